@@ -1,0 +1,379 @@
+"""Timing and illumination model of a synchronized rolling-shutter projector-camera (Sec. 3.1).
+
+This module is the single place that turns the two knobs of the device -- the
+**delay** ``t_d`` and the **exposure** ``t_e`` -- into illumination weights over
+projector rows.  The simulator, the demultiplexer and synthesis all call it, so
+they can never disagree about the sign convention or the discretization.
+
+Conventions
+-----------
+* Rows are counted downward, in projector rows.  A camera row ``t`` sits at the
+  projector coordinate ``p_t = (t + 1/2) * rows_per_camera_row - 1/2``
+  (:class:`RowGeometry`), so a 128-row image of a 720-row projector is expressible.
+* The **offset** ``u = v - t`` is projector row minus camera row (both in projector
+  rows).  A positive delay centres the band at ``u = +I_d``: the camera row then
+  receives light from a *lower* epipolar plane (Sec. 3.1: "positive t_d > t_e/2
+  means the camera row receives light from a vertically lower epipolar plane").
+* Offsets are discretized on 1-row bins ``[k - 1/2, k + 1/2)``.  The weight of a
+  bin is the exact integral of the (optionally blurred) band over it, so the
+  weights of one image sum to ``I_w`` (Eq. 2) wherever the band lies inside the
+  projector.
+
+References
+----------
+.. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa,
+   S. G. Narasimhan, "Programmable Non-Epipolar Indirect Light Transport:
+   Capture and Analysis", IEEE TVCG 27(4), 2021 (doi:10.1109/TVCG.2019.2946812).
+.. [2] M. O'Toole, S. Achar, S. G. Narasimhan, K. N. Kutulakos, "Homogeneous
+   codes for energy-efficient illumination and imaging", SIGGRAPH 2015.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import ndtr
+
+__all__ = [
+    "PAPER_LINES_PER_SECOND",
+    "PAPER_BOUNDARY_MARGIN_US",
+    "delay_from_sync_offset",
+    "sync_offset_from_delay",
+    "band_centre_rows",
+    "band_width_rows",
+    "illumination",
+    "band_bin_weights",
+    "RowGeometry",
+    "Band",
+    "RowPattern",
+    "Sweep",
+    "paper_sweep",
+    "sweep_support_rows",
+    "SWEEPS",
+    "make_sweep",
+    "boundary_images",
+    "quick_sweep",
+]
+
+#: Projector scanline velocity measured in the paper (27 lines in 500 us, Sec. 6).
+PAPER_LINES_PER_SECOND = 54_000.0
+#: Images with ``||t_d| - t_e/2| <= 75 us`` sit on the epipolar/non-epipolar
+#: boundary and show synchronization artifacts; the paper leaves them out (N = 75).
+PAPER_BOUNDARY_MARGIN_US = 75.0
+
+
+# ----------------------------------------------------------------------------
+# Eq. 1 and Eq. 2
+# ----------------------------------------------------------------------------
+def _line_time_us(line_time_us, lines_per_second):
+    if line_time_us is None:
+        if lines_per_second is None:
+            raise ValueError("give line_time_us or lines_per_second")
+        return 1e6 / float(lines_per_second)
+    return line_time_us
+
+
+def delay_from_sync_offset(sync_offset_us, exposure_us, line_time_us=None, lines_per_second=None):
+    """Delay from the synchronization offset, Eq. 1: ``t_d = t_e/2 - t_p/2 - t'_o``.
+
+    Parameters
+    ----------
+    sync_offset_us : float or array_like
+        ``t'_o``, time between the start of a row's exposure and the moment the
+        projector illuminates that row, in microseconds.
+    exposure_us : float or array_like
+        Row exposure ``t_e`` in microseconds.
+    line_time_us : float, optional
+        ``t_p``, time the projector illuminates one scanline.  Defaults to one
+        scanline period ``1e6 / lines_per_second``.
+    lines_per_second : float, optional
+        Projector scanline velocity ``v_p``; used only when ``line_time_us`` is None.
+
+    Returns
+    -------
+    delay_us : float or ndarray
+        Delay ``t_d`` between the centre of exposure and the centre of illumination.
+    """
+    t_p = _line_time_us(line_time_us, lines_per_second)
+    return 0.5 * np.asarray(exposure_us, dtype=float) - 0.5 * t_p - np.asarray(sync_offset_us, dtype=float)
+
+
+def sync_offset_from_delay(delay_us, exposure_us, line_time_us=None, lines_per_second=None):
+    """Inverse of Eq. 1: ``t'_o = t_e/2 - t_p/2 - t_d`` (see :func:`delay_from_sync_offset`)."""
+    t_p = _line_time_us(line_time_us, lines_per_second)
+    return 0.5 * np.asarray(exposure_us, dtype=float) - 0.5 * t_p - np.asarray(delay_us, dtype=float)
+
+
+def band_centre_rows(delay_us, lines_per_second):
+    """Band centre ``I_d = v_p t_d`` in projector rows, Eq. 2 (``v_p`` in lines per second)."""
+    return np.asarray(delay_us, dtype=float) * 1e-6 * float(lines_per_second)
+
+
+def band_width_rows(exposure_us, lines_per_second):
+    """Band width ``I_w = v_p t_e`` in projector rows, Eq. 2 (``v_p`` in lines per second)."""
+    return np.asarray(exposure_us, dtype=float) * 1e-6 * float(lines_per_second)
+
+
+def illumination(offset_rows, delay_us, exposure_us, lines_per_second):
+    """Continuous illumination function ``L``, Eq. 3.
+
+    ``L(u) = 1`` where ``|u - I_d| < I_w / 2`` and 0 elsewhere, with ``u = v - t``
+    the projector-row offset.  Use :func:`band_bin_weights` for its exact
+    discretization on 1-row bins.
+    """
+    centre = band_centre_rows(delay_us, lines_per_second)
+    half = 0.5 * band_width_rows(exposure_us, lines_per_second)
+    return (np.abs(np.asarray(offset_rows, dtype=float) - centre) < half).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------
+# Exact bin integrals of a blurred box
+# ----------------------------------------------------------------------------
+def _second_antiderivative(x, sigma, width):
+    """``G(x) = int_{-inf}^x CDF_K(z) dz`` of the blur kernel ``K``.
+
+    ``K`` is a Gaussian of std ``sigma`` convolved with a centred box of width
+    ``width`` (either may be zero).  The bin weight of a box ``[a, b]`` blurred by
+    ``K`` over the bin ``[l, r]`` is ``G(r-a) - G(l-a) - G(r-b) + G(l-b)``.
+    """
+    if width <= 0.0:
+        if sigma <= 0.0:
+            return np.maximum(x, 0.0)
+        z = x / sigma
+        return x * ndtr(z) + sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
+
+    def third(y):
+        if sigma <= 0.0:
+            return 0.5 * np.maximum(y, 0.0) ** 2
+        z = y / sigma
+        return 0.5 * (y * y + sigma * sigma) * ndtr(z) + 0.5 * y * sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
+
+    return (third(x + 0.5 * width) - third(x - 0.5 * width)) / width
+
+
+def band_bin_weights(offset_rows, centre_rows, width_rows, blur_sigma_rows=0.0, line_width_rows=0.0):
+    """Exact weights of a (blurred) box band on 1-row offset bins, discretizing Eq. 3.
+
+    Parameters
+    ----------
+    offset_rows : array_like
+        Bin centres ``k`` (projector rows); the bin is ``[k - 1/2, k + 1/2)``.
+    centre_rows, width_rows : array_like
+        Band centre ``I_d`` and width ``I_w`` (Eq. 2), broadcast against ``offset_rows``.
+    blur_sigma_rows : float
+        Standard deviation of a Gaussian blur of the band edges (synchronization
+        jitter ``sigma_us * v_p``).
+    line_width_rows : float
+        Width of a box blur of the band edges (the laser line's own width ``t_p v_p``).
+
+    Returns
+    -------
+    weights : ndarray of float64
+        Fraction of each bin lit by the band; they sum to ``width_rows`` over all bins.
+    """
+    k = np.asarray(offset_rows, dtype=float)
+    c = np.asarray(centre_rows, dtype=float)
+    half = 0.5 * np.asarray(width_rows, dtype=float)
+    lo, hi = c - half, c + half
+    G = lambda x: _second_antiderivative(x, float(blur_sigma_rows), float(line_width_rows))  # noqa: E731
+    w = G(k + 0.5 - lo) - G(k - 0.5 - lo) - G(k + 0.5 - hi) + G(k - 0.5 - hi)
+    # Differences of large numbers leave ~1e-13 noise far from the band.
+    return np.where(np.abs(w) < 1e-12, 0.0, w)
+
+
+# ----------------------------------------------------------------------------
+# Geometry: camera rows in projector rows
+# ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RowGeometry:
+    """Vertical geometry of a rectified projector-camera pair.
+
+    Parameters
+    ----------
+    camera_rows : int
+        Number of camera rows ``H``.
+    projector_rows : int, optional
+        Number of projector rows ``P`` seen by the camera; defaults to ``H``
+        (one camera row per projector row).  ``P = 720, H = 128`` models the
+        paper's 128x128 images of a 720-row PicoPro.
+    """
+
+    camera_rows: int
+    projector_rows: int | None = None
+
+    def __post_init__(self):
+        if self.projector_rows is None:
+            object.__setattr__(self, "projector_rows", int(self.camera_rows))
+        if self.camera_rows < 1 or self.projector_rows < 1:
+            raise ValueError("camera_rows and projector_rows must be positive")
+
+    @property
+    def rows_per_camera_row(self) -> float:
+        """Projector rows spanned by one camera row."""
+        return self.projector_rows / self.camera_rows
+
+    def projector_row_of(self, camera_row):
+        """Projector coordinate ``p_t`` of the centre of camera row ``t``."""
+        return (np.asarray(camera_row, dtype=float) + 0.5) * self.rows_per_camera_row - 0.5
+
+    def coverage(self, camera_row, offset_rows):
+        """Fraction of offset bin ``[u - 1/2, u + 1/2)`` of row ``t`` inside the projector.
+
+        Offsets whose projector row ``v = p_t + u`` falls outside ``[-1/2, P - 1/2)``
+        receive no light: rows near the top and bottom have fewer valid offsets.
+        """
+        v = self.projector_row_of(camera_row) + np.asarray(offset_rows, dtype=float)
+        return np.clip(np.minimum(v + 0.5, self.projector_rows - 0.5) - np.maximum(v - 0.5, -0.5), 0.0, 1.0)
+
+
+# ----------------------------------------------------------------------------
+# Illuminations: anything with ``weights(geometry, rows, offsets)``
+# ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Band:
+    """The band of projector rows seen by a camera row for one (delay, exposure).
+
+    ``weights`` discretizes Eq. 3 on offset bins, blurred by synchronization jitter
+    (Gaussian, ``jitter_us``) and the laser line's width (box, ``line_width_us``),
+    and clipped to the projector.  ``row_shifts_rows`` (``(F, H)``) optionally holds
+    a realized per-frame, per-row trigger offset in projector rows; the weights are
+    then the average over the ``F`` frames -- this is what produces horizontal row
+    artifacts when a band edge sits on the epipolar plane (``|t_d| ~ t_e/2``).
+    """
+
+    delay_us: float
+    exposure_us: float
+    lines_per_second: float = PAPER_LINES_PER_SECOND
+    jitter_us: float = 0.0
+    line_width_us: float = 0.0
+    row_shifts_rows: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def centre_rows(self) -> float:
+        return float(band_centre_rows(self.delay_us, self.lines_per_second))
+
+    @property
+    def width_rows(self) -> float:
+        return float(band_width_rows(self.exposure_us, self.lines_per_second))
+
+    def weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
+        """Illumination weight of offset bin ``offsets_rows`` for camera row ``rows`` (broadcast)."""
+        rows = np.asarray(rows)
+        offsets = np.asarray(offsets_rows, dtype=float)
+        sigma = self.jitter_us * 1e-6 * self.lines_per_second
+        line = self.line_width_us * 1e-6 * self.lines_per_second
+        centre = self.centre_rows
+        if self.row_shifts_rows is None:
+            w = band_bin_weights(offsets, centre, self.width_rows, sigma, line)
+        else:
+            shifts = np.asarray(self.row_shifts_rows, dtype=float)
+            w = 0.0
+            for frame_shift in shifts:  # a handful of frames; each term is vectorized
+                w = w + band_bin_weights(offsets, centre + frame_shift[rows], self.width_rows, sigma, line)
+            w = w / len(shifts)
+        return w * geometry.coverage(rows, offsets)
+
+
+@dataclass(frozen=True)
+class RowPattern:
+    """Any illumination given as an intensity per projector row (relighting, Sec. 9).
+
+    ``pattern`` has one value per projector row ``v = 0 .. P-1``; the weight of an
+    offset bin is the exact average of the piecewise-constant pattern over the bin.
+    """
+
+    pattern: np.ndarray
+
+    def weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
+        p = np.asarray(self.pattern, dtype=float).ravel()
+        if p.size != geometry.projector_rows:
+            raise ValueError(f"pattern has {p.size} rows, projector has {geometry.projector_rows}")
+        edges = np.concatenate([[0.0], np.cumsum(p)])  # integral up to projector coordinate x - 1/2
+        v = geometry.projector_row_of(rows) + np.asarray(offsets_rows, dtype=float)
+        cum = lambda x: np.interp(x + 0.5, np.arange(p.size + 1), edges)  # noqa: E731
+        return cum(v + 0.5) - cum(v - 0.5)
+
+
+# ----------------------------------------------------------------------------
+# Sweeps
+# ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Sweep:
+    """A delay-exposure sweep: one (delay, exposure) per image, plus exclusion flags.
+
+    ``excluded`` marks the images that sit on the epipolar/non-epipolar boundary
+    (``||t_d| - t_e/2| <= boundary_margin_us``); they are captured and stored but
+    left out of demultiplexing (Sec. 4).
+    """
+
+    delay_us: np.ndarray
+    exposure_us: np.ndarray
+    excluded: np.ndarray
+    name: str = "custom"
+
+    def __post_init__(self):
+        d = np.asarray(self.delay_us, dtype=float).ravel()
+        e = np.asarray(self.exposure_us, dtype=float).ravel()
+        x = np.asarray(self.excluded, dtype=bool).ravel()
+        if not (d.shape == e.shape == x.shape):
+            raise ValueError("delay_us, exposure_us and excluded must have one entry per image")
+        if np.any(e <= 0):
+            raise ValueError("exposures must be positive")
+        object.__setattr__(self, "delay_us", d)
+        object.__setattr__(self, "exposure_us", e)
+        object.__setattr__(self, "excluded", x)
+
+    def __len__(self) -> int:
+        return self.delay_us.size
+
+    @classmethod
+    def grid(cls, delays_us, exposures_us, boundary_margin_us=PAPER_BOUNDARY_MARGIN_US, name="custom"):
+        """Every delay at every exposure, exposure-major (rows of the Fig. 8 contact sheet)."""
+        e, d = np.meshgrid(np.asarray(exposures_us, float), np.asarray(delays_us, float), indexing="ij")
+        d, e = d.ravel(), e.ravel()
+        return cls(d, e, boundary_images(d, e, boundary_margin_us), name=name)
+
+    def bands(self, lines_per_second, jitter_us=0.0, line_width_us=0.0):
+        """One :class:`Band` per image."""
+        return [Band(float(d), float(e), lines_per_second, jitter_us, line_width_us) for d, e in zip(self.delay_us, self.exposure_us)]
+
+
+def boundary_images(delay_us, exposure_us, margin_us=PAPER_BOUNDARY_MARGIN_US):
+    """Flag images whose band edge sits on the epipolar plane: ``||t_d| - t_e/2| <= margin``."""
+    d = np.asarray(delay_us, dtype=float)
+    e = np.asarray(exposure_us, dtype=float)
+    return np.abs(np.abs(d) - 0.5 * e) <= margin_us + 1e-9
+
+
+def paper_sweep() -> Sweep:
+    """The paper's sweep (Sec. 6): delays -1500..1500 us step 187.5 (17) x exposures
+    600..1200 us step 150 (5) = 85 images, 10 boundary images flagged -> N = 75."""
+    return Sweep.grid(np.arange(-8, 9) * 187.5, np.arange(600.0, 1201.0, 150.0), name="paper")
+
+
+def quick_sweep() -> Sweep:
+    """A small sweep for quick looks and tests: 9 delays x 3 exposures."""
+    return Sweep.grid(np.arange(-4, 5) * 375.0, np.array([600.0, 900.0, 1200.0]), name="quick")
+
+
+#: Named sweeps, chosen by name on the command line (``--sweep paper``).
+SWEEPS = {"paper": paper_sweep, "quick": quick_sweep}
+
+
+def make_sweep(name: str) -> Sweep:
+    """Look up a named sweep in :data:`SWEEPS`."""
+    try:
+        return SWEEPS[name]()
+    except KeyError:
+        raise ValueError(f"unknown sweep {name!r}; choose one of {sorted(SWEEPS)}") from None
+
+
+def sweep_support_rows(sweep: Sweep, lines_per_second, include_excluded=False) -> int:
+    """Half-width ``K`` of the offset support ``-K..K`` reached by a sweep's bands:
+    ``max |I_d| + I_w / 2`` rounded up (114 rows -> 229 offsets for the paper's sweep)."""
+    keep = np.ones(len(sweep), bool) if include_excluded else ~sweep.excluded
+    reach = np.abs(band_centre_rows(sweep.delay_us[keep], lines_per_second)) + 0.5 * band_width_rows(
+        sweep.exposure_us[keep], lines_per_second
+    )
+    return int(np.ceil(reach.max() - 1e-9))
