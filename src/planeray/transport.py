@@ -237,11 +237,12 @@ class Transport:
     def epipolar_image(self) -> np.ndarray:
         """Epipolar image ``I_e = int delta(t - v) T dv``, Eq. 5.
 
-        The delta picks the projector rows inside the camera row's own footprint
-        (offset bin 0 when one camera row is one projector row).
+        The delta picks the offset bins that intersect the camera row's own
+        footprint: bin 0 when one camera row is one projector row, the ~``P/H``
+        bins a camera row spans otherwise.
         """
-        footprint = band_bin_weights(self.offsets_rows, 0.0, self.geometry.rows_per_camera_row)
-        return np.tensordot(self.dense, footprint.astype(np.float32), axes=([2], [0])).astype(np.float32)
+        footprint = band_bin_weights(self.offsets_rows, 0.0, self.geometry.rows_per_camera_row) > 0
+        return self.dense[:, :, footprint].sum(axis=2, dtype=np.float64).astype(np.float32)
 
     def non_epipolar_image(self) -> np.ndarray:
         """Non-epipolar image ``I_n = int (1 - delta(t - v)) T dv``, Eq. 6."""

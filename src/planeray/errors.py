@@ -1,0 +1,38 @@
+"""One exception family for planeray.
+
+Every message names the file (or field) and the problem, so the CLI can print it
+as a single line and exit non-zero instead of showing a traceback.
+"""
+
+from __future__ import annotations
+
+__all__ = ["PlanerayError", "InputError", "StackError", "TransportError"]
+
+
+class PlanerayError(Exception):
+    """Base class of every error planeray raises on purpose."""
+
+
+class InputError(PlanerayError, ValueError):
+    """Bad user input: a file, a field or a parameter that cannot be used.
+
+    Parameters
+    ----------
+    problem : str
+        What is wrong, in words.
+    path : str or os.PathLike, optional
+        The file or folder concerned; prefixed to the message.
+    """
+
+    def __init__(self, problem: str, path=None):
+        self.path = None if path is None else str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}" if self.path else problem)
+
+
+class StackError(InputError):
+    """A delay-exposure stack (native store or import folder) is malformed."""
+
+
+class TransportError(InputError):
+    """A transport store is malformed."""

@@ -1,0 +1,163 @@
+"""Scene interface and registry (Mitsuba-style: plugins chosen by name).
+
+A scene is a deterministic (seeded) function of image size and geometry that
+returns the exact ground-truth :class:`~planeray.transport.Transport` plus the
+maps a test or a figure needs to judge an estimate against it.  Each built-in
+scene lives in its own module of this package and registers itself with
+:func:`register_scene`; modules are discovered automatically, so adding a scene
+is adding one module.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..timing import RowGeometry, band_bin_weights
+from ..transport import Transport
+
+__all__ = [
+    "EFFECTS",
+    "Scene",
+    "register_scene",
+    "make_scene",
+    "list_scenes",
+    "scene_offsets",
+    "footprint_kernel",
+    "DEFAULT_BAND_ROWS",
+    "DEFAULT_MM_PER_ROW",
+]
+
+#: Light-transport effect labels of ground-truth pixels (``Scene.labels``).
+EFFECTS = {
+    0: "none",  # background / no light of interest
+    1: "diffuse",  # direct diffuse reflection: narrow, unimodal delay profile
+    2: "subsurface",  # subsurface scattering: broadened profile
+    3: "diffuse_interreflection",  # steep, one-sided profile
+    4: "specular_interreflection",  # a second, displaced peak
+}
+#: Half-width of the dense offset band stored by built-in scenes (projector rows);
+#: light from farther rows becomes sparse long-range entries.
+DEFAULT_BAND_ROWS = 128
+#: Size of one projector row on the scene: 720 rows over ~216 mm.
+DEFAULT_MM_PER_ROW = 0.3
+
+
+@dataclass
+class Scene:
+    """A scene with known light transport.
+
+    Attributes
+    ----------
+    name : str
+    transport : Transport
+        Exact ground-truth ``T`` (dense band + sparse long-range entries).
+    direct : ndarray (H, W) float32
+        Ground-truth direct component (what ideal epipolar imaging shows).
+    ambient_albedo : ndarray (H, W) float32
+        Reflectance under ambient (room) light, used by the camera's ambient term.
+    labels : ndarray (H, W) uint8
+        Dominant effect of each pixel, keys of :data:`EFFECTS`.
+    params : dict
+        JSON-serializable parameters that rebuild the scene.
+    """
+
+    name: str
+    transport: Transport
+    direct: np.ndarray
+    ambient_albedo: np.ndarray
+    labels: np.ndarray
+    params: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.transport.shape
+
+    @property
+    def geometry(self) -> RowGeometry:
+        return self.transport.geometry
+
+
+@dataclass(frozen=True)
+class _Entry:
+    build: Callable[..., Scene]
+    description: str
+
+
+_REGISTRY: dict[str, _Entry] = {}
+_DISCOVERED = False
+
+
+def register_scene(name: str, description: str):
+    """Decorator registering ``build(shape, projector_rows, seed, **params) -> Scene``."""
+
+    def deco(build):
+        if name in _REGISTRY and _REGISTRY[name].build is not build:
+            raise ValueError(f"scene {name!r} registered twice")
+        _REGISTRY[name] = _Entry(build, description)
+        return build
+
+    return deco
+
+
+def _discover() -> None:
+    global _DISCOVERED
+    if _DISCOVERED:
+        return
+    package = __name__.rsplit(".", 1)[0]
+    for mod in pkgutil.iter_modules(importlib.import_module(package).__path__):
+        if mod.name not in ("base",) and not mod.name.startswith("_"):
+            importlib.import_module(f"{package}.{mod.name}")
+    _DISCOVERED = True
+
+
+def list_scenes() -> dict[str, str]:
+    """Names and one-line descriptions of all registered scenes."""
+    _discover()
+    return {k: v.description for k, v in sorted(_REGISTRY.items())}
+
+
+def make_scene(name: str, shape=(128, 128), projector_rows: int | None = None, seed: int = 0, **params) -> Scene:
+    """Build a registered scene by name.
+
+    Parameters
+    ----------
+    name : str
+        One of :func:`list_scenes`.
+    shape : (int, int)
+        Camera image ``(H, W)``.
+    projector_rows : int, optional
+        Projector rows spanned by the image height (default ``H``).
+    seed : int
+        Seed of every random element (textures); same seed, same bytes.
+    **params
+        Scene-specific physical parameters (see each scene's docstring).
+    """
+    _discover()
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown scene {name!r}; choose one of {sorted(_REGISTRY)}")
+    H, W = (int(shape[0]), int(shape[1]))
+    if H < 8 or W < 8:
+        raise ValueError(f"scene size must be at least 8x8, got {H}x{W}")
+    scene = _REGISTRY[name].build((H, W), projector_rows, int(seed), **params)
+    scene.params = {"name": name, "shape": [H, W], "projector_rows": scene.geometry.projector_rows, "seed": int(seed), **scene.params}
+    return scene
+
+
+def scene_offsets(band_rows: int = DEFAULT_BAND_ROWS) -> np.ndarray:
+    """Offsets ``-band_rows .. band_rows`` of a scene's dense band."""
+    return np.arange(-int(band_rows), int(band_rows) + 1)
+
+
+def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
+    """Direct light of one camera row spread over the projector rows it spans.
+
+    A camera row covers ``rows_per_camera_row`` projector rows; a Lambertian
+    surface returns each of them in equal share.  Sums to 1.
+    """
+    k = band_bin_weights(offsets_rows, 0.0, rows_per_camera_row)
+    return (k / k.sum()).astype(np.float64)

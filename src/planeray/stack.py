@@ -1,0 +1,125 @@
+"""The delay-exposure stack: the interface between capture and analysis.
+
+A :class:`Stack` is what every device, simulator and import produces and what
+every later stage (demultiplexing, profiles, figures) consumes.  Images are
+float32 and normalized so that 0 is the black level and 1 the largest code of the
+ADC; read noise can take dark pixels slightly below 0, which is kept on purpose
+(clipping would bias dark pixels).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import StackError
+from .timing import RowGeometry, Sweep, boundary_images
+
+__all__ = ["Stack"]
+
+
+@dataclass
+class Stack:
+    """Images of a delay-exposure sweep with everything needed to interpret them.
+
+    Parameters
+    ----------
+    images : array_like, shape (N, H, W)
+        Normalized images (float32); may be a lazily read Zarr array.
+    delay_us, exposure_us : ndarray, shape (N,)
+        Delay ``t_d`` and exposure ``t_e`` of each image, in microseconds.
+    lines_per_second : float
+        Projector scanline velocity ``v_p`` (Eq. 2).
+    excluded : ndarray of bool, shape (N,), optional
+        Images left out of demultiplexing (boundary images, Sec. 4).  Defaults to
+        the paper's rule ``||t_d| - t_e/2| <= 75 us``.
+    saturated : array_like of bool, shape (N, H, W), optional
+        Pixels that hit the top of the ADC in any averaged frame.
+    projector_rows : int, optional
+        Projector rows spanned by the image height (default: one per camera row).
+    metadata : dict
+        JSON-serializable acquisition record: ``camera``, ``sync``, ``scene``,
+        ``seed``, ``source``, ``sweep`` ... (free-form, kept verbatim).
+    """
+
+    images: object
+    delay_us: np.ndarray
+    exposure_us: np.ndarray
+    lines_per_second: float
+    excluded: np.ndarray | None = None
+    saturated: object | None = None
+    projector_rows: int | None = None
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.delay_us = np.asarray(self.delay_us, dtype=np.float64).ravel()
+        self.exposure_us = np.asarray(self.exposure_us, dtype=np.float64).ravel()
+        n = len(self.images)
+        if self.delay_us.size != n or self.exposure_us.size != n:
+            raise StackError(
+                f"{n} images but {self.delay_us.size} delays and {self.exposure_us.size} exposures"
+            )
+        if len(self.images.shape) != 3:
+            raise StackError(f"images must be (N, H, W), got shape {tuple(self.images.shape)}")
+        if not np.isfinite(self.lines_per_second) or self.lines_per_second <= 0:
+            raise StackError(f"lines_per_second must be a positive number, got {self.lines_per_second!r}")
+        if np.any(~np.isfinite(self.delay_us)) or np.any(~np.isfinite(self.exposure_us)):
+            raise StackError("delay_us and exposure_us must be finite")
+        if np.any(self.exposure_us <= 0):
+            raise StackError("exposure_us must be positive")
+        if self.excluded is None:
+            self.excluded = boundary_images(self.delay_us, self.exposure_us)
+        self.excluded = np.asarray(self.excluded, dtype=bool).ravel()
+        if self.excluded.size != n:
+            raise StackError(f"excluded has {self.excluded.size} entries for {n} images")
+        if self.saturated is not None and tuple(self.saturated.shape) != tuple(self.images.shape):
+            raise StackError(f"saturation mask {tuple(self.saturated.shape)} does not match images {tuple(self.images.shape)}")
+        if self.projector_rows is None:
+            self.projector_rows = int(self.images.shape[1])
+        self.lines_per_second = float(self.lines_per_second)
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image shape ``(H, W)``."""
+        return tuple(self.images.shape[1:])
+
+    @property
+    def geometry(self) -> RowGeometry:
+        return RowGeometry(self.shape[0], self.projector_rows)
+
+    @property
+    def sweep(self) -> Sweep:
+        return Sweep(self.delay_us, self.exposure_us, self.excluded, name=self.metadata.get("sweep", "custom"))
+
+    @property
+    def jitter_us(self) -> float:
+        """Synchronization jitter (Gaussian sigma) recorded for the illumination model."""
+        return float(self.metadata.get("sync", {}).get("jitter_us", 0.0))
+
+    @property
+    def line_width_us(self) -> float:
+        return float(self.metadata.get("sync", {}).get("line_width_us", 0.0))
+
+    def bands(self):
+        """The illumination model of every image (same discretization as the simulator)."""
+        return self.sweep.bands(self.lines_per_second, self.jitter_us, self.line_width_us)
+
+    def image(self, index: int) -> np.ndarray:
+        return np.asarray(self.images[index], dtype=np.float32)
+
+    def delays(self) -> np.ndarray:
+        """Sorted unique delays."""
+        return np.unique(self.delay_us)
+
+    def exposures(self) -> np.ndarray:
+        """Sorted unique exposures."""
+        return np.unique(self.exposure_us)
+
+    def index_of(self, delay_us: float, exposure_us: float) -> int | None:
+        """Index of the image with this (delay, exposure), or None."""
+        hit = np.flatnonzero(np.isclose(self.delay_us, delay_us) & np.isclose(self.exposure_us, exposure_us))
+        return int(hit[0]) if hit.size else None
