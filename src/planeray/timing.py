@@ -136,20 +136,28 @@ def _second_antiderivative(x, sigma, width):
     ``K`` is a Gaussian of std ``sigma`` convolved with a centred box of width
     ``width`` (either may be zero).  The bin weight of a box ``[a, b]`` blurred by
     ``K`` over the bin ``[l, r]`` is ``G(r-a) - G(l-a) - G(r-b) + G(l-b)``.
+    Far from the kernel's support ``G`` is exactly ``max(x, 0)``; using that there
+    avoids cancellation between large numbers.
     """
+    x = np.asarray(x, dtype=float)
+    ramp = np.maximum(x, 0.0)
+    if width <= 0.0 and sigma <= 0.0:
+        return ramp
     if width <= 0.0:
-        if sigma <= 0.0:
-            return np.maximum(x, 0.0)
         z = x / sigma
         return x * ndtr(z) + sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
+    if sigma <= 0.0:
+        inner = (x + 0.5 * width) ** 2 / (2.0 * width)
+        return np.where(x >= 0.5 * width, x, np.where(x <= -0.5 * width, 0.0, inner))
 
     def third(y):
-        if sigma <= 0.0:
-            return 0.5 * np.maximum(y, 0.0) ** 2
         z = y / sigma
         return 0.5 * (y * y + sigma * sigma) * ndtr(z) + 0.5 * y * sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
 
-    return (third(x + 0.5 * width) - third(x - 0.5 * width)) / width
+    reach = 0.5 * width + 10.0 * sigma
+    near = np.abs(x) < reach
+    xn = np.where(near, x, 0.0)
+    return np.where(near, (third(xn + 0.5 * width) - third(xn - 0.5 * width)) / width, ramp)
 
 
 def band_bin_weights(offset_rows, centre_rows, width_rows, blur_sigma_rows=0.0, line_width_rows=0.0):
@@ -176,10 +184,15 @@ def band_bin_weights(offset_rows, centre_rows, width_rows, blur_sigma_rows=0.0, 
     c = np.asarray(centre_rows, dtype=float)
     half = 0.5 * np.asarray(width_rows, dtype=float)
     lo, hi = c - half, c + half
-    G = lambda x: _second_antiderivative(x, float(blur_sigma_rows), float(line_width_rows))  # noqa: E731
+    # Blurs far below a row change nothing but would overflow x / sigma (or, for
+    # a box narrower than 1/1000 row, lose precision dividing by its width).
+    sigma = float(blur_sigma_rows) if blur_sigma_rows > 1e-6 else 0.0
+    line = float(line_width_rows) if line_width_rows > 1e-3 else 0.0
+    G = lambda x: _second_antiderivative(x, sigma, line)  # noqa: E731
     w = G(k + 0.5 - lo) - G(k - 0.5 - lo) - G(k + 0.5 - hi) + G(k - 0.5 - hi)
-    # Differences of large numbers leave ~1e-13 noise far from the band.
-    return np.where(np.abs(w) < 1e-12, 0.0, w)
+    # Differences of large numbers leave ~1e-12 noise far from the band; a weight
+    # of 1e-10 of a row is far below any photon count, so it is zeroed.
+    return np.where(w < 1e-10, 0.0, np.minimum(w, 1.0))
 
 
 # ----------------------------------------------------------------------------

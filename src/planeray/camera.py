@@ -1,0 +1,166 @@
+"""Rolling-shutter camera model of the simulated Episcan (Sec. 6).
+
+What the sensor does with the light the transport delivers to a pixel:
+
+* **Laser signal.**  Each projector row is lit for one scanline period; a camera
+  row collects ``laser_electrons * I`` electrons, where ``I = sum_v L(v) T(v)``
+  is Eq. 4.  Direct light comes from one row only, so widening the exposure does
+  not make epipolar images brighter -- it only admits more indirect light.
+* **Ambient light** is integrated over the whole row exposure:
+  ``ambient_e_per_us * t_e * albedo``.  A row is exposed for ``t_e`` (hundreds of
+  microseconds) instead of a full frame time, which is why synchronized imaging
+  rejects ambient light (Sec. 10, Fig. 13).
+* **Photon shot noise** (Poisson), **read noise** (Gaussian, electrons),
+  **full-well saturation**, a linear **ADC** with ``bit_depth`` bits and a
+  ``black_level`` offset, and **averaging** of ``frames_averaged`` frames
+  (the paper: 12 bit, 8 frames).
+* **Synchronization**: ``jitter_us`` is the Gaussian timing jitter between laser
+  and shutter within an exposure; it blurs the band edges and leaks light into
+  neighbouring rows (it is part of the illumination model the demultiplexer
+  uses).  ``row_jitter_us`` is a per-frame, per-row trigger offset; it is drawn
+  at random for each frame and shows up as horizontal row artifacts exactly where
+  a band edge sits on the epipolar plane, ``|t_d| ~ t_e / 2`` (Sec. 4).
+
+Images are returned normalized, ``(adu - black_level) / (2**bit_depth - 1 - black_level)``,
+the same normalization as the stack import, so simulated and captured stacks
+are interchangeable downstream.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["CameraModel", "row_shifts_rows"]
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Sensor and synchronization parameters (defaults: an IDS UI-3250-like camera).
+
+    Parameters
+    ----------
+    bit_depth : int
+        ADC bits (12).
+    black_level : int
+        ADC offset in codes (64).
+    full_well_e : float
+        Electrons at which a pixel saturates; mapped to the largest ADC code.
+    read_noise_e : float
+        Read noise, electrons RMS per frame.
+    laser_electrons : float
+        Electrons per frame from a white Lambertian surface under its own
+        projector row (``T = 1`` integrated over one scanline).
+    ambient_e_per_us : float
+        Ambient electrons per microsecond of row exposure for albedo 1.
+    frames_averaged : int
+        Frames averaged per stack image (8).
+    jitter_us : float
+        Gaussian sigma of laser-to-shutter timing jitter (blurs band edges).
+    row_jitter_us : float
+        Gaussian sigma of the per-frame, per-row trigger offset (row artifacts).
+    """
+
+    bit_depth: int = 12
+    black_level: int = 64
+    full_well_e: float = 10_000.0
+    read_noise_e: float = 7.0
+    laser_electrons: float = 6_000.0
+    ambient_e_per_us: float = 0.5
+    frames_averaged: int = 8
+    jitter_us: float = 5.0
+    row_jitter_us: float = 10.0
+
+    def __post_init__(self):
+        if not 1 <= self.bit_depth <= 16:
+            raise ValueError(f"bit_depth must be 1..16, got {self.bit_depth}")
+        if not 0 <= self.black_level < self.max_code:
+            raise ValueError(f"black_level must be in [0, {self.max_code}), got {self.black_level}")
+        for name in ("full_well_e", "laser_electrons"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be positive")
+        for name in ("read_noise_e", "ambient_e_per_us", "jitter_us", "row_jitter_us"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be non-negative")
+        if self.frames_averaged < 1:
+            raise ValueError("frames_averaged must be at least 1")
+
+    @property
+    def max_code(self) -> int:
+        return 2**self.bit_depth - 1
+
+    @property
+    def gain_adu_per_e(self) -> float:
+        """Conversion gain: full well maps to the largest code above black."""
+        return (self.max_code - self.black_level) / self.full_well_e
+
+    @property
+    def signal_scale(self) -> float:
+        """Normalized image value per unit of Eq. 4 (``laser_electrons / full_well``).
+
+        A transport demultiplexed from this camera's stack is ``signal_scale``
+        times the scene's transport.
+        """
+        return self.laser_electrons / self.full_well_e
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def mean_electrons(self, signal, exposure_us, ambient_albedo=None):
+        """Expected electrons per frame: laser signal plus ambient over the row exposure."""
+        e = self.laser_electrons * np.asarray(signal, dtype=np.float64)
+        if ambient_albedo is not None and self.ambient_e_per_us > 0:
+            e = e + self.ambient_e_per_us * float(exposure_us) * np.asarray(ambient_albedo, dtype=np.float64)
+        return np.maximum(e, 0.0)
+
+    def expose(self, signal, exposure_us, rng: np.random.Generator, ambient_albedo=None, noise=True):
+        """Capture one stack image: ``frames_averaged`` noisy frames, averaged and normalized.
+
+        Parameters
+        ----------
+        signal : ndarray (H, W)
+            Noise-free Eq. 4 image (transport units), averaged over the frames' sync.
+        exposure_us : float
+            Row exposure, for the ambient term.
+        rng : numpy.random.Generator
+        ambient_albedo : ndarray (H, W), optional
+        noise : bool
+            False gives the expected normalized image (no shot/read noise, no
+            quantization) -- for ground-truth comparisons.
+
+        Returns
+        -------
+        image : ndarray (H, W) float32
+            Normalized image; nominally [0, 1], may dip slightly below 0 by read noise.
+        saturated : ndarray (H, W) bool
+            Pixels that reached full well or the top code in any frame.
+        """
+        e_mean = self.mean_electrons(signal, exposure_us, ambient_albedo)
+        span = self.max_code - self.black_level
+        if not noise:
+            clipped = np.minimum(e_mean, self.full_well_e)
+            return (clipped * self.gain_adu_per_e / span).astype(np.float32), e_mean >= self.full_well_e
+        total = np.zeros(e_mean.shape, np.float64)
+        saturated = np.zeros(e_mean.shape, bool)
+        for _ in range(self.frames_averaged):
+            e = rng.poisson(e_mean).astype(np.float64)
+            full = e >= self.full_well_e
+            if self.read_noise_e > 0:
+                e += rng.normal(0.0, self.read_noise_e, e.shape)
+            adu = np.clip(np.rint(e * self.gain_adu_per_e) + self.black_level, 0, self.max_code)
+            adu[full] = self.max_code  # a full well reads as the top code
+            saturated |= adu >= self.max_code
+            total += adu
+        image = (total / self.frames_averaged - self.black_level) / span
+        return image.astype(np.float32), saturated
+
+
+def row_shifts_rows(rng: np.random.Generator, n_frames: int, camera_rows: int, row_jitter_us: float, lines_per_second: float):
+    """Realized per-frame, per-row trigger offsets ``(n_frames, H)`` in projector rows.
+
+    Returns None when ``row_jitter_us`` is 0 (no artifacts).
+    """
+    if row_jitter_us <= 0:
+        return None
+    return rng.normal(0.0, row_jitter_us * 1e-6 * lines_per_second, size=(n_frames, camera_rows))

@@ -1,0 +1,170 @@
+"""Imaging model (Eqs. 1-3) against closed forms and independent discretizations."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from planeray.timing import (
+    Band,
+    RowGeometry,
+    RowPattern,
+    Sweep,
+    band_bin_weights,
+    band_centre_rows,
+    band_width_rows,
+    boundary_images,
+    delay_from_sync_offset,
+    illumination,
+    make_sweep,
+    paper_sweep,
+    sweep_support_rows,
+    sync_offset_from_delay,
+)
+
+finite = dict(allow_nan=False, allow_infinity=False)
+
+
+def test_eq1_closed_form():
+    # t_d = t_e/2 - t_p/2 - t'_o
+    assert delay_from_sync_offset(100.0, 600.0, line_time_us=20.0) == pytest.approx(300 - 10 - 100)
+    # default t_p is one scanline period: 1e6 / 54000 us
+    assert delay_from_sync_offset(0.0, 600.0, lines_per_second=54000) == pytest.approx(300 - 0.5e6 / 54000)
+
+
+@given(st.floats(-5000, 5000, **finite), st.floats(1, 5000, **finite), st.floats(0, 100, **finite))
+def test_eq1_inverse_round_trip(delay, exposure, t_p):
+    offset = sync_offset_from_delay(delay, exposure, line_time_us=t_p)
+    assert delay_from_sync_offset(offset, exposure, line_time_us=t_p) == pytest.approx(delay, abs=1e-9)
+
+
+def test_eq2_paper_numbers():
+    assert band_centre_rows(1500, 54000) == pytest.approx(81.0)
+    assert band_width_rows(600, 54000) == pytest.approx(32.4)
+    assert band_width_rows(500, 54000) == pytest.approx(27.0)  # the calibration: 27 lines in 500 us
+
+
+def test_eq3_indicator_and_sign_convention():
+    u = np.arange(-100, 101)
+    L = illumination(u, 1000.0, 600.0, 54000)  # centre +54, half width 16.2
+    lit = u[L > 0]
+    assert lit.min() == 38 and lit.max() == 70
+    # positive delay lights lower projector rows (u = v - t > 0)
+    assert np.all(lit > 0)
+
+
+def _brute_force_bins(k, centre, width, sigma=0.0, line=0.0, n=801):
+    """Independent reference: integrate the blurred box on a fine grid."""
+    x = np.linspace(-0.5, 0.5, n)
+    out = []
+    for kk in k:
+        xs = kk + x
+        if sigma == 0 and line == 0:
+            f = (np.abs(xs - centre) <= width / 2).astype(float)
+        else:
+            # box convolved with kernel: average of shifted boxes over kernel samples
+            z = np.linspace(-6, 6, 121)
+            g = np.exp(-0.5 * z**2) if sigma > 0 else np.zeros_like(z)
+            shifts = z * sigma if sigma > 0 else np.array([0.0])
+            wts = g / g.sum() if sigma > 0 else np.array([1.0])
+            if line > 0:
+                ls = ((np.arange(100) + 0.5) / 100 - 0.5) * line
+                shifts = (shifts[:, None] + ls[None, :]).ravel()
+                wts = (wts[:, None] * np.full(100, 1 / 100)[None, :]).ravel()
+            f = (np.abs(xs[None, :] - shifts[:, None] - centre) <= width / 2).astype(float)
+            f = (wts[:, None] * f).sum(axis=0)
+        out.append(np.trapezoid(f, xs))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("sigma,line", [(0.0, 0.0), (0.8, 0.0), (0.0, 1.5), (0.6, 1.0)])
+def test_bin_weights_match_brute_force_integration(sigma, line):
+    k = np.arange(-12, 13)
+    w = band_bin_weights(k, 2.3, 9.7, sigma, line)
+    ref = _brute_force_bins(k, 2.3, 9.7, sigma, line)
+    np.testing.assert_allclose(w, ref, atol=2e-3)
+
+
+@settings(max_examples=200)
+@given(
+    st.floats(-60, 60, **finite),
+    st.floats(0.01, 70, **finite),
+    st.floats(0, 3, **finite),
+    st.floats(0, 3, **finite),
+)
+def test_bin_weights_sum_to_band_width(centre, width, sigma, line):
+    k = np.arange(-150, 151)
+    w = band_bin_weights(k, centre, width, sigma, line)
+    assert w.sum() == pytest.approx(width, rel=1e-9, abs=1e-9)
+    assert np.all(w >= -1e-12) and np.all(w <= 1 + 1e-12)
+
+
+def test_paper_sweep():
+    s = paper_sweep()
+    assert len(s) == 85
+    assert (~s.excluded).sum() == 75
+    assert sorted(set(s.delay_us)) == list(np.arange(-8, 9) * 187.5)
+    assert sorted(set(s.exposure_us)) == [600.0, 750.0, 900.0, 1050.0, 1200.0]
+    # flagged images are exactly the boundary rule
+    assert np.array_equal(s.excluded, np.abs(np.abs(s.delay_us) - s.exposure_us / 2) <= 75)
+    K = sweep_support_rows(s, 54000)
+    assert 2 * K + 1 == 229
+    assert make_sweep("paper").name == "paper"
+    with pytest.raises(ValueError, match="unknown sweep"):
+        make_sweep("nope")
+
+
+def test_boundary_rule_examples():
+    assert boundary_images(375.0, 750.0)  # |375| - 375 = 0
+    assert boundary_images(-562.5, 1050.0)  # 37.5
+    assert not boundary_images(0.0, 600.0)
+    assert not boundary_images(187.5, 600.0)  # 112.5
+
+
+def test_sweep_validation():
+    with pytest.raises(ValueError):
+        Sweep([0.0, 1.0], [600.0], [False, False])
+    with pytest.raises(ValueError):
+        Sweep([0.0], [-600.0], [False])
+
+
+def test_scaled_camera_geometry():
+    g = RowGeometry(128, 720)
+    assert g.rows_per_camera_row == pytest.approx(5.625)
+    # centres of the first and last camera row in projector coordinates
+    assert g.projector_row_of(0) == pytest.approx(2.3125)
+    assert g.projector_row_of(127) == pytest.approx(716.6875)
+    # rows near the top have fewer valid offsets
+    cov = g.coverage(0, np.arange(-5, 6))
+    assert cov[0] == 0 and cov[-1] == 1 and 0 < cov[2] < 1
+
+
+def test_band_is_clipped_to_projector():
+    g = RowGeometry(128)
+    b = Band(-1000.0, 600.0, 54000)  # centre -54 rows: above the top for early rows
+    w = b.weights(g, np.arange(128)[:, None], np.arange(-80, 81)[None, :])
+    assert w[0].sum() == 0  # camera row 0 sees projector rows -70..-38: none exist
+    assert w[63].sum() == pytest.approx(25.7)  # rows -7.2..25.2 clipped at the top edge -0.5
+    assert w[100].sum() == pytest.approx(32.4)
+
+
+def test_row_pattern_matches_band():
+    g = RowGeometry(50)
+    b = Band(200.0, 300.0, 54000)
+    t = 25
+    u = np.arange(-40, 41)
+    v = np.arange(50)
+    pattern = band_bin_weights(v - t, b.centre_rows, b.width_rows)  # band around row t
+    np.testing.assert_allclose(RowPattern(pattern).weights(g, t, u), b.weights(g, t, u), atol=1e-12)
+
+
+def test_row_jitter_averages_frames():
+    g = RowGeometry(4)
+    shifts = np.array([[0.5, 0, 0, 0], [-0.5, 0, 0, 0]])
+    b = Band(0.0, 300.0, 54000, row_shifts_rows=shifts)
+    u = np.arange(-20, 21)
+    w = b.weights(g, np.arange(4)[:, None], u[None, :])
+    b0 = Band(0.0, 300.0, 54000)
+    ref0 = 0.5 * (band_bin_weights(u, 0.5, b0.width_rows) + band_bin_weights(u, -0.5, b0.width_rows))
+    np.testing.assert_allclose(w[0], ref0 * g.coverage(0, u), atol=1e-12)
+    np.testing.assert_allclose(w[1], b0.weights(g, 1, u), atol=1e-12)
