@@ -15,7 +15,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 demo: venv
-	$(PY) -m planeray.demo --out $(OUT)
+	$(VENV)/bin/planeray demo --out $(OUT)
 
 test: venv
 	$(PY) -m pytest -q

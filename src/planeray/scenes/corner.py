@@ -35,7 +35,7 @@ Assumptions and approximations
   occlusion and the finite width of the faces are ignored.
 * Offsets beyond the dense band (``|u| > band_rows``, outside the paper's
   +-114-row sweep support) are kept as sparse entries lumped over
-  ``far_group_rows``-row groups at their weighted centre (total energy is exact,
+  ``far_group_rows``-row groups (8 camera rows) at their weighted centre (total energy is exact,
   their position within a group is approximate); ``far_group_rows = 0`` drops them.
 * ``bounces = 2`` adds the second bounce A -> B -> A (and B -> A -> B), with the
   intermediate face discretized on camera rows.  It lands on the receiver's own
@@ -150,7 +150,7 @@ def build(
     mm_per_row_b: float = 1.5 * DEFAULT_MM_PER_ROW,
     bounces: int = 1,
     band_rows: int = DEFAULT_BAND_ROWS,
-    far_group_rows: int = 8,
+    far_group_rows: int | None = None,
     label_support_rows: int = 114,
     label_fraction: float = 0.1,
 ):
@@ -166,9 +166,9 @@ def build(
         1 (default, one-sided profiles) or 2 (adds A -> B -> A and B -> A -> B).
     band_rows : int
         Half-width of the dense offset band.
-    far_group_rows : int
+    far_group_rows : int, optional
         Offsets beyond the band are lumped over groups of this many rows into sparse
-        entries (0: dropped).
+        entries (0: dropped; default ``8 * ceil(rows_per_camera_row)``).
     label_support_rows, label_fraction : float
         A pixel is labelled ``diffuse_interreflection`` when its indirect light within
         ``|u| <= label_support_rows`` (the paper sweep's support) exceeds
@@ -210,6 +210,8 @@ def build(
     # Far tail: sparse entries lumped over groups of offsets.
     sparse = SparseEntries.empty()
     far = ~inb
+    if far_group_rows is None:
+        far_group_rows = 8 * int(np.ceil(rpc))
     if far_group_rows > 0 and np.any(F[:, far] > 0):
         g = int(far_group_rows)
         far_off = full[far]

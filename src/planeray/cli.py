@@ -1,0 +1,294 @@
+"""Command-line interface: a thin shell over the library (typer + rich).
+
+Every command that takes a stack accepts a native Zarr stack or a captured
+import folder (``manifest.csv`` + images + ``acquisition.json``).  Bad input
+prints one line naming the file and the problem and exits with status 1.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from pathlib import Path
+from typing import Annotated, Optional
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+from .errors import PlanerayError
+
+app = typer.Typer(
+    help="planeray: programmable plane-to-ray light transport (simulate, capture, analyse delay-exposure stacks).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+console = Console(stderr=True)
+out = Console()
+
+
+def _friendly_errors(fn):
+    """Turn planeray's own errors into one red line and exit status 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except (PlanerayError, ValueError, FileNotFoundError) as exc:
+            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            raise typer.Exit(1) from None
+
+    return wrapper
+
+
+def progress_bar():
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+        transient=False,
+    )
+
+
+def _load_stack(path: Path):
+    from .io import read_stack
+
+    return read_stack(path)
+
+
+# ---------------------------------------------------------------- scenes
+@app.command()
+@_friendly_errors
+def scenes():
+    """List the built-in scenes of the simulated device."""
+    from .scenes import list_scenes
+
+    table = Table("scene", "what it shows")
+    for name, description in list_scenes().items():
+        table.add_row(name, description)
+    out.print(table)
+
+
+# -------------------------------------------------------------- simulate
+@app.command()
+@_friendly_errors
+def simulate(
+    scene: Annotated[str, typer.Argument(help="Built-in scene (see `planeray scenes`).")],
+    out_path: Annotated[Path, typer.Option("--out", "-o", help="Stack to write (Zarr directory).")],
+    size: Annotated[tuple[int, int], typer.Option(help="Image size H W.")] = (128, 128),
+    projector_rows: Annotated[Optional[int], typer.Option(help="Projector rows spanned by the image (default: H).")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the scene textures and the camera noise.")] = 0,
+    sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep: paper (85 images) or quick.")] = "paper",
+    lines_per_second: Annotated[float, typer.Option(help="Projector scanline velocity v_p.")] = 54_000.0,
+    frames: Annotated[int, typer.Option(help="Frames averaged per image.")] = 8,
+    bit_depth: Annotated[int, typer.Option(help="ADC bits.")] = 12,
+    black_level: Annotated[int, typer.Option(help="ADC black level (codes).")] = 64,
+    full_well: Annotated[float, typer.Option(help="Full-well capacity (electrons).")] = 10_000.0,
+    read_noise: Annotated[float, typer.Option(help="Read noise (electrons RMS).")] = 7.0,
+    laser_electrons: Annotated[float, typer.Option(help="Electrons from a white surface under its own row.")] = 6_000.0,
+    ambient: Annotated[float, typer.Option(help="Ambient electrons per microsecond of exposure (albedo 1).")] = 0.5,
+    jitter_us: Annotated[float, typer.Option(help="Laser-shutter timing jitter sigma (blurs band edges).")] = 5.0,
+    row_jitter_us: Annotated[float, typer.Option(help="Per-row trigger jitter sigma (row artifacts at the boundary).")] = 10.0,
+    noise: Annotated[bool, typer.Option(help="Simulate noise (--no-noise: expected images).")] = True,
+    truth: Annotated[Optional[Path], typer.Option(help="Also write the scene's ground-truth transport store here.")] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
+):
+    """Simulate a delay-exposure sweep of a built-in scene on the simulated Episcan."""
+    from .acquire import acquire_sweep
+    from .camera import CameraModel
+    from .devices import SimulatedEpiscan
+    from .io import write_stack, write_transport
+    from .scenes import make_scene
+    from .timing import make_sweep
+
+    camera = CameraModel(bit_depth, black_level, full_well, read_noise, laser_electrons, ambient, frames, jitter_us, row_jitter_us)
+    sw = make_sweep(sweep)
+    with console.status(f"building scene {scene} {size[0]}x{size[1]}"):
+        sc = make_scene(scene, size, projector_rows, seed)
+    device = SimulatedEpiscan(sc, camera, lines_per_second, seed, noise)
+    with progress_bar() as bar:
+        task = bar.add_task(f"capturing {len(sw)} images", total=len(sw))
+        stack = acquire_sweep(device, sw, progress=lambda i: bar.advance(task))
+        task = bar.add_task("writing stack", total=len(sw))
+        write_stack(stack, out_path, overwrite=overwrite, progress=lambda i: bar.advance(task))
+    if truth is not None:
+        write_transport(sc.transport, truth, {"lines_per_second": lines_per_second, "method": "ground_truth", "scene": sc.params}, overwrite=overwrite)
+        out.print(f"ground-truth transport: {truth}")
+    out.print(f"stack: {out_path}  ({len(stack)} images, {size[0]}x{size[1]}, {int((~stack.excluded).sum())} used for demultiplexing)")
+
+
+# ------------------------------------------------------------------ info
+@app.command()
+@_friendly_errors
+def info(
+    stack_path: Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
+):
+    """Describe a stack: size, sweep, timing, camera and scene parameters."""
+    st = _load_stack(stack_path)
+    summary = {
+        "path": str(stack_path),
+        "images": len(st),
+        "shape": list(st.shape),
+        "projector_rows": st.projector_rows,
+        "lines_per_second": st.lines_per_second,
+        "delays_us": st.delays().tolist(),
+        "exposures_us": st.exposures().tolist(),
+        "excluded": int(st.excluded.sum()),
+        "used_for_demux": int((~st.excluded).sum()),
+        "metadata": st.metadata,
+    }
+    if as_json:
+        print(json.dumps(summary, indent=2, default=str))
+        return
+    table = Table(show_header=False)
+    for key in ("path", "images", "shape", "projector_rows", "lines_per_second", "excluded", "used_for_demux"):
+        table.add_row(key, str(summary[key]))
+    table.add_row("delays_us", f"{len(summary['delays_us'])}: {st.delays().min():g} .. {st.delays().max():g}")
+    table.add_row("exposures_us", ", ".join(f"{e:g}" for e in summary["exposures_us"]))
+    for key, value in st.metadata.items():
+        table.add_row(key, json.dumps(value, default=str))
+    out.print(table)
+
+
+# --------------------------------------------------------- contact sheet
+@app.command("contact-sheet")
+@_friendly_errors
+def contact_sheet(
+    stack_path: Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")],
+    out_png: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")],
+    gamma: Annotated[float, typer.Option(help="Display gamma.")] = 0.5,
+    max_delays: Annotated[Optional[int], typer.Option(help="Show at most this many delays.")] = None,
+):
+    """Write the delay x exposure grid of a stack (the paper's Fig. 8)."""
+    from .figures import contact_sheet_figure
+
+    st = _load_stack(stack_path)
+    with console.status("drawing contact sheet"):
+        path = contact_sheet_figure(st, out_png, gamma=gamma, max_delays=max_delays)
+    out.print(f"contact sheet: {path}")
+
+
+# -------------------------------------------------------------- profiles
+@app.command()
+@_friendly_errors
+def profiles(
+    stack_path: Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")],
+    pixel: Annotated[list[str], typer.Option(help="Pixel as ROW COL or ROW,COL (repeat for more pixels).")],
+    out_png: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")],
+    exposure: Annotated[Optional[float], typer.Option(help="Plot only this exposure (us).")] = None,
+    csv: Annotated[Optional[Path], typer.Option(help="Also write the profiles as CSV.")] = None,
+):
+    """Plot area-normalized delay profiles of pixels (the paper's Fig. 9)."""
+    from .figures import delay_profiles_figure
+    from .profiles import measured_delay_profiles
+
+    st = _load_stack(stack_path)
+    prof = measured_delay_profiles(st, [_parse_pixel(p) for p in pixel])
+    path = delay_profiles_figure(st, prof, out_png, exposure_us=exposure)
+    if csv is not None:
+        _write_profiles_csv(prof, csv)
+        out.print(f"profiles CSV: {csv}")
+    out.print(f"delay profiles: {path}")
+
+
+def _parse_pixel(text: str) -> tuple[int, int]:
+    parts = text.replace(",", " ").split()
+    if len(parts) != 2 or not all(p.lstrip("-").isdigit() for p in parts):
+        raise ValueError(f"--pixel expects ROW COL (two integers), got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+def _join_pixel_args(argv: list[str]) -> list[str]:
+    """Let ``--pixel ROW COL`` (two words) through typer, which takes one value per option."""
+    joined, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--pixel" and i + 2 < len(argv) and argv[i + 1].lstrip("-").isdigit() and argv[i + 2].lstrip("-").isdigit():
+            joined += ["--pixel", f"{argv[i + 1]},{argv[i + 2]}"]
+            i += 3
+        else:
+            joined.append(argv[i])
+            i += 1
+    return joined
+
+
+def _write_profiles_csv(prof, path: Path):
+    from .io import atomic_file
+
+    rows = ["row,col,exposure_us,delay_us,raw,normalized"]
+    for p, (r, c) in enumerate(prof.pixels):
+        for e_i, e in enumerate(prof.exposure_us):
+            for d_i, d in enumerate(prof.delay_us):
+                if np.isfinite(prof.raw[p, e_i, d_i]):
+                    rows.append(f"{r},{c},{e:g},{d:g},{prof.raw[p, e_i, d_i]:.7g},{prof.values[p, e_i, d_i]:.7g}")
+    with atomic_file(path) as tmp:
+        tmp.write_text("\n".join(rows) + "\n")
+
+
+# ------------------------------------------------------ export / import
+@app.command()
+@_friendly_errors
+def export(
+    stack_path: Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")],
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (manifest.csv + images + acquisition.json).")],
+    fmt: Annotated[str, typer.Option("--format", help="tiff or png (16-bit grayscale).")] = "tiff",
+    bit_depth: Annotated[int, typer.Option(help="Bits of the written codes.")] = 16,
+    black_level: Annotated[int, typer.Option(help="Code of black (keeps small negative values).")] = 256,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing folder.")] = False,
+):
+    """Export a stack as 16-bit images + manifest.csv + acquisition.json (the import format)."""
+    from .io import export_folder
+
+    st = _load_stack(stack_path)
+    with console.status(f"exporting {len(st)} images"):
+        export_folder(st, out_dir, fmt=fmt, bit_depth=bit_depth, black_level=black_level, overwrite=overwrite)
+    out.print(f"exported folder: {out_dir}")
+
+
+@app.command("import")
+@_friendly_errors
+def import_(
+    folder: Annotated[Path, typer.Argument(help="Folder with manifest.csv, images and acquisition.json.")],
+    out_path: Annotated[Path, typer.Option("--out", "-o", help="Native stack to write (Zarr).")],
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing store.")] = False,
+):
+    """Import a captured stack folder into a native Zarr stack."""
+    from .io import import_folder, write_stack
+
+    st = import_folder(folder)
+    with progress_bar() as bar:
+        task = bar.add_task("writing stack", total=len(st))
+        write_stack(st, out_path, overwrite=overwrite, progress=lambda i: bar.advance(task))
+    out.print(f"stack: {out_path}  ({len(st)} images, {st.shape[0]}x{st.shape[1]})")
+
+
+# ------------------------------------------------------------------ demo
+@app.command()
+@_friendly_errors
+def demo(
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("out"),
+    size: Annotated[int, typer.Option(help="Image size (square).")] = 128,
+    seed: Annotated[int, typer.Option(help="Seed.")] = 0,
+):
+    """The newcomer's first run: simulate the paper's sweep and look at it."""
+    from .demo import run_demo
+
+    run_demo(out_dir, size=size, seed=seed, console=out, progress=progress_bar)
+
+
+def main(argv: list[str] | None = None):
+    """Console entry point (``planeray``)."""
+    import sys
+
+    args = _join_pixel_args(list(sys.argv[1:] if argv is None else argv))
+    app(args=args, prog_name="planeray")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

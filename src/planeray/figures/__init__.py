@@ -1,0 +1,6 @@
+"""Paper figures, one function each (matplotlib, Agg backend, PNG output)."""
+
+from .contact_sheet import contact_sheet_figure
+from .profiles import delay_profiles_figure
+
+__all__ = ["contact_sheet_figure", "delay_profiles_figure"]

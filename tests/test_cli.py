@@ -1,0 +1,111 @@
+"""The command line: every command runs, writes what it says, and fails in one line."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from planeray.cli import _join_pixel_args, app, main
+from planeray.io import read_stack
+
+runner = CliRunner()
+
+
+def invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def stack_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "plane.zarr"
+    res = invoke("simulate", "diffuse_plane", "--out", path, "--size", 32, 40, "--sweep", "quick", "--seed", 3)
+    assert res.exit_code == 0, res.output
+    return path
+
+
+def test_scenes_lists_the_builtin_scenes():
+    res = invoke("scenes")
+    assert res.exit_code == 0
+    for name in ("diffuse_plane", "wax", "corner", "mirror_ball", "disco_ball"):
+        assert name in res.output
+
+
+def test_simulate_writes_a_stack_with_its_parameters(stack_path, tmp_path):
+    st = read_stack(stack_path)
+    assert st.shape == (32, 40) and len(st) == 27
+    assert st.metadata["camera"]["frames_averaged"] == 8
+    assert st.metadata["scene"]["seed"] == 3
+    truth = tmp_path / "truth.zarr"
+    res = invoke("simulate", "wax", "--out", tmp_path / "w.zarr", "--size", 32, 32, "--sweep", "quick",
+                 "--frames", 2, "--read-noise", 3, "--projector-rows", 96, "--truth", truth)
+    assert res.exit_code == 0, res.output
+    st = read_stack(tmp_path / "w.zarr")
+    assert st.projector_rows == 96 and st.metadata["camera"]["read_noise_e"] == 3
+    assert truth.exists()
+
+
+def test_simulate_refuses_to_overwrite(stack_path):
+    res = invoke("simulate", "diffuse_plane", "--out", stack_path, "--size", 16, 16, "--sweep", "quick")
+    assert res.exit_code == 1
+    assert "already exists" in res.output
+
+
+def test_info_json(stack_path):
+    res = invoke("info", stack_path, "--json")
+    assert res.exit_code == 0
+    info = json.loads(res.stdout)
+    assert info["images"] == 27 and info["shape"] == [32, 40] and info["lines_per_second"] == 54000.0
+
+
+def test_contact_sheet_and_profiles_write_pngs(stack_path, tmp_path):
+    res = invoke("contact-sheet", stack_path, "--out", tmp_path / "cs.png")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "cs.png").read_bytes()[:4] == b"\x89PNG"
+    res = invoke("profiles", stack_path, "--pixel", "5,6", "--pixel", "20,30", "--out", tmp_path / "p.png", "--csv", tmp_path / "p.csv")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "p.png").exists()
+    lines = (tmp_path / "p.csv").read_text().splitlines()
+    assert lines[0].startswith("row,col") and len(lines) == 1 + 2 * 27
+
+
+def test_pixel_accepts_two_words(stack_path, tmp_path):
+    assert _join_pixel_args(["profiles", "s", "--pixel", "5", "6", "--out", "x"]) == ["profiles", "s", "--pixel", "5,6", "--out", "x"]
+    with pytest.raises(SystemExit) as exc:
+        main(["profiles", str(stack_path), "--pixel", "5", "6", "--out", str(tmp_path / "p2.png")])
+    assert exc.value.code == 0
+    assert (tmp_path / "p2.png").exists()
+
+
+def test_export_import_round_trip(stack_path, tmp_path):
+    res = invoke("export", stack_path, "--out", tmp_path / "folder", "--format", "png")
+    assert res.exit_code == 0, res.output
+    res = invoke("import", tmp_path / "folder", "--out", tmp_path / "back.zarr")
+    assert res.exit_code == 0, res.output
+    a, b = read_stack(stack_path), read_stack(tmp_path / "back.zarr")
+    np.testing.assert_allclose(np.asarray(b.images[:]), np.asarray(a.images[:]), atol=1e-4)
+    # every command accepts the import folder directly too
+    assert invoke("info", tmp_path / "folder").exit_code == 0
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (("info", "/no/such/stack"), "does not exist"),
+        (("simulate", "no_such_scene", "--out", "/tmp/x.zarr"), "unknown scene"),
+        (("simulate", "diffuse_plane", "--out", "/tmp/x.zarr", "--sweep", "bogus"), "unknown sweep"),
+        (("simulate", "diffuse_plane", "--out", "/tmp/x.zarr", "--bit-depth", "20"), "bit_depth"),
+    ],
+)
+def test_errors_are_one_line(args, message):
+    res = invoke(*args)
+    assert res.exit_code == 1
+    assert message in res.output
+    assert "Traceback" not in res.output
+
+
+def test_bad_pixel_is_reported(stack_path, tmp_path):
+    res = invoke("profiles", stack_path, "--pixel", "500,1", "--out", tmp_path / "p.png")
+    assert res.exit_code == 1 and "outside" in res.output
+    res = invoke("profiles", stack_path, "--pixel", "a,b", "--out", tmp_path / "p.png")
+    assert res.exit_code == 1 and "ROW COL" in res.output
