@@ -30,15 +30,21 @@ the camera row's footprint.
 
 Assumptions and approximations
 ------------------------------
-* Infinite strips: light from a strip of B is assumed to come from the same
-  column's albedo ``rho_B(v, s)`` (the form factor spreads it along the crease);
-  occlusion and the finite width of the faces are ignored.
+* Along the crease the faces are infinite (continued beyond the image by
+  mirroring the texture).  The light of a strip arrives from a spread of columns:
+  integrating the 3D point-to-area form factor ``a b / (pi (x^2 + c^2)^2)`` over
+  ``x`` gives the strip form factor times the kernel ``2 c^3 / (pi (x^2+c^2)^2)``
+  with ``c^2 = a^2 + b^2``, so ``rho_B(v, s)`` above is the source row's albedo
+  blurred along the row by that kernel (exact per pixel; ``c`` quantized to
+  scales 1.25x apart).  Occlusion is ignored.
 * Offsets beyond the dense band (``|u| > band_rows``, outside the paper's
   +-114-row sweep support) are kept as sparse entries lumped over
-  ``far_group_rows``-row groups (8 camera rows) at their weighted centre (total energy is exact,
-  their position within a group is approximate); ``far_group_rows = 0`` drops them.
+  ``far_group_rows``-row groups (default 8 camera rows, at most 16 groups a
+  side) at their weighted centre (total energy is exact, their position within
+  a group is approximate); ``far_group_rows = 0`` drops them.
 * ``bounces = 2`` adds the second bounce A -> B -> A (and B -> A -> B), with the
-  intermediate face discretized on camera rows.  It lands on the receiver's own
+  intermediate face discretized on camera rows (same-column albedos, no
+  along-crease blur).  It lands on the receiver's own
   face, so it breaks the one-sided profile; it is off by default and small
   (``< rho^3 / 4``).
 
@@ -140,6 +146,34 @@ def _second_bounce(geometry, x_c, mm_a, mm_b, offsets, albedo, crease_row, n_sub
     return out
 
 
+def _strip_kernel_stack(albedo, scales_px):
+    """``albedo`` blurred along rows by the along-crease kernel of each scale ``c`` (pixels).
+
+    A point at distance ``a`` from the crease receives from the element ``(x, b)``
+    of the other face with ``dF = a b / (pi (x^2 + c^2)^2) dx db``, ``c^2 = a^2 + b^2``;
+    integrating over ``x`` gives the strip form factor times the normalized kernel
+    ``2 c^3 / (pi (x^2 + c^2)^2)``, integrated exactly over each pixel.  The faces are
+    continued beyond the image by mirroring.  Returns ``(S, H, W)``.
+    """
+    H, W = albedo.shape
+    J = W  # kernel half-width in pixels (mirrored rows repeat beyond that)
+    x = np.arange(-J, J + 1, dtype=float)
+    padded = np.pad(albedo.astype(float), ((0, 0), (J, J)), mode="symmetric")
+    n = padded.shape[1] + 2 * J + 1
+    spec = np.fft.rfft(padded, n=n, axis=1)
+    out = np.empty((len(scales_px), H, W))
+    for i, c in enumerate(scales_px):
+        if c < 0.2:
+            out[i] = albedo
+            continue
+        cdf = lambda z: np.arctan(z / c) + c * z / (z * z + c * c)  # noqa: E731  (x pi, minus pi/2)
+        k = cdf(x + 0.5) - cdf(x - 0.5)
+        k /= k.sum()
+        full = np.fft.irfft(spec * np.fft.rfft(k, n=n), n=n, axis=1)
+        out[i] = full[:, 2 * J : 2 * J + W]
+    return out
+
+
 @register_scene("corner", "concave corner: diffuse interreflection (steep one-sided delay profile)")
 def build(
     shape,
@@ -151,6 +185,8 @@ def build(
     bounces: int = 1,
     band_rows: int = DEFAULT_BAND_ROWS,
     far_group_rows: int | None = None,
+    mm_per_column: float | None = None,
+    textured: bool = True,
     label_support_rows: int = 114,
     label_fraction: float = 0.1,
 ):
@@ -168,7 +204,12 @@ def build(
         Half-width of the dense offset band.
     far_group_rows : int, optional
         Offsets beyond the band are lumped over groups of this many rows into sparse
-        entries (0: dropped; default ``8 * ceil(rows_per_camera_row)``).
+        entries (0: dropped; default: 8 camera rows, or more so that each side has at
+        most 16 groups).
+    mm_per_column : float, optional
+        Width of a pixel column on both faces, mm (default: a camera row's height on face A).
+    textured : bool
+        Textured albedos (default) or uniform faces (0.65 above, 0.55 below) for validation.
     label_support_rows, label_fraction : float
         A pixel is labelled ``diffuse_interreflection`` when its indirect light within
         ``|u| <= label_support_rows`` (the paper sweep's support) exceeds
@@ -185,10 +226,14 @@ def build(
     band = max(int(band_rows), int(np.ceil(rpc)) + 1)
     offsets = scene_offsets(band)
 
-    wall = wallpaper(shape, rng, mean=0.65, amplitude=0.12)
-    floor = floor_tiles(shape, rng, tiles=6, mean=0.55, spread=0.15, grout=0.2)
-    albedo = np.where(np.arange(H)[:, None] < crease_row, wall, floor)
-    albedo = np.clip(albedo * (1.0 + smooth_noise(shape, rng, H / 8.0, 0.03)), 0.02, 0.95).astype(np.float32)
+    if textured:
+        wall = wallpaper(shape, rng, mean=0.65, amplitude=0.12)
+        floor = floor_tiles(shape, rng, tiles=6, mean=0.55, spread=0.15, grout=0.2)
+        albedo = np.where(np.arange(H)[:, None] < crease_row, wall, floor)
+        albedo = albedo * (1.0 + smooth_noise(shape, rng, H / 8.0, 0.03))
+    else:
+        albedo = np.where(np.arange(H)[:, None] < crease_row, 0.65, 0.55) * np.ones(shape)
+    albedo = np.clip(albedo, 0.02, 0.95).astype(np.float32)
 
     # Form factors over every offset that can reach the other face.
     reach = max(P, band)
@@ -198,9 +243,21 @@ def build(
     p_t = geometry.projector_row_of(np.arange(H))
     src_row = np.clip(np.floor((p_t[:, None] + full[None, :] + 0.5) / rpc).astype(int), 0, H - 1)  # (H, 2P+1)
 
+    # Along-crease spread: the source strip's albedo blurred at the scale c = sqrt(a^2 + b^2).
+    mm_col = mm_per_column if mm_per_column is not None else rpc * mm_per_row_a
+    src = p_t[:, None] + full[None, :]
+    d_recv = np.where(p_t < x_c, (x_c - p_t) * mm_per_row_a, (p_t - x_c) * mm_per_row_b)[:, None]
+    d_src = np.where(src < x_c, (x_c - src) * mm_per_row_a, (src - x_c) * mm_per_row_b)
+    c_px = np.hypot(d_recv, d_src) / mm_col
+    c_lo = max(0.2, float(c_px.min()))
+    n_scales = int(np.ceil(np.log(max(c_px.max(), c_lo * 1.01) / c_lo) / np.log(1.25))) + 1
+    scales = c_lo * 1.25 ** np.arange(n_scales)
+    stack = _strip_kernel_stack(albedo, scales).astype(np.float32)
+    scale_idx = np.clip(np.rint(np.log(np.maximum(c_px, c_lo) / c_lo) / np.log(1.25)).astype(int), 0, n_scales - 1)
+
     inb = (full >= offsets[0]) & (full <= offsets[-1])
     Fd = F[:, inb].astype(np.float32)
-    rho_src = albedo[src_row[:, inb]]  # (H, U, W)
+    rho_src = stack[scale_idx[:, inb], src_row[:, inb]]  # (H, U, W)
     indirect = (albedo[:, :, None] * (Fd[:, :, None] * rho_src).transpose(0, 2, 1)).astype(np.float32)
     if bounces == 2:
         indirect += _second_bounce(geometry, x_c, mm_per_row_a, mm_per_row_b, offsets, albedo, crease_row, n_sub)
@@ -211,7 +268,7 @@ def build(
     sparse = SparseEntries.empty()
     far = ~inb
     if far_group_rows is None:
-        far_group_rows = 8 * int(np.ceil(rpc))
+        far_group_rows = max(8 * int(np.ceil(rpc)), int(np.ceil((reach - band) / 16)))
     if far_group_rows > 0 and np.any(F[:, far] > 0):
         g = int(far_group_rows)
         far_off = full[far]
@@ -226,7 +283,8 @@ def build(
             if rows_nz.size == 0:
                 continue
             centre = np.rint((w[rows_nz] * full[sel][None, :]).sum(axis=1) / tot[rows_nz]).astype(int)
-            val = np.einsum("rn,rnw->rw", w[rows_nz], albedo[src_row[rows_nz][:, sel]]) * albedo[rows_nz]
+            rho_far = stack[scale_idx[rows_nz][:, sel], src_row[rows_nz][:, sel]]
+            val = np.einsum("rn,rnw->rw", w[rows_nz], rho_far) * albedo[rows_nz]
             rr, cc = np.meshgrid(rows_nz, np.arange(W), indexing="ij")
             rows_l.append(rr.ravel())
             cols_l.append(cc.ravel())
@@ -247,6 +305,8 @@ def build(
         "bounces": int(bounces),
         "band_rows": int(band_rows),
         "far_group_rows": int(far_group_rows),
+        "mm_per_column": float(mm_col),
+        "textured": bool(textured),
         "label_support_rows": int(label_support_rows),
         "label_fraction": float(label_fraction),
     }

@@ -269,7 +269,7 @@ def gather_resting_sphere(shape, geometry, mm_per_row, albedo, centre_xy_mm, rad
     R = float(radius_mm)
     p_t = geometry.projector_row_of(np.arange(H))
     # Inverse table of rho_q(beta), refined by Newton steps.
-    s = np.linspace(0.0, 1.0, 4097)[1:] ** 2
+    s = np.linspace(0.0, 1.0, 4097)[1:-1] ** 2
     beta_tab = 0.5 * np.pi - 0.25 * np.pi * s  # from the limb (rho_q = R) inward
     rq_tab, _ = _reflection_radius(beta_tab, R)
     visible = coverage < 1.0

@@ -25,7 +25,7 @@ wood texture with direct reflection only.  A wax pixel ``(t, s)`` receives
   wax in column ``s`` (light must enter the wax: the kernel is truncated at the
   object's top and bottom boundary).  ``rho_ss`` is a smooth tint variation
   (~5 %) of the wax; the dipole itself carries the diffuse albedo (``K`` sums to
-  the dipole's total diffuse reflectance, ~0.77 for the defaults).
+  the dipole's total diffuse reflectance, ~0.75 for the defaults).
 
 Assumptions and approximations
 ------------------------------
