@@ -21,7 +21,7 @@ from .figures import contact_sheet_figure, delay_profiles_figure
 from .io import write_stack, write_transport
 from .profiles import measured_delay_profiles
 from .scenes import EFFECTS, Scene, make_scene
-from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
+from .timing import PAPER_LINES_PER_SECOND, Band, paper_sweep, sweep_support_rows
 
 __all__ = ["run_demo", "pick_pixels"]
 
@@ -29,33 +29,61 @@ __all__ = ["run_demo", "pick_pixels"]
 DEMO_PROJECTOR_ROWS = 720
 
 
-def pick_pixels(scene: Scene, support_rows: int, per_label: int = 1) -> tuple[np.ndarray, list[str]]:
+def pick_pixels(scene: Scene, support_rows: int, per_label: int = 1, exposure_us: float = 600.0) -> tuple[np.ndarray, list[str]]:
     """Pick pixels that show each ground-truth effect of a scene most clearly.
 
-    For direct/diffuse pixels: the brightest with the least in-sweep indirect
-    light; for the other effects: the largest in-sweep non-epipolar light
-    relative to the pixel's direct light.
+    Direct/diffuse pixels: the brightest whose in-sweep indirect light is below 1 %
+    of their direct light, at least 6 pixels from any other effect or the border.
+    Other effects: the pixels whose noise-free delay profile (the paper's delays at
+    ``exposure_us``, rendered from the ground truth) has the most prominent second
+    peak beside the one on the epipolar plane -- the clearest two-peak profiles.
     """
+    from scipy.ndimage import distance_transform_edt
+
     T = scene.transport
     u = T.offsets_rows
-    in_sweep = (np.abs(u) <= support_rows) & (np.abs(u) > T.geometry.rows_per_camera_row)
+    footprint = np.abs(u) <= T.geometry.rows_per_camera_row
+    near = T.dense[:, :, footprint].sum(axis=2)
+    in_sweep = (np.abs(u) <= support_rows) & ~footprint
     indirect = T.dense[:, :, in_sweep].max(axis=2)
-    direct = scene.direct + 1e-6
+    delays = np.unique(paper_sweep().delay_us)
+    profile = np.stack([T.render(Band(d, exposure_us, PAPER_LINES_PER_SECOND)) for d in delays])
+    centre = np.abs(delays) <= exposure_us / 2
+    on_plane = profile[centre].max(axis=0)
+    # The clearest second peak on either side: its prominence over the valley
+    # towards the epipolar plane and over the fall-off beyond it (a peak cut by
+    # the end of the sweep does not count).
+    bimodality = np.full(on_plane.shape, -np.inf)
+    for side in (delays < 0, delays > 0):
+        order = np.argsort(np.abs(delays[side]))
+        prof = profile[side][order]  # from the plane outward
+        inner = np.minimum.accumulate(prof, axis=0)
+        outer = np.minimum.accumulate(prof[::-1], axis=0)[::-1]
+        beyond_band = np.abs(delays[side][order]) > exposure_us / 2
+        for k in np.flatnonzero(beyond_band)[:-1]:
+            peak = prof[k]
+            drop = np.minimum(peak - inner[k], peak - outer[k + 1])
+            score = np.minimum(drop, on_plane - inner[k]) / (np.maximum(on_plane, peak) + 1e-9)
+            bimodality = np.maximum(bimodality, score)
     pixels, names = [], []
     for label in sorted(set(np.unique(scene.labels)) - {0}):
         mask = scene.labels == label
         if label == 1:
-            score = np.where(mask & (indirect < 0.01 * direct), direct, -np.inf)
+            interior = distance_transform_edt(np.pad(mask, 1))[1:-1, 1:-1] > 6
+            score = np.where(interior & (indirect < 0.01 * near), near, -np.inf)
         else:
-            score = np.where(mask & (scene.direct > 0.05), indirect / direct, -np.inf)
-            if not np.isfinite(score).any():
-                score = np.where(mask, indirect, -np.inf)
-        order = np.argsort(score, axis=None)[::-1][:per_label]
+            score = np.where(mask, bimodality, -np.inf)
+        order = np.argsort(score, axis=None)[::-1]
+        chosen = []
         for flat in order:
-            if np.isfinite(score.flat[flat]):
-                pixels.append(np.unravel_index(flat, score.shape))
-                names.append(EFFECTS[int(label)].replace("_", " "))
-    return np.array(pixels, dtype=np.int64), names
+            if len(chosen) == per_label or not np.isfinite(score.flat[flat]):
+                break
+            p = np.array(np.unravel_index(flat, score.shape))
+            if all(np.abs(p - q).max() > 6 for q in chosen):  # spread the picks out
+                chosen.append(p)
+        pixels += chosen
+        names += [EFFECTS[int(label)].replace("_", " ")] * len(chosen)
+    return np.array(pixels, dtype=np.int64).reshape(-1, 2), names
 
 
 def _simulate(name, out_dir, size, seed, console, progress):
@@ -95,7 +123,7 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     mirror, mirror_stack = _simulate("mirror_ball", out_dir, size, seed, console, progress)
     written["stack_mirror_ball"] = out_dir / "mirror_ball.zarr"
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
-    pixels, names = pick_pixels(mirror, support, per_label=2)
+    pixels, names = pick_pixels(mirror, support, per_label=1)
     prof = measured_delay_profiles(mirror_stack, pixels)
     written["fig9_delay_profiles"] = delay_profiles_figure(mirror_stack, prof, out_dir / "fig9_delay_profiles.png", names=names)
     from .cli import _write_profiles_csv

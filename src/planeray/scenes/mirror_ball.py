@@ -318,7 +318,7 @@ def build(
     mm_per_row: float = DEFAULT_MM_PER_ROW,
     radius: float = 0.18,
     mirror_reflectance: float = 0.9,
-    ball_diffuse: float = 0.02,
+    ball_diffuse: float = 0.08,
     n_cam: int = 6,
     n_splat: int = 0,
     band_rows: int = DEFAULT_BAND_ROWS,
@@ -333,7 +333,9 @@ def build(
     radius : float
         Sphere radius as a fraction of the image height.
     mirror_reflectance, ball_diffuse : float
-        Specular and (dust) diffuse reflectance of the ball.
+        Specular and diffuse reflectance of the ball (a chrome ball with a dull,
+        dusty finish: its diffuse part gives ball pixels a peak at u = 0 beside the
+        displaced specular one, a clearly bimodal delay profile).
     n_cam, n_splat : int
         Samples per pixel side for ball pixels and for the forward splat; ``n_splat = 0``
         (default) replaces the splat by the exact, noise-free gather
