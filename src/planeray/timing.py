@@ -143,21 +143,27 @@ def _second_antiderivative(x, sigma, width):
     ramp = np.maximum(x, 0.0)
     if width <= 0.0 and sigma <= 0.0:
         return ramp
-    if width <= 0.0:
-        z = x / sigma
-        return x * ndtr(z) + sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
     if sigma <= 0.0:
         inner = (x + 0.5 * width) ** 2 / (2.0 * width)
         return np.where(x >= 0.5 * width, x, np.where(x <= -0.5 * width, 0.0, inner))
+
+    def gauss2(y):
+        z = y / sigma
+        return y * ndtr(z) + sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
 
     def third(y):
         z = y / sigma
         return 0.5 * (y * y + sigma * sigma) * ndtr(z) + 0.5 * y * sigma * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi)
 
-    reach = 0.5 * width + 10.0 * sigma
-    near = np.abs(x) < reach
-    xn = np.where(near, x, 0.0)
-    return np.where(near, (third(xn + 0.5 * width) - third(xn - 0.5 * width)) / width, ramp)
+    # Special functions only where the kernel reaches (a few bins per band edge).
+    near = np.abs(x) < 0.5 * width + 10.0 * sigma
+    out = ramp.copy()
+    xn = x[near]
+    if width <= 0.0:
+        out[near] = gauss2(xn)
+    else:
+        out[near] = (third(xn + 0.5 * width) - third(xn - 0.5 * width)) / width
+    return out
 
 
 def band_bin_weights(offset_rows, centre_rows, width_rows, blur_sigma_rows=0.0, line_width_rows=0.0):
