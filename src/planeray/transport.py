@@ -135,11 +135,18 @@ class Transport:
         flat = (row[inside] * W + col[inside]) * offsets_rows.size + (k[inside] - offsets_rows[0])
         dense = dense + np.bincount(flat, value[inside], minlength=dense.size).reshape(dense.shape).astype(np.float32)
         far = ~inside
-        # Merge duplicate far entries so the sparse list stays compact.
-        key = np.stack([row[far], col[far], k[far]], axis=1)
-        uniq, inv = np.unique(key, axis=0, return_inverse=True)
-        vals = np.bincount(inv.ravel(), value[far], minlength=len(uniq))
-        sparse = SparseEntries(uniq[:, 0], uniq[:, 1], uniq[:, 2], vals) if len(uniq) else SparseEntries.empty()
+        if far.any():
+            # Merge duplicate far entries so the sparse list stays compact; one int64
+            # key per entry keeps np.unique fast for millions of entries.
+            k_far = k[far]
+            k_min, span = k_far.min(), int(k_far.max() - k_far.min()) + 1
+            key = (row[far] * W + col[far]) * span + (k_far - k_min)
+            uniq, inv = np.unique(key, return_inverse=True)
+            vals = np.bincount(inv.ravel(), value[far], minlength=uniq.size)
+            pix, kk = np.divmod(uniq, span)
+            sparse = SparseEntries(pix // W, pix % W, kk + k_min, vals)
+        else:
+            sparse = SparseEntries.empty()
         return cls(dense, offsets_rows, geometry, sparse)
 
     # ------------------------------------------------------------ rendering

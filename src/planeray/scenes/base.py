@@ -57,7 +57,9 @@ class Scene:
     transport : Transport
         Exact ground-truth ``T`` (dense band + sparse long-range entries).
     direct : ndarray (H, W) float32
-        Ground-truth direct component (what ideal epipolar imaging shows).
+        Ground-truth physical direct light (single bounce).  The epipolar image of
+        the transport (Eq. 5) can hold more: indirect light that lands on the
+        epipolar plane (e.g. the offset-0 bin of a subsurface kernel).
     ambient_albedo : ndarray (H, W) float32
         Reflectance under ambient (room) light, used by the camera's ambient term.
     labels : ndarray (H, W) uint8
