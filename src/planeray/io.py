@@ -13,7 +13,7 @@ A Zarr v3 directory store (group) written by :func:`write_stack`, read by
 =================  ==========  =======  ==========================================
 array              shape       dtype    content
 =================  ==========  =======  ==========================================
-``images``         (N, H, W)   float32  normalized images, chunked ``(1, H, W)``
+``images``         (N, H, W)   float32  normalized images, chunked ``(1, 32, W)``
 ``saturated``      (N, H, W)   bool     saturation mask (all False if unknown)
 ``delay_us``       (N,)        float64  delay ``t_d`` of each image
 ``exposure_us``    (N,)        float64  exposure ``t_e`` of each image
@@ -123,6 +123,8 @@ __all__ = [
     "write_image",
     "write_transport",
     "read_transport",
+    "read_transport_maps",
+    "transport_attrs",
 ]
 
 STACK_FORMAT = "planeray-stack"
@@ -369,7 +371,8 @@ def write_stack(stack: Stack, path, overwrite: bool = False, progress=None) -> P
     }
     with atomic_directory(path, overwrite, error=StackError) as tmp:
         group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
-        chunks = (1, max(h, 1), max(w, 1))
+        # Row blocks: demultiplexing reads a few camera rows of every image at a time.
+        chunks = (1, max(min(h, 32), 1), max(w, 1))
         images = group.create_array("images", shape=(n, h, w), chunks=chunks, dtype="float32", fill_value=0.0)
         saturated = group.create_array("saturated", shape=(n, h, w), chunks=chunks, dtype="bool", fill_value=False)
         for i in range(n):
@@ -923,6 +926,37 @@ def write_image(path, image, bit_depth: int = 16, black_level: float = 0) -> Pat
 # ----------------------------------------------------------------------------
 # Transport store
 # ----------------------------------------------------------------------------
+def transport_attrs(offsets_rows, projector_rows: int, attrs: dict | None = None, path=None) -> dict:
+    """Group attributes of a transport store: ``attrs`` plus the reserved format fields.
+
+    Used by :func:`write_transport` and by writers that fill a store chunk by chunk
+    (:func:`planeray.demux.demultiplex_to_store`), so both produce the same format.
+    """
+    out = _jsonable(dict(attrs or {}), "attrs", TransportError)
+    out.update(
+        {
+            "format": TRANSPORT_FORMAT,
+            "format_version": FORMAT_VERSION,
+            "offsets_rows": [int(u) for u in offsets_rows],
+            "projector_rows": int(projector_rows),
+            "lines_per_second": out.get("lines_per_second"),
+        }
+    )
+    out.setdefault("planeray_version", _planeray_version())
+    return out
+
+
+def read_transport_maps(path) -> dict:
+    """Per-pixel 2-D arrays stored beside ``T`` (e.g. demultiplexing diagnostics), by name."""
+    path = Path(path)
+    group = _open_group(path, TransportError)
+    maps = {}
+    for name, member in group.members():
+        if name != "T" and name not in _SPARSE_ARRAYS and hasattr(member, "shape") and len(member.shape) == 2:
+            maps[name] = np.asarray(member[...])
+    return maps
+
+
 def write_transport(transport: Transport, path, attrs: dict | None = None, overwrite: bool = False) -> Path:
     """Write a transport to a Zarr v3 store, atomically.
 
@@ -952,18 +986,7 @@ def write_transport(transport: Transport, path, attrs: dict | None = None, overw
     path = Path(path)
     if not isinstance(transport, Transport):
         raise TransportError(f"expected a Transport, got {type(transport).__name__}", path)
-    attrs = dict(attrs or {})
-    out = _jsonable(attrs, "attrs", TransportError)
-    out.update(
-        {
-            "format": TRANSPORT_FORMAT,
-            "format_version": FORMAT_VERSION,
-            "offsets_rows": [int(u) for u in transport.offsets_rows],
-            "projector_rows": int(transport.geometry.projector_rows),
-            "lines_per_second": out.get("lines_per_second"),
-        }
-    )
-    out.setdefault("planeray_version", _planeray_version())
+    out = transport_attrs(transport.offsets_rows, transport.geometry.projector_rows, attrs, path)
     dense = np.asarray(transport.dense, dtype=np.float32)
     h, w, u = dense.shape
     with atomic_directory(path, overwrite, error=TransportError) as tmp:

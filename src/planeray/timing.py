@@ -276,20 +276,23 @@ class Band:
     def width_rows(self) -> float:
         return float(band_width_rows(self.exposure_us, self.lines_per_second))
 
+    def profile(self, offsets_rows, centre_shift_rows=0.0) -> np.ndarray:
+        """Weights over offset bins before clipping to the projector (same for every row)."""
+        sigma = self.jitter_us * 1e-6 * self.lines_per_second
+        line = self.line_width_us * 1e-6 * self.lines_per_second
+        return band_bin_weights(offsets_rows, self.centre_rows + centre_shift_rows, self.width_rows, sigma, line)
+
     def weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
         """Illumination weight of offset bin ``offsets_rows`` for camera row ``rows`` (broadcast)."""
         rows = np.asarray(rows)
         offsets = np.asarray(offsets_rows, dtype=float)
-        sigma = self.jitter_us * 1e-6 * self.lines_per_second
-        line = self.line_width_us * 1e-6 * self.lines_per_second
-        centre = self.centre_rows
         if self.row_shifts_rows is None:
-            w = band_bin_weights(offsets, centre, self.width_rows, sigma, line)
+            w = self.profile(offsets)
         else:
             shifts = np.asarray(self.row_shifts_rows, dtype=float)
             w = 0.0
             for frame_shift in shifts:  # a handful of frames; each term is vectorized
-                w = w + band_bin_weights(offsets, centre + frame_shift[rows], self.width_rows, sigma, line)
+                w = w + self.profile(offsets, frame_shift[rows])
             w = w / len(shifts)
         return w * geometry.coverage(rows, offsets)
 

@@ -1,0 +1,397 @@
+"""Chunked, resumable, optionally distributed demultiplexing of a whole stack.
+
+Work is split into chunks of camera rows.  Each chunk reads only its rows of the
+used images (memory is bounded by the chunk, not the image), solves every pixel
+with the chosen method and returns the transport plus per-pixel diagnostics.
+
+:func:`demultiplex_to_store` writes chunks into a hidden partial store next to
+the output (``.NAME.partial``), marking each chunk done after its data; a run
+that is killed and started again with the same output and parameters continues
+from the finished chunks and yields the same result.  Only a complete result is
+renamed to the output path, so a finished output is never half-written.
+``workers=N`` runs the chunks on a Dask ``LocalCluster``; ``scheduler=ADDRESS``
+on an existing Dask distributed cluster.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..errors import InputError, TransportError
+from ..stack import Stack
+from ..timing import RowGeometry
+from ..transport import Transport
+from .problem import DemuxProblem, RowGroup
+
+__all__ = ["DEFAULT_CHUNK_ROWS", "DemuxResult", "ChunkResult", "solve_chunk", "demultiplex", "demultiplex_to_store", "MAP_NAMES"]
+
+DEFAULT_CHUNK_ROWS = 16
+#: Per-pixel diagnostic maps stored beside ``T``.
+MAP_NAMES = {
+    "residual_rms": "float32",  # RMS of (A x - b) over the observations used
+    "kkt_residual": "float32",  # scaled KKT violation (0 at the exact optimum)
+    "objective": "float32",  # value of the paper's objective
+    "iterations": "int32",
+    "converged": "bool",
+    "n_observations": "int16",  # observations used (saturated ones dropped)
+}
+
+
+@dataclass
+class ChunkResult:
+    """Transport and diagnostics of a block of camera rows."""
+
+    rows: slice
+    T: np.ndarray  # (r, W, U) float32
+    maps: dict  # name -> (r, W)
+
+
+@dataclass
+class DemuxResult:
+    """An in-memory demultiplexing result."""
+
+    transport: Transport
+    maps: dict
+    attrs: dict
+
+
+def _solver(method: str):
+    from . import SOLVERS
+
+    try:
+        return SOLVERS[method]
+    except KeyError:
+        raise InputError(f"unknown demultiplexing method {method!r}; choose one of {sorted(SOLVERS)}") from None
+
+
+def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, source=None):
+    """Observations ``(N, r, W)`` float64 of the used images and their saturation mask."""
+    imgs = np.asarray(stack.images[:, rows, :], dtype=np.float64)[problem.image_index]
+    bad = ~np.isfinite(imgs)
+    if bad.any():
+        n, r, c = np.argwhere(bad)[0]
+        where = f"{source}: " if source else ""
+        raise InputError(f"{where}image {int(problem.image_index[n])} has a non-finite value at pixel ({rows.start + r}, {c})")
+    sat = None
+    if stack.saturated is not None:
+        sat = np.asarray(stack.saturated[:, rows, :], dtype=bool)[problem.image_index]
+        if not sat.any():
+            sat = None
+    return imgs, sat
+
+
+def solve_chunk(problem: DemuxProblem, observations, saturated, rows: slice, method: str = "fast", tol: float | None = None) -> ChunkResult:
+    """Solve every pixel of camera rows ``rows``.
+
+    Parameters
+    ----------
+    problem : DemuxProblem
+    observations : ndarray (N, r, W)
+        Used images restricted to the rows.
+    saturated : ndarray (N, r, W) bool or None
+        Saturated observations; they are dropped from their pixel's fit.
+    rows : slice
+        The camera rows (absolute).
+    method : str
+        A key of :data:`planeray.demux.SOLVERS`.
+    """
+    solve = _solver(method)
+    N, r, W = observations.shape
+    U = problem.n_offsets
+    T = np.zeros((r, W, U), np.float32)
+    maps = {name: np.zeros((r, W), dtype) for name, dtype in MAP_NAMES.items()}
+    row_ids = np.arange(rows.start, rows.stop)
+    for g in np.unique(problem.row_group[row_ids]):
+        group = problem.groups[g]
+        local = np.flatnonzero(problem.row_group[row_ids] == g)
+        B = observations[:, local, :].reshape(N, -1).T  # (P, N) pixels of these rows
+        mask = None if saturated is None else ~saturated[:, local, :].reshape(N, -1).T
+        X = np.zeros((B.shape[0], group.A.shape[1]))
+        iters = np.zeros(B.shape[0], np.int32)
+        conv = np.zeros(B.shape[0], bool)
+        full = np.ones(B.shape[0], bool) if mask is None else mask.all(axis=1)
+        if full.any():
+            res = solve(group, B[full], problem.alpha, problem.beta, tol)
+            X[full], iters[full], conv[full] = res.X, res.iterations, res.converged
+        for p in np.flatnonzero(~full):  # rare: pixels with saturated observations
+            keep = mask[p]
+            sub = RowGroup(group.rows, group.A[keep], group.valid)
+            res = solve(sub, B[p : p + 1, keep], problem.alpha, problem.beta, tol)
+            X[p], iters[p], conv[p] = res.X[0], res.iterations[0], res.converged[0]
+        resid = X @ group.A.T - B
+        if mask is not None:
+            resid = np.where(mask, resid, 0.0)
+        n_obs = np.full(B.shape[0], N) if mask is None else mask.sum(axis=1)
+        pix_maps = {
+            "residual_rms": np.sqrt((resid**2).sum(axis=1) / np.maximum(n_obs, 1)),
+            "kkt_residual": problem.kkt_residual(group, X, np.where(mask, B, 0.0) if mask is not None else B),
+            "objective": problem.objective(group, X, B, mask),
+            "iterations": iters,
+            "converged": conv,
+            "n_observations": n_obs,
+        }
+        if mask is not None and (~full).any():
+            # The KKT test above used the full matrix; redo masked pixels exactly.
+            for p in np.flatnonzero(~full):
+                keep = mask[p]
+                sub = RowGroup(group.rows, group.A[keep], group.valid)
+                pix_maps["kkt_residual"][p] = problem.kkt_residual(sub, X[p : p + 1], B[p : p + 1, keep])[0]
+        Tg = np.zeros((B.shape[0], U), np.float32)
+        Tg[:, group.valid] = X
+        T[local] = Tg.reshape(local.size, W, U)
+        for name, value in pix_maps.items():
+            maps[name][local] = np.asarray(value).reshape(local.size, W)
+    return ChunkResult(rows, T, maps)
+
+
+def _chunks(H: int, chunk_rows: int) -> list[slice]:
+    if chunk_rows < 1:
+        raise InputError(f"chunk must be at least one row, got {chunk_rows}")
+    return [slice(r, min(r + chunk_rows, H)) for r in range(0, H, chunk_rows)]
+
+
+def _attrs(problem: DemuxProblem, method: str, tol) -> dict:
+    return {
+        "lines_per_second": problem.lines_per_second,
+        "alpha": problem.alpha,
+        "beta": problem.beta,
+        "method": method,
+        "tol": tol,
+        "n_images": int(problem.n_images),
+        "epipolar_resolution_rows": problem.epipolar_resolution_rows,
+        "image_index": problem.image_index.tolist(),
+    }
+
+
+def demultiplex(stack: Stack, alpha: float = 0.01, beta: float = 0.01, method: str = "fast", chunk_rows: int = DEFAULT_CHUNK_ROWS,
+                tol: float | None = None, progress: Callable[[int], None] | None = None) -> DemuxResult:
+    """Demultiplex a stack in memory (Sec. 4).
+
+    Parameters
+    ----------
+    stack : Stack
+    alpha, beta : float
+        Smoothness and sparsity weights (paper: 0.01 each).
+    method : {'fast', 'pinv', 'nnls', 'cvxpy'}
+    chunk_rows : int
+        Camera rows per chunk (bounds memory).
+    tol : float, optional
+        Solver tolerance (method-specific default).
+    progress : callable, optional
+        Called with the number of rows finished after each chunk.
+
+    Returns
+    -------
+    DemuxResult
+        ``transport`` (``T`` over ``offsets_rows``), per-pixel ``maps`` and ``attrs``.
+    """
+    problem = DemuxProblem.from_stack(stack, alpha, beta)
+    H, W = stack.shape
+    T = np.zeros((H, W, problem.n_offsets), np.float32)
+    maps = {name: np.zeros((H, W), dtype) for name, dtype in MAP_NAMES.items()}
+    for rows in _chunks(H, chunk_rows):
+        obs, sat = read_observations(stack, problem, rows)
+        res = solve_chunk(problem, obs, sat, rows, method, tol)
+        T[rows] = res.T
+        for name in maps:
+            maps[name][rows] = res.maps[name]
+        if progress is not None:
+            progress(rows.stop - rows.start)
+    transport = Transport(T, problem.offsets_rows, RowGeometry(H, stack.projector_rows))
+    return DemuxResult(transport, maps, _attrs(problem, method, tol))
+
+
+# ---------------------------------------------------------------- the store
+def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_rows: int) -> str:
+    """Identity of a run: a resumed run must match it exactly."""
+    h = hashlib.sha256()
+    for arr in (stack.delay_us, stack.exposure_us, stack.excluded.astype(np.uint8)):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    for i in (0, len(stack) - 1):  # cheap content check: first and last image
+        h.update(np.ascontiguousarray(np.asarray(stack.images[i], np.float32)).tobytes())
+    meta = {
+        "shape": list(stack.shape),
+        "lps": stack.lines_per_second,
+        "projector_rows": stack.projector_rows,
+        "alpha": problem.alpha,
+        "beta": problem.beta,
+        "method": method,
+        "tol": tol,
+        "chunk_rows": chunk_rows,
+        "offsets": [int(problem.offsets_rows[0]), int(problem.offsets_rows[-1])],
+    }
+    h.update(json.dumps(meta, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def _partial_path(out: Path) -> Path:
+    return out.parent / f".{out.name}.partial"
+
+
+def _open_partial(partial: Path, fingerprint: str, shape, problem: DemuxProblem, n_chunks: int, attrs: dict):
+    import zarr
+
+    from ..io import transport_attrs
+
+    if partial.exists():
+        group = zarr.open_group(str(partial), mode="r+")
+        if group.attrs.get("run_fingerprint") != fingerprint:
+            raise InputError(
+                "an unfinished run with different inputs or parameters is in the way; "
+                "remove it or run with --restart",
+                partial,
+            )
+        return group
+    H, W = shape
+    U = problem.n_offsets
+    tmp = partial.parent / f"{partial.name}.init"
+    shutil.rmtree(tmp, ignore_errors=True)
+    group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
+    group.create_array("T", shape=(H, W, U), chunks=(DEFAULT_CHUNK_ROWS, W, U), dtype="float32", fill_value=0.0)
+    for name, dtype in MAP_NAMES.items():
+        group.create_array(name, shape=(H, W), chunks=(DEFAULT_CHUNK_ROWS, W), dtype=dtype, fill_value=0)
+    group.create_array("done_chunks", shape=(n_chunks,), chunks=(n_chunks,), dtype="bool", fill_value=False)
+    group.attrs.update(transport_attrs(problem.offsets_rows, problem.projector_rows, attrs))
+    group.attrs["run_fingerprint"] = fingerprint
+    os.rename(tmp, partial)  # the partial store appears complete with its layout
+    return zarr.open_group(str(partial), mode="r+")
+
+
+def _write_chunk(group, res: ChunkResult, index: int) -> None:
+    group["T"][res.rows] = res.T
+    for name in MAP_NAMES:
+        group[name][res.rows] = res.maps[name]
+    group["done_chunks"][index] = True  # only after the data: a killed run redoes this chunk
+
+
+def _finish(partial: Path, out: Path, overwrite: bool) -> None:
+    import zarr
+
+    group = zarr.open_group(str(partial), mode="r+")
+    if not np.all(group["done_chunks"][:]):
+        raise TransportError("internal error: finishing a run with unfinished chunks", partial)
+    del group["done_chunks"]
+    group.attrs.pop("run_fingerprint", None)
+    if out.exists():
+        if not overwrite:
+            raise TransportError("already exists (pass overwrite=True to replace it)", out)
+        backup = out.parent / f".{out.name}.old"
+        shutil.rmtree(backup, ignore_errors=True)
+        os.rename(out, backup)
+        os.rename(partial, out)
+        shutil.rmtree(backup, ignore_errors=True)
+    else:
+        os.rename(partial, out)
+
+
+def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0.01, method: str = "fast",
+                         chunk_rows: int = DEFAULT_CHUNK_ROWS, tol: float | None = None, workers: int | None = None,
+                         scheduler: str | None = None, overwrite: bool = False, restart: bool = False,
+                         progress: Callable[[int], None] | None = None, source=None,
+                         _stop_after: int | None = None) -> Path:
+    """Demultiplex a stack chunk by chunk into a transport store (resumable).
+
+    Parameters
+    ----------
+    stack : Stack
+        May be lazy (Zarr-backed): only a chunk of rows is in memory at a time.
+    out : path
+        Transport store to write (Zarr group with ``T``, the diagnostic maps of
+        :data:`MAP_NAMES` and the attributes of the transport format).
+    workers : int, optional
+        Run chunks on a Dask ``LocalCluster`` with this many single-threaded workers.
+    scheduler : str, optional
+        Address of an existing Dask distributed scheduler.
+    overwrite : bool
+        Replace an existing finished output.
+    restart : bool
+        Discard an unfinished run of the same output instead of resuming it.
+    progress : callable, optional
+        Called with the number of rows finished after each chunk.
+    source : str, optional
+        Name of the stack for error messages.
+
+    Returns
+    -------
+    pathlib.Path
+        The finished store.
+    """
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise TransportError("already exists (pass --overwrite to replace it)", out)
+    problem = DemuxProblem.from_stack(stack, alpha, beta)
+    _solver(method)
+    H, W = stack.shape
+    chunks = _chunks(H, chunk_rows)
+    partial = _partial_path(out)
+    if restart:
+        shutil.rmtree(partial, ignore_errors=True)
+    fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows)
+    group = _open_partial(partial, fingerprint, (H, W), problem, len(chunks), _attrs(problem, method, tol))
+    done = np.asarray(group["done_chunks"][:], bool)
+    todo = [i for i in range(len(chunks)) if not done[i]]
+    if progress is not None and done.any():
+        progress(sum(chunks[i].stop - chunks[i].start for i in range(len(chunks)) if done[i]))
+    if _stop_after is not None:  # testing hook: simulate a run killed after k chunks
+        todo = todo[:_stop_after]
+    if workers or scheduler:
+        _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source)
+    else:
+        for i in todo:
+            obs, sat = read_observations(stack, problem, chunks[i], source)
+            _write_chunk(group, solve_chunk(problem, obs, sat, chunks[i], method, tol), i)
+            if progress is not None:
+                progress(chunks[i].stop - chunks[i].start)
+    if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
+        return partial
+    _finish(partial, out, overwrite)
+    return out
+
+
+def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source):
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise InputError("--workers/--scheduler need dask[distributed]: pip install 'dask[distributed]'") from exc
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    try:
+        shared = client.scatter(problem, broadcast=True)
+        in_flight = max(2, 2 * len(client.scheduler_info()["workers"]))
+        pending = list(todo)
+        futures = as_completed()
+        index_of = {}
+
+        def submit_next():
+            i = pending.pop(0)
+            obs, sat = read_observations(stack, problem, chunks[i], source)
+            fut = client.submit(solve_chunk, shared, obs, sat, chunks[i], method, tol, pure=False)
+            index_of[fut.key] = i
+            futures.add(fut)
+
+        for _ in range(min(in_flight, len(pending))):
+            submit_next()
+        for fut in futures:
+            res = fut.result()
+            i = index_of.pop(fut.key)
+            _write_chunk(group, res, i)
+            if progress is not None:
+                progress(chunks[i].stop - chunks[i].start)
+            if pending:
+                submit_next()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
