@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test bench clean venv
+.PHONY: demo test bench bench-demux clean venv
 
 venv: $(VENV)/.installed
 
@@ -21,7 +21,10 @@ test: venv
 	$(PY) -m pytest -q
 
 bench: venv
-	$(PY) benchmarks/bench_render.py
+	$(PY) benchmarks/bench_render.py --size 512
+
+bench-demux: venv
+	$(PY) benchmarks/bench_demux.py --pixels 384 --large 512
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache

@@ -109,3 +109,19 @@ def test_bad_pixel_is_reported(stack_path, tmp_path):
     assert res.exit_code == 1 and "outside" in res.output
     res = invoke("profiles", stack_path, "--pixel", "a,b", "--out", tmp_path / "p.png")
     assert res.exit_code == 1 and "ROW COL" in res.output
+
+
+def test_demux_command_writes_a_transport_store(tmp_path):
+    stack = tmp_path / "wax.zarr"
+    assert invoke("simulate", "wax", "--out", stack, "--size", 16, 16, "--projector-rows", 90).exit_code == 0
+    res = invoke("demux", stack, "--out", tmp_path / "T.zarr", "--chunk", 8)
+    assert res.exit_code == 0, res.output
+    assert "converged 100.00 %" in res.output
+    from planeray.io import read_transport
+
+    T, attrs = read_transport(tmp_path / "T.zarr")
+    assert T.dense.shape == (16, 16, 229) and attrs["method"] == "fast"
+    res = invoke("demux", stack, "--out", tmp_path / "T.zarr")
+    assert res.exit_code == 1 and "already exists" in res.output
+    res = invoke("demux", stack, "--out", tmp_path / "P.zarr", "--method", "magic")
+    assert res.exit_code == 1 and "unknown demultiplexing method" in res.output

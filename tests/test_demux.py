@@ -234,3 +234,30 @@ def test_lazy_stack_and_dask_equal_the_local_path(wax_stack, tmp_path):
     local = demultiplex_to_store(lazy, tmp_path / "local.zarr", chunk_rows=6)
     dask = demultiplex_to_store(lazy, tmp_path / "dask.zarr", chunk_rows=6, workers=2)
     np.testing.assert_allclose(read_transport(dask)[0].dense, read_transport(local)[0].dense, rtol=1e-5, atol=1e-7)
+
+
+class _GuardedImages:
+    """An image array that refuses reads of more camera rows than a chunk (larger-than-memory stand-in)."""
+
+    def __init__(self, images, max_rows):
+        self.images, self.max_rows, self.shape = images, max_rows, images.shape
+
+    def __len__(self):
+        return self.shape[0]
+
+    def __getitem__(self, key):
+        if isinstance(key, tuple) and len(key) > 1 and isinstance(key[1], slice):
+            rows = range(*key[1].indices(self.shape[1]))
+            assert len(rows) <= self.max_rows, f"read {len(rows)} rows at once"
+        elif not isinstance(key, (int, np.integer)):
+            raise AssertionError(f"whole-stack read {key!r}")
+        return self.images[key]
+
+
+def test_memory_is_bounded_by_the_chunk(wax_stack, tmp_path):
+    _, stack = wax_stack
+    guarded = Stack(_GuardedImages(np.asarray(stack.images), 4), stack.delay_us, stack.exposure_us, stack.lines_per_second,
+                    stack.excluded, saturated=None, projector_rows=stack.projector_rows, metadata=stack.metadata)
+    out = demultiplex_to_store(guarded, tmp_path / "t.zarr", chunk_rows=4)
+    ref = demultiplex(stack, chunk_rows=24).transport.dense
+    np.testing.assert_allclose(read_transport(out)[0].dense, ref, rtol=1e-5, atol=1e-7)

@@ -2,5 +2,6 @@
 
 from .contact_sheet import contact_sheet_figure
 from .profiles import delay_profiles_figure
+from .transport import transport_profiles_figure
 
-__all__ = ["contact_sheet_figure", "delay_profiles_figure"]
+__all__ = ["contact_sheet_figure", "delay_profiles_figure", "transport_profiles_figure"]
