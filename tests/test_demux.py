@@ -48,8 +48,12 @@ def test_too_few_images_and_gaps_are_reported():
     gappy = simulate_stack(scene, Sweep.grid([-1500.0, -1300.0, 0.0, 150.0, 1400.0], [300.0]), noise=False)
     with pytest.raises(InputError, match="unlit"):
         DemuxProblem.from_stack(gappy)
+    good = simulate_stack(scene, paper_sweep(), noise=False)
     with pytest.raises(InputError, match="alpha"):
-        DemuxProblem.from_stack(simulate_stack(scene, paper_sweep(), noise=False), alpha=-1)
+        DemuxProblem.from_stack(good, alpha=-1)
+    good.metadata["sync"]["jitter_us"] = -5.0
+    with pytest.raises(InputError, match="inconsistent metadata: sync jitter_us"):
+        DemuxProblem.from_stack(good)
 
 
 def test_nan_in_stack_is_reported(wax_stack):
@@ -261,3 +265,13 @@ def test_memory_is_bounded_by_the_chunk(wax_stack, tmp_path):
     out = demultiplex_to_store(guarded, tmp_path / "t.zarr", chunk_rows=4)
     ref = demultiplex(stack, chunk_rows=24).transport.dense
     np.testing.assert_allclose(read_transport(out)[0].dense, ref, rtol=1e-5, atol=1e-7)
+
+
+def test_existing_dask_cluster_by_address(wax_stack, tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    _, stack = wax_stack
+    local = demultiplex_to_store(stack, tmp_path / "local.zarr", chunk_rows=8)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
+        remote = demultiplex_to_store(stack, tmp_path / "remote.zarr", chunk_rows=8, scheduler=cluster.scheduler_address)
+    np.testing.assert_allclose(read_transport(remote)[0].dense, read_transport(local)[0].dense, rtol=1e-5, atol=1e-7)
+    assert read_transport_maps(remote)["converged"].all()

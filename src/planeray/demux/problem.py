@@ -146,6 +146,12 @@ class DemuxProblem:
         """
         if not (np.isfinite(alpha) and np.isfinite(beta)) or alpha < 0 or beta < 0:
             raise InputError(f"alpha and beta must be non-negative numbers, got alpha={alpha}, beta={beta}")
+        for name in ("jitter_us", "line_width_us"):
+            value = getattr(stack, name)
+            if not np.isfinite(value) or value < 0:
+                raise InputError(f"inconsistent metadata: sync {name} = {value!r} must be a non-negative number")
+        if stack.projector_rows < 1:
+            raise InputError(f"inconsistent metadata: projector_rows = {stack.projector_rows}")
         used = np.flatnonzero(~stack.excluded)
         if used.size < MIN_IMAGES:
             raise InputError(
