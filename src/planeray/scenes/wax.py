@@ -25,7 +25,10 @@ wood texture with direct reflection only.  A wax pixel ``(t, s)`` receives
   wax in column ``s`` (light must enter the wax: the kernel is truncated at the
   object's top and bottom boundary).  ``rho_ss`` is a smooth tint variation
   (~5 %) of the wax; the dipole itself carries the diffuse albedo (``K`` sums to
-  the dipole's total diffuse reflectance, ~0.75 for the defaults).
+  the dipole's total diffuse reflectance for the defaults).
+  Defaults: a translucent paraffin candle, sigma_s' = 0.3 /mm (transport mean
+  free path ~3 mm, ~10 rows), sigma_a = 0.003 /mm, with a frosted, carved surface
+  reflecting 8 %: at 600 us the epipolar image is ~4.4x the direct light.
 
 Assumptions and approximations
 ------------------------------
@@ -111,9 +114,9 @@ def build(
     seed,
     mm_per_row: float = DEFAULT_MM_PER_ROW,
     sigma_a: float = 0.003,
-    sigma_s_prime: float = 1.0,
+    sigma_s_prime: float = 0.3,
     eta: float = 1.4,
-    surface_reflectance: float = 0.035,
+    surface_reflectance: float = 0.08,
     background_albedo: float = 0.2,
     size: float = 0.36,
     band_rows: int = DEFAULT_BAND_ROWS,
