@@ -5,9 +5,8 @@ import pytest
 from scipy.signal import find_peaks
 
 from planeray.acquire import simulate_stack
-from planeray.demo import pick_pixels
 from planeray.profiles import area_normalize, measured_delay_profiles
-from planeray.scenes import make_scene
+from planeray.scenes import make_scene, representative_pixels
 from planeray.timing import paper_sweep, sweep_support_rows
 
 
@@ -26,7 +25,7 @@ def _peaks(profile, delays):
 
 def test_specular_interreflection_profile_is_bimodal(mirror):
     scene, stack = mirror
-    pixels, names = pick_pixels(scene, sweep_support_rows(paper_sweep(), 54000), per_label=2)
+    pixels, names = representative_pixels(scene, sweep_support_rows(paper_sweep(), 54000), per_label=2)
     spec = pixels[[n == "specular interreflection" for n in names]]
     assert len(spec) == 2
     prof = measured_delay_profiles(stack, spec)
@@ -40,7 +39,7 @@ def test_specular_interreflection_profile_is_bimodal(mirror):
 
 def test_diffuse_profile_is_unimodal_and_centred(mirror):
     scene, stack = mirror
-    pixels, names = pick_pixels(scene, 114, per_label=2)
+    pixels, names = representative_pixels(scene, 114, per_label=2)
     diffuse = pixels[[n == "diffuse" for n in names]]
     prof = measured_delay_profiles(stack, diffuse)
     e600 = list(prof.exposure_us).index(600.0)

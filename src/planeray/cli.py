@@ -272,6 +272,92 @@ def demux(
     )
 
 
+# ----------------------------------------------------------------- synth
+def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
+    """PNG: display-scaled 8-bit preview; TIFF: the values as 16-bit codes (0..1 -> 0..65535)."""
+    from .io import write_image
+
+    if path.suffix.lower() == ".png":
+        from .figures._common import display_scale
+        from PIL import Image
+        from .io import atomic_file
+
+        shown = np.clip(image * (scale_to or display_scale([image], 99.5)), 0, 1)
+        with atomic_file(path) as tmp:
+            Image.fromarray((shown * 255 + 0.5).astype(np.uint8)).save(tmp, format="PNG")
+        return path
+    if path.suffix.lower() in (".tif", ".tiff"):
+        return write_image(path, image, bit_depth=16)
+    raise ValueError(f"--out must end in .png, .tif or .tiff, got {path.name}")
+
+
+@app.command()
+@_friendly_errors
+def synth(
+    transport_path: Annotated[Path, typer.Argument(help="Transport store (Zarr).")],
+    out_path: Annotated[Path, typer.Option("--out", "-o", help="Image to write (.png preview, .tif 16-bit values).")],
+    epipolar: Annotated[bool, typer.Option("--epipolar", help="Epipolar image (Eq. 5).")] = False,
+    non_epipolar: Annotated[bool, typer.Option("--non-epipolar", help="Non-epipolar image (Eq. 6).")] = False,
+    sharpen: Annotated[Optional[float], typer.Option(help="Sharpened epipolar image with a band of ROWS projector rows.")] = None,
+    relight: Annotated[Optional[str], typer.Option(help="Relight: a projector row number, or a pattern file (.npy/.csv/image).")] = None,
+    band: Annotated[Optional[tuple[float, float]], typer.Option(help="Banded image for DELAY_US EXPOSURE_US (any pair).")] = None,
+    short_range: Annotated[Optional[float], typer.Option(help="Short-range indirect light up to MAX_ROWS offsets.")] = None,
+    long_range: Annotated[Optional[float], typer.Option(help="Long-range indirect light beyond MAX_ROWS offsets.")] = None,
+):
+    """Synthesize an image from a transport: epipolar, non-epipolar, sharpened, relit, banded, short/long range."""
+    from . import synthesis as syn
+    from .io import read_transport
+
+    chosen = [x for x in (epipolar, non_epipolar, sharpen is not None, relight is not None, band is not None,
+                          short_range is not None, long_range is not None) if x]
+    if len(chosen) != 1:
+        raise ValueError("choose exactly one of --epipolar, --non-epipolar, --sharpen, --relight, --band, --short-range, --long-range")
+    T, attrs = read_transport(transport_path)
+    lps = attrs.get("lines_per_second") or 54_000.0
+    if epipolar:
+        image, what = syn.epipolar_image(T), "epipolar image"
+    elif non_epipolar:
+        image, what = syn.non_epipolar_image(T), "non-epipolar image"
+    elif sharpen is not None:
+        image, what = syn.sharpened_epipolar(T, sharpen), f"sharpened epipolar image ({sharpen:g} rows)"
+        res = attrs.get("epipolar_resolution_rows")
+        if res and sharpen < 2 * res:
+            console.print(f"[yellow]note:[/] the sweep cannot split light within +-{res:.2f} rows of the epipolar plane; "
+                          f"a {sharpen:g}-row band shows the regularizer's spread there")
+    elif relight is not None:
+        P = T.geometry.projector_rows
+        pattern = syn.single_line_pattern(P, int(relight)) if relight.lstrip("-").isdigit() else syn.load_pattern(relight, P)
+        image, what = syn.relight(T, pattern), "relit image"
+    elif band is not None:
+        image, what = syn.band_image(T, band[0], band[1], lps), f"band image (t_d {band[0]:g} us, t_e {band[1]:g} us)"
+    else:
+        short, long = syn.short_long_range(T, short_range if short_range is not None else long_range)
+        image, what = (short, "short-range indirect image") if short_range is not None else (long, "long-range indirect image")
+    path = _save_image(image, out_path)
+    out.print(f"{what}: {path}  (min {image.min():.3g}, max {image.max():.3g})")
+
+
+# ---------------------------------------------------------------- figure
+@app.command()
+@_friendly_errors
+def figure(
+    name: Annotated[str, typer.Argument(help="fig8 | fig9 | fig11 | fig12 | all")],
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the PNGs and their numbers (JSON).")] = Path("out/figures"),
+    size: Annotated[int, typer.Option(help="Image size (square).")] = 128,
+    seed: Annotated[int, typer.Option(help="Seed.")] = 0,
+):
+    """Reproduce a paper figure on the built-in scenes (writes PNG + JSON of the measured numbers)."""
+    from .figures.paper import FIGURES
+
+    names = list(FIGURES) if name == "all" else [name]
+    for n in names:
+        if n not in FIGURES:
+            raise ValueError(f"unknown figure {n!r}; choose one of {sorted(FIGURES)} or all")
+        with console.status(f"reproducing {n}"):
+            numbers = FIGURES[n](out_dir, size=size, seed=seed)
+        out.print(f"{n}: {out_dir / (n + '.json')}  {json.dumps(numbers.get('images', {}), default=float)[:300]}")
+
+
 # ------------------------------------------------------ export / import
 @app.command()
 @_friendly_errors

@@ -23,70 +23,13 @@ from .demux import demultiplex_to_store
 from .figures import contact_sheet_figure, delay_profiles_figure, transport_profiles_figure
 from .io import read_transport, read_transport_maps, write_stack, write_transport
 from .profiles import measured_delay_profiles
-from .scenes import EFFECTS, Scene, make_scene
-from .timing import PAPER_LINES_PER_SECOND, Band, paper_sweep, sweep_support_rows
+from .scenes import make_scene, representative_pixels
+from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
 
-__all__ = ["run_demo", "pick_pixels"]
+__all__ = ["run_demo"]
 
 #: The paper's projector (Celluon PicoPro) has 720 rows.
 DEMO_PROJECTOR_ROWS = 720
-
-
-def pick_pixels(scene: Scene, support_rows: int, per_label: int = 1, exposure_us: float = 600.0) -> tuple[np.ndarray, list[str]]:
-    """Pick pixels that show each ground-truth effect of a scene most clearly.
-
-    Direct/diffuse pixels: the brightest whose in-sweep indirect light is below 1 %
-    of their direct light, at least 6 pixels from any other effect or the border.
-    Other effects: the pixels whose noise-free delay profile (the paper's delays at
-    ``exposure_us``, rendered from the ground truth) has the most prominent second
-    peak beside the one on the epipolar plane -- the clearest two-peak profiles.
-    """
-    from scipy.ndimage import distance_transform_edt
-
-    T = scene.transport
-    u = T.offsets_rows
-    footprint = np.abs(u) <= T.geometry.rows_per_camera_row
-    near = T.dense[:, :, footprint].sum(axis=2)
-    in_sweep = (np.abs(u) <= support_rows) & ~footprint
-    indirect = T.dense[:, :, in_sweep].max(axis=2)
-    delays = np.unique(paper_sweep().delay_us)
-    profile = np.stack([T.render(Band(d, exposure_us, PAPER_LINES_PER_SECOND)) for d in delays])
-    centre = np.abs(delays) <= exposure_us / 2
-    on_plane = profile[centre].max(axis=0)
-    # The clearest second peak on either side: its prominence over the valley
-    # towards the epipolar plane and over the fall-off beyond it (a peak cut by
-    # the end of the sweep does not count).
-    bimodality = np.full(on_plane.shape, -np.inf)
-    for side in (delays < 0, delays > 0):
-        order = np.argsort(np.abs(delays[side]))
-        prof = profile[side][order]  # from the plane outward
-        inner = np.minimum.accumulate(prof, axis=0)
-        outer = np.minimum.accumulate(prof[::-1], axis=0)[::-1]
-        beyond_band = np.abs(delays[side][order]) > exposure_us / 2
-        for k in np.flatnonzero(beyond_band)[:-1]:
-            peak = prof[k]
-            drop = np.minimum(peak - inner[k], peak - outer[k + 1])
-            score = np.minimum(drop, on_plane - inner[k]) / (np.maximum(on_plane, peak) + 1e-9)
-            bimodality = np.maximum(bimodality, score)
-    pixels, names = [], []
-    for label in sorted(set(np.unique(scene.labels)) - {0}):
-        mask = scene.labels == label
-        if label == 1:
-            interior = distance_transform_edt(np.pad(mask, 1))[1:-1, 1:-1] > 6
-            score = np.where(interior & (indirect < 0.01 * near), near, -np.inf)
-        else:
-            score = np.where(mask, bimodality, -np.inf)
-        order = np.argsort(score, axis=None)[::-1]
-        chosen = []
-        for flat in order:
-            if len(chosen) == per_label or not np.isfinite(score.flat[flat]):
-                break
-            p = np.array(np.unravel_index(flat, score.shape))
-            if all(np.abs(p - q).max() > 6 for q in chosen):  # spread the picks out
-                chosen.append(p)
-        pixels += chosen
-        names += [EFFECTS[int(label)].replace("_", " ")] * len(chosen)
-    return np.array(pixels, dtype=np.int64).reshape(-1, 2), names
 
 
 def _simulate(name, out_dir, size, seed, console, progress):
@@ -126,7 +69,7 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     mirror, mirror_stack = _simulate("mirror_ball", out_dir, size, seed, console, progress)
     written["stack_mirror_ball"] = out_dir / "mirror_ball.zarr"
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
-    pixels, names = pick_pixels(mirror, support, per_label=1)
+    pixels, names = representative_pixels(mirror, support, per_label=1)
     prof = measured_delay_profiles(mirror_stack, pixels)
     written["fig9_delay_profiles"] = delay_profiles_figure(mirror_stack, prof, out_dir / "fig9_delay_profiles.png", names=names)
     from .cli import _write_profiles_csv

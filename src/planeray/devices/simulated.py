@@ -75,6 +75,29 @@ class SimulatedEpiscan:
         signal = self.scene.transport.render(self.band(rng))
         return self.camera.expose(signal, self.exposure_us, rng, self.scene.ambient_albedo, noise=self.noise)
 
+    def capture_pattern(self, pattern, exposure_us: float, frame_period_us: float = 1e6 / 60.0):
+        """Conventional (unsynchronized) capture: project a row pattern, one full-frame exposure.
+
+        The raster projector repeats the pattern every ``frame_period_us``; each
+        pass lights every projector row for one scanline, so an exposure collects
+        ``exposure_us / frame_period_us`` passes of ``sum_v pattern(v) T(v)``,
+        while ambient light is integrated over the whole exposure.  This is the
+        paper's single-line baseline of Fig. 12 (16 ms and 800 ms exposures).
+
+        Returns the normalized image and its saturation mask (``frames_averaged``
+        such exposures averaged, as for sweep images).
+        """
+        from ..timing import RowPattern
+
+        passes = float(exposure_us) / float(frame_period_us)
+        rng = np.random.default_rng([self.seed, 2**41, int(round(exposure_us * 1000)), self._next_pattern()])
+        signal = passes * self.scene.transport.render(RowPattern(np.asarray(pattern, float)))
+        return self.camera.expose(signal, exposure_us, rng, self.scene.ambient_albedo, noise=self.noise)
+
+    def _next_pattern(self) -> int:
+        self._patterns = getattr(self, "_patterns", 0) + 1
+        return self._patterns
+
     def describe(self) -> dict:
         return {
             "device": self.kind,

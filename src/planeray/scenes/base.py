@@ -30,6 +30,7 @@ __all__ = [
     "footprint_kernel",
     "DEFAULT_BAND_ROWS",
     "DEFAULT_MM_PER_ROW",
+    "representative_pixels",
 ]
 
 #: Light-transport effect labels of ground-truth pixels (``Scene.labels``).
@@ -163,3 +164,62 @@ def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
     """
     k = band_bin_weights(offsets_rows, 0.0, rows_per_camera_row)
     return (k / k.sum()).astype(np.float64)
+
+
+def representative_pixels(scene: Scene, support_rows: int, per_label: int = 1, exposure_us: float = 600.0) -> tuple[np.ndarray, list[str]]:
+    """Pick pixels that show each ground-truth effect of a scene most clearly.
+
+    Direct/diffuse pixels: the brightest whose in-sweep indirect light is below 1 %
+    of their direct light, at least 6 pixels from any other effect or the border.
+    Other effects: the pixels whose noise-free delay profile (the paper's delays at
+    ``exposure_us``, rendered from the ground truth) has the most prominent second
+    peak beside the one on the epipolar plane -- the clearest two-peak profiles.
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    from ..timing import PAPER_LINES_PER_SECOND, Band, paper_sweep
+
+    T = scene.transport
+    u = T.offsets_rows
+    footprint = np.abs(u) <= T.geometry.rows_per_camera_row
+    near = T.dense[:, :, footprint].sum(axis=2)
+    in_sweep = (np.abs(u) <= support_rows) & ~footprint
+    indirect = T.dense[:, :, in_sweep].max(axis=2)
+    delays = np.unique(paper_sweep().delay_us)
+    profile = np.stack([T.render(Band(d, exposure_us, PAPER_LINES_PER_SECOND)) for d in delays])
+    centre = np.abs(delays) <= exposure_us / 2
+    on_plane = profile[centre].max(axis=0)
+    # The clearest second peak on either side: its prominence over the valley
+    # towards the epipolar plane and over the fall-off beyond it (a peak cut by
+    # the end of the sweep does not count).
+    bimodality = np.full(on_plane.shape, -np.inf)
+    for side in (delays < 0, delays > 0):
+        order = np.argsort(np.abs(delays[side]))
+        prof = profile[side][order]  # from the plane outward
+        inner = np.minimum.accumulate(prof, axis=0)
+        outer = np.minimum.accumulate(prof[::-1], axis=0)[::-1]
+        beyond_band = np.abs(delays[side][order]) > exposure_us / 2
+        for k in np.flatnonzero(beyond_band)[:-1]:
+            peak = prof[k]
+            drop = np.minimum(peak - inner[k], peak - outer[k + 1])
+            score = np.minimum(drop, on_plane - inner[k]) / (np.maximum(on_plane, peak) + 1e-9)
+            bimodality = np.maximum(bimodality, score)
+    pixels, names = [], []
+    for label in sorted(set(np.unique(scene.labels)) - {0}):
+        mask = scene.labels == label
+        if label == 1:
+            interior = distance_transform_edt(np.pad(mask, 1))[1:-1, 1:-1] > 6
+            score = np.where(interior & (indirect < 0.01 * near), near, -np.inf)
+        else:
+            score = np.where(mask, bimodality, -np.inf)
+        order = np.argsort(score, axis=None)[::-1]
+        chosen = []
+        for flat in order:
+            if len(chosen) == per_label or not np.isfinite(score.flat[flat]):
+                break
+            p = np.array(np.unravel_index(flat, score.shape))
+            if all(np.abs(p - q).max() > 6 for q in chosen):  # spread the picks out
+                chosen.append(p)
+        pixels += chosen
+        names += [EFFECTS[int(label)].replace("_", " ")] * len(chosen)
+    return np.array(pixels, dtype=np.int64).reshape(-1, 2), names
