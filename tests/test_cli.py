@@ -125,3 +125,16 @@ def test_demux_command_writes_a_transport_store(tmp_path):
     assert res.exit_code == 1 and "already exists" in res.output
     res = invoke("demux", stack, "--out", tmp_path / "P.zarr", "--method", "magic")
     assert res.exit_code == 1 and "unknown demultiplexing method" in res.output
+
+
+def test_profiles_from_transport_and_classification(tmp_path):
+    stack = tmp_path / "mb.zarr"
+    assert invoke("simulate", "mirror_ball", "--out", stack, "--size", 32, 32, "--projector-rows", 180).exit_code == 0
+    assert invoke("demux", stack, "--out", tmp_path / "T.zarr").exit_code == 0
+    res = invoke("profiles", stack, "--pixel", "10,10", "--transport", tmp_path / "T.zarr",
+                 "--classify", tmp_path / "labels.png", "--out", tmp_path / "p.png")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "labels.png").read_bytes()[:4] == b"\x89PNG" and (tmp_path / "p.png").exists()
+    assert "specular_interreflection" in res.output
+    res = invoke("profiles", stack, "--classify", tmp_path / "l2.png", "--out", tmp_path / "p2.png")
+    assert res.exit_code == 1 and "--transport" in res.output

@@ -180,22 +180,49 @@ def contact_sheet(
 @_friendly_errors
 def profiles(
     stack_path: Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")],
-    pixel: Annotated[list[str], typer.Option(help="Pixel as ROW COL or ROW,COL (repeat for more pixels).")],
     out_png: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")],
+    pixel: Annotated[Optional[list[str]], typer.Option(help="Pixel as ROW COL or ROW,COL (repeat for more pixels).")] = None,
     exposure: Annotated[Optional[float], typer.Option(help="Plot only this exposure (us).")] = None,
     csv: Annotated[Optional[Path], typer.Option(help="Also write the profiles as CSV.")] = None,
+    transport: Annotated[Optional[Path], typer.Option(help="Transport store: also draw its continuous delay profiles.")] = None,
+    classify: Annotated[Optional[Path], typer.Option(help="With --transport: write the per-pixel effect label map PNG.")] = None,
 ):
-    """Plot area-normalized delay profiles of pixels (the paper's Fig. 9)."""
-    from .figures import delay_profiles_figure
-    from .profiles import measured_delay_profiles
+    """Plot area-normalized delay profiles of pixels (the paper's Fig. 9); classify effects from a transport."""
+    from .figures import delay_profiles_figure, label_map_figure
+    from .profiles import classify_transport, measured_delay_profiles, transport_delay_profiles
 
+    if classify is not None and transport is None:
+        raise ValueError("--classify needs --transport (the labels come from the transport's profiles)")
+    if not pixel and classify is None:
+        raise ValueError("give at least one --pixel ROW COL (or --classify with --transport)")
     st = _load_stack(stack_path)
-    prof = measured_delay_profiles(st, [_parse_pixel(p) for p in pixel])
-    path = delay_profiles_figure(st, prof, out_png, exposure_us=exposure)
-    if csv is not None:
-        _write_profiles_csv(prof, csv)
-        out.print(f"profiles CSV: {csv}")
-    out.print(f"delay profiles: {path}")
+    T = attrs = None
+    if transport is not None:
+        from .io import read_transport
+
+        T, attrs = read_transport(transport)
+        if T.shape != st.shape:
+            raise ValueError(f"{transport}: transport is {T.shape[0]}x{T.shape[1]}, stack {st.shape[0]}x{st.shape[1]}")
+    if pixel:
+        prof = measured_delay_profiles(st, [_parse_pixel(p) for p in pixel])
+        continuous = None
+        if T is not None:
+            e = exposure if exposure is not None else float(prof.exposure_us.min())
+            continuous = transport_delay_profiles(T, prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second)
+        path = delay_profiles_figure(st, prof, out_png, exposure_us=exposure, continuous=continuous)
+        if csv is not None:
+            _write_profiles_csv(prof, csv)
+            out.print(f"profiles CSV: {csv}")
+        out.print(f"delay profiles: {path}")
+    if classify is not None:
+        from .scenes import EFFECTS
+
+        labels = classify_transport(T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0))
+        ref = st.image(st.index_of(0.0, float(st.exposures().min())) or 0)
+        path = label_map_figure(labels, classify, reference=ref)
+        counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
+        summary = ", ".join(f"{EFFECTS[k]} {counts[k] / labels.size * 100:.1f} %" for k in EFFECTS if counts[k])
+        out.print(f"label map: {path}  ({summary})")
 
 
 def _parse_pixel(text: str) -> tuple[int, int]:

@@ -107,10 +107,11 @@ __all__ += [
 #: the built-in scenes, 64x64 camera rows of a 360-row projector, the paper's
 #: sweep, default camera; see :func:`characterize` for their meaning).
 CLASSIFY_THRESHOLDS = {
-    "smooth_bins": 7,  # box smoothing over offsets before peak finding
-    "peak_prominence": 0.2,  # a peak counts if its prominence >= this x the main peak's height
-    "indirect_fraction": 0.08,  # significant light outside the unresolved cell
-    "asymmetry": 0.65,  # |asymmetry| at or above: one-sided (diffuse interreflection)
+    "smooth_bins": 5,  # box smoothing over offsets before peak finding
+    "peak_prominence": 0.15,  # a peak counts if its prominence >= this x the main peak's height
+    "indirect_fraction": 0.07,  # significant light outside the unresolved cell
+    "asymmetry": 0.75,  # |asymmetry| at or above: one-sided (diffuse interreflection)
+    "peak_contrast": 0.0,  # a displaced peak's prominence over the level beside it
 }
 
 
@@ -286,27 +287,44 @@ def _smooth_valid(P, valid, bins):
     return np.where(valid & (den > 0), num / np.where(den > 0, den, 1.0), 0.0)
 
 
-def _tail_floor(S, valid, offsets, tail_rows):
-    """Per-profile floor: the smaller of the mean levels of the two tails ``|u| >= tail_rows``."""
-    floors = []
+def _tail_floor(S, valid, offsets, tail_rows, clip=5.0):
+    """Per-profile floor: the smaller of the robust mean levels of the two tails ``|u| >= tail_rows``.
+
+    A tail's level is its mean with values above ``clip`` x its median clipped
+    there: noise averages out, while a specular spot covering less than half
+    the tail barely moves it.  The smaller side ignores one-sided light that
+    fills a tail.
+    """
+    floor = np.full(S.shape[0], np.inf)
     for side in (offsets <= -tail_rows, offsets >= tail_rows):
-        m = valid & side[None, :]
-        n = m.sum(axis=1)
-        floors.append(np.where(n > 0, (S * m).sum(axis=1) / np.maximum(n, 1), np.inf))
-    floor = np.minimum(*floors)
+        if not side.any():
+            continue
+        vals = np.where(valid[:, side], S[:, side], np.nan)
+        has = np.isfinite(vals).any(axis=1)
+        if not has.any():
+            continue
+        v = vals[has]
+        med = np.nanmedian(v, axis=1)
+        cap = np.where(med > 0, clip * med, 0.0)[:, None]
+        level = np.full(S.shape[0], np.inf)
+        level[has] = np.nanmean(np.minimum(v, cap), axis=1)
+        floor = np.minimum(floor, level)
     return np.where(np.isfinite(floor), floor, 0.0)
 
 
-def _peaks(S, valid, offsets, rel_prominence, cell):
-    """Vectorized peak finding over all profiles at once.
+def _peak_table(S, valid):
+    """All local maxima of all profiles at once, with scipy's prominence.
 
     Every profile is padded with one sample at its lowest level on each side
     (so a peak cut by the end of the offsets still counts) and separated from
     the next by a sentinel higher than any sample: ``scipy.signal.find_peaks``
     then runs once over the concatenation, and a peak's bases -- hence its
     prominence -- never leave its own profile.
+
+    Returns ``(pix, k, prominence, height)`` sorted by profile, then height
+    (the last entry of each profile is its main peak).
     """
-    from scipy.signal import find_peaks
+    from scipy.signal import find_peaks, peak_prominences
 
     N, U = S.shape
     X = np.where(valid, S, 0.0)
@@ -318,39 +336,34 @@ def _peaks(S, valid, offsets, rel_prominence, cell):
     cat[:, 2 : U + 2] = X
     cat[:, U + 2] = low
     flat = np.concatenate([cat.ravel(), [sentinel]])
-    idx, props = find_peaks(flat, prominence=0.0)
+    idx, _ = find_peaks(flat)
+    idx = idx[flat[idx] < sentinel]  # sentinels are no peaks (and would search the whole array)
+    prom = peak_prominences(flat, idx)[0]
     pix, pos = np.divmod(idx, U + 3)
-    real = (pos >= 1) & (pos <= U + 1) & (pix < N) & (flat[idx] < sentinel)
-    pix, pos, prom = pix[real], pos[real], props["prominences"][real]
     k = np.clip(pos - 2, 0, U - 1)  # padding samples map to the end offsets
-    height = flat[idx[real]]
-    # Main peak: the highest of each profile (ties: the most prominent).
+    height = flat[idx]
     order = np.lexsort((prom, height, pix))
-    pix, k, prom, height = pix[order], k[order], prom[order], height[order]
-    last = np.r_[pix[1:] != pix[:-1], True] if pix.size else np.zeros(0, bool)
-    main_k = np.full(N, -1)
-    main_h = np.zeros(N)
-    main_k[pix[last]] = k[last]
-    main_h[pix[last]] = height[last]
-    is_main = np.zeros(pix.size, bool)
-    is_main[last] = True
-    counted = (prom >= rel_prominence * main_h[pix]) & (main_h[pix] > 0)
-    counted |= is_main & (main_h[pix] > 0)
-    peak_count = np.bincount(pix[counted], minlength=N).astype(np.int16)
-    second = np.full(N, np.nan)
-    other = counted & ~is_main
-    if other.any():
-        o = np.flatnonzero(other)
-        o = o[np.lexsort((prom[o], pix[o]))]  # most prominent last within each profile
-        lastp = np.r_[pix[o][1:] != pix[o][:-1], True]
-        second[pix[o][lastp]] = offsets[k[o][lastp]]
-    displaced = np.full(N, np.nan)
-    far = counted & (np.abs(offsets[k]) > cell)
-    if far.any():
-        f = np.flatnonzero(far)  # already sorted by (pix, height)
-        lastf = np.r_[pix[f][1:] != pix[f][:-1], True]
-        displaced[pix[f][lastf]] = offsets[k[f][lastf]]
-    return peak_count, main_k, main_h, second, displaced
+    return pix[order], k[order], prom[order], height[order]
+
+
+def _local_level(S, valid, pix, k, core, window):
+    """Background level beside each peak: the mean positive level of the valid
+    offsets ``core < |j - k| <= window`` on both sides of it (``valid`` may
+    exclude offsets, e.g. the main peak's cell); 0 if there are none."""
+    N, U = S.shape
+    pos = np.where(valid, np.clip(S, 0.0, None), 0.0)
+    cs = np.zeros((N, U + 1))
+    cs[:, 1:] = np.cumsum(pos, axis=1)
+    cn = np.zeros((N, U + 1))
+    cn[:, 1:] = np.cumsum(valid, axis=1)
+    total = np.zeros(pix.size)
+    count = np.zeros(pix.size)
+    for lo, hi in ((k - window, k - core), (k + core + 1, k + window + 1)):
+        lo = np.clip(lo, 0, U)
+        hi = np.clip(hi, 0, U)
+        total += cs[pix, hi] - cs[pix, lo]
+        count += cn[pix, hi] - cn[pix, lo]
+    return np.where(count > 0, total / np.maximum(count, 1), 0.0)
 
 
 def _fwhm(S, main_k, main_h):
@@ -387,6 +400,7 @@ def characterize(
     peak_prominence=None,
     indirect_fraction_min=None,
     asymmetry_min=None,
+    peak_contrast=None,
     subtract_floor=True,
 ) -> ProfileCharacter:
     """Characterize transport profiles and label the light transport effect they show.
@@ -424,10 +438,13 @@ def characterize(
 
     1. **Floor.**  The profile is box-smoothed over ``smooth_bins`` offsets (the
        demultiplexer's L1 term turns an ambient floor and noise into isolated
-       spikes; smoothing spreads them) and its floor is the smaller of the mean
-       levels of its two tails (``|u| >=`` half the largest offset, beyond the cell):
-       ambient light is the same at every offset, while one-sided indirect
-       light leaves at least one tail clean.  The floor is subtracted from the
+       spikes; smoothing spreads them) and its floor is the smaller of the
+       levels of its two tails (``0.5 K <= |u| <= 0.85 K``, ``K`` the largest
+       offset: a demultiplexed floor sags in the outermost offsets, which fewer
+       images constrain; a tail's level is its mean after clipping values above
+       5x its median): ambient light is the same at every offset, a specular spot
+       covers less than half a tail, and one-sided indirect light leaves one
+       tail clean.  The floor is subtracted from the
        raw and the smoothed profile.
     2. **Energies** (raw, floor-subtracted): ``E0`` inside the cell, ``E+`` and
        ``E-`` beyond it (each clipped at 0).  ``indirect_fraction = (E+ + E-) /
@@ -457,6 +474,7 @@ def characterize(
         ("peak_prominence", peak_prominence),
         ("indirect_fraction", indirect_fraction_min),
         ("asymmetry", asymmetry_min),
+        ("peak_contrast", peak_contrast),
     ):
         if val is not None:
             th[key] = val
@@ -473,9 +491,11 @@ def characterize(
     cell = float(resolution_rows) + 0.5 * float(footprint_rows) + 0.5
     bins = int(th["smooth_bins"])
     S = _smooth_valid(P, V, bins)
+    S_raw = S
     if subtract_floor and U > 0:
-        tail = max(cell + 1.0, 0.5 * np.abs(offsets).max())
-        floor = _tail_floor(S, V, offsets, tail)
+        reach = np.abs(offsets).max()
+        tails = (np.abs(offsets) >= max(cell + 1.0, 0.5 * reach)) & (np.abs(offsets) <= max(cell + 2.0, 0.85 * reach))
+        floor = _tail_floor(S, V & tails[None, :], offsets, max(cell + 1.0, 0.5 * reach))
         S = np.where(V, S - floor[:, None], 0.0)
         R = np.where(V, P - floor[:, None], 0.0)
     else:
@@ -493,7 +513,35 @@ def characterize(
     safe = np.where(mass > 0, mass, 1.0)
     mean = (pos * offsets).sum(axis=1) / safe
     spread = np.where(mass > 0, np.sqrt(np.clip((pos * offsets**2).sum(axis=1) / safe - mean**2, 0.0, None)), np.nan)
-    count, main_k, main_h, second, displaced = _peaks(S, V, offsets, float(th["peak_prominence"]), cell)
+    # Peaks: the main one is the highest of each profile; others count when
+    # prominent enough; a counted peak beyond the cell is specular when it also
+    # stands out of its own surroundings (``contrast``): the spikes a sparse
+    # estimate makes of a broad subsurface skirt do not.
+    pix, k, prom, height = _peak_table(S, V)
+    is_main = np.r_[pix[1:] != pix[:-1], True] if pix.size else np.zeros(0, bool)
+    main_k = np.full(N, -1)
+    main_h = np.zeros(N)
+    main_k[pix[is_main]] = k[is_main]
+    main_h[pix[is_main]] = height[is_main]
+    lit = main_h[pix] > 0
+    counted = lit & (is_main | (prom >= float(th["peak_prominence"]) * main_h[pix]))
+    core = int(np.ceil(bins // 2 + 0.5 * float(footprint_rows) + 1.0))
+    beside = V & (np.abs(offsets) > cell + core)[None, :]  # not the main peak's flanks
+    level = _local_level(S_raw, beside, pix, k, core, 4 * core)  # floor included: noise scales with it
+    contrast = np.where(level > 0, prom / np.where(level > 0, level, 1.0), np.inf)
+    far = counted & (np.abs(offsets[k]) > cell) & (is_main | (contrast >= float(th["peak_contrast"])))
+    count = np.bincount(pix[counted], minlength=N).astype(np.int16)
+    second = np.full(N, np.nan)
+    other = np.flatnonzero(counted & ~is_main)
+    if other.size:
+        other = other[np.lexsort((prom[other], pix[other]))]  # most prominent last per profile
+        last = np.r_[pix[other][1:] != pix[other][:-1], True]
+        second[pix[other][last]] = offsets[k[other][last]]
+    displaced = np.full(N, np.nan)
+    f = np.flatnonzero(far)  # sorted by (profile, height): the highest last
+    if f.size:
+        last = np.r_[pix[f][1:] != pix[f][:-1], True]
+        displaced[pix[f][last]] = offsets[k[f][last]]
     fwhm = _fwhm(S, main_k, main_h)
     peak_at = np.where(main_k >= 0, offsets[np.clip(main_k, 0, U - 1)], np.nan)
 
@@ -519,3 +567,150 @@ def characterize(
         label=out(label, np.uint8),
         cell_rows=cell,
     )
+
+
+#: Offsets this close to the end of the projector are left out of the analysis.
+EDGE_MARGIN_BINS = 2
+
+
+def _inside_projector(geometry, rows, offsets, margin=EDGE_MARGIN_BINS) -> np.ndarray:
+    """Offsets ``(r, U)`` whose bin and ``margin`` bins on each side lie fully on the projector.
+
+    A demultiplexed estimate spikes at the projector's end (light from beyond
+    it has nowhere else to go), so the bins there are not part of the profile.
+    """
+    full = geometry.coverage(np.asarray(rows)[:, None], np.asarray(offsets)[None, :]) >= 1.0 - 1e-6
+    if margin > 0:
+        from scipy.ndimage import binary_erosion
+
+        full = binary_erosion(full, structure=np.ones((1, 2 * margin + 1), bool), border_value=1)
+    return full
+
+
+def classify_transport(transport, resolution_rows=0.0, support_rows=None, chunk_rows=32, **thresholds) -> np.ndarray:
+    """Effect label of every pixel of a transport from its profile ``T(u)``.
+
+    Parameters
+    ----------
+    transport : Transport
+        Ground-truth or demultiplexed transport (dense band; sparse long-range
+        entries lie beyond it and are not used).
+    resolution_rows : float
+        Half-width of the cell the data cannot split: a demultiplexing result's
+        ``attrs["epipolar_resolution_rows"]`` (6.075 for the paper's sweep), 0
+        for an exact transport.
+    support_rows : int, optional
+        Use only offsets ``|u| <= support_rows`` (e.g. the sweep's support, 114
+        rows for the paper's sweep, to see a ground truth as the sweep does).
+    chunk_rows : int
+        Camera rows processed at once (bounds memory).
+    **thresholds
+        Passed to :func:`characterize` (``smooth_bins``, ``peak_prominence``,
+        ``indirect_fraction_min``, ``asymmetry_min``).
+
+    Returns
+    -------
+    labels : ndarray (H, W) uint8
+        Keys of :data:`planeray.scenes.EFFECTS`.  Offsets outside the projector
+        (rows near its ends) are ignored; the camera-row footprint ``P / H`` is
+        part of the unresolved cell.
+    """
+    offsets = transport.offsets_rows
+    keep = np.ones(offsets.size, bool) if support_rows is None else np.abs(offsets) <= float(support_rows)
+    offsets = offsets[keep]
+    geometry = transport.geometry
+    H, W = transport.shape
+    labels = np.zeros((H, W), np.uint8)
+    for r0 in range(0, H, max(1, int(chunk_rows))):
+        rows = np.arange(r0, min(H, r0 + max(1, int(chunk_rows))))
+        valid = _inside_projector(geometry, rows, offsets)
+        ch = characterize(
+            transport.dense[rows][:, :, keep],
+            offsets,
+            resolution_rows=resolution_rows,
+            footprint_rows=geometry.rows_per_camera_row,
+            valid=valid[:, None, :],
+            **thresholds,
+        )
+        labels[rows] = ch.label
+    return labels
+
+
+def visible_effect_mask(scene, support_rows=114, resolution_rows=6.075, min_fraction=0.05) -> np.ndarray:
+    """Pixels whose ground-truth effect a sweep can show.
+
+    A labelled pixel's effect is *visible* when, in its ground-truth transport,
+    the light that the sweep can split from the direct peak -- offsets
+    ``resolution_rows + P/H < |u| <= support_rows``: beyond the unresolved cell
+    widened by one camera-row footprint, inside the sweep's support -- is at
+    least ``min_fraction`` of its light within the support.  Diffuse pixels
+    (label 1, nothing to see) are always visible; label 0 never.
+
+    This excludes, e.g., mirror-ball page pixels whose specular light is a few
+    percent of their direct light (below the noise of a demultiplexed profile),
+    disco-ball pixels whose reflection lies beyond the support or next to the
+    epipolar plane, and pixels labelled from light the sweep never reaches.
+
+    Parameters
+    ----------
+    scene : Scene
+        Built-in scene (``transport``, ``labels``).
+    support_rows : float
+        Half-width of the sweep's offset support (114 rows for the paper's sweep).
+    resolution_rows : float
+        Unresolved half-width around ``u = 0`` (6.075 rows for the paper's sweep).
+    min_fraction : float
+        Share of the in-support light the effect must hold.
+
+    Returns
+    -------
+    mask : ndarray (H, W) bool
+    """
+    T = scene.transport
+    u = np.abs(T.offsets_rows)
+    support = u <= float(support_rows)
+    zone = support & (u > float(resolution_rows) + T.geometry.rows_per_camera_row)
+    total = T.dense[:, :, support].sum(axis=2, dtype=np.float64)
+    effect = T.dense[:, :, zone].sum(axis=2, dtype=np.float64)
+    labels = np.asarray(scene.labels)
+    seen = effect >= float(min_fraction) * np.where(total > 0, total, np.inf)
+    return (labels == 1) | ((labels > 1) & seen)
+
+
+def label_agreement(pred, truth_labels, mask=None, n_labels=5) -> dict:
+    """Agreement of predicted effect labels with ground-truth labels.
+
+    Parameters
+    ----------
+    pred, truth_labels : array_like of int, same shape
+        Predicted and true labels (keys of :data:`planeray.scenes.EFFECTS`).
+    mask : array_like of bool, optional
+        Pixels to evaluate (e.g. :func:`visible_effect_mask`); pixels with true
+        label 0 are always ignored.
+    n_labels : int
+        Number of label values (5: ``EFFECTS``).
+
+    Returns
+    -------
+    dict
+        ``recall``: ``{k: fraction of the evaluated pixels with true label k
+        predicted k}`` for each label ``1..n_labels-1`` present; ``counts``:
+        ``{k: number of evaluated pixels with true label k}``; ``confusion``:
+        ``(n_labels, n_labels)`` int64 array, rows true label, columns predicted;
+        ``overall``: fraction of all evaluated pixels predicted right (NaN if none);
+        ``n``: number of evaluated pixels.
+    """
+    pred = np.asarray(pred).astype(np.int64)
+    truth = np.asarray(truth_labels).astype(np.int64)
+    if pred.shape != truth.shape:
+        raise InputError(f"predicted labels {pred.shape} and truth {truth.shape} differ in shape")
+    sel = truth > 0
+    if mask is not None:
+        sel &= np.broadcast_to(np.asarray(mask, bool), truth.shape)
+    t, p = truth[sel], np.clip(pred[sel], 0, n_labels - 1)
+    confusion = np.bincount(t * n_labels + p, minlength=n_labels * n_labels).reshape(n_labels, n_labels)
+    counts = confusion.sum(axis=1)
+    recall = {k: float(confusion[k, k] / counts[k]) for k in range(1, n_labels) if counts[k] > 0}
+    n = int(counts.sum())
+    overall = float(np.trace(confusion[1:, 1:]) / n) if n else float("nan")
+    return {"recall": recall, "counts": {k: int(counts[k]) for k in range(1, n_labels) if counts[k] > 0}, "confusion": confusion, "overall": overall, "n": n}

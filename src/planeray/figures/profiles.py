@@ -13,7 +13,8 @@ __all__ = ["delay_profiles_figure"]
 _COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive"]
 
 
-def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposure_us: float | None = None, names=None):
+def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposure_us: float | None = None, names=None,
+                          continuous=None):
     """Write Fig. 9: the scene with the pixels marked, and each pixel's delay profile.
 
     Parameters
@@ -27,6 +28,9 @@ def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposu
         the smallest solid and the others fainter.
     names : list of str, optional
         A legend label per pixel.
+    continuous : TransportDelayProfiles, optional
+        Profiles of the same pixels from a transport
+        (:func:`planeray.profiles.transport_delay_profiles`), drawn dashed.
     """
     e0 = profiles.exposure_us.min() if exposure_us is None else exposure_us
     ref_idx = stack.index_of(profiles.delay_us[np.argmin(np.abs(profiles.delay_us))], e0)
@@ -54,6 +58,9 @@ def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposu
                 ms=3,
                 label=label if solid else None,
             )
+        if continuous is not None:
+            ax_prof.plot(continuous.delay_us, continuous.values[p], "--", color=color, lw=1.2,
+                         label=f"{label}, from transport" if p == 0 else None)
     ax_prof.axvline(0, color="0.7", lw=0.8)
     ax_prof.set_xlabel("delay $t_d$ (µs)")
     ax_prof.set_ylabel("area-normalized intensity (1/ms)")
