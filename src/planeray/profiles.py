@@ -103,15 +103,18 @@ __all__ += [
     "CLASSIFY_THRESHOLDS",
 ]
 
-#: Rule thresholds of :func:`characterize` (tuned on demultiplexed transports of
-#: the built-in scenes, 64x64 camera rows of a 360-row projector, the paper's
-#: sweep, default camera; see :func:`characterize` for their meaning).
+#: Rule thresholds of :func:`characterize` and :func:`classify_transport`, by
+#: keyword (tuned on demultiplexed transports of the built-in scenes: 64x64
+#: camera rows of a 360-row projector, the paper's sweep, the default camera,
+#: four seeds; checked at 128x128 of 720 rows and on the ground truth).
 CLASSIFY_THRESHOLDS = {
-    "smooth_bins": 5,  # box smoothing over offsets before peak finding
+    "smooth_bins": 5,  # box smoothing over offsets before floor and peak finding
     "peak_prominence": 0.15,  # a peak counts if its prominence >= this x the main peak's height
-    "indirect_fraction": 0.07,  # significant light outside the unresolved cell
-    "asymmetry": 0.75,  # |asymmetry| at or above: one-sided (diffuse interreflection)
-    "peak_contrast": 0.0,  # a displaced peak's prominence over the level beside it
+    "strong_peak_prominence": 0.3,  # a displaced peak this prominent is specular outright
+    "peak_contrast": 6.0,  # else its prominence must be >= this x the level beside it
+    "indirect_fraction_min": 0.07,  # significant light outside the unresolved cell
+    "asymmetry_min": 0.75,  # |asymmetry| at or above: one-sided (diffuse interreflection)
+    "broadening": 1.3,  # main peak this many times wider than a direct one: broadened
 }
 
 
@@ -251,8 +254,8 @@ class ProfileCharacter:
     second_peak_offset_rows : ndarray float32
         Offset of the most prominent counted peak other than the main one (NaN if none).
     displaced_peak_offset_rows : ndarray float32
-        Offset of the highest counted peak beyond the cell (NaN if none); the
-        main peak itself when it lies beyond the cell.
+        Offset of the highest *displaced* peak -- beyond the cell and standing
+        out (see :func:`characterize`) -- or NaN; may be the main peak itself.
     spread_rows : ndarray float32
         RMS width of the profile about its centroid, in rows.
     peak_offset_rows : ndarray float32
@@ -367,7 +370,10 @@ def _local_level(S, valid, pix, k, core, window):
 
 
 def _fwhm(S, main_k, main_h):
-    """Width of the main peak at half its height, linear interpolation between samples."""
+    """Width of the main peak at half its height, linear interpolation between samples.
+
+    Returns the width and the left and right crossing positions (in samples).
+    """
     N, U = S.shape
     cols = np.arange(U)[None, :]
     ok = main_k >= 0
@@ -387,7 +393,8 @@ def _fwhm(S, main_k, main_h):
     ri = np.clip(right_idx, 0, U - 1)
     left = np.where(left_idx >= 0, cross(li, np.minimum(li + 1, U - 1)), -0.5)
     right = np.where(right_idx < U, cross(np.maximum(ri - 1, 0), ri), U - 0.5)
-    return np.where(ok & (main_h > 0), right - left, np.nan)
+    good = ok & (main_h > 0)
+    return np.where(good, right - left, np.nan), np.where(good, left, np.nan), np.where(good, right, np.nan)
 
 
 def characterize(
@@ -396,14 +403,11 @@ def characterize(
     resolution_rows=0.0,
     footprint_rows=0.0,
     valid=None,
-    smooth_bins=None,
-    peak_prominence=None,
-    indirect_fraction_min=None,
-    asymmetry_min=None,
-    peak_contrast=None,
+    direct_fwhm_rows=None,
     subtract_floor=True,
+    **thresholds,
 ) -> ProfileCharacter:
-    """Characterize transport profiles and label the light transport effect they show.
+    """Characterize transport profiles and label the light transport effect each shows.
 
     Parameters
     ----------
@@ -416,68 +420,87 @@ def characterize(
         Half-width of the cell around ``u = 0`` that the data cannot split (the
         demultiplexing result's ``epipolar_resolution_rows``; 0 for an exact transport).
     footprint_rows : float
-        Projector rows spanned by one camera row (``P / H``): direct light
-        covers the bins of that footprint.  The **unresolved cell** is
+        Projector rows spanned by one camera row (``P / H``); direct light
+        covers that footprint.  The **unresolved cell** is
         ``|u| <= cell = resolution_rows + footprint_rows / 2 + 1/2`` (the half bin:
         a bin ``[k - 1/2, k + 1/2)`` belongs to the cell if it overlaps it).
     valid : array_like of bool, broadcastable to (..., U), optional
-        Offsets that exist (e.g. inside the projector); others are ignored.
-    smooth_bins, peak_prominence, indirect_fraction_min, asymmetry_min : optional
-        Rule thresholds; defaults from :data:`CLASSIFY_THRESHOLDS`.
+        Offsets that exist (e.g. on the projector); the others are ignored.
+    direct_fwhm_rows : float, optional
+        FWHM of a direct (diffuse) peak in these profiles.  When given, a
+        one-sided profile whose main peak is ``broadening`` times wider is
+        subsurface, not diffuse interreflection (see :func:`classify_transport`,
+        which measures it on the image).
     subtract_floor : bool
         Subtract a per-profile floor (ambient light spreads a constant over all
         offsets of a demultiplexed transport) before anything else.
+    **thresholds
+        Any key of :data:`CLASSIFY_THRESHOLDS` to override its default.
 
     Returns
     -------
     ProfileCharacter
+        Arrays of the input's leading shape ``(...)``.
+
+    Raises
+    ------
+    InputError
+        Profiles and offsets of different lengths, or an unknown threshold.
 
     Notes
     -----
-    Processing, per profile (vectorized over profiles):
+    Per profile, vectorized over profiles (defaults in brackets):
 
-    1. **Floor.**  The profile is box-smoothed over ``smooth_bins`` offsets (the
-       demultiplexer's L1 term turns an ambient floor and noise into isolated
-       spikes; smoothing spreads them) and its floor is the smaller of the
-       levels of its two tails (``0.5 K <= |u| <= 0.85 K``, ``K`` the largest
-       offset: a demultiplexed floor sags in the outermost offsets, which fewer
-       images constrain; a tail's level is its mean after clipping values above
-       5x its median): ambient light is the same at every offset, a specular spot
-       covers less than half a tail, and one-sided indirect light leaves one
-       tail clean.  The floor is subtracted from the
-       raw and the smoothed profile.
-    2. **Energies** (raw, floor-subtracted): ``E0`` inside the cell, ``E+`` and
-       ``E-`` beyond it (each clipped at 0).  ``indirect_fraction = (E+ + E-) /
-       (E0 + E+ + E-)``, ``asymmetry = (E+ - E-) / (E+ + E-)``.  ``spread_rows`` is
-       the RMS width of the positive part.
-    3. **Peaks** of the smoothed profile with scipy's prominence (bases within
-       the profile); peaks below ``peak_prominence`` x the main peak's height are
-       noise.  ``fwhm_rows`` is the main peak's width at half its height.
+    1. **Floor.**  The profile is box-smoothed over ``smooth_bins`` [5] offsets
+       (the demultiplexer's L1 term turns an ambient floor and noise into
+       isolated spikes; smoothing spreads them).  Its floor is the smaller of
+       the levels of its two tails ``0.5 K <= |u| <= 0.85 K`` (``K`` the largest
+       offset; a demultiplexed floor sags in the outermost offsets, which fewer
+       images constrain), a tail's level being its mean after clipping values
+       above 5x its median: ambient light is the same at every offset, a
+       specular spot covers less than half a tail, and one-sided indirect light
+       leaves one tail clean.  The floor is subtracted from the raw and the
+       smoothed profile.
+    2. **Energies** of the raw, floor-subtracted profile: ``E0`` inside the
+       cell, ``E+`` (``u > cell``) and ``E-`` (``u < -cell``) clipped at 0.
+       ``indirect_fraction = (E+ + E-) / (E0 + E+ + E-)``, ``asymmetry = (E+ -
+       E-) / (E+ + E-)`` (0 without light outside the cell), ``spread_rows`` the
+       RMS width of the positive part about its centroid.
+    3. **Peaks** of the smoothed profile, with scipy's prominence (bases within
+       the profile, a peak at the end of the offsets included).  The main peak
+       is the highest; another counts if its prominence is at least
+       ``peak_prominence`` [0.15] x the main peak's height.  ``fwhm_rows``:
+       width of the main peak at half its height (linear interpolation).  A
+       counted peak beyond the cell is *displaced* if it is the main peak, or
+       its prominence is at least ``strong_peak_prominence`` [0.3] x the main
+       peak's height, or at least ``peak_contrast`` [6] x the mean level beside
+       it (offsets 3..4 ``core`` away on both sides, outside the main peak's
+       flanks, floor included; ``core = smooth_bins // 2 + footprint_rows / 2 +
+       1``): a sparse estimate of a broad subsurface skirt is spiky, and its
+       spikes stand only a few times above their surroundings, a specular spot
+       far more.
     4. **Label**, first rule that applies:
 
        * 0 ``none``: no light above the floor;
-       * 4 ``specular_interreflection``: a counted peak beyond the cell -- a
-         second, displaced peak at least ``peak_prominence`` (0.2) as prominent
-         as the main peak, or a displaced main peak;
-       * 3 ``diffuse_interreflection``: ``indirect_fraction >= 0.08`` and
-         ``|asymmetry| >= 0.65`` (steep, one-sided);
-       * 2 ``subsurface``: ``indirect_fraction >= 0.08``, symmetric (broadened);
+       * 4 ``specular_interreflection``: a displaced peak (a second peak beyond
+         the cell, or a dominant displaced one);
+       * 3 ``diffuse_interreflection``: ``indirect_fraction >=
+         indirect_fraction_min`` [0.07] and ``|asymmetry| >= asymmetry_min``
+         [0.75] (steep, one-sided), unless the main peak is broadened
+         (``fwhm_rows >= broadening`` [1.3] ``x direct_fwhm_rows``, only when
+         ``direct_fwhm_rows`` is given);
+       * 2 ``subsurface``: ``indirect_fraction >= indirect_fraction_min``,
+         symmetric or broadened;
        * 1 ``diffuse``: otherwise (narrow, unimodal).
 
-    The defaults are tuned on demultiplexed transports of the built-in scenes
-    (paper sweep; noise gives diffuse pixels an apparent indirect fraction up
-    to ~0.06 and noise peaks up to ~0.15 of the main peak).
+    On demultiplexed transports of the built-in scenes, noise gives diffuse
+    pixels an apparent indirect fraction up to ~0.06 and noise peaks up to
+    ~0.15 of the main peak; the thresholds sit just above.
     """
-    th = dict(CLASSIFY_THRESHOLDS)
-    for key, val in (
-        ("smooth_bins", smooth_bins),
-        ("peak_prominence", peak_prominence),
-        ("indirect_fraction", indirect_fraction_min),
-        ("asymmetry", asymmetry_min),
-        ("peak_contrast", peak_contrast),
-    ):
-        if val is not None:
-            th[key] = val
+    unknown = set(thresholds) - set(CLASSIFY_THRESHOLDS)
+    if unknown:
+        raise InputError(f"unknown threshold(s) {sorted(unknown)}; choose from {sorted(CLASSIFY_THRESHOLDS)}")
+    th = {**CLASSIFY_THRESHOLDS, **{key: val for key, val in thresholds.items() if val is not None}}
     T = np.asarray(T_profiles, dtype=np.float64)
     offsets = np.asarray(offsets_rows, dtype=np.float64).ravel()
     if T.ndim < 1 or T.shape[-1] != offsets.size:
@@ -514,9 +537,9 @@ def characterize(
     mean = (pos * offsets).sum(axis=1) / safe
     spread = np.where(mass > 0, np.sqrt(np.clip((pos * offsets**2).sum(axis=1) / safe - mean**2, 0.0, None)), np.nan)
     # Peaks: the main one is the highest of each profile; others count when
-    # prominent enough; a counted peak beyond the cell is specular when it also
-    # stands out of its own surroundings (``contrast``): the spikes a sparse
-    # estimate makes of a broad subsurface skirt do not.
+    # prominent enough; a counted peak beyond the cell is specular when it is
+    # strong or stands out of its own surroundings (``contrast``): the spikes a
+    # sparse estimate makes of a broad subsurface skirt do neither.
     pix, k, prom, height = _peak_table(S, V)
     is_main = np.r_[pix[1:] != pix[:-1], True] if pix.size else np.zeros(0, bool)
     main_k = np.full(N, -1)
@@ -529,7 +552,17 @@ def characterize(
     beside = V & (np.abs(offsets) > cell + core)[None, :]  # not the main peak's flanks
     level = _local_level(S_raw, beside, pix, k, core, 4 * core)  # floor included: noise scales with it
     contrast = np.where(level > 0, prom / np.where(level > 0, level, 1.0), np.inf)
-    far = counted & (np.abs(offsets[k]) > cell) & (is_main | (contrast >= float(th["peak_contrast"])))
+    strong = prom >= float(th["strong_peak_prominence"]) * main_h[pix]
+    # A main peak beyond the cell is displaced if a separate peak remains in the
+    # cell or its half-maximum interval leaves out u = 0 (a direct peak merged
+    # with a one-sided shoulder can have its maximum just beyond the cell).
+    fwhm, left, right = _fwhm(S, main_k, main_h)
+    zero = np.interp(0.0, offsets, np.arange(U)) if U > 1 else 0.0
+    in_cell = counted & (np.abs(offsets[k]) <= cell)
+    direct_peak = np.bincount(pix[in_cell], minlength=N) > 0
+    apart = direct_peak | ~((left <= zero) & (right >= zero))
+    beyond = (np.abs(offsets[k]) > cell) & (~is_main | apart[pix])
+    far = counted & beyond & (is_main | strong | (contrast >= float(th["peak_contrast"])))
     count = np.bincount(pix[counted], minlength=N).astype(np.int16)
     second = np.full(N, np.nan)
     other = np.flatnonzero(counted & ~is_main)
@@ -542,13 +575,15 @@ def characterize(
     if f.size:
         last = np.r_[pix[f][1:] != pix[f][:-1], True]
         displaced[pix[f][last]] = offsets[k[f][last]]
-    fwhm = _fwhm(S, main_k, main_h)
     peak_at = np.where(main_k >= 0, offsets[np.clip(main_k, 0, U - 1)], np.nan)
 
     label = np.ones(N, np.uint8)
-    sig = frac >= float(th["indirect_fraction"])
+    sig = frac >= float(th["indirect_fraction_min"])
     label[sig] = 2
-    label[sig & (np.abs(asym) >= float(th["asymmetry"]))] = 3
+    one_sided = sig & (np.abs(asym) >= float(th["asymmetry_min"]))
+    if direct_fwhm_rows is not None:  # a broadened main peak is subsurface even if one-sided
+        one_sided &= ~(fwhm >= float(th["broadening"]) * float(direct_fwhm_rows))
+    label[one_sided] = 3
     label[np.isfinite(displaced)] = 4
     label[~has_light] = 0
 
@@ -571,6 +606,8 @@ def characterize(
 
 #: Offsets this close to the end of the projector are left out of the analysis.
 EDGE_MARGIN_BINS = 2
+#: Diffuse pixels needed to measure the width of a direct peak in an image.
+MIN_DIRECT_PIXELS = 16
 
 
 def _inside_projector(geometry, rows, offsets, margin=EDGE_MARGIN_BINS) -> np.ndarray:
@@ -587,7 +624,7 @@ def _inside_projector(geometry, rows, offsets, margin=EDGE_MARGIN_BINS) -> np.nd
     return full
 
 
-def classify_transport(transport, resolution_rows=0.0, support_rows=None, chunk_rows=32, **thresholds) -> np.ndarray:
+def classify_transport(transport, resolution_rows=0.0, support_rows=None, chunk_rows=32, return_character=False, **thresholds):
     """Effect label of every pixel of a transport from its profile ``T(u)``.
 
     Parameters
@@ -604,36 +641,59 @@ def classify_transport(transport, resolution_rows=0.0, support_rows=None, chunk_
         rows for the paper's sweep, to see a ground truth as the sweep does).
     chunk_rows : int
         Camera rows processed at once (bounds memory).
+    return_character : bool
+        Also return the :class:`ProfileCharacter` of every pixel.
     **thresholds
-        Passed to :func:`characterize` (``smooth_bins``, ``peak_prominence``,
-        ``indirect_fraction_min``, ``asymmetry_min``).
+        Any key of :data:`CLASSIFY_THRESHOLDS`, passed to :func:`characterize`.
 
     Returns
     -------
     labels : ndarray (H, W) uint8
-        Keys of :data:`planeray.scenes.EFFECTS`.  Offsets outside the projector
-        (rows near its ends) are ignored; the camera-row footprint ``P / H`` is
-        part of the unresolved cell.
+        Keys of :data:`planeray.scenes.EFFECTS`.
+    character : ProfileCharacter
+        Only with ``return_character``; arrays of shape (H, W).
+
+    Notes
+    -----
+    The camera-row footprint ``P / H`` is part of the unresolved cell; offsets
+    off the projector (and the :data:`EDGE_MARGIN_BINS` bins at its ends) are
+    ignored.  The width of a direct peak -- needed to call a main peak
+    *broadened* -- is measured on the image itself: the median main-peak FWHM of
+    the pixels first labelled diffuse (the rule is skipped when fewer than
+    :data:`MIN_DIRECT_PIXELS` are).  One-sided pixels whose main peak is
+    ``broadening`` (1.3) times wider are subsurface (light scattered inside an
+    object whose boundary cuts the kernel on one side), not diffuse
+    interreflection.
     """
     offsets = transport.offsets_rows
     keep = np.ones(offsets.size, bool) if support_rows is None else np.abs(offsets) <= float(support_rows)
     offsets = offsets[keep]
     geometry = transport.geometry
     H, W = transport.shape
-    labels = np.zeros((H, W), np.uint8)
-    for r0 in range(0, H, max(1, int(chunk_rows))):
-        rows = np.arange(r0, min(H, r0 + max(1, int(chunk_rows))))
+    step = max(1, int(chunk_rows))
+    parts = []
+    for r0 in range(0, H, step):
+        rows = np.arange(r0, min(H, r0 + step))
         valid = _inside_projector(geometry, rows, offsets)
-        ch = characterize(
-            transport.dense[rows][:, :, keep],
-            offsets,
-            resolution_rows=resolution_rows,
-            footprint_rows=geometry.rows_per_camera_row,
-            valid=valid[:, None, :],
-            **thresholds,
+        parts.append(
+            characterize(
+                transport.dense[rows][:, :, keep],
+                offsets,
+                resolution_rows=resolution_rows,
+                footprint_rows=geometry.rows_per_camera_row,
+                valid=valid[:, None, :],
+                **thresholds,
+            )
         )
-        labels[rows] = ch.label
-    return labels
+    fields = [f for f in ProfileCharacter.__dataclass_fields__ if f != "cell_rows"]
+    ch = ProfileCharacter(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}, cell_rows=parts[0].cell_rows)
+    direct = (ch.label == 1) & np.isfinite(ch.fwhm_rows)
+    if direct.sum() >= MIN_DIRECT_PIXELS:
+        broadening = thresholds.get("broadening")
+        broadening = float(CLASSIFY_THRESHOLDS["broadening"] if broadening is None else broadening)
+        width = float(np.median(ch.fwhm_rows[direct]))
+        ch.label[(ch.label == 3) & (ch.fwhm_rows >= broadening * width)] = 2
+    return (ch.label, ch) if return_character else ch.label
 
 
 def visible_effect_mask(scene, support_rows=114, resolution_rows=6.075, min_fraction=0.05) -> np.ndarray:
