@@ -368,7 +368,7 @@ def synth(
 @app.command()
 @_friendly_errors
 def figure(
-    name: Annotated[str, typer.Argument(help="fig8 | fig9 | fig11 | fig12 | all")],
+    name: Annotated[str, typer.Argument(help="fig8 | fig9 | fig11 | fig12 | effects | all")],
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the PNGs and their numbers (JSON).")] = Path("out/figures"),
     size: Annotated[int, typer.Option(help="Image size (square).")] = 128,
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
@@ -382,7 +382,8 @@ def figure(
             raise ValueError(f"unknown figure {n!r}; choose one of {sorted(FIGURES)} or all")
         with console.status(f"reproducing {n}"):
             numbers = FIGURES[n](out_dir, size=size, seed=seed)
-        out.print(f"{n}: {out_dir / (n + '.json')}  {json.dumps(numbers.get('images', {}), default=float)[:300]}")
+        shown = numbers.get("images", numbers)
+        out.print(f"{n}: {out_dir / (n + '.json')}  {json.dumps(shown, default=float)[:400]}")
 
 
 # ------------------------------------------------------ export / import
