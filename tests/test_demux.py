@@ -195,7 +195,7 @@ def test_resume_after_interrupted_run_gives_the_same_result(wax_stack, tmp_path)
     out = tmp_path / "resumed.zarr"
     partial = demultiplex_to_store(stack, out, chunk_rows=4, _stop_after=3)  # "killed" after 3 chunks
     assert not out.exists() and partial.exists()
-    assert zarr.open_group(str(partial), mode="r")["done_chunks"][:].sum() == 3
+    assert zarr.open_group(str(partial), mode="r")["done_units"][:].sum() == 3
     seen = []
     demultiplex_to_store(stack, out, chunk_rows=4, progress=seen.append)
     assert seen[0] == 12  # the finished chunks are reported, not redone

@@ -6,7 +6,7 @@ as a single line and exit non-zero instead of showing a traceback.
 
 from __future__ import annotations
 
-__all__ = ["PlanerayError", "InputError", "StackError", "TransportError"]
+__all__ = ["PlanerayError", "InputError", "StackError", "TransportError", "DeviceError"]
 
 
 class PlanerayError(Exception):
@@ -36,3 +36,7 @@ class StackError(InputError):
 
 class TransportError(InputError):
     """A transport store is malformed."""
+
+
+class DeviceError(PlanerayError, RuntimeError):
+    """A device cannot be opened or refused a setting (missing SDK, no camera, bad timing)."""

@@ -116,6 +116,7 @@ __all__ = [
     "atomic_directory",
     "atomic_file",
     "write_stack",
+    "create_stack_group",
     "read_stack",
     "validate_images",
     "import_folder",
@@ -361,20 +362,10 @@ def write_stack(stack: Stack, path, overwrite: bool = False, progress=None) -> P
     if not isinstance(stack, Stack):
         raise StackError(f"expected a Stack, got {type(stack).__name__}", path)
     n, h, w = (int(x) for x in stack.images.shape)
-    attrs = {
-        "format": STACK_FORMAT,
-        "format_version": FORMAT_VERSION,
-        "lines_per_second": float(stack.lines_per_second),
-        "projector_rows": int(stack.projector_rows),
-        "metadata": _jsonable(stack.metadata, "metadata", StackError),
-        "planeray_version": _planeray_version(),
-    }
     with atomic_directory(path, overwrite, error=StackError) as tmp:
-        group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
-        # Row blocks: demultiplexing reads a few camera rows of every image at a time.
-        chunks = (1, max(min(h, 32), 1), max(w, 1))
-        images = group.create_array("images", shape=(n, h, w), chunks=chunks, dtype="float32", fill_value=0.0)
-        saturated = group.create_array("saturated", shape=(n, h, w), chunks=chunks, dtype="bool", fill_value=False)
+        group = create_stack_group(tmp, (n, h, w), stack.delay_us, stack.exposure_us, stack.excluded,
+                                   stack.lines_per_second, stack.projector_rows, stack.metadata, path)
+        images, saturated = group["images"], group["saturated"]
         for i in range(n):
             image = np.asarray(stack.images[i], dtype=np.float32)
             if image.shape != (h, w):
@@ -388,11 +379,35 @@ def write_stack(stack: Stack, path, overwrite: bool = False, progress=None) -> P
                     saturated[i] = mask
             if progress is not None:
                 progress(i)
-        group.create_array("delay_us", data=np.asarray(stack.delay_us, dtype=np.float64))
-        group.create_array("exposure_us", data=np.asarray(stack.exposure_us, dtype=np.float64))
-        group.create_array("excluded", data=np.asarray(stack.excluded, dtype=bool))
-        group.attrs.update(attrs)
     return path
+
+
+def create_stack_group(directory, shape, delay_us, exposure_us, excluded, lines_per_second, projector_rows, metadata, path=None):
+    """Create the layout of a native stack store in ``directory`` (images left at 0).
+
+    Shared by :func:`write_stack` and writers that fill a store image by image
+    (the resumable sweep runner, :func:`planeray.acquire.acquire_to_store`).
+    """
+    n, h, w = (int(x) for x in shape)
+    group = zarr.open_group(str(directory), mode="w", zarr_format=3)
+    # Row blocks: demultiplexing reads a few camera rows of every image at a time.
+    chunks = (1, max(min(h, 32), 1), max(w, 1))
+    group.create_array("images", shape=(n, h, w), chunks=chunks, dtype="float32", fill_value=0.0)
+    group.create_array("saturated", shape=(n, h, w), chunks=chunks, dtype="bool", fill_value=False)
+    group.create_array("delay_us", data=np.asarray(delay_us, dtype=np.float64))
+    group.create_array("exposure_us", data=np.asarray(exposure_us, dtype=np.float64))
+    group.create_array("excluded", data=np.asarray(excluded, dtype=bool))
+    group.attrs.update(
+        {
+            "format": STACK_FORMAT,
+            "format_version": FORMAT_VERSION,
+            "lines_per_second": float(lines_per_second),
+            "projector_rows": int(projector_rows),
+            "metadata": _jsonable(metadata, "metadata", StackError),
+            "planeray_version": _planeray_version(),
+        }
+    )
+    return group
 
 
 def _open_group(path: Path, error):

@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from .. import resumable
 from ..errors import InputError, TransportError
 from ..stack import Stack
 from ..timing import RowGeometry
@@ -232,64 +231,26 @@ def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_ro
     return h.hexdigest()
 
 
-def _partial_path(out: Path) -> Path:
-    return out.parent / f".{out.name}.partial"
-
-
-def _open_partial(partial: Path, fingerprint: str, shape, problem: DemuxProblem, n_chunks: int, attrs: dict):
+def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
     import zarr
 
     from ..io import transport_attrs
 
-    if partial.exists():
-        group = zarr.open_group(str(partial), mode="r+")
-        if group.attrs.get("run_fingerprint") != fingerprint:
-            raise InputError(
-                "an unfinished run with different inputs or parameters is in the way; "
-                "remove it or run with --restart",
-                partial,
-            )
-        return group
     H, W = shape
     U = problem.n_offsets
-    tmp = partial.parent / f"{partial.name}.init"
-    shutil.rmtree(tmp, ignore_errors=True)
-    group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
+    group = zarr.open_group(str(directory), mode="w", zarr_format=3)
     group.create_array("T", shape=(H, W, U), chunks=(DEFAULT_CHUNK_ROWS, W, U), dtype="float32", fill_value=0.0)
     for name, dtype in MAP_NAMES.items():
         group.create_array(name, shape=(H, W), chunks=(DEFAULT_CHUNK_ROWS, W), dtype=dtype, fill_value=0)
-    group.create_array("done_chunks", shape=(n_chunks,), chunks=(n_chunks,), dtype="bool", fill_value=False)
     group.attrs.update(transport_attrs(problem.offsets_rows, problem.projector_rows, attrs))
-    group.attrs["run_fingerprint"] = fingerprint
-    os.rename(tmp, partial)  # the partial store appears complete with its layout
-    return zarr.open_group(str(partial), mode="r+")
+    return group
 
 
 def _write_chunk(group, res: ChunkResult, index: int) -> None:
     group["T"][res.rows] = res.T
     for name in MAP_NAMES:
         group[name][res.rows] = res.maps[name]
-    group["done_chunks"][index] = True  # only after the data: a killed run redoes this chunk
-
-
-def _finish(partial: Path, out: Path, overwrite: bool) -> None:
-    import zarr
-
-    group = zarr.open_group(str(partial), mode="r+")
-    if not np.all(group["done_chunks"][:]):
-        raise TransportError("internal error: finishing a run with unfinished chunks", partial)
-    del group["done_chunks"]
-    group.attrs.pop("run_fingerprint", None)
-    if out.exists():
-        if not overwrite:
-            raise TransportError("already exists (pass overwrite=True to replace it)", out)
-        backup = out.parent / f".{out.name}.old"
-        shutil.rmtree(backup, ignore_errors=True)
-        os.rename(out, backup)
-        os.rename(partial, out)
-        shutil.rmtree(backup, ignore_errors=True)
-    else:
-        os.rename(partial, out)
+    resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 
 def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0.01, method: str = "fast",
@@ -331,12 +292,10 @@ def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0
     _solver(method)
     H, W = stack.shape
     chunks = _chunks(H, chunk_rows)
-    partial = _partial_path(out)
-    if restart:
-        shutil.rmtree(partial, ignore_errors=True)
     fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows)
-    group = _open_partial(partial, fingerprint, (H, W), problem, len(chunks), _attrs(problem, method, tol))
-    done = np.asarray(group["done_chunks"][:], bool)
+    attrs = _attrs(problem, method, tol)
+    group = resumable.open_partial(out, fingerprint, len(chunks), lambda d: _create_store(d, (H, W), problem, attrs), restart)
+    done = resumable.done_units(group)
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():
         progress(sum(chunks[i].stop - chunks[i].start for i in range(len(chunks)) if done[i]))
@@ -351,9 +310,8 @@ def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0
             if progress is not None:
                 progress(chunks[i].stop - chunks[i].start)
     if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
-        return partial
-    _finish(partial, out, overwrite)
-    return out
+        return resumable.partial_path(out)
+    return resumable.promote(out, overwrite, TransportError)
 
 
 def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source):

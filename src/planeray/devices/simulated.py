@@ -101,6 +101,8 @@ class SimulatedEpiscan:
     def describe(self) -> dict:
         return {
             "device": self.kind,
+            "image_shape": list(self.scene.shape),
+            "projector_rows": self.scene.geometry.projector_rows,
             "lines_per_second": self.lines_per_second,
             "camera": self.camera.to_dict(),
             "signal_scale": self.camera.signal_scale,

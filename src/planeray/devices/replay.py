@@ -1,0 +1,63 @@
+"""Replay device: serves a recorded stack through the device protocol.
+
+Lets every acquisition path (sweep runner, calibration, CLI) run on real data
+captured elsewhere, or re-run a simulated capture, without the hardware.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..stack import Stack
+
+__all__ = ["ReplayDevice"]
+
+
+class ReplayDevice:
+    """Answers ``grab()`` with the recorded image of the current (delay, exposure).
+
+    Parameters
+    ----------
+    stack : Stack
+        The recording (native store or import folder, e.g. via :func:`planeray.io.read_stack`).
+    source : str, optional
+        Name of the recording, for metadata and error messages.
+    """
+
+    kind = "replay"
+
+    def __init__(self, stack: Stack, source: str | None = None):
+        self.stack = stack
+        self.source = source or stack.metadata.get("source", "stack")
+        self.lines_per_second = stack.lines_per_second
+        self.delay_us = float(stack.delay_us[0])
+        self.exposure_us = float(stack.exposure_us[0])
+
+    def set_delay(self, delay_us: float) -> None:
+        self.delay_us = float(delay_us)
+
+    def set_exposure(self, exposure_us: float) -> None:
+        if exposure_us <= 0:
+            raise InputError(f"exposure must be positive, got {exposure_us}")
+        self.exposure_us = float(exposure_us)
+
+    def grab(self):
+        i = self.stack.index_of(self.delay_us, self.exposure_us)
+        if i is None:
+            raise InputError(
+                f"the recording has no image at delay {self.delay_us:g} us, exposure {self.exposure_us:g} us", self.source
+            )
+        sat = self.stack.saturated
+        mask = np.zeros(self.stack.shape, bool) if sat is None else np.asarray(sat[i], bool)
+        return self.stack.image(i), mask
+
+    def describe(self) -> dict:
+        return {
+            "device": self.kind,
+            "source": str(self.source),
+            "image_shape": list(self.stack.shape),
+            "projector_rows": int(self.stack.projector_rows),
+            "lines_per_second": self.lines_per_second,
+            "recording": self.stack.metadata,
+        }
