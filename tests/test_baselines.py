@@ -366,3 +366,24 @@ def test_default_room_light_saturates_conventional_frames():
     assert sat.any()
     assert out["numbers"]["saturated_pixels"]["nayar"] == int(sat.sum())
     assert out["numbers"]["errors"]["nayar_direct"]["all"]["pixels"] == int((~sat).sum())
+
+
+def test_separate_and_emulate_cli(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["separate", "direct-global", "diffuse_plane", "--out", str(tmp_path / "dg"),
+                              "--size", "32", "32", "--projector-rows", "96"])
+    assert res.exit_code == 0, res.output
+    numbers = json.loads((tmp_path / "dg" / "direct_global.json").read_text())
+    assert numbers["errors"]["nayar_direct"]["all"]["relative_rmse"] < 0.05
+    assert (tmp_path / "dg" / "nayar_direct.png").exists() and (tmp_path / "dg" / "truth_global.tif").exists()
+    res = runner.invoke(app, ["emulate", "wax", "--out", str(tmp_path / "em"), "--size", "24", "24",
+                              "--projector-rows", "96", "--delay-us", "375"])
+    assert res.exit_code == 0, res.output
+    numbers = json.loads((tmp_path / "em" / "emulation.json").read_text())
+    assert numbers["n_captures"] == {"emulated": 25, "synchronized": 2}

@@ -232,8 +232,9 @@ class LineCount:
         det = np.flatnonzero(self.detected)
         i = det[0] if first else det[-1]
         j = i - 1 if first else i + 1
-        beyond = self.fractions[j] if 0 <= j < self.fractions.size and not self.detected[j] else None
-        return float(self.fractions[i]), beyond
+        m = i + 1 if first else i - 1  # the interior neighbour: its deficit is light blurred into the end cells
+        beyond = float(self.fractions[j]) if 0 <= j < self.fractions.size and not self.detected[j] else None
+        return float(self.fractions[i] + (self.fractions[m] - 1.0)), beyond
 
     def window_rows(self, rows_per_line: int = 1) -> tuple[float, float]:
         """Length of the exposure window in projector rows, from this image alone.
@@ -446,34 +447,43 @@ def count_lines(image, *, dark=None, flat=None) -> LineCount:
     detected = (cand >= lo_i) & (cand <= hi_i)
     interior = (cand > lo_i) & (cand < hi_i)
     n_int = int(interior.sum())
-
-    # Full-line area: robust linear trend over the interior lines (uneven brightness).
-    a_int, p_int = areas[interior], pos[interior]
+    # Cells whose area is measured: the ends and the candidates beyond them, plus
+    # the interior lines next to the ends -- blur moves light between a partial
+    # end line and its full neighbour, and counting both conserves it.  The other
+    # interior lines are fully exposed (the window is contiguous): they count 1
+    # each and give the full-line area.
+    measured = ~interior
     if n_int >= 4:
+        measured = measured | (cand == lo_i + 1) | (cand == hi_i - 1)
+    ref_set = interior & ~measured
+
+    # Full-line area: robust linear trend over the reference lines (uneven brightness).
+    a_ref, p_ref = areas[ref_set], pos[ref_set]
+    n_ref = int(ref_set.sum())
+    if n_ref >= 4:
         from scipy.stats import theilslopes
 
-        b, a0 = theilslopes(a_int, p_int)[:2]
+        b, a0 = theilslopes(a_ref, p_ref)[:2]
     else:
-        b, a0 = 0.0, float(np.median(a_int))
+        b, a0 = 0.0, float(np.median(a_ref))
     trend = a0 + b * pos
-    ref = float(np.median(a0 + b * p_int))
+    ref = float(np.median(a0 + b * p_ref))
     if not ref > 0:
         raise InputError("cannot tell lit lines from background (non-positive line areas)")
     trend = np.maximum(trend, 0.2 * ref)
-    resid = a_int - (a0 + b * p_int)
+    resid = a_ref - (a0 + b * p_ref)
     # noise of each cell's area: the row-profile noise summed over its rows
     var_rows = np.concatenate([[0.0], np.cumsum(sigma**2)])
     edges = np.arange(H + 1) - 0.5
     cell_noise = np.sqrt(np.maximum(np.interp(hi, edges, var_rows) - np.interp(lo, edges, var_rows), 0.0))
-    area_noise = float(np.median(cell_noise[~interior]))
-    scatter = _MAD * float(np.median(np.abs(resid - np.median(resid)))) if n_int >= 3 else 0.0
+    area_noise = float(np.median(cell_noise[measured]))
+    scatter = _MAD * float(np.median(np.abs(resid - np.median(resid)))) if n_ref >= 3 else 0.0
     sigma_a = max(scatter, area_noise)
-    fractions = areas / trend
-    fractions[interior] = 1.0
-    ends = ~interior
+    fractions = np.where(measured, areas / trend, 1.0)
     sf = sigma_a / ref
-    count = n_int + float(fractions[ends].sum())
-    var = int(ends.sum()) * sf**2 + (float(fractions[ends].sum()) * sf) ** 2 / max(n_int, 1)
+    f_sum = float(fractions[measured].sum())
+    count = float(n_int - (interior & measured).sum()) + f_sum
+    var = int(measured.sum()) * sf**2 + (f_sum * sf) ** 2 / max(n_ref, 1)
     return LineCount(pos, cand, areas, fractions, detected, interior, spacing, sf, count, math.sqrt(var), truncated, noise)
 
 
