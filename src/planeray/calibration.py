@@ -193,8 +193,10 @@ class LineCount:
         Integrated (background-subtracted, flat-fielded) profile over each line's cell.
     fractions : ndarray
         Exposed fraction of each candidate: area over the full-line area at its
-        position (a trend fitted to the interior lines).  Interior lines are fully
-        exposed by construction (the exposure window is contiguous).
+        position (a trend fitted to the interior lines).  Measured for the end
+        lines, the candidates beyond them and the ends' interior neighbours; 1 for
+        the other interior lines, which are fully exposed by construction (the
+        exposure window is contiguous).
     detected, interior : ndarray of bool
     spacing_rows : float
         Line spacing in camera rows.
@@ -358,6 +360,35 @@ def _cumulative(q: np.ndarray):
     return lambda x: np.interp(x, edges, cum)
 
 
+def _robust_trend(x, y):
+    """Least-squares polynomial trend of ``y(x)`` after rejecting outliers beyond 4 robust sigmas.
+
+    Degree 2 with at least 10 points (a vignetting-like falloff), 1 with at least
+    3, else a constant.  Least squares (not a median fit) on purpose: line areas
+    can be two-valued (texture beating with the line spacing), where a median picks
+    one of the values instead of their mean.  Returns ``(coefficients for
+    np.polyval, residuals of the kept points)``.
+    """
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    keep = np.ones(x.size, bool)
+    for _ in range(3):
+        n = int(keep.sum())
+        deg = 2 if n >= 10 else 1 if n >= 3 else 0
+        coef = np.polyfit(x[keep], y[keep], deg)
+        r = y - np.polyval(coef, x)
+        # interquartile scale: unlike the MAD it does not collapse on two-valued data
+        q1, q2, q3 = np.percentile(r[keep], [25, 50, 75])
+        s = (q3 - q1) / 1.349
+        if s <= 0:
+            break
+        new = np.abs(r - q2) <= 4.0 * s
+        if new.sum() < 2 or np.array_equal(new, keep):
+            break
+        keep = new
+    return coef, r[keep]
+
+
 def count_lines(image, *, dark=None, flat=None) -> LineCount:
     """Detect and count the lit lines of a global-shutter calibration image (Sec. 6).
 
@@ -367,9 +398,12 @@ def count_lines(image, *, dark=None, flat=None) -> LineCount:
     :func:`scipy.signal.find_peaks` above a prominence threshold from a robust (MAD)
     noise estimate; a regular grid fitted to the peaks (sub-row line positions and
     spacing, missed interior lines restored); each line's area integrated over its
-    cell of one spacing (sub-row cell edges); a robust linear trend of the interior
-    lines' areas (uneven brightness); and the exposed fraction of the two end lines
-    and of the candidates beyond them relative to that trend.
+    cell of one spacing (sub-row cell edges); a trend of the full lines' areas
+    (low-order least squares with outlier rejection: uneven brightness); and the
+    exposed fraction of the two end lines, of the candidates beyond them and of
+    their interior neighbours (light blurred across a cell edge stays counted)
+    relative to that trend.  Interior lines count 1 each: the exposure window is
+    contiguous, so only the lines at its ends can be partially exposed.
 
     Parameters
     ----------
@@ -413,26 +447,31 @@ def count_lines(image, *, dark=None, flat=None) -> LineCount:
         raise InputError(f"found {peaks.size} lit line(s); need at least 3 separated lines to count")
 
     # Regular grid through the peaks: sub-row positions, missed lines restored.
-    s = float(np.median(np.diff(peaks)))
-    rel = (peaks - peaks[0]) / s
-    idx = np.rint(rel).astype(int)
-    keep = np.abs(rel - idx) < 0.3
-    peaks, idx = peaks[keep], idx[keep]
-    # sub-row centroids of the peaks (within a third of the spacing)
     C = _cumulative(q)
     xs = np.arange(H, dtype=float)
+    s = float(np.median(np.diff(peaks)))
     cent = []
-    for p in peaks:
+    for p in peaks:  # sub-row centroid of each peak, within a third of the spacing
         sel = np.abs(xs - p) <= s / 3
         w = np.maximum(q[sel], 0.0)
         cent.append(float((w * xs[sel]).sum() / w.sum()) if w.sum() > 0 else float(p))
     cent = np.array(cent)
-    _, first = np.unique(idx, return_index=True)
-    idx, cent = idx[first], cent[first]
-    if idx.size < 3:
-        raise InputError(f"found {idx.size} lit line(s); need at least 3 separated lines to count")
-    slope, icpt = np.polyfit(idx, cent, 1)
-    spacing = float(slope)
+    # Index the lines in order: consecutive peaks are one spacing apart, or a
+    # whole number of spacings where lines were missed (line shapes can alternate,
+    # so the index comes from each gap, not from an accumulated spacing).
+    gaps = np.diff(cent)
+    s0 = float(np.median(gaps))
+    if not s0 >= 2.0:
+        raise InputError(f"lines are {s0:.2f} camera rows apart; need at least 2 to separate them")
+    idx = np.concatenate([[0], np.cumsum(np.maximum(1, np.rint(gaps / s0)).astype(int))])
+    spacing, icpt = (float(v) for v in np.polyfit(idx, cent, 1))
+    off = np.abs(cent - (icpt + spacing * idx)) > 0.3 * spacing
+    if off.any():  # a stray peak between lines: drop it, index again
+        cent = cent[~off]
+        if cent.size < 3:
+            raise InputError(f"found {cent.size} lit line(s) on a regular grid; need at least 3 separated lines")
+        idx = np.concatenate([[0], np.cumsum(np.maximum(1, np.rint(np.diff(cent) / spacing)).astype(int))])
+        spacing, icpt = (float(v) for v in np.polyfit(idx, cent, 1))
     if not spacing >= 2.0:
         raise InputError(f"lines are {spacing:.2f} camera rows apart; need at least 2 to separate them")
 
@@ -457,27 +496,21 @@ def count_lines(image, *, dark=None, flat=None) -> LineCount:
         measured = measured | (cand == lo_i + 1) | (cand == hi_i - 1)
     ref_set = interior & ~measured
 
-    # Full-line area: robust linear trend over the reference lines (uneven brightness).
+    # Full-line area: a robust trend over the reference lines (uneven brightness).
     a_ref, p_ref = areas[ref_set], pos[ref_set]
     n_ref = int(ref_set.sum())
-    if n_ref >= 4:
-        from scipy.stats import theilslopes
-
-        b, a0 = theilslopes(a_ref, p_ref)[:2]
-    else:
-        b, a0 = 0.0, float(np.median(a_ref))
-    trend = a0 + b * pos
-    ref = float(np.median(a0 + b * p_ref))
+    coef, resid = _robust_trend(p_ref, a_ref)
+    trend = np.polyval(coef, pos)
+    ref = float(np.median(np.polyval(coef, p_ref)))
     if not ref > 0:
         raise InputError("cannot tell lit lines from background (non-positive line areas)")
     trend = np.maximum(trend, 0.2 * ref)
-    resid = a_ref - (a0 + b * p_ref)
     # noise of each cell's area: the row-profile noise summed over its rows
     var_rows = np.concatenate([[0.0], np.cumsum(sigma**2)])
     edges = np.arange(H + 1) - 0.5
     cell_noise = np.sqrt(np.maximum(np.interp(hi, edges, var_rows) - np.interp(lo, edges, var_rows), 0.0))
     area_noise = float(np.median(cell_noise[measured]))
-    scatter = _MAD * float(np.median(np.abs(resid - np.median(resid)))) if n_ref >= 3 else 0.0
+    scatter = float(np.sqrt((resid**2).sum() / (resid.size - len(coef)))) if resid.size > len(coef) else 0.0
     sigma_a = max(scatter, area_noise)
     fractions = np.where(measured, areas / trend, 1.0)
     sf = sigma_a / ref
@@ -627,7 +660,7 @@ def calibrate_lines_per_second(data, exposure_us=None, rows_per_line=None, *, da
     if complete:
         rows = float(sum(c.count for c in counts))
         var = float(sum(c.count_uncertainty**2 for c in counts))
-        if k * n != k * k:  # several images per phase: the mean over repeats
+        if n != k:  # several images per phase: the mean over repeats
             rows *= k / n
             var *= (k / n) ** 2
         method = "complete sweep"
@@ -764,6 +797,53 @@ def _ramp(resp, a, b, half, ipk, step):
     return inner if len(inner) >= 2 else sorted((i, j))
 
 
+def _fit_response(d, r, centre, width, ramp, base, amp):
+    """Least-squares fit of ``base + amp * (box(width) * box(ramp) * gauss(blur))(d - centre)``.
+
+    The epipolar response of a diffuse target over delay is the band (a box as
+    wide as the exposure) slid over one camera row's footprint (a box: the ramp)
+    and blurred by the sync jitter (a Gaussian): the exact bin integral of
+    :func:`planeray.timing.band_bin_weights` with 1-us bins.  Returns
+    ``(centre, sigma, params)`` with the 1-sigma from the Jacobian and the residual
+    variance (noise plus any misfit), or None if the fit fails.
+    """
+    from scipy.optimize import least_squares
+
+    from .timing import band_bin_weights
+
+    def model(p):
+        c, w, f, g, b0, a = p
+        return b0 + a * band_bin_weights(d, c, abs(w), abs(g), abs(f))
+
+    p0 = np.array([centre, abs(width), max(abs(ramp), 1.0), max(0.1 * abs(ramp), 1.0), base, amp], float)
+    try:
+        sol = least_squares(lambda p: model(p) - r, p0, x_scale=np.array([10.0, 10.0, 10.0, 5.0, abs(amp), abs(amp)]))
+    except (ValueError, FloatingPointError):
+        return None
+    if not sol.success or d.size <= p0.size:
+        return None
+    dof = d.size - p0.size
+    s2 = float((sol.fun**2).sum()) / dof
+    # Heteroscedasticity-consistent (HC3 sandwich) covariance: the ramps, where all
+    # the information on the centre is, are much noisier than plateau and
+    # baseline (per-row trigger jitter acts exactly there).
+    J = sol.jac
+    try:
+        bread = np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return None
+    lev = np.clip(np.einsum("ij,jk,ik->i", J, bread, J), 0.0, 0.99)
+    meat = (J * (sol.fun / (1.0 - lev))[:, None] ** 2).T @ J  # HC3: leverage-corrected
+    cov = bread @ meat @ bread
+    sigma = float(np.sqrt(max(cov[0, 0], 0.0)))
+    if not np.isfinite(sigma):
+        return None
+    c, w, f, g, b0, a = (float(v) for v in sol.x)
+    params = {"centre_us": c, "width_us": abs(w), "ramp_us": abs(f), "blur_us": abs(g), "baseline": b0, "amplitude": a,
+              "residual_rms": math.sqrt(s2)}
+    return c, sigma, params
+
+
 def calibrate_delay_zero(capture, delays_us, exposure_us: float = 600.0, *, lines_per_second=PAPER_LINES_PER_SECOND,
                          roi=None) -> DelayZeroCalibration:
     """Delay zero: the commanded delay at which the epipolar (direct) response peaks.
@@ -771,11 +851,18 @@ def calibrate_delay_zero(capture, delays_us, exposure_us: float = 600.0, *, line
     On a diffuse calibration target the direct light of a camera row comes from its
     own epipolar plane, so the mean image over a fine delay sweep at one exposure
     is a plateau (the band ``|t_d - zero| < t_e/2`` covers the plane) with ramps as
-    wide as one camera row's footprint, blurred by sync jitter.  Its centre --
-    the midpoint of the two half-maximum crossings, each from a straight line
-    fitted to the ramp between 20 % and 80 % of the rise -- is the commanded delay
-    where the true ``t_d = 0``; Eq. 1 then gives the sync offset ``t'_o`` measured
-    rather than assumed (Sec. 6).
+    wide as one camera row's footprint, blurred by sync jitter.  Its centre is the
+    commanded delay where the true ``t_d = 0``; Eq. 1 then gives the sync offset
+    ``t'_o`` measured rather than assumed (Sec. 6).
+
+    The centre is first the midpoint of the two half-maximum crossings (each from
+    a straight line fitted to the ramp between 20 % and 80 % of the rise), then
+    refined by a least-squares fit of the whole curve to a box (exposure) slid
+    over a box (footprint) blurred by a Gaussian (jitter), which uses every ramp
+    point whatever the grid's phase.  Its 1-sigma comes from a leverage-corrected
+    sandwich covariance (the ramps are far noisier than plateau and baseline:
+    per-row trigger jitter acts exactly there).  If the fit fails or disagrees
+    with the midpoint, the midpoint is returned with its own uncertainty.
 
     Parameters
     ----------
@@ -797,7 +884,7 @@ def calibrate_delay_zero(capture, delays_us, exposure_us: float = 600.0, *, line
     Returns
     -------
     DelayZeroCalibration
-        With a 1-sigma uncertainty from the response noise over the ramp slopes.
+        With its 1-sigma uncertainty; ``details["method"]`` says which estimate.
 
     Raises
     ------
@@ -858,20 +945,31 @@ def calibrate_delay_zero(capture, delays_us, exposure_us: float = 600.0, *, line
         if slope == 0 or not np.isfinite(slope):
             raise InputError("cannot locate the edge of the epipolar response")
         xc = (half - icpt) / slope
-        # error of the crossing: the response noise through the fitted line
+        # error of the crossing: the response noise (or the ramp's departure from
+        # a straight line, if larger) through the fitted line
+        res = y - (icpt + slope * x)
+        lack = float(np.sqrt((res**2).sum() / (len(x) - 2))) if len(x) > 2 else 0.0
+        s_r = max(noise, lack)
         xm = x.mean()
         sxx = float(((x - xm) ** 2).sum())
-        var_line = noise**2 * (1.0 / len(x) + (xc - xm) ** 2 / sxx)
+        var_line = s_r**2 * (1.0 / len(x) + (xc - xm) ** 2 / sxx)
         return float(xc), float(slope), math.sqrt(var_line) / abs(slope), len(idx)
 
     xl, sl, el, nl = edge(-1)
     xr, sr, er, nr = edge(+1)
-    centre = 0.5 * (xl + xr)
-    sigma = 0.5 * math.hypot(el, er)
-    # The step of the grid bounds how well a ramp seen at only two points is placed.
+    mid, mid_sigma = 0.5 * (xl + xr), 0.5 * math.hypot(el, er)
     step = float(np.median(np.diff(d)))
-    if min(nl, nr) < 3:
-        sigma = math.hypot(sigma, step / math.sqrt(12.0) / 2)
+    if min(nl, nr) < 3:  # a ramp seen at two points is placed no better than the grid allows
+        mid_sigma = math.hypot(mid_sigma, step / math.sqrt(12.0) / 2)
+    # Start the model fit from the crossings: width = FWHM, ramp = rise / slope.
+    ramp = 0.5 * (hi - lo) * (1.0 / abs(sl) + 1.0 / abs(sr))
+    fit = _fit_response(d, resp, mid, xr - xl, ramp, lo, hi - lo)
+    if fit is not None and abs(fit[0] - mid) < max(3.0 * mid_sigma, 0.5 * step, 1.0):
+        centre, sigma, params = fit
+        method = "model fit"
+    else:
+        centre, sigma, params = mid, mid_sigma, None
+        method = "half-maximum midpoint"
     t_p = 1e6 / float(lines_per_second)
     sync = float(sync_offset_from_delay(centre, exposure_us, line_time_us=t_p))
     nominal = float(sync_offset_from_delay(0.0, exposure_us, line_time_us=t_p))
@@ -884,6 +982,10 @@ def calibrate_delay_zero(capture, delays_us, exposure_us: float = 600.0, *, line
         "left_crossing_us": xl,
         "right_crossing_us": xr,
         "ramp_points": [nl, nr],
+        "midpoint_us": mid,
+        "midpoint_uncertainty_us": mid_sigma,
+        "method": method,
+        "model": params,
         "lines_per_second": float(lines_per_second),
     }
     return DelayZeroCalibration(float(centre), float(sigma), sync, nominal, float(xr - xl), float(exposure_us), details)
@@ -1021,11 +1123,7 @@ def write_calibration(path, lines: LineCalibration | None = None, delay_zero: De
         acq["delay_zero_us"] = float(delay_zero.delay_zero_us)
         acq["delay_zero_uncertainty_us"] = float(delay_zero.uncertainty_us)
         acq["sync_offset_us"] = float(delay_zero.sync_offset_us)
-        dz = delay_zero.to_dict()
-        dz.pop("delays_us", None), dz.pop("response", None)
-        dz["delays_us"] = delay_zero.details.get("delays_us")
-        dz["response"] = delay_zero.details.get("response")
-        cal["delay_zero"] = dz
+        cal["delay_zero"] = delay_zero.to_dict()
     acq["calibration"] = cal
     acq = _jsonable(acq, "acquisition.json", InputError)
     with atomic_file(path) as tmp:
