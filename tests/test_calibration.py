@@ -246,3 +246,28 @@ def test_line_sweep_file_round_trip(tmp_path, target):
         read_line_sweep(tmp_path / "missing.npz")
     with pytest.raises(InputError):
         LineSweep(np.zeros((2, 3, 4, 5)))
+
+
+def test_calibrate_cli(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["calibrate", "simulate-lines", "--out", str(tmp_path / "l.npz"), "--lines-per-second", "60000"])
+    assert res.exit_code == 0, res.output
+    acq = tmp_path / "acquisition.json"
+    acq.write_text(json.dumps({"bit_depth": 12}))
+    res = runner.invoke(app, ["calibrate", "lines", str(tmp_path / "l.npz"), "--write", str(acq), "--json"])
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.stdout)
+    assert abs(info["lines_per_second"] - 60000) < 0.02 * 60000
+    written = json.loads(acq.read_text())
+    assert written["bit_depth"] == 12 and abs(written["lines_per_second"] - 60000) < 1200
+    res = runner.invoke(app, ["calibrate", "delay-zero", "--simulate", "--delay-error-us", "-25", "--json"])
+    assert res.exit_code == 0, res.output
+    assert abs(json.loads(res.stdout)["delay_zero_us"] + 25) < 2
+    res = runner.invoke(app, ["calibrate", "lines", str(tmp_path / "missing.npz")])
+    assert res.exit_code == 1 and "not found" in res.output
