@@ -15,7 +15,6 @@ import argparse
 import time
 from pathlib import Path
 
-import numpy as np
 
 from .acquire import acquire_sweep
 from .devices import SimulatedEpiscan
@@ -59,7 +58,7 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     progress = progress or progress_bar
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    console.print(f"[bold]planeray demo[/]: the paper's sweep (17 delays x 5 exposures) on the simulated Episcan")
+    console.print("[bold]planeray demo[/]: the paper's sweep (17 delays x 5 exposures) on the simulated Episcan")
     written = {}
 
     disco, disco_stack = _simulate("disco_ball", out_dir, size, seed, console, progress)
