@@ -70,13 +70,7 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     pixels : array_like (P, 2)
         ``(row, col)`` pixel coordinates.
     """
-    px = np.atleast_2d(np.asarray(pixels, dtype=np.int64))
-    if px.shape[1] != 2:
-        raise InputError(f"pixels must be (row, col) pairs, got shape {px.shape}")
-    H, W = stack.shape
-    bad = (px[:, 0] < 0) | (px[:, 0] >= H) | (px[:, 1] < 0) | (px[:, 1] >= W)
-    if bad.any():
-        raise InputError(f"pixel {tuple(px[bad][0])} outside the {H}x{W} image")
+    px = _check_pixels(pixels, stack.shape)
     delays, exposures = stack.delays(), stack.exposures()
     raw = np.full((len(px), exposures.size, delays.size), np.nan, np.float32)
     di = np.searchsorted(delays, stack.delay_us)
