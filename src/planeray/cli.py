@@ -484,6 +484,28 @@ def calibrate_delay_zero_cmd(
                   f"epipolar centre); sync offset t'_o = {result.sync_offset_us:.2f} us" + (f"; written to {write}" if write else ""))
 
 
+# ----------------------------------------------------------------- study
+study_app = typer.Typer(help="Studies of the method (Sec. 5.2).", no_args_is_help=True)
+app.add_typer(study_app, name="study")
+
+
+@study_app.command("demux")
+@_friendly_errors
+def study_demux(
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the figures (PNG) and numbers (CSV).")],
+    provider: Annotated[str, typer.Option(help="Scattering profiles: dipole or mc.")] = "dipole",
+    seeds: Annotated[int, typer.Option(help="Noise seeds per point.")] = 5,
+    quick: Annotated[bool, typer.Option(help="Reduced grids.")] = False,
+):
+    """Reconstruction quality of pinv, NNLS and the full method (Figs. 5, 6) and an alpha/beta sweep."""
+    from .study import run_study
+
+    with console.status("running the demultiplexing study"):
+        numbers = run_study(out_dir, provider, seeds, quick)
+    for f in numbers.get("files", []):
+        out.print(f"  {f}")
+
+
 # ----------------------------------------------------------------- demux
 @app.command()
 @_friendly_errors

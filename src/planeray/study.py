@@ -1,0 +1,373 @@
+"""The demultiplexing study of Sec. 5.2 (Figs. 5 and 6) in simulation.
+
+A 1-D scattering profile ``T`` over the paper sweep's offsets ``u = -K..K``
+(``K = sweep_support_rows(paper_sweep(), 54000)`` = 114, 229 offsets) is imaged
+through the used bands (``A[i, u] = L_i(u)``, ``(75, 229)``), scaled so that
+``max(A T) = 1`` (images normalized to [0, 1], the range the paper's
+``alpha = beta = 0.01`` refer to), and corrupted with ``eta ~ N(0, noise^2)``:
+``I = A T + eta``.  Three reconstructions are compared by their MSE against the
+true ``T`` (mean over the 229 offsets):
+
+* ``pinv`` -- pseudo-inverse (minimum-norm least squares);
+* ``nnls`` -- non-negative least squares without regularization;
+* ``full`` -- the paper's method (non-negativity + ``alpha ||dT/dv||^2 +
+  beta ||T||_1``), solved by :func:`planeray.demux.solve_fast`.
+
+The profile comes from a *provider* ``profile(sigma_s, sigma_a, g) -> T`` over
+the offsets.  The default (:func:`default_provider`) uses the Monte Carlo engine
+:func:`planeray.mc.mc_line_profile` when it is importable and otherwise the
+diffusion-dipole line kernel :func:`planeray.kernels.dipole_line_kernel` with
+the similarity relation ``sigma_s' = sigma_s (1 - g)`` -- with the dipole, ``g``
+enters *only* through ``sigma_s'`` (no single-scattering, no phase-function
+shape), so the g-sweep then measures the effect of the profile's width alone.
+:func:`run_study` uses the dipole unless asked for ``provider='mc'`` (the MC
+engine is far too slow at sigma_a = 0 for a few-minutes study; see
+:func:`default_provider`).
+
+Every noise realization is shared by the three methods (paired comparison), and
+every realization is seeded from ``(seed, point)`` so results are reproducible.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .demux import RowGroup, solve_fast, solve_nnls, solve_pinv
+from .io import atomic_file
+from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
+
+__all__ = [
+    "DEFAULT_PARAMS",
+    "DEFAULT_NOISE",
+    "DEFAULT_MM_PER_ROW",
+    "METHODS",
+    "StudySetup",
+    "study_setup",
+    "dipole_provider",
+    "mc_provider",
+    "default_provider",
+    "scaled_truth",
+    "reconstruct",
+    "mse_trials",
+    "reconstruction_example",
+    "noise_sweep",
+    "parameter_sweep",
+    "regularization_sweep",
+    "run_study",
+]
+
+#: The paper's default configuration (Figs. 5, 6): sigma_s = 1, sigma_a = 0, g = 0.9 (mm^-1).
+DEFAULT_PARAMS = {"sigma_s": 1.0, "sigma_a": 0.0, "g": 0.9}
+#: The paper's default noise level eta.
+DEFAULT_NOISE = 0.05
+#: Size of one projector row on the surface (mm).  With the defaults the transport
+#: mean free path 1 / sigma_s' is 10 mm = 10 rows: the profile spans tens of rows
+#: of the 229-offset support.
+DEFAULT_MM_PER_ROW = 1.0
+#: Reconstruction methods compared.
+METHODS = ("pinv", "nnls", "full")
+
+Provider = Callable[[float, float, float], np.ndarray]
+
+
+# ---------------------------------------------------------------------------- setup
+@dataclass
+class StudySetup:
+    """Offsets ``u`` (U,), the band matrix ``A`` (N, U) and its :class:`RowGroup`."""
+
+    offsets: np.ndarray
+    A: np.ndarray
+    group: RowGroup
+
+
+def study_setup(sweep=None, lines_per_second: float = PAPER_LINES_PER_SECOND) -> StudySetup:
+    """The paper sweep's used bands over ``u = -K..K`` (75 x 229 for the paper sweep)."""
+    sweep = paper_sweep() if sweep is None else sweep
+    K = sweep_support_rows(sweep, lines_per_second)
+    u = np.arange(-K, K + 1)
+    bands = [b for b, x in zip(sweep.bands(lines_per_second), sweep.excluded) if not x]
+    A = np.stack([b.profile(u) for b in bands]).astype(np.float64)
+    return StudySetup(u, A, RowGroup(rows=np.array([0]), A=A, valid=slice(0, u.size)))
+
+
+# ---------------------------------------------------------------------------- providers
+def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float = 1.0) -> Provider:
+    """Profile from the diffusion dipole with ``sigma_s' = sigma_s (1 - g)``.
+
+    ``g`` enters only through the similarity relation.  ``eta = 1`` (index-matched
+    boundary) matches the Monte Carlo engine's default ``n = 1``.
+    """
+    from .kernels import dipole_line_kernel
+
+    offsets = np.asarray(offsets)
+
+    def profile(sigma_s, sigma_a, g):
+        sp = float(sigma_s) * (1.0 - float(g))
+        return dipole_line_kernel(offsets, mm_per_row, float(sigma_a), sp, eta=eta)
+
+    profile.name = f"dipole (sigma_s' = sigma_s (1 - g), {mm_per_row} mm/row, eta {eta})"
+    return profile
+
+
+def mc_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, seed: int = 0, n: float = 1.0) -> Provider:
+    """Profile from :func:`planeray.mc.mc_line_profile` (semi-infinite medium). Raises ImportError without it."""
+    from .mc import mc_line_profile  # noqa: F401  (ImportError -> caller falls back)
+
+    offsets = np.asarray(offsets)
+
+    def profile(sigma_s, sigma_a, g):
+        res = mc_line_profile(float(sigma_s), float(sigma_a), float(g), n=n, n_photons=int(n_photons),
+                              offsets_rows=offsets, mm_per_row=mm_per_row, seed=seed)
+        return np.asarray(getattr(res, "values", res), np.float64)
+
+    profile.name = f"Monte Carlo ({n_photons:.0e} photons, {mm_per_row} mm/row, n {n})"
+    return profile
+
+
+def default_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, use_mc: bool = False) -> Provider:
+    """The provider used when none is given.
+
+    ``use_mc=True``: Monte Carlo if :mod:`planeray.mc` is importable, else the dipole.
+    ``use_mc=False`` (default): the dipole.  Measured (2 cores): the MC engine did
+    not return even 2,000 photons for the default sigma_a = 0, g = 0.9 medium within
+    60 s (and 2e5 photons ran > 10 min), while the study needs ~40 profiles -- so the
+    full study with MC is not a few-minutes run; ask for it explicitly.
+    """
+    if use_mc:
+        try:
+            return mc_provider(offsets, mm_per_row, n_photons)
+        except ImportError:
+            pass
+    return dipole_provider(offsets, mm_per_row)
+
+
+def _resolve_provider(provider, offsets) -> Provider:
+    if provider is None or provider == "dipole":
+        return dipole_provider(offsets)
+    if provider == "mc":
+        return default_provider(offsets, use_mc=True)
+    if callable(provider):
+        return provider
+    raise ValueError(f"provider must be None, 'dipole', 'mc' or a callable, got {provider!r}")
+
+
+def _cached(provider: Provider) -> Provider:
+    cache = {}
+
+    def profile(sigma_s, sigma_a, g):
+        key = (float(sigma_s), float(sigma_a), float(g))
+        if key not in cache:
+            cache[key] = np.asarray(provider(*key), np.float64)
+        return cache[key]
+
+    profile.name = getattr(provider, "name", getattr(provider, "__name__", "custom"))
+    return profile
+
+
+def scaled_truth(A, T) -> np.ndarray:
+    """``T`` scaled so that ``max(A T) = 1`` (normalized images)."""
+    T = np.clip(np.asarray(T, np.float64), 0.0, None)
+    peak = float(np.max(A @ T))
+    if not peak > 0:
+        raise ValueError("the profile gives no light in any image")
+    return T / peak
+
+
+# ---------------------------------------------------------------------------- core
+def reconstruct(setup: StudySetup, B, methods=METHODS, alpha=0.01, beta=0.01) -> dict:
+    """Reconstructions ``{method: X (P, U)}`` of observations ``B`` (P, N)."""
+    B = np.atleast_2d(np.asarray(B, np.float64))
+    out = {}
+    for m in methods:
+        if m == "pinv":
+            out[m] = solve_pinv(setup.group, B).X
+        elif m == "nnls":
+            out[m] = solve_nnls(setup.group, B).X
+        elif m == "full":
+            out[m] = solve_fast(setup.group, B, alpha, beta).X
+        else:
+            raise ValueError(f"unknown method {m!r}; choose from {METHODS}")
+    return out
+
+
+def _observations(setup: StudySetup, T, noise, seeds, point=0):
+    clean = setup.A @ T
+    rows = [clean + noise * np.random.default_rng([s, point]).standard_normal(clean.size) for s in range(seeds)]
+    return np.stack(rows)
+
+
+def mse_trials(setup: StudySetup, T, noise, seeds=5, methods=METHODS, alpha=0.01, beta=0.01, point=0, return_x=False):
+    """MSE against ``T`` of each method for ``seeds`` noise realizations: ``{method: (seeds,)}``."""
+    B = _observations(setup, T, noise, seeds, point)
+    X = reconstruct(setup, B, methods, alpha, beta)
+    mse = {m: ((x - T[None]) ** 2).mean(axis=1) for m, x in X.items()}
+    return (mse, X) if return_x else mse
+
+
+def _truth(setup, provider, sigma_s, sigma_a, g):
+    return scaled_truth(setup.A, provider(sigma_s, sigma_a, g))
+
+
+def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_NOISE, seed=0, **params) -> dict:
+    """Fig. 5a/b: truth and one reconstruction per method (noise realization ``seed``)."""
+    p = {**DEFAULT_PARAMS, **params}
+    T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
+    B = _observations(setup, T, noise, seed + 1)[seed:seed + 1]
+    X = reconstruct(setup, B)
+    return {"offsets": setup.offsets, "truth": T, **{m: x[0] for m, x in X.items()},
+            "mse": {m: float(((x[0] - T) ** 2).mean()) for m, x in X.items()}}
+
+
+def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, **params) -> dict:
+    """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``."""
+    p = {**DEFAULT_PARAMS, **params}
+    T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
+    mse = {m: np.zeros((len(noises), seeds)) for m in METHODS}
+    for i, eta in enumerate(noises):
+        r = mse_trials(setup, T, float(eta), seeds, point=i)
+        for m in METHODS:
+            mse[m][i] = r[m]
+    return {"noise": np.asarray(noises, float), "mse": mse}
+
+
+def parameter_sweep(setup: StudySetup, provider: Provider, name: str, values, seeds=5, noise=DEFAULT_NOISE, **params) -> dict:
+    """Fig. 6: ``mse[method]`` of shape ``(len(values), seeds)`` as ``name`` in
+    {'sigma_s', 'sigma_a', 'g'} varies, the others at their defaults."""
+    if name not in DEFAULT_PARAMS:
+        raise ValueError(f"unknown parameter {name!r}")
+    mse = {m: np.zeros((len(values), seeds)) for m in METHODS}
+    width = np.zeros(len(values))
+    for i, v in enumerate(values):
+        p = {**DEFAULT_PARAMS, **params, name: float(v)}
+        T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
+        width[i] = np.sum(T * np.abs(setup.offsets)) / np.sum(T)  # mean |u| of the profile (rows)
+        r = mse_trials(setup, T, noise, seeds, point=i)
+        for m in METHODS:
+            mse[m][i] = r[m]
+    return {"name": name, "values": np.asarray(values, float), "mse": mse, "mean_abs_offset": width}
+
+
+def regularization_sweep(setup: StudySetup, provider: Provider, alphas, betas, seeds=5, noise=DEFAULT_NOISE, **params) -> dict:
+    """MSE, squared bias and variance of the full method over an ``alpha x beta`` grid.
+
+    Returns ``mse``, ``bias2`` (mean over offsets of the squared mean error over
+    seeds) and ``variance`` (``mse - bias2``), each ``(len(alphas), len(betas))``;
+    the same noise realizations are used at every grid point.
+    """
+    p = {**DEFAULT_PARAMS, **params}
+    T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
+    B = _observations(setup, T, noise, seeds)
+    shape = (len(alphas), len(betas))
+    mse, bias2 = np.zeros(shape), np.zeros(shape)
+    for i, a in enumerate(alphas):
+        for j, b in enumerate(betas):
+            X = solve_fast(setup.group, B, float(a), float(b)).X
+            err = X - T[None]
+            mse[i, j] = (err**2).mean()
+            bias2[i, j] = (err.mean(axis=0) ** 2).mean()
+    return {"alphas": np.asarray(alphas, float), "betas": np.asarray(betas, float), "mse": mse, "bias2": bias2,
+            "variance": mse - bias2}
+
+
+# ---------------------------------------------------------------------------- output
+def _write_csv(path: Path, header, rows) -> Path:
+    with atomic_file(path) as tmp:
+        with open(tmp, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(header)
+            for r in rows:
+                w.writerow([f"{v:.9g}" if isinstance(v, (float, np.floating)) else v for v in r])
+    return path
+
+
+def _sweep_rows(x, mse, seeds):
+    for i, v in enumerate(x):
+        for s in range(seeds):
+            yield [float(v), s] + [float(mse[m][i, s]) for m in METHODS]
+
+
+def _summary(mse):
+    return {m: {"mean": v.mean(axis=1).tolist(), "std": v.std(axis=1, ddof=1).tolist() if v.shape[1] > 1 else [0.0] * len(v)}
+            for m, v in mse.items()}
+
+
+def grids(quick: bool = False) -> dict:
+    """The swept values (full, or reduced for tests)."""
+    if quick:
+        return {
+            "noise": np.array([0.005, 0.05, 0.3]),
+            "sigma_s": np.array([0.5, 2.0]),
+            "sigma_a": np.array([0.0, 0.1]),
+            "g": np.array([-0.5, 0.0, 0.9]),
+            "alpha": np.array([1e-3, 1e-2, 1e-1]),
+            "beta": np.array([1e-3, 1e-2, 1e-1]),
+        }
+    return {
+        "noise": np.geomspace(1e-3, 0.3, 11),
+        "sigma_s": np.geomspace(0.25, 8.0, 11),
+        "sigma_a": np.array([0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0]),
+        "g": np.round(np.arange(-0.9, 0.91, 0.15), 2),
+        "alpha": np.geomspace(1e-4, 100.0, 13),
+        "beta": np.geomspace(1e-4, 100.0, 13),
+    }
+
+
+def run_study(out_dir, provider: Provider | str | None = None, seeds: int = 5, quick: bool = False, noise: float = DEFAULT_NOISE) -> dict:
+    """Run the whole Sec. 5.2 study, write PNGs and CSVs into ``out_dir``, return the numbers.
+
+    ``provider``: a callable ``profile(sigma_s, sigma_a, g)`` over ``study_setup().offsets``,
+    ``'dipole'`` / ``None`` (the dipole kernel, see :func:`default_provider` for why
+    Monte Carlo is not the default) or ``'mc'`` (:mod:`planeray.mc` if importable).
+
+    Files: ``fig5_reconstruction.png/.csv``, ``fig5c_mse_vs_noise.png/.csv``,
+    ``fig6_mse_vs_params.png``, ``fig6{a,b,c}_mse_vs_{sigma_s,sigma_a,g}.csv``,
+    ``regularization_sweep.png/.csv``.
+    """
+    from .figures import study as figs
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    setup = study_setup()
+    provider = _cached(_resolve_provider(provider, setup.offsets))
+    G = grids(quick)
+    result = {"provider": provider.name, "seeds": seeds, "noise": noise, "n_images": int(setup.A.shape[0]),
+              "n_offsets": int(setup.offsets.size), "files": []}
+
+    ex = reconstruction_example(setup, provider, noise)
+    result["example_mse"] = ex["mse"]
+    result["example_min"] = {m: float(ex[m].min()) for m in METHODS}
+    result["files"].append(_write_csv(out / "fig5_reconstruction.csv", ["offset_rows", "truth", *METHODS],
+                                      ([int(u), ex["truth"][k]] + [ex[m][k] for m in METHODS] for k, u in enumerate(ex["offsets"]))))
+    result["files"].append(figs.plot_reconstruction(ex, out / "fig5_reconstruction.png", noise))
+
+    ns = noise_sweep(setup, provider, G["noise"], seeds)
+    result["noise_sweep"] = {"noise": ns["noise"].tolist(), **_summary(ns["mse"])}
+    result["files"].append(_write_csv(out / "fig5c_mse_vs_noise.csv", ["noise", "seed", *METHODS], _sweep_rows(ns["noise"], ns["mse"], seeds)))
+    result["files"].append(figs.plot_noise_sweep(ns, out / "fig5c_mse_vs_noise.png"))
+
+    sweeps = {}
+    for tag, name in (("a", "sigma_s"), ("b", "sigma_a"), ("c", "g")):
+        ps = parameter_sweep(setup, provider, name, G[name], seeds, noise)
+        sweeps[name] = ps
+        result[f"{name}_sweep"] = {"values": ps["values"].tolist(), "mean_abs_offset": ps["mean_abs_offset"].tolist(), **_summary(ps["mse"])}
+        result["files"].append(_write_csv(out / f"fig6{tag}_mse_vs_{name}.csv", [name, "seed", *METHODS], _sweep_rows(ps["values"], ps["mse"], seeds)))
+    result["files"].append(figs.plot_parameter_sweeps(sweeps, out / "fig6_mse_vs_params.png", noise))
+
+    rs = regularization_sweep(setup, provider, G["alpha"], G["beta"], seeds, noise)
+    i, j = np.unravel_index(np.argmin(rs["mse"]), rs["mse"].shape)
+    ia, ib = int(np.argmin(np.abs(np.log(rs["alphas"] / 0.01)))), int(np.argmin(np.abs(np.log(rs["betas"] / 0.01))))
+    result["regularization"] = {"alphas": rs["alphas"].tolist(), "betas": rs["betas"].tolist(), "mse": rs["mse"].tolist(),
+                                "bias2": rs["bias2"].tolist(), "best": {"alpha": float(rs["alphas"][i]), "beta": float(rs["betas"][j]),
+                                                                         "mse": float(rs["mse"][i, j])},
+                                "paper": {"alpha": float(rs["alphas"][ia]), "beta": float(rs["betas"][ib]), "mse": float(rs["mse"][ia, ib])}}
+    result["files"].append(_write_csv(out / "regularization_sweep.csv", ["alpha", "beta", "mse", "bias2", "variance"],
+                                      ([float(a), float(b), float(rs["mse"][p, q]), float(rs["bias2"][p, q]), float(rs["variance"][p, q])]
+                                       for p, a in enumerate(rs["alphas"]) for q, b in enumerate(rs["betas"]))))
+    result["files"].append(figs.plot_regularization(rs, out / "regularization_sweep.png", noise))
+    result["files"] = [str(f) for f in result["files"]]
+    return result

@@ -1,0 +1,73 @@
+"""The Sec. 5.2 demultiplexing study (quick grid, dipole provider)."""
+
+import numpy as np
+import pytest
+
+from planeray import study
+
+
+@pytest.fixture(scope="module")
+def setup():
+    return study.study_setup()
+
+
+@pytest.fixture(scope="module")
+def provider(setup):
+    return study.dipole_provider(setup.offsets)
+
+
+def test_setup_is_the_paper_sweep(setup):
+    assert setup.A.shape == (75, 229)
+    assert setup.offsets[0] == -114 and setup.offsets[-1] == 114
+
+
+def test_truth_is_normalized(setup, provider):
+    T = study.scaled_truth(setup.A, provider(1.0, 0.0, 0.9))
+    assert np.max(setup.A @ T) == pytest.approx(1.0)
+    assert T.min() >= 0
+
+
+def test_pinv_goes_negative_and_full_wins_at_default_noise(setup, provider):
+    ex = study.reconstruction_example(setup, provider)
+    assert ex["pinv"].min() < -0.01  # measured about -0.09 (Fig. 5a)
+    assert ex["nnls"].min() >= 0 and ex["full"].min() >= 0
+    T = study.scaled_truth(setup.A, provider(1.0, 0.0, 0.9))
+    mse = study.mse_trials(setup, T, 0.05, seeds=5)
+    full, pinv, nnls = (mse[m].mean() for m in ("full", "pinv", "nnls"))
+    # measured: full ~1.4e-4, pinv ~1e-3, nnls ~8e-4
+    assert full < 0.5 * pinv and full < 0.5 * nnls
+
+
+def test_mse_increases_with_noise(setup, provider):
+    ns = study.noise_sweep(setup, provider, [0.005, 0.05, 0.3], seeds=3)
+    for m in study.METHODS:
+        assert np.all(np.diff(ns["mse"][m].mean(axis=1)) > 0), m
+    # at low noise the unconstrained pinv is as good as the full method (paper: "can sometimes
+    # yield lower MSE ... at low noise"), at high noise the regularized method is best
+    assert ns["mse"]["pinv"][0].mean() < 2 * ns["mse"]["full"][0].mean()
+    hi = {m: ns["mse"][m][-1].mean() for m in study.METHODS}
+    assert hi["full"] < hi["nnls"] < hi["pinv"]
+
+
+def test_run_study_quick_writes_files(tmp_path, provider):
+    r = study.run_study(tmp_path, provider=provider, seeds=2, quick=True)
+    names = {p.name for p in tmp_path.iterdir()}
+    for stem in ("fig5_reconstruction", "fig5c_mse_vs_noise", "regularization_sweep"):
+        assert f"{stem}.png" in names and f"{stem}.csv" in names
+    assert {"fig6_mse_vs_params.png", "fig6a_mse_vs_sigma_s.csv", "fig6b_mse_vs_sigma_a.csv", "fig6c_mse_vs_g.csv"} <= names
+    assert not any(n.startswith(".") for n in names)  # no temporaries left
+    header = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()[0]
+    assert header == "noise,seed,pinv,nnls,full"
+    assert len((tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()) == 1 + 3 * 2
+    assert set(r["example_mse"]) == set(study.METHODS)
+    assert np.array(r["regularization"]["mse"]).shape == (3, 3)
+
+
+def test_custom_provider_and_errors(setup):
+    flat = lambda s, a, g: np.exp(-np.abs(setup.offsets) / (5.0 * s))  # noqa: E731
+    ps = study.parameter_sweep(setup, flat, "sigma_s", [1.0, 2.0], seeds=2)
+    assert ps["mse"]["full"].shape == (2, 2)
+    with pytest.raises(ValueError):
+        study.parameter_sweep(setup, flat, "n", [1.0])
+    with pytest.raises(ValueError):
+        study.run_study("/nonexistent-never", provider="bogus")
