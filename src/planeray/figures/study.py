@@ -70,8 +70,10 @@ def plot_parameter_sweeps(sweeps: dict, path, noise):
         ax.set_yscale("log")
         if name == "sigma_s":
             ax.set_xscale("log")
+            ax.xaxis.set_minor_formatter(plt.NullFormatter())
         elif name == "sigma_a":
             ax.set_xscale("symlog", linthresh=0.002)
+            ax.set_xlim(left=0.0)
         ax.set_xlabel(SYMBOLS[name])
         ax.set_ylabel("MSE of T")
         ax.set_title(f"({tag}) MSE vs {name}, eta = {noise}")
@@ -92,7 +94,7 @@ def plot_regularization(rs: dict, path, noise):
         ax.set_yticks(range(len(a)), [f"{x:.0e}" for x in a], fontsize=7)
         ax.set_xlabel(r"$\beta$ (L1)")
         ax.set_ylabel(r"$\alpha$ (smoothness)")
-        for p in range(len(a)):
+        for p in (range(len(a)) if len(a) * len(b) <= 81 else ()):
             for q in range(len(b)):
                 ax.text(q, p, f"{rs[key][p, q]:.1e}", ha="center", va="center", fontsize=5.5, color="w")
         ia, ib = int(np.argmin(np.abs(np.log(a / 0.01)))), int(np.argmin(np.abs(np.log(b / 0.01))))
