@@ -2,14 +2,22 @@
 
 import numpy as np
 import pytest
+from scipy.integrate import trapezoid
 
 from planeray.kernels import dipole_line_kernel, dipole_total_reflectance
-from planeray.mc import fresnel_unpolarized, mc_line_profile, sample_hg_cos
+from planeray.mc import fresnel_unpolarized, hg_phase, mc_line_profile, sample_hg_cos
+
+# van de Hulst, Multiple Light Scattering (1980), Vol. 2, Table 35 (also MCML's
+# validation case, Wang et al. 1995): slab of optical depth 2, albedo 0.9,
+# HG g = 0.75, index matched, normal incidence.  Rd diffuse reflectance, Tt total
+# transmittance (unscattered exp(-2) included), R(mu = 1) the reflection function
+# along the normal: radiance L = R(1) / pi per unit incident irradiance.
+VDH35 = dict(Rd=0.09739, Tt=0.66096, R_mu1=0.06180)
 
 
 def test_energy_conservation_finite_slab_with_fresnel():
     p = mc_line_profile(1.0, 0.1, 0.5, n=1.3, thickness=2.0, n_photons=20_000, seed=3)
-    total = p.total_reflectance + p.specular_reflectance + p.transmittance + p.absorbed
+    total = p.total_reflectance + p.specular_reflectance + p.transmittance + p.absorbed + p.truncated
     assert abs(total - 1.0) < 1e-9
     assert p.transmittance > 0 and p.total_reflectance > 0 and p.absorbed > 0
     assert p.values.sum() <= p.total_reflectance + 1e-12
@@ -101,3 +109,83 @@ def test_rejects_bad_parameters():
         mc_line_profile(1.0, 0.1, 1.0, n_photons=10)
     with pytest.raises(ValueError):
         mc_line_profile(1.0, 0.1, 0.0, n_photons=10, offsets_rows=[0.5, 1.5])
+
+
+def _vdh_slab(n, n_photons, seed, offsets=np.arange(-150, 151)):
+    # tau = 2 with sigma_t = 10 / mm -> d = 0.2 mm; bins of 0.02 mm over +-3 mm hold all
+    # of the (albedo 0.9, thin) profile.
+    return mc_line_profile(9.0, 1.0, 0.75, n=n, thickness=0.2, n_photons=n_photons,
+                           offsets_rows=offsets, mm_per_row=0.02, seed=seed)
+
+
+def test_published_slab_van_de_hulst_table35():
+    p = _vdh_slab(1.0, 1_000_000, seed=2)
+    assert abs(p.total_reflectance - VDH35["Rd"]) < 4 * p.total_reflectance_stderr + 2e-4
+    assert abs(p.transmittance - VDH35["Tt"]) < 4 * p.transmittance_stderr + 2e-4
+    # The normal-view radiance integrated over the line-source profile is the
+    # radiance under uniform unit irradiance: R(1) / pi.
+    dx = p.mm_per_row
+    L = p.radiance.sum() * dx
+    L_err = np.sqrt((p.radiance_stderr ** 2).sum()) * dx  # bins independent across batches: conservative
+    assert abs(L - VDH35["R_mu1"] / np.pi) < 4 * L_err + 1e-4
+    assert p.truncated == 0.0 and abs(p.energy_balance - 1.0) < 1e-9
+
+
+def test_mismatched_slab_against_adding_doubling():
+    iad = pytest.importorskip("iadpython")
+    for n in (1.4, 1.33):
+        ref_R, ref_T, _, _ = iad.Sample(a=0.9, b=2.0, g=0.75, d=1.0, n=n, n_above=1.0,
+                                        n_below=1.0, quad_pts=16).rt()
+        p = _vdh_slab(n, 500_000, seed=4, offsets=np.arange(-2, 3))
+        # Prahl's UR1 counts the specular reflection at entry, UT1 the unscattered light.
+        R = p.total_reflectance + p.specular_reflectance
+        assert abs(R - ref_R) < 4 * p.total_reflectance_stderr + 3e-4, (n, R, ref_R)
+        assert abs(p.transmittance - ref_T) < 4 * p.transmittance_stderr + 3e-4, (n, p.transmittance, ref_T)
+
+
+def test_radiance_single_scattering_closed_form():
+    # Low albedo, index matched, semi-infinite, lit strip = one bin: the light
+    # scattered once straight back up is L1 = sigma_s p(-1) E / (2 sigma_t), E = 1 / w,
+    # only above the strip; higher orders are O(albedo^2).
+    sigma_s, sigma_a, w = 0.01, 0.99, 0.5
+    for g in (0.0, 0.6, -0.6):
+        p = mc_line_profile(sigma_s, sigma_a, g, n_photons=200_000, offsets_rows=np.arange(-3, 4),
+                            mm_per_row=w, source_width_mm=w, seed=1)
+        L1 = sigma_s * hg_phase(-1.0, g) / (2.0 * 1.0 * w)
+        a = sigma_s
+        assert abs(p.radiance[3] - L1) < 4 * p.radiance_stderr[3] + 3 * a * L1, (g, p.radiance[3], L1)
+        assert np.all(p.radiance[[0, 1, 5, 6]] < 3 * a * L1)
+
+
+def test_hg_phase_normalized_and_sampled():
+    mu = np.linspace(-1, 1, 200_001)
+    for g in (0.0, 0.5, 0.9, -0.7):
+        p = hg_phase(mu, g)
+        assert 2 * np.pi * trapezoid(p, mu) == pytest.approx(1.0, rel=1e-4)
+        assert 2 * np.pi * trapezoid(p * mu, mu) == pytest.approx(g, abs=1e-4)
+
+
+def test_same_bytes_whatever_the_thread_count():
+    numba = pytest.importorskip("numba")
+    kw = dict(sigma_s=1.0, sigma_a=0.05, g=0.9, n=1.3, n_photons=20_000, seed=11)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        a = mc_line_profile(**kw)
+        numba.set_num_threads(before)
+        b = mc_line_profile(**kw)
+    finally:
+        numba.set_num_threads(before)
+    assert a.values.tobytes() == b.values.tobytes()
+    assert a.radiance.tobytes() == b.radiance.tobytes()
+
+
+def test_non_absorbing_medium_finishes_and_reports_truncation():
+    off = np.arange(-30, 31)
+    p = mc_line_profile(1.0, 0.0, 0.9, n_photons=5_000, offsets_rows=off, seed=0)
+    assert p.absorbed == pytest.approx(0.0, abs=0.02)  # only roulette's zero-mean net weight
+    assert 0.0 < p.truncated < 0.15
+    assert abs(p.energy_balance - 1.0) < 1e-9
+    # A larger cutoff truncates less (~ 1 / cutoff for a random walk).
+    q = mc_line_profile(1.0, 0.0, 0.9, n_photons=5_000, offsets_rows=off, seed=0, cutoff_mm=4 * p.params["cutoff_mm"])
+    assert q.truncated < 0.5 * p.truncated

@@ -1,6 +1,7 @@
-"""Monte Carlo photon transport in homogeneous slabs (vectorized MCML-style engine).
+"""Monte Carlo photon transport in homogeneous slabs (compiled MCML-style engine).
 
-See :mod:`planeray.mc.engine`.
+See :mod:`planeray.mc.engine`; :mod:`planeray.mc.mitsuba_ref` renders the same
+profile with Mitsuba 3 as an independent check (optional extra ``mitsuba``).
 """
 
 from planeray.mc.engine import (
@@ -8,7 +9,9 @@ from planeray.mc.engine import (
     ROULETTE_THRESHOLD,
     MCProfile,
     cache_dir,
+    default_cutoff_mm,
     fresnel_unpolarized,
+    hg_phase,
     mc_line_profile,
     sample_hg_cos,
 )
@@ -16,8 +19,10 @@ from planeray.mc.engine import (
 __all__ = [
     "MCProfile",
     "mc_line_profile",
+    "default_cutoff_mm",
     "fresnel_unpolarized",
     "sample_hg_cos",
+    "hg_phase",
     "cache_dir",
     "ROULETTE_THRESHOLD",
     "ROULETTE_CHANCE",

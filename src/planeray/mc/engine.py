@@ -1,40 +1,59 @@
-"""Vectorized Monte Carlo photon transport in a homogeneous slab.
+"""Monte Carlo photon transport in a homogeneous slab, compiled with Numba.
 
-All photons of a run are advanced together in NumPy arrays (the *MCML* scheme of
-Wang, Jacques & Zheng [1]_ with weights, implicit capture and Russian roulette,
-vectorized over photons instead of looping over them).  The medium has
-absorption ``sigma_a`` and scattering ``sigma_s`` coefficients (mm^-1), a
-Henyey-Greenstein phase function with anisotropy ``g``, a relative refractive
-index ``n`` against the outside (same on both faces) and a thickness (``inf`` =
-semi-infinite).  Light enters at normal incidence at the origin; the exit
-points of reflected light are binned by their ``x`` coordinate only, which is
-the profile of a *line* source along ``y`` (integrating the point-source
-profile along the line) -- the binned form of :func:`planeray.kernels.dipole_line_kernel`
+Photon packets are traced one by one inside a Numba kernel (the *MCML* scheme of
+Wang, Jacques & Zheng [1]_: weights, implicit capture, Russian roulette), in 32
+fixed batches run in parallel; each batch owns a xoshiro256+ stream seeded from
+``numpy.random.SeedSequence(seed).spawn(32)``, so a result depends only on the
+seed, never on the number of threads.  The medium has absorption ``sigma_a`` and
+scattering ``sigma_s`` coefficients (mm^-1), a Henyey-Greenstein phase function
+with anisotropy ``g``, a relative refractive index ``n`` against the outside
+(same on both faces) and a thickness (``inf`` = semi-infinite).  Light enters
+collimated at normal incidence, spread uniformly over ``|x| <= w / 2``
+(``w = source_width_mm``; 0 is an ideal line) and infinitely long along ``y``:
+binning exit points by ``x`` only integrates the point-source response along
+the line -- the binned form of :func:`planeray.kernels.dipole_line_kernel`
 (Jensen et al. [3]_), used by Kubo et al. (TVCG 2019, Sec. 5.2) with a
 Henyey-Greenstein medium.
 
-Scheme, per iteration over the photons still alive:
+Scheme, per photon:
 
 * free path ``s = -ln(xi) / sigma_t``;
-* a photon whose step would cross ``z = 0`` (top) or ``z = d`` (bottom) is
-  moved to the face; the unpolarized Fresnel fraction ``R(theta_i)`` of its
-  weight is internally reflected (``R = 1`` beyond the critical angle) and the
-  rest escapes -- tallied as diffuse reflectance at its exit ``x`` (top) or as
-  transmittance (bottom).  This is MCML's *partial reflection* option; the
-  photon continues with a fresh free path (exact, the exponential being
-  memoryless);
-* otherwise it interacts: ``(1 - albedo) w`` is deposited as absorbed, ``w``
-  is multiplied by the albedo (implicit capture) and the direction is resampled
-  from the Henyey-Greenstein phase function (Prahl [2]_) and rotated into the
-  photon's frame;
-* Russian roulette below ``w < ROULETTE_THRESHOLD``: survive with probability
-  ``1 / ROULETTE_CHANCE`` at weight ``ROULETTE_CHANCE * w``.  The net weight
-  created or destroyed by roulette (zero in expectation) is booked under
-  ``absorbed``, so ``diffuse + specular + transmitted + absorbed == 1`` holds to
-  round-off for every run.
+* a step that would cross ``z = 0`` (top) or ``z = d`` (bottom) stops on the
+  face; the unpolarized Fresnel fraction ``R(theta_i)`` of the weight is
+  internally reflected (``R = 1`` beyond the critical angle) and the rest
+  escapes -- tallied as diffuse reflectance at its exit ``x`` (top) or as
+  transmittance (bottom).  The photon continues with a fresh free path (exact:
+  the exponential is memoryless);
+* otherwise it interacts: the *radiance estimator* books the light this
+  collision sends straight up (below), ``(1 - albedo) w`` is absorbed, ``w`` is
+  multiplied by the albedo and a new direction is drawn from the HG phase
+  function (Prahl [2]_);
+* Russian roulette below ``w < ROULETTE_THRESHOLD`` (survive with probability
+  ``1 / ROULETTE_CHANCE`` at ``ROULETTE_CHANCE * w``); the net weight it creates
+  or destroys (zero mean) is booked under ``absorbed``;
+* a photon farther than ``cutoff_mm`` from the line (``|x|`` or depth ``z``) is
+  stopped and its weight booked as ``truncated``.  A non-absorbing half-space
+  reflects everything eventually, but its photons make unbounded random walks
+  (the 1-D return time has infinite mean); the cutoff bounds the run and its
+  cost is measured, not hidden: ``truncated`` is reported and, by default, the
+  cutoff sits far outside the binned window (see :func:`default_cutoff_mm`).
 
-At entry the specular fraction ``((n - 1) / (n + 1))^2`` is reflected and counted
-as ``specular_reflectance``; the remainder enters with weight ``1 - R_sp``.
+So ``diffuse + specular + transmitted + absorbed + truncated == 1`` to round-off.
+
+Two profiles are tallied:
+
+``values``
+    power *exiting* the top face per bin (all directions): the exitance a
+    camera with a Lambertian-like view of the surface would integrate;
+``radiance``
+    radiance leaving along the outward normal, averaged over the bin -- what an
+    orthographic camera looking straight down measures.  It is a collision
+    (next-event) estimator: a collision at depth ``z`` with weight ``w`` adds
+    ``w a p_HG(-u_z) exp(-sigma_t z) (1 - R(0)) / n^2`` at its ``x``, ``a`` the
+    albedo, ``R(0)`` the normal Fresnel reflectance and ``1/n^2`` the radiance
+    change across the face; divided by the bin width it is in mm^-1 sr^-1 per
+    unit line power.  It is the quantity Mitsuba renders (see
+    :mod:`planeray.mc.mitsuba_ref`).
 
 References
 ----------
@@ -45,24 +64,29 @@ References
    of light propagation in tissue", SPIE Institute Series IS 5, 102-111, 1989.
 .. [3] H. W. Jensen, S. R. Marschner, M. Levoy, P. Hanrahan, "A practical model
    for subsurface light transport", SIGGRAPH 2001.
+.. [4] D. Blackman, S. Vigna, "Scrambled linear pseudorandom number
+   generators", ACM TOMS 47(4), 2021 (xoshiro256+).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 
 __all__ = [
     "MCProfile",
     "mc_line_profile",
+    "default_cutoff_mm",
     "fresnel_unpolarized",
     "sample_hg_cos",
+    "hg_phase",
     "cache_dir",
     "ROULETTE_THRESHOLD",
     "ROULETTE_CHANCE",
@@ -70,14 +94,13 @@ __all__ = [
 
 ROULETTE_THRESHOLD = 1e-4
 ROULETTE_CHANCE = 10.0
-_ENGINE_VERSION = 1
+_ENGINE_VERSION = 2
 _N_BATCHES = 32
-_N_CHUNKS = 4
 
 
 @dataclass(frozen=True)
 class MCProfile:
-    """Result of :func:`mc_line_profile`. All quantities are fractions of the incident power.
+    """Result of :func:`mc_line_profile`. Power quantities are fractions of the incident power.
 
     Attributes
     ----------
@@ -90,6 +113,11 @@ class MCProfile:
         profile); sums to ``total_reflectance`` when the bins cover the profile.
     stderr : ndarray of float64
         Standard error of ``values`` from the spread of 32 independent photon batches.
+    radiance : ndarray of float64
+        Radiance leaving the top face along the outward normal, averaged over
+        each bin, per unit incident line power (mm^-1 sr^-1).
+    radiance_stderr : ndarray of float64
+        Its batch standard error.
     total_reflectance : float
         Diffuse reflectance (all exit positions, binned or not; excludes specular).
     total_reflectance_stderr : float
@@ -97,11 +125,18 @@ class MCProfile:
     specular_reflectance : float
         Fresnel reflection at entry, ``((n - 1) / (n + 1))^2``.
     transmittance : float
-        Power leaving through the bottom face (0 for a semi-infinite medium).
+        Power leaving through the bottom face (0 for a semi-infinite medium),
+        unscattered light included.
+    transmittance_stderr : float
+        Its batch standard error.
     absorbed : float
         Absorbed power (including the zero-mean net weight of Russian roulette).
+    truncated : float
+        Power of photons stopped beyond ``cutoff_mm`` (see the module docstring).
     n_photons : int
         Number of photon packets traced.
+    n_interactions : int
+        Number of collisions traced (a measure of the run's cost).
     params : dict
         The parameters of the run.
     """
@@ -110,29 +145,92 @@ class MCProfile:
     mm_per_row: float
     values: np.ndarray
     stderr: np.ndarray
+    radiance: np.ndarray
+    radiance_stderr: np.ndarray
     total_reflectance: float
     total_reflectance_stderr: float
     specular_reflectance: float
     transmittance: float
+    transmittance_stderr: float
     absorbed: float
+    truncated: float
     n_photons: int
+    n_interactions: int = 0
     params: dict = field(default_factory=dict)
 
     @property
     def energy_balance(self) -> float:
-        """``diffuse + specular + transmitted + absorbed`` (1 up to round-off)."""
+        """``diffuse + specular + transmitted + absorbed + truncated`` (1 up to round-off)."""
         return (self.total_reflectance + self.specular_reflectance
-                + self.transmittance + self.absorbed)
+                + self.transmittance + self.absorbed + self.truncated)
+
+
+# ---------------------------------------------------------------- scalar physics (compiled)
+@numba.njit(cache=True, inline="always")
+def _fresnel(cos_i, n):
+    """Unpolarized Fresnel reflectance from inside (index ``n``) to outside (index 1)."""
+    if n == 1.0:
+        return 0.0
+    cos_i = min(max(cos_i, 0.0), 1.0)
+    sin_t2 = n * n * (1.0 - cos_i * cos_i)
+    if sin_t2 >= 1.0:
+        return 1.0
+    cos_t = math.sqrt(1.0 - sin_t2)
+    rs = (n * cos_i - cos_t) / (n * cos_i + cos_t)
+    rp = (cos_i - n * cos_t) / (cos_i + n * cos_t)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+@numba.njit(cache=True, inline="always")
+def _hg_cos(xi, g):
+    """Inverse-CDF sample of the HG scattering cosine (Prahl 1989 [2]_)."""
+    if abs(g) < 1e-6:
+        return 2.0 * xi - 1.0
+    t = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
+    return min(max((1.0 + g * g - t * t) / (2.0 * g), -1.0), 1.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _hg_pdf(mu, g):
+    """HG phase function per steradian, ``(1 - g^2) / (4 pi (1 + g^2 - 2 g mu)^1.5)``."""
+    q = 1.0 + g * g - 2.0 * g * mu
+    return (1.0 - g * g) / (4.0 * math.pi * q * math.sqrt(q))
+
+
+@numba.njit(cache=True)
+def _fresnel_array(cos_i, n, out):
+    for i in range(cos_i.size):
+        out[i] = _fresnel(cos_i[i], n)
+
+
+@numba.njit(cache=True)
+def _hg_cos_array(xi, g, out):
+    for i in range(xi.size):
+        out[i] = _hg_cos(xi[i], g)
+
+
+@numba.njit(cache=True)
+def _hg_pdf_array(mu, g, out):
+    for i in range(mu.size):
+        out[i] = _hg_pdf(mu[i], g)
+
+
+def _apply(kernel, x, *args):
+    x = np.asarray(x, dtype=np.float64)
+    flat = np.ascontiguousarray(x).ravel()
+    out = np.empty_like(flat)
+    kernel(flat, *[float(a) for a in args], out)
+    return out.reshape(x.shape)
 
 
 def fresnel_unpolarized(cos_i, n):
-    """Unpolarized Fresnel reflectance for light inside a medium of index ``n`` hitting
-    a face to index 1 at incidence cosine ``cos_i``; 1 beyond the critical angle.
+    """Unpolarized Fresnel reflectance for light inside a medium of index ``n``
+    hitting a face to index 1 at incidence cosine ``cos_i``; 1 beyond the critical angle.
 
     Parameters
     ----------
     cos_i : array_like
-        Cosine of the incidence angle, in ``[0, 1]``.
+        Cosine of the incidence angle, clipped to ``[0, 1]``.
     n : float
         Relative refractive index (inside / outside).
 
@@ -141,16 +239,7 @@ def fresnel_unpolarized(cos_i, n):
     ndarray of float64
         Reflectance ``(r_s^2 + r_p^2) / 2``.
     """
-    cos_i = np.clip(np.asarray(cos_i, dtype=np.float64), 0.0, 1.0)
-    if n == 1.0:
-        return np.zeros_like(cos_i)
-    sin_t2 = n * n * (1.0 - cos_i * cos_i)
-    tir = sin_t2 >= 1.0
-    cos_t = np.sqrt(np.maximum(1.0 - sin_t2, 0.0))
-    rs = (n * cos_i - cos_t) / (n * cos_i + cos_t)
-    rp = (cos_i - n * cos_t) / (cos_i + n * cos_t)
-    R = 0.5 * (rs * rs + rp * rp)
-    return np.where(tir, 1.0, R)
+    return _apply(_fresnel_array, cos_i, n)
 
 
 def sample_hg_cos(xi, g):
@@ -161,39 +250,157 @@ def sample_hg_cos(xi, g):
 
     Parameters
     ----------
-    xi : ndarray
+    xi : array_like
         Uniform variates in ``[0, 1)``.
     g : float
         Anisotropy, ``-1 < g < 1``.
     """
-    if abs(g) < 1e-6:
-        return 2.0 * xi - 1.0
-    t = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
-    return np.clip((1.0 + g * g - t * t) / (2.0 * g), -1.0, 1.0)
+    return _apply(_hg_cos_array, xi, g)
 
 
-def _scatter(ux, uy, uz, cos_t, phi):
-    """Rotate directions by polar ``cos_t`` and azimuth ``phi`` about themselves (MCML [1]_)."""
-    sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
-    cp = np.cos(phi)
-    sp = np.sin(phi)
-    den2 = 1.0 - uz * uz
-    near_pole = den2 < 1e-10
-    den = np.sqrt(np.where(near_pole, 1.0, den2))
-    a = sin_t / den
-    nux = a * (ux * uz * cp - uy * sp) + ux * cos_t
-    nuy = a * (uy * uz * cp + ux * sp) + uy * cos_t
-    nuz = -sin_t * cp * den + uz * cos_t
-    if near_pole.any():
-        sgn = np.where(uz >= 0.0, 1.0, -1.0)
-        nux = np.where(near_pole, sin_t * cp, nux)
-        nuy = np.where(near_pole, sin_t * sp, nuy)
-        nuz = np.where(near_pole, sgn * cos_t, nuz)
-    # Renormalize against drift over thousands of rotations.
-    norm = 1.0 / np.sqrt(nux * nux + nuy * nuy + nuz * nuz)
-    return nux * norm, nuy * norm, nuz * norm
+def hg_phase(mu, g):
+    """Henyey-Greenstein phase function ``p(mu)`` per steradian (integrates to 1 over the sphere)."""
+    return _apply(_hg_pdf_array, mu, g)
 
 
+# ---------------------------------------------------------------- random numbers
+@numba.njit(cache=True, inline="always")
+def _rotl(x, k):
+    return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
+
+
+@numba.njit(cache=True, inline="always")
+def _uniform(s):
+    """Next double in ``[0, 1)`` from xoshiro256+ state ``s`` (4 uint64, updated in place) [4]_."""
+    s0 = s[0]
+    s1 = s[1]
+    s2 = s[2]
+    s3 = s[3]
+    result = s0 + s3
+    t = s1 << np.uint64(17)
+    s2 ^= s0
+    s3 ^= s1
+    s1 ^= s2
+    s0 ^= s3
+    s2 ^= t
+    s3 = _rotl(s3, 45)
+    s[0] = s0
+    s[1] = s1
+    s[2] = s2
+    s[3] = s3
+    return float(result >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+# ---------------------------------------------------------------- the kernel
+@numba.njit(cache=True, parallel=True, error_model="numpy")
+def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
+           source_width_mm, cutoff_mm):
+    """Trace ``counts[b]`` photons for each batch ``b``; per-batch tallies."""
+    B = counts.size
+    refl_bins = np.zeros((B, nk))
+    rad_bins = np.zeros((B, nk))
+    refl = np.zeros(B)
+    trans = np.zeros(B)
+    absorbed = np.zeros(B)
+    truncated = np.zeros(B)
+    events = np.zeros(B, dtype=np.int64)
+    sigma_t = sigma_s + sigma_a
+    albedo = sigma_s / sigma_t
+    finite = d < np.inf
+    # Straight-up radiance: normal transmission and the n^2 radiance law at the face.
+    up_gain = (1.0 - _fresnel(1.0, n)) / (n * n) / mm_per_row
+    inv_bin = 1.0 / mm_per_row
+    for b in numba.prange(B):
+        s = states[b].copy()
+        # Scalar accumulators per batch: writing neighbouring array slots from
+        # several threads on every collision would thrash a shared cache line.
+        refl_b = 0.0
+        trans_b = 0.0
+        abs_b = 0.0
+        trunc_b = 0.0
+        events_b = 0
+        for _ in range(counts[b]):
+            x = (_uniform(s) - 0.5) * source_width_mm
+            z = 0.0
+            ux = 0.0
+            uy = 0.0
+            uz = 1.0
+            w = w0
+            while True:
+                step = -math.log(1.0 - _uniform(s)) / sigma_t
+                zn = z + step * uz
+                if zn < 0.0 or (finite and zn > d):
+                    top = zn < 0.0
+                    zf = 0.0 if top else d
+                    x += (zf - z) / uz * ux
+                    z = zf
+                    R = _fresnel(abs(uz), n)
+                    esc = w * (1.0 - R)
+                    if top:
+                        refl_b += esc
+                        k = math.floor(x * inv_bin + 0.5) - kmin
+                        if 0 <= k < nk:
+                            refl_bins[b, int(k)] += esc
+                    else:
+                        trans_b += esc
+                    w *= R
+                    uz = -uz
+                    if w <= 0.0:
+                        break
+                else:
+                    x += step * ux
+                    z = zn
+                    events_b += 1
+                    # Collision estimator of the radiance leaving straight up (-z inside).
+                    tau = sigma_t * z
+                    if tau < 40.0:
+                        k = math.floor(x * inv_bin + 0.5) - kmin
+                        if 0 <= k < nk:
+                            rad_bins[b, int(k)] += (w * albedo * _hg_pdf(-uz, g)
+                                                    * math.exp(-tau) * up_gain)
+                    abs_b += w * (1.0 - albedo)
+                    w *= albedo
+                    # New direction: HG polar angle, uniform azimuth, rotated into the frame.
+                    ct = _hg_cos(_uniform(s), g)
+                    st = math.sqrt(max(1.0 - ct * ct, 0.0))
+                    phi = 2.0 * math.pi * _uniform(s)
+                    cp = math.cos(phi)
+                    sp = math.sin(phi)
+                    den2 = 1.0 - uz * uz
+                    if den2 < 1e-10:
+                        sgn = 1.0 if uz >= 0.0 else -1.0
+                        nux = st * cp
+                        nuy = st * sp
+                        nuz = sgn * ct
+                    else:
+                        den = math.sqrt(den2)
+                        a = st / den
+                        nux = a * (ux * uz * cp - uy * sp) + ux * ct
+                        nuy = a * (uy * uz * cp + ux * sp) + uy * ct
+                        nuz = -st * cp * den + uz * ct
+                    norm = 1.0 / math.sqrt(nux * nux + nuy * nuy + nuz * nuz)
+                    ux = nux * norm
+                    uy = nuy * norm
+                    uz = nuz * norm
+                if w < ROULETTE_THRESHOLD:
+                    if _uniform(s) < 1.0 / ROULETTE_CHANCE:
+                        abs_b -= w * (ROULETTE_CHANCE - 1.0)
+                        w *= ROULETTE_CHANCE
+                    else:
+                        abs_b += w
+                        break
+                if z > cutoff_mm or abs(x) > cutoff_mm:
+                    trunc_b += w
+                    break
+        refl[b] = refl_b
+        trans[b] = trans_b
+        absorbed[b] = abs_b
+        truncated[b] = trunc_b
+        events[b] = events_b
+    return refl_bins, rad_bins, refl, trans, absorbed, truncated, events
+
+
+# ---------------------------------------------------------------- cache
 def cache_dir() -> Path:
     """Cache folder: ``$PLANERAY_CACHE/mc`` if set, else ``~/.cache/planeray/mc``."""
     root = os.environ.get("PLANERAY_CACHE")
@@ -208,15 +415,16 @@ def _cache_key(params: dict, offsets: np.ndarray) -> str:
     return h.hexdigest()[:32]
 
 
+_ARRAYS = ("offsets_rows", "values", "stderr", "radiance", "radiance_stderr")
 _SCALARS = ("mm_per_row", "total_reflectance", "total_reflectance_stderr",
-            "specular_reflectance", "transmittance", "absorbed")
+            "specular_reflectance", "transmittance", "transmittance_stderr", "absorbed", "truncated")
 
 
 def _save(path: Path, prof: MCProfile) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + f".{os.getpid()}.tmp.npz")
-    np.savez(tmp, offsets_rows=prof.offsets_rows, values=prof.values, stderr=prof.stderr,
-             n_photons=np.int64(prof.n_photons),
+    np.savez(tmp, **{k: getattr(prof, k) for k in _ARRAYS},
+             n_photons=np.int64(prof.n_photons), n_interactions=np.int64(prof.n_interactions),
              params=np.array(json.dumps(prof.params, sort_keys=True)),
              **{k: np.float64(getattr(prof, k)) for k in _SCALARS})
     os.replace(tmp, path)
@@ -225,13 +433,35 @@ def _save(path: Path, prof: MCProfile) -> None:
 def _load(path: Path) -> MCProfile:
     with np.load(path, allow_pickle=False) as z:
         return MCProfile(
-            offsets_rows=z["offsets_rows"], values=z["values"], stderr=z["stderr"],
-            n_photons=int(z["n_photons"]), params=json.loads(str(z["params"])),
+            **{k: z[k] for k in _ARRAYS},
+            n_photons=int(z["n_photons"]), n_interactions=int(z["n_interactions"]),
+            params=json.loads(str(z["params"])),
             **{k: float(z[k]) for k in _SCALARS})
 
 
+# ---------------------------------------------------------------- public entry point
+def default_cutoff_mm(offsets_rows, mm_per_row, sigma_s, sigma_a, g):
+    """Default photon cutoff: far outside both the binned window and the medium's scales.
+
+    ``max(4 * window half-width, 20 / sigma_tr, 20 / sigma_t')`` with the
+    transport coefficient ``sigma_t' = sigma_a + sigma_s (1 - g)`` and the
+    effective attenuation ``sigma_tr = sqrt(3 sigma_a sigma_t')``.  A photon
+    that far away re-emerges spread over a width of the order of its distance,
+    so it adds at most ~1/4 of its weight (a non-absorbing medium) to the
+    window and much less with absorption -- and :attr:`MCProfile.truncated`
+    says how much weight that was.
+    """
+    half = (np.max(np.abs(np.asarray(offsets_rows))) + 0.5) * float(mm_per_row)
+    sigma_tp = float(sigma_a) + float(sigma_s) * (1.0 - float(g))
+    scales = [4.0 * half, 20.0 / sigma_tp]
+    if sigma_a > 0:
+        scales.append(20.0 / math.sqrt(3.0 * sigma_a * sigma_tp))
+    return float(min(max(scales), 1e6))
+
+
 def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**6,
-                    offsets_rows=None, mm_per_row=1.0, seed=0, cache=False):
+                    offsets_rows=None, mm_per_row=1.0, seed=0, cache=False,
+                    source_width_mm=0.0, cutoff_mm=None):
     """Monte Carlo line-source reflectance profile of a homogeneous slab.
 
     Parameters
@@ -251,22 +481,34 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     mm_per_row : float
         Bin width in mm.
     seed : int
-        Seed of the ``numpy.random.Generator`` (PCG64); same seed, same bytes.
+        Seed; same seed, same bytes, whatever the number of threads.
     cache : bool
         Read/write an ``.npz`` result keyed by all parameters under :func:`cache_dir`.
+    source_width_mm : float
+        Width of the lit strip (uniform over ``|x| <= w/2``); 0 = ideal line.
+    cutoff_mm : float, optional
+        Stop photons farther than this from the line (``|x|``) or deeper (``z``);
+        default :func:`default_cutoff_mm`.  Their weight is reported as ``truncated``.
 
     Returns
     -------
     MCProfile
-        Binned diffuse reflectance of a line source along ``y`` lit at ``x = 0``
-        (fractions of incident power per bin), with batch standard errors and the
-        energy balance.
+        Binned exiting power (``values``) and normal-view radiance (``radiance``)
+        of a line source along ``y`` lit at ``x = 0``, with batch standard errors
+        and the energy balance.
 
     Notes
     -----
-    See the module docstring for the transport scheme (MCML [1]_, HG sampling [2]_).
-    Compare with :func:`planeray.kernels.dipole_line_kernel` using
+    See the module docstring for the transport scheme (MCML [1]_, HG sampling
+    [2]_) and the radiance estimator.  Compare with
+    :func:`planeray.kernels.dipole_line_kernel` using
     ``sigma_s_prime = sigma_s * (1 - g)`` and ``eta = n`` [3]_.
+
+    Examples
+    --------
+    >>> p = mc_line_profile(1.0, 0.1, 0.9, n_photons=20_000)
+    >>> abs(p.energy_balance - 1.0) < 1e-9
+    True
     """
     sigma_s = float(sigma_s)
     sigma_a = float(sigma_a)
@@ -275,28 +517,37 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     thickness = float(thickness)
     n_photons = int(n_photons)
     mm_per_row = float(mm_per_row)
-    if sigma_s < 0 or sigma_a < 0 or sigma_s + sigma_a <= 0:
-        raise ValueError("need sigma_s, sigma_a >= 0 and sigma_s + sigma_a > 0")
+    source_width_mm = float(source_width_mm)
+    if not (np.isfinite(sigma_s) and np.isfinite(sigma_a)) or sigma_s < 0 or sigma_a < 0 or sigma_s + sigma_a <= 0:
+        raise ValueError(f"need finite sigma_s, sigma_a >= 0 with sigma_s + sigma_a > 0, got {sigma_s}, {sigma_a}")
     if not -1.0 < g < 1.0:
-        raise ValueError("g must lie in (-1, 1)")
+        raise ValueError(f"g must lie in (-1, 1), got {g}")
     if not n > 0:
-        raise ValueError("n must be positive")
+        raise ValueError(f"n must be positive, got {n}")
     if not thickness > 0:
-        raise ValueError("thickness must be positive")
+        raise ValueError(f"thickness must be positive, got {thickness}")
     if n_photons < 1:
-        raise ValueError("n_photons must be >= 1")
+        raise ValueError(f"n_photons must be >= 1, got {n_photons}")
     if not mm_per_row > 0:
-        raise ValueError("mm_per_row must be positive")
+        raise ValueError(f"mm_per_row must be positive, got {mm_per_row}")
+    if not source_width_mm >= 0:
+        raise ValueError(f"source_width_mm must be >= 0, got {source_width_mm}")
     if offsets_rows is None:
         offsets_rows = np.arange(-50, 51)
     offsets_f = np.asarray(offsets_rows)
     offsets = offsets_f.astype(np.int64).ravel()
     if offsets.size == 0 or np.any(offsets != offsets_f.ravel()) or np.unique(offsets).size != offsets.size:
         raise ValueError("offsets_rows must be distinct integers")
+    if cutoff_mm is None:
+        cutoff_mm = default_cutoff_mm(offsets, mm_per_row, sigma_s, sigma_a, g)
+    cutoff_mm = float(cutoff_mm)
+    if not cutoff_mm > 0:
+        raise ValueError(f"cutoff_mm must be positive, got {cutoff_mm}")
 
     params = dict(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n,
                   thickness=None if np.isinf(thickness) else thickness,
-                  n_photons=n_photons, mm_per_row=mm_per_row, seed=int(seed))
+                  n_photons=n_photons, mm_per_row=mm_per_row, seed=int(seed),
+                  source_width_mm=source_width_mm, cutoff_mm=cutoff_mm)
     path = None
     if cache:
         path = cache_dir() / f"{_cache_key(params, offsets)}.npz"
@@ -304,148 +555,47 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
             try:
                 return _load(path)
             except (OSError, ValueError, KeyError):
-                pass
+                pass  # unreadable cache entry: recompute and overwrite
 
-    prof = _run(sigma_s, sigma_a, g, n, thickness, n_photons, offsets, mm_per_row, int(seed))
-    prof = MCProfile(**{**prof.__dict__, "params": params})
+    prof = _run(sigma_s, sigma_a, g, n, thickness, n_photons, offsets, mm_per_row, int(seed),
+                source_width_mm, cutoff_mm, params)
     if path is not None:
         _save(path, prof)
     return prof
 
 
-def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed):
-    B = min(_N_BATCHES, n_photons)
-    kmin, kmax = int(offsets.min()), int(offsets.max())
-    lut = np.full(kmax - kmin + 1, -1, dtype=np.int64)
-    lut[offsets - kmin] = np.arange(offsets.size)
-    nb = offsets.size
+def _batch_stats(per_batch, counts):
+    """Mean per photon and its standard error from the spread of batch means."""
+    n_total = counts.sum()
+    mean = per_batch.sum(axis=0) / n_total
+    used = counts > 0
+    if used.sum() < 2:
+        return mean, np.full(np.shape(mean), np.nan)
+    means = per_batch[used] / counts[used].reshape((-1,) + (1,) * (per_batch.ndim - 1))
+    return mean, means.std(axis=0, ddof=1) / np.sqrt(used.sum())
+
+
+def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
+         source_width_mm, cutoff_mm, params):
+    B = _N_BATCHES
+    counts = np.full(B, n_photons // B, dtype=np.int64)
+    counts[: n_photons % B] += 1
+    states = np.stack([s.generate_state(4, np.uint64) for s in np.random.SeedSequence(seed).spawn(B)])
+    kmin = int(offsets.min())
+    nk = int(offsets.max()) - kmin + 1
     r_sp = ((n - 1.0) / (n + 1.0)) ** 2
-
-    # Fixed split into chunks, each with its own spawned stream: results do not
-    # depend on how many threads run them (summed in chunk order).
-    n_chunks = max(1, min(_N_CHUNKS, n_photons // 25000))
-    bounds = np.linspace(0, n_photons, n_chunks + 1).astype(np.int64)
-    seeds = np.random.SeedSequence(seed).spawn(n_chunks)
-    jobs = [(np.arange(bounds[i], bounds[i + 1]) % B, seeds[i]) for i in range(n_chunks)]
-
-    def work(job):
-        return _trace(job[0], np.random.Generator(np.random.PCG64(job[1])), sigma_s, sigma_a,
-                      g, n, d, B, nb, kmin, kmax, lut, mm_per_row, 1.0 - r_sp)
-
-    workers = min(n_chunks, os.cpu_count() or 1)
-    if workers > 1:
-        with ThreadPoolExecutor(max_workers=workers) as ex:
-            parts = list(ex.map(work, jobs))
-    else:
-        parts = [work(j) for j in jobs]
-    refl_bins = np.zeros(B * nb)
-    refl_batch = np.zeros(B)
-    trans_batch = np.zeros(B)
-    absorbed = 0.0
-    for rb, rt, tb, ab in parts:
-        refl_bins += rb
-        refl_batch += rt
-        trans_batch += tb
-        absorbed += ab
-
-    counts = np.bincount(np.arange(n_photons) % B, minlength=B).astype(np.float64)
-    bins_b = refl_bins.reshape(B, nb)
-    values = bins_b.sum(axis=0) / n_photons
-    R_tot = float(refl_batch.sum() / n_photons)
-    if B > 1:
-        per_b = bins_b / counts[:, None]
-        stderr = per_b.std(axis=0, ddof=1) / np.sqrt(B)
-        r_err = float((refl_batch / counts).std(ddof=1) / np.sqrt(B))
-    else:
-        stderr = np.full(nb, np.nan)
-        r_err = float("nan")
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events = _trace(
+        states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, 1.0 - r_sp,
+        source_width_mm, cutoff_mm)
+    cols = offsets - kmin
+    values, stderr = _batch_stats(refl_bins[:, cols], counts)
+    radiance, rad_err = _batch_stats(rad_bins[:, cols], counts)
+    R_tot, r_err = _batch_stats(refl, counts)
+    T_tot, t_err = _batch_stats(trans, counts)
     return MCProfile(
         offsets_rows=offsets.copy(), mm_per_row=mm_per_row, values=values, stderr=stderr,
-        total_reflectance=R_tot, total_reflectance_stderr=r_err,
-        specular_reflectance=float(r_sp), transmittance=float(trans_batch.sum() / n_photons),
-        absorbed=absorbed / n_photons, n_photons=n_photons)
-
-
-def _trace(batch, rng, sigma_s, sigma_a, g, n, d, B, nb, kmin, kmax, lut, mm_per_row, w0):
-    """Trace one chunk of photons to extinction; returns the tallies."""
-    sigma_t = sigma_s + sigma_a
-    albedo = sigma_s / sigma_t
-    finite = np.isfinite(d)
-    m0 = batch.size
-    refl_bins = np.zeros(B * nb)
-    refl_batch = np.zeros(B)
-    trans_batch = np.zeros(B)
-    absorbed = 0.0
-    x = np.zeros(m0)
-    y = np.zeros(m0)
-    z = np.zeros(m0)
-    ux = np.zeros(m0)
-    uy = np.zeros(m0)
-    uz = np.ones(m0)
-    w = np.full(m0, w0)
-    while x.size:
-        m = x.size
-        s = -np.log1p(-rng.random(m)) / sigma_t  # 1 - xi in (0, 1]
-        zn = z + s * uz
-        hit = zn < 0.0
-        if finite:
-            hit |= zn > d
-        hh = np.flatnonzero(hit)
-        # Boundary hits: position on the face, from the pre-step state.
-        if hh.size:
-            uzh = uz[hh]
-            zface = np.where(zn[hh] < 0.0, 0.0, d)
-            t = (zface - z[hh]) / uzh
-            xh = x[hh] + t * ux[hh]
-            yh = y[hh] + t * uy[hh]
-            uxh = ux[hh]
-            uyh = uy[hh]
-            wh = w[hh]
-        # Interactions, computed for everyone (cheaper than gathering), hits restored after.
-        x += s * ux
-        y += s * uy
-        z = zn
-        absorbed += float(np.sum(w)) * (1.0 - albedo)
-        w *= albedo
-        cos_t = sample_hg_cos(rng.random(m), g)
-        phi = (2.0 * np.pi) * rng.random(m)
-        ux, uy, uz = _scatter(ux, uy, uz, cos_t, phi)
-        if hh.size:
-            absorbed -= float(np.sum(wh)) * (1.0 - albedo)
-            R = fresnel_unpolarized(np.abs(uzh), n)
-            esc = wh * (1.0 - R)
-            x[hh] = xh
-            y[hh] = yh
-            z[hh] = zface
-            ux[hh] = uxh
-            uy[hh] = uyh
-            uz[hh] = -uzh
-            w[hh] = wh * R
-            bh = batch[hh]
-            th = zface == 0.0
-            if th.any():
-                et = esc[th]
-                bt = bh[th]
-                refl_batch += np.bincount(bt, weights=et, minlength=B)
-                k = np.floor(xh[th] / mm_per_row + 0.5)
-                inr = (k >= kmin) & (k <= kmax)
-                col = np.full(k.shape, -1, dtype=np.int64)
-                col[inr] = lut[k[inr].astype(np.int64) - kmin]
-                ok = col >= 0
-                if ok.any():
-                    refl_bins += np.bincount(bt[ok] * nb + col[ok], weights=et[ok],
-                                             minlength=B * nb)
-            if finite and not th.all():
-                trans_batch += np.bincount(bh[~th], weights=esc[~th], minlength=B)
-
-        # Russian roulette
-        li = np.flatnonzero(w < ROULETTE_THRESHOLD)
-        if li.size:
-            wl = w[li]
-            survive = rng.random(li.size) < 1.0 / ROULETTE_CHANCE
-            new = np.where(survive, wl * ROULETTE_CHANCE, 0.0)
-            absorbed += float(np.sum(wl) - np.sum(new))  # net roulette weight (zero mean)
-            w[li] = new
-            alive = w > 0.0
-            x, y, z, ux, uy, uz, w, batch = (a[alive] for a in (x, y, z, ux, uy, uz, w, batch))
-    return refl_bins, refl_batch, trans_batch, absorbed
+        radiance=radiance, radiance_stderr=rad_err,
+        total_reflectance=float(R_tot), total_reflectance_stderr=float(r_err),
+        specular_reflectance=float(r_sp), transmittance=float(T_tot), transmittance_stderr=float(t_err),
+        absorbed=float(absorbed.sum() / n_photons), truncated=float(truncated.sum() / n_photons),
+        n_photons=n_photons, n_interactions=int(events.sum()), params=params)
