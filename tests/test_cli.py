@@ -138,3 +138,23 @@ def test_profiles_from_transport_and_classification(tmp_path):
     assert "specular_interreflection" in res.output
     res = invoke("profiles", stack, "--classify", tmp_path / "l2.png", "--out", tmp_path / "p2.png")
     assert res.exit_code == 1 and "--transport" in res.output
+
+
+def test_mc_profile_writes_csv_json_and_png(tmp_path, monkeypatch):
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "p.csv"
+    r = invoke("mc", "profile", "--out", out, "--sigma-s", 1.0, "--sigma-a", 0.1, "--g", 0.5,
+               "--photons", 4000, "--rows", 10, "--plot", tmp_path / "p.png")
+    assert r.exit_code == 0, r.output
+    import csv
+    import json
+
+    rows = list(csv.DictReader(open(out)))
+    assert len(rows) == 21 and rows[10]["offset_rows"] == "0"
+    assert float(rows[10]["exitance"]) > float(rows[0]["exitance"]) > 0
+    summary = json.loads(out.with_suffix(".json").read_text())
+    assert abs(summary["energy_balance"] - 1.0) < 1e-9
+    assert summary["params"]["sigma_a"] == 0.1 and summary["n_photons"] == 4000
+    assert (tmp_path / "p.png").stat().st_size > 10_000
+    bad = invoke("mc", "profile", "--out", out, "--g", 1.5, "--photons", 10)
+    assert bad.exit_code != 0 and "g must lie in (-1, 1)" in bad.output

@@ -1,0 +1,52 @@
+"""A Monte Carlo line profile against the diffusion dipole (log scale, error bars)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels import dipole_line_kernel
+from ._common import plt, save_png
+
+__all__ = ["mc_profile_figure"]
+
+
+def mc_profile_figure(prof, path, compare_dipole: bool = True):
+    """Plot exitance per mm (and normal-view radiance) of ``prof`` vs distance from the line.
+
+    Parameters
+    ----------
+    prof : planeray.mc.MCProfile
+        The profile to plot.
+    path : str or os.PathLike
+        PNG to write.
+    compare_dipole : bool
+        Overlay :func:`planeray.kernels.dipole_line_kernel` with
+        ``sigma_s' = sigma_s (1 - g)`` and ``eta = n`` (Jensen et al. 2001), the
+        classical approximation the engine should approach far from the line.
+    """
+    p = prof.params
+    x = np.asarray(prof.offsets_rows, float) * prof.mm_per_row
+    dx = prof.mm_per_row
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    ok = prof.values > 0
+    ax.errorbar(x[ok], prof.values[ok] / dx, yerr=prof.stderr[ok] / dx, fmt=".", ms=3,
+                lw=0.8, label="Monte Carlo exitance")
+    if compare_dipole and p.get("thickness") is None:
+        k = dipole_line_kernel(prof.offsets_rows, dx, p["sigma_a"], p["sigma_s"] * (1 - p["g"]), eta=p["n"])
+        ax.plot(x, k / dx, "-", lw=1, label="diffusion dipole (Jensen 2001)")
+    ax.set_yscale("log")
+    ax.set_xlabel("distance from the lit line x (mm)")
+    ax.set_ylabel("exiting power per mm (per unit line power)")
+    ax.set_title(f"sigma_s={p['sigma_s']:g}, sigma_a={p['sigma_a']:g} /mm, g={p['g']:g}, n={p['n']:g}")
+    ax.legend(fontsize=8)
+    okr = prof.radiance > 0
+    ax2.errorbar(x[okr], prof.radiance[okr], yerr=prof.radiance_stderr[okr], fmt=".", ms=3, lw=0.8,
+                 color="C2", label="normal-view radiance")
+    ax2.set_yscale("log")
+    ax2.set_xlabel("x (mm)")
+    ax2.set_ylabel("radiance (mm^-1 sr^-1 per unit line power)")
+    ax2.set_title(f"{prof.n_photons:.0e} photons; R={prof.total_reflectance:.4f}, "
+                  f"truncated {prof.truncated:.3f}")
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    return save_png(fig, path)

@@ -1,0 +1,70 @@
+"""Plain-file output of a Monte Carlo profile: CSV of the bins, JSON of the scalars.
+
+The CSV has one row per offset bin with the columns ``offset_rows``, ``x_mm``
+(bin centre), ``exitance`` and ``exitance_stderr`` (power leaving the top face
+per bin, fraction of the incident line power), ``radiance`` and
+``radiance_stderr`` (normal-view radiance, mm^-1 sr^-1 per unit line power).
+The JSON sidecar (same name, ``.json``) holds the totals, the energy balance
+and every parameter of the run, so the file alone reproduces it.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_file
+from .engine import MCProfile
+
+__all__ = ["profile_columns", "write_profile", "profile_summary"]
+
+COLUMNS = ("offset_rows", "x_mm", "exitance", "exitance_stderr", "radiance", "radiance_stderr")
+
+
+def profile_columns(prof: MCProfile) -> dict:
+    """The CSV columns of ``prof`` as float64/int64 arrays keyed by :data:`COLUMNS`."""
+    return {
+        "offset_rows": np.asarray(prof.offsets_rows, np.int64),
+        "x_mm": np.asarray(prof.offsets_rows, np.float64) * prof.mm_per_row,
+        "exitance": np.asarray(prof.values, np.float64),
+        "exitance_stderr": np.asarray(prof.stderr, np.float64),
+        "radiance": np.asarray(prof.radiance, np.float64),
+        "radiance_stderr": np.asarray(prof.radiance_stderr, np.float64),
+    }
+
+
+def profile_summary(prof: MCProfile) -> dict:
+    """Scalars of a run (JSON-ready): totals with errors, energy balance, cost, parameters."""
+    return {
+        "total_reflectance": prof.total_reflectance,
+        "total_reflectance_stderr": prof.total_reflectance_stderr,
+        "specular_reflectance": prof.specular_reflectance,
+        "transmittance": prof.transmittance,
+        "transmittance_stderr": prof.transmittance_stderr,
+        "absorbed": prof.absorbed,
+        "truncated": prof.truncated,
+        "energy_balance": prof.energy_balance,
+        "binned_exitance": float(np.sum(prof.values)),
+        "n_photons": prof.n_photons,
+        "n_interactions": prof.n_interactions,
+        "params": prof.params,
+    }
+
+
+def write_profile(prof: MCProfile, path) -> tuple[Path, Path]:
+    """Write ``path`` (CSV, see the module docstring) and its ``.json`` sidecar atomically."""
+    path = Path(path)
+    cols = profile_columns(prof)
+    with atomic_file(path) as tmp:
+        with open(tmp, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(COLUMNS)
+            for i in range(cols["offset_rows"].size):
+                w.writerow([int(cols["offset_rows"][i])] + [repr(float(cols[c][i])) for c in COLUMNS[1:]])
+    side = path.with_suffix(".json")
+    with atomic_file(side) as tmp:
+        tmp.write_text(json.dumps(profile_summary(prof), indent=2, sort_keys=True))
+    return path, side
