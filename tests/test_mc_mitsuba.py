@@ -10,25 +10,28 @@ import pytest
 
 pytest.importorskip("mitsuba")
 
-from planeray.mc import mc_line_profile  # noqa: E402
-from planeray.mc.mitsuba_ref import (  # noqa: E402
+from planeray.mc import mc_line_profile
+from planeray.mc.mitsuba_ref import (
     _mitsuba,
     mitsuba_line_profile,
     single_scattering_radiance,
 )
 
 # Multiple-scattering comparison medium (mm^-1): albedo 0.95, moderately forward
-# scattering.  g = 0.9 works too but Mitsuba's estimate is then heavy-tailed (the HG
-# peak meets the delta light in next-event estimation) and needs ~10x the samples.
-MS = dict(sigma_s=1.0, sigma_a=0.05, g=0.5)
+# scattering.  At g = 0.9 Mitsuba's estimate is heavy-tailed (the HG peak is reached
+# only by next-event estimation towards the delta light): 10x the samples still give
+# per-bin z-scores up to 5, so that case is left to offline runs.
+MS = {"sigma_s": 1.0, "sigma_a": 0.05, "g": 0.5}
 MS_MM_PER_ROW = 1.0
 MS_OFFSETS = np.arange(-10, 11)
 
 
 @pytest.fixture(scope="module")
 def ms_profiles():
+    # ~1e6 camera paths (49k per bin; 1024 rows along the line keep the row-spread
+    # standard error honest for the skewed far bins) and 3e5 MC photons: ~10 s.
     mi = mitsuba_line_profile(**MS, offsets_rows=MS_OFFSETS, mm_per_row=MS_MM_PER_ROW,
-                              spp=96, along_pixels=256, seed=1)
+                              spp=48, along_pixels=1024, seed=1)
     mc = mc_line_profile(**MS, n=1.0, n_photons=300_000, offsets_rows=MS_OFFSETS,
                          mm_per_row=MS_MM_PER_ROW, source_width_mm=MS_MM_PER_ROW, seed=0)
     return mi, mc
