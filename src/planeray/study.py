@@ -312,7 +312,7 @@ def grids(quick: bool = False) -> dict:
         "sigma_s": np.geomspace(0.25, 8.0, 11),
         "sigma_a": np.array([0.0, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0]),
         "g": np.round(np.arange(-0.9, 0.91, 0.15), 2),
-        "alpha": np.geomspace(1e-4, 100.0, 13),
+        "alpha": np.geomspace(1e-4, 1e4, 17),
         "beta": np.geomspace(1e-4, 100.0, 13),
     }
 

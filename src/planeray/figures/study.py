@@ -100,8 +100,8 @@ def plot_regularization(rs: dict, path, noise):
         ia, ib = int(np.argmin(np.abs(np.log(a / 0.01)))), int(np.argmin(np.abs(np.log(b / 0.01))))
         ax.plot(ib, ia, "s", mfc="none", mec="r", ms=16, mew=1.5, label="paper 0.01 / 0.01")
         ax.plot(j, i, "x", color="w", ms=12, mew=2, label="min MSE")
-        ax.set_title(f"log10 {title} of the full method, eta = {noise}")
+        ax.set_title(f"log10 {title} of the full method, eta = {noise}\n"
+                     "red square: the paper's 0.01 / 0.01, white x: lowest MSE", fontsize=10)
         fig.colorbar(im, ax=ax)
-    axes[0].legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     return save_png(fig, path)
