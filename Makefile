@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test bench bench-demux clean venv
+.PHONY: demo test bench bench-demux bench-mc clean venv
 
 venv: $(VENV)/.installed
 
@@ -25,6 +25,9 @@ bench: venv
 
 bench-demux: venv
 	$(PY) benchmarks/bench_demux.py --pixels 384 --large 512
+
+bench-mc: venv
+	$(PY) benchmarks/bench_mc.py
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache

@@ -1,0 +1,89 @@
+"""Monte Carlo speed: planeray's engine vs Mitsuba 3 on the same profile, at equal error.
+
+Both estimate the normal-view radiance next to a lit strip one bin wide on an
+index-matched HG half-space (what :mod:`planeray.mc.mitsuba_ref` renders).  Run
+time alone is not comparable (different estimators), so the figure of merit is
+the *efficiency* ``1 / (seconds * relative variance)`` of the profile, with the
+relative variance taken as the mean of ``(stderr / value)^2`` over the bins
+within 5 transport mean free paths of the line; the ratio of efficiencies is the
+speed-up at equal error.  Also prints photon and collision rates for media from
+the paper's study (Sec. 5.2: sigma_s = 1, sigma_a = 0, g = 0.9) and the wax scene.
+
+Run: ``make bench-mc`` or ``.venv/bin/python benchmarks/bench_mc.py [--photons 1000000]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numba
+import numpy as np
+
+from planeray.mc import mc_line_profile
+
+
+def rates(n_photons):
+    print(f"planeray MC, {n_photons:.0e} photons, {numba.get_num_threads()} threads")
+    print(f"{'medium':44s} {'s':>7s} {'photons/s':>10s} {'coll/photon':>11s} {'ns/coll/thread':>14s}")
+    media = [
+        ("study default: 1 / 0 / g 0.9, n 1, +-114 mm", dict(sigma_s=1.0, sigma_a=0.0, g=0.9, offsets_rows=np.arange(-114, 115))),
+        ("absorbing: 1 / 0.1 / g 0.9, n 1", dict(sigma_s=1.0, sigma_a=0.1, g=0.9)),
+        ("wax: 1.5 / 0.003 / g 0.8, n 1.4, 0.3 mm", dict(sigma_s=1.5, sigma_a=0.003, g=0.8, n=1.4,
+                                                      offsets_rows=np.arange(-192, 193), mm_per_row=0.3)),
+    ]
+    mc_line_profile(1.0, 0.1, 0.5, n_photons=1000)  # compile (or load the compiled cache)
+    for name, kw in media:
+        t0 = time.perf_counter()
+        p = mc_line_profile(n_photons=n_photons, **kw)
+        dt = time.perf_counter() - t0
+        per = p.n_interactions / p.n_photons
+        print(f"{name:44s} {dt:7.2f} {p.n_photons / dt:10.3g} {per:11.0f} "
+              f"{dt * numba.get_num_threads() / p.n_interactions * 1e9:14.1f}")
+
+
+def efficiency(seconds, value, stderr, mask):
+    rel_var = np.mean((stderr[mask] / value[mask]) ** 2)
+    return 1.0 / (seconds * rel_var), np.sqrt(rel_var)
+
+
+def versus_mitsuba(n_photons, spp):
+    try:
+        from planeray.mc.mitsuba_ref import mitsuba_line_profile
+    except ImportError:
+        print("\nMitsuba 3 not installed (pip install 'planeray[mitsuba]'): skipping the comparison")
+        return
+    sigma_s, sigma_a, g, dx = 1.0, 0.05, 0.5, 1.0
+    off = np.arange(-10, 11)
+    mfp = 1.0 / (sigma_a + sigma_s * (1 - g))
+    mask = np.abs(off) * dx <= 5 * mfp
+    mitsuba_line_profile(sigma_s, sigma_a, g, off, dx, spp=1, along_pixels=16)  # load variant, warm up
+    t0 = time.perf_counter()
+    mi = mitsuba_line_profile(sigma_s, sigma_a, g, off, dx, spp=spp, along_pixels=1024)
+    t_mi = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    mc = mc_line_profile(sigma_s, sigma_a, g, n=1.0, n_photons=n_photons, offsets_rows=off, mm_per_row=dx,
+                         source_width_mm=dx)
+    t_mc = time.perf_counter() - t0
+    e_mi, r_mi = efficiency(t_mi, mi.radiance, mi.stderr, mask)
+    e_mc, r_mc = efficiency(t_mc, mc.radiance, mc.radiance_stderr, mask)
+    z = (mc.radiance - mi.radiance) / np.hypot(mc.radiance_stderr, mi.stderr)
+    print(f"\nsame profile (sigma_s {sigma_s}, sigma_a {sigma_a}, g {g}, {off.size} bins of {dx} mm, "
+          f"bins within 5 mfp: {mask.sum()})")
+    print(f"  Mitsuba volpath : {t_mi:6.2f} s, {spp} spp x 1024 rows, rms rel. error {r_mi:.4f}")
+    print(f"  planeray MC     : {t_mc:6.2f} s, {n_photons:.0e} photons, rms rel. error {r_mc:.4f}")
+    print(f"  agreement: max |z| {np.abs(z).max():.2f}, integrated ratio {mc.radiance.sum() / mi.radiance.sum():.4f}")
+    print(f"  efficiency ratio (planeray / Mitsuba, time at equal error): {e_mc / e_mi:.1f}x")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--photons", type=int, default=1_000_000)
+    ap.add_argument("--spp", type=int, default=64)
+    args = ap.parse_args()
+    rates(args.photons)
+    versus_mitsuba(args.photons, args.spp)
+
+
+if __name__ == "__main__":
+    main()
