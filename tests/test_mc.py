@@ -208,3 +208,46 @@ def test_default_wax_scene_uses_the_shipped_kernel(tmp_path, monkeypatch):
         s = make_scene("wax", shape, projector_rows=720, seed=0)
         assert s.params["kernel"] == "mc" and 0.5 < s.params["subsurface_total_reflectance"] < 0.9
     assert not any(tmp_path.rglob("*.npz"))
+
+
+@pytest.mark.parametrize("medium", [
+    dict(sigma_s=1.0, sigma_a=0.0, g=0.5, n=1.0),    # non-absorbing: the case the hybrid is for
+    dict(sigma_s=2.0, sigma_a=0.01, g=0.8, n=1.4),   # absorption (K1 law) and a Fresnel boundary (A > 1)
+])
+def test_hybrid_diffusion_continuation_matches_full_tracing(medium):
+    # Photons handed to diffusion theory 10 transport mfp deep must land where fully
+    # traced photons land (bin by bin within the combined Monte Carlo error), for a
+    # fraction of the collisions.
+    off = np.arange(-30, 31)
+    kw = dict(offsets_rows=off, mm_per_row=1.0, n_photons=100_000, **medium)
+    hyb = mc_line_profile(**kw, seed=1)
+    full = mc_line_profile(**kw, seed=2, diffusion_depth_mfp=None, cutoff_mm=600.0)  # 20x the window
+    assert hyb.n_interactions < 0.5 * full.n_interactions
+    assert abs(hyb.energy_balance - 1.0) < 1e-9 and hyb.truncated < 1e-3
+    for a, b, ea, eb in ((hyb.values, full.values, hyb.stderr, full.stderr),
+                         (hyb.radiance, full.radiance, hyb.radiance_stderr, full.radiance_stderr)):
+        z = (a - b) / np.hypot(ea, eb)
+        assert np.mean(z ** 2) < 2.0 and np.abs(z).max() < 5.0
+        for lo, hi in ((0, 5), (5, 15), (15, 31)):
+            m = (np.abs(off) >= lo) & (np.abs(off) < hi)
+            err = np.sqrt((ea[m] ** 2).sum() + (eb[m] ** 2).sum())  # bins independent: conservative
+            assert abs(a[m].sum() - b[m].sum()) < 4 * err + 0.01 * b[m].sum(), (lo, hi)
+    assert abs(hyb.total_reflectance - full.total_reflectance - full.truncated) < \
+        4 * np.hypot(hyb.total_reflectance_stderr, full.total_reflectance_stderr) + 2e-3
+
+
+def test_diffusion_exit_law():
+    from planeray.mc import diffusion_exit, diffusion_normal_radiance_ratio
+
+    # One unit of weight at x = 0, depth 20 mm: without absorption it all leaves, with a
+    # Cauchy-like spread (half of it within |x| < z + z_b-ish); with absorption exp(-sigma_tr z).
+    hist = np.zeros((1, 1))
+    hist[0, 0] = 1.0
+    out = np.arange(-20000, 20001)
+    bins, total = diffusion_exit(hist, 0, out, 1.0, 20.0, 0.0, 0.1, 1.0)
+    assert total == 1.0 and bins.sum() == pytest.approx(1.0, abs=2e-3)  # tails beyond 20 m
+    assert np.allclose(bins[0], bins[0][::-1])
+    bins, total = diffusion_exit(hist, 0, np.arange(-3000, 3001), 1.0, 20.0, 0.01, 0.1, 1.4)
+    assert bins.sum() == pytest.approx(total, rel=1e-3) and 0.15 < total < 0.25
+    # Normal-view radiance per exitance: P1 value 5 / (4 pi) for n = 1 (Chandrasekhar: 0.401).
+    assert diffusion_normal_radiance_ratio(1.0) == pytest.approx(5.0 / (4.0 * np.pi), rel=2e-3)

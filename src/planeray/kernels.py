@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "boundary_mismatch_A",
     "dipole_reflectance",
     "dipole_total_reflectance",
     "dipole_line_kernel",
@@ -44,12 +45,19 @@ MC_KERNEL_PHOTONS = 1_000_000
 MC_KERNEL_REACH_ROWS = 192
 
 
+def boundary_mismatch_A(eta):
+    """Internal-reflection parameter ``A = (1 + F_dr) / (1 - F_dr)`` of the diffusion
+    boundary condition, with Groenhuis' fit ``F_dr(eta)`` [1]_ (``A ~ 1`` for ``eta = 1``).
+    The extrapolated boundary sits ``2 A D`` above the surface."""
+    f_dr = -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
+    return (1.0 + f_dr) / (1.0 - f_dr)
+
+
 def _dipole_constants(sigma_a, sigma_s_prime, eta):
     sigma_t = sigma_a + sigma_s_prime
     albedo = sigma_s_prime / sigma_t
     sigma_tr = np.sqrt(3.0 * sigma_a * sigma_t)
-    f_dr = -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
-    A = (1.0 + f_dr) / (1.0 - f_dr)
+    A = boundary_mismatch_A(eta)
     z_r = 1.0 / sigma_t
     z_v = z_r * (1.0 + 4.0 * A / 3.0)
     return albedo, sigma_tr, z_r, z_v, A

@@ -31,12 +31,18 @@ Scheme, per photon:
 * Russian roulette below ``w < ROULETTE_THRESHOLD`` (survive with probability
   ``1 / ROULETTE_CHANCE`` at ``ROULETTE_CHANCE * w``); the net weight it creates
   or destroys (zero mean) is booked under ``absorbed``;
-* a photon farther than ``cutoff_mm`` from the line (``|x|`` or depth ``z``) is
-  stopped and its weight booked as ``truncated``.  A non-absorbing half-space
-  reflects everything eventually, but its photons make unbounded random walks
-  (the 1-D return time has infinite mean); the cutoff bounds the run and its
-  cost is measured, not hidden: ``truncated`` is reported and, by default, the
-  cutoff sits far outside the binned window (see :func:`default_cutoff_mm`).
+* **hybrid continuation** (semi-infinite media): a photon that reaches the depth
+  ``z_c = diffusion_depth_mfp`` transport mean free paths (default 10) has
+  forgotten its direction; where it leaves the surface is then given by
+  diffusion theory (the 2-D dipole of a line source at ``z_c``,
+  :func:`diffusion_exit`) instead of thousands more collisions -- the hybrid
+  model of Wang & Jacques [6]_.  A non-absorbing half-space reflects everything
+  eventually, but its photons make unbounded random walks (the 1-D return time
+  has infinite mean): this is what makes ``sigma_a = 0`` affordable;
+* a photon farther than ``cutoff_mm`` from the line (``|x|``, or depth ``z``
+  when the continuation is off) is stopped and its weight booked as
+  ``truncated``; the cutoff sits far outside the binned window by default
+  (:func:`default_cutoff_mm`) and ``truncated`` says how much weight that was.
 
 So ``diffuse + specular + transmitted + absorbed + truncated == 1`` to round-off.
 
@@ -66,6 +72,11 @@ References
    for subsurface light transport", SIGGRAPH 2001.
 .. [4] D. Blackman, S. Vigna, "Scrambled linear pseudorandom number
    generators", ACM TOMS 47(4), 2021 (xoshiro256+).
+.. [5] T. J. Farrell, M. S. Patterson, B. Wilson, "A diffusion theory model of
+   spatially resolved, steady-state diffuse reflectance", Med. Phys. 19, 1992.
+.. [6] L. Wang, S. L. Jacques, "Hybrid model of Monte Carlo simulation and
+   diffusion theory for light reflectance by turbid media", J. Opt. Soc. Am. A
+   10(8), 1746-1752, 1993.
 """
 
 from __future__ import annotations
@@ -84,6 +95,9 @@ __all__ = [
     "MCProfile",
     "mc_line_profile",
     "default_cutoff_mm",
+    "diffusion_exit",
+    "diffusion_normal_radiance_ratio",
+    "DIFFUSION_DEPTH_MFP",
     "fresnel_unpolarized",
     "sample_hg_cos",
     "hg_phase",
@@ -94,9 +108,12 @@ __all__ = [
     "ROULETTE_CHANCE",
 ]
 
+#: Default depth (transport mean free paths) at which photons in a half-space are
+#: handed to diffusion theory; see :func:`mc_line_profile`.
+DIFFUSION_DEPTH_MFP = 10.0
 ROULETTE_THRESHOLD = 1e-4
 ROULETTE_CHANCE = 10.0
-_ENGINE_VERSION = 2
+_ENGINE_VERSION = 3
 _N_BATCHES = 32
 
 
@@ -296,9 +313,15 @@ def _uniform(s):
 # ---------------------------------------------------------------- the kernel
 @numba.njit(cache=True, parallel=True, error_model="numpy")
 def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
-           source_width_mm, cutoff_mm):
-    """Trace ``counts[b]`` photons for each batch ``b``; per-batch tallies."""
+           source_width_mm, cutoff_mm, z_cont, hmin, nh):
+    """Trace ``counts[b]`` photons for each batch ``b``; per-batch tallies.
+
+    A photon whose step crosses depth ``z_cont`` stops there; its weight is
+    tallied in ``cont_hist`` by the ``x`` of the crossing (bins ``hmin ..
+    hmin + nh - 1``) for the diffusion continuation.
+    """
     B = counts.size
+    cont_hist = np.zeros((B, nh))
     refl_bins = np.zeros((B, nk))
     rad_bins = np.zeros((B, nk))
     refl = np.zeros(B)
@@ -331,6 +354,14 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
             while True:
                 step = -math.log(1.0 - _uniform(s)) / sigma_t
                 zn = z + step * uz
+                if zn > z_cont:
+                    xc = x + (z_cont - z) / uz * ux
+                    h = math.floor(xc * inv_bin + 0.5) - hmin
+                    if 0 <= h < nh:
+                        cont_hist[b, int(h)] += w
+                    else:
+                        trunc_b += w
+                    break
                 if zn < 0.0 or (finite and zn > d):
                     top = zn < 0.0
                     zf = 0.0 if top else d
@@ -399,7 +430,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
         absorbed[b] = abs_b
         truncated[b] = trunc_b
         events[b] = events_b
-    return refl_bins, rad_bins, refl, trans, absorbed, truncated, events
+    return refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont_hist
 
 
 # ---------------------------------------------------------------- cache
@@ -469,7 +500,7 @@ def default_cutoff_mm(offsets_rows, mm_per_row, sigma_s, sigma_a, g):
 
 def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**6,
                     offsets_rows=None, mm_per_row=1.0, seed=0, cache=False,
-                    source_width_mm=0.0, cutoff_mm=None):
+                    source_width_mm=0.0, cutoff_mm=None, diffusion_depth_mfp=DIFFUSION_DEPTH_MFP):
     """Monte Carlo line-source reflectance profile of a homogeneous slab.
 
     Parameters
@@ -497,6 +528,11 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     cutoff_mm : float, optional
         Stop photons farther than this from the line (``|x|``) or deeper (``z``);
         default :func:`default_cutoff_mm`.  Their weight is reported as ``truncated``.
+    diffusion_depth_mfp : float or None
+        Semi-infinite media only: a photon reaching this depth, in transport mean
+        free paths ``1 / (sigma_a + sigma_s (1 - g))``, is handed to diffusion
+        theory (:func:`diffusion_exit`; the hybrid model of Wang & Jacques [6]_)
+        instead of being traced on.  ``None`` or 0 traces every photon to the end.
 
     Returns
     -------
@@ -552,10 +588,14 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     if not cutoff_mm > 0:
         raise ValueError(f"cutoff_mm must be positive, got {cutoff_mm}")
 
+    depth_mfp = float(diffusion_depth_mfp) if diffusion_depth_mfp else None
+    if depth_mfp is not None and not depth_mfp > 0:
+        raise ValueError(f"diffusion_depth_mfp must be positive or None, got {diffusion_depth_mfp}")
     params = dict(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n,
                   thickness=None if np.isinf(thickness) else thickness,
                   n_photons=n_photons, mm_per_row=mm_per_row, seed=int(seed),
-                  source_width_mm=source_width_mm, cutoff_mm=cutoff_mm)
+                  source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
+                  diffusion_depth_mfp=depth_mfp)
     path = None
     if cache:
         name = f"{cache_key(params, offsets)}.npz"
@@ -594,9 +634,22 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
     kmin = int(offsets.min())
     nk = int(offsets.max()) - kmin + 1
     r_sp = ((n - 1.0) / (n + 1.0)) ** 2
-    refl_bins, rad_bins, refl, trans, absorbed, truncated, events = _trace(
+    depth_mfp = params["diffusion_depth_mfp"]
+    sigma_tp = sigma_a + sigma_s * (1.0 - g)
+    z_cont = depth_mfp / sigma_tp if (depth_mfp and not np.isfinite(d)) else np.inf
+    reach = int(np.ceil(cutoff_mm / mm_per_row))
+    hmin, nh = -reach, 2 * reach + 1
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont = _trace(
         states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, 1.0 - r_sp,
-        source_width_mm, cutoff_mm)
+        source_width_mm, cutoff_mm, z_cont, hmin, nh)
+    if np.isfinite(z_cont) and cont.any():
+        exit_bins, exit_total = diffusion_exit(cont, hmin, np.arange(kmin, kmin + nk), mm_per_row,
+                                               z_cont, sigma_a, sigma_tp, n)
+        w_cont = cont.sum(axis=1)
+        refl_bins += exit_bins
+        rad_bins += exit_bins * (diffusion_normal_radiance_ratio(n) / mm_per_row)
+        refl += w_cont * exit_total
+        absorbed += w_cont * (1.0 - exit_total)
     cols = offsets - kmin
     values, stderr = _batch_stats(refl_bins[:, cols], counts)
     radiance, rad_err = _batch_stats(rad_bins[:, cols], counts)
@@ -609,3 +662,88 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
         specular_reflectance=float(r_sp), transmittance=float(T_tot), transmittance_stderr=float(t_err),
         absorbed=float(absorbed.sum() / n_photons), truncated=float(truncated.sum() / n_photons),
         n_photons=n_photons, n_interactions=int(events.sum()), params=params)
+
+
+# ---------------------------------------------------------------- diffusion continuation
+def diffusion_exit(hist, hmin, out_bins, mm_per_row, z_mm, sigma_a, sigma_tp, n):
+    """Where photons diffusing from depth ``z_mm`` leave the top face (hybrid MC-diffusion).
+
+    The 2-D diffusion dipole of a line source at depth ``z`` (the line along
+    ``y``, so the problem is 2-D in ``x, z``) with an extrapolated boundary
+    ``z_b = 2 A D`` above the surface (Farrell et al. [5]_, integrated along the
+    line) gives the exiting flux at lateral offset ``x``::
+
+        J(x) = (1 / 2 pi) sum_{z_i in (z, z + 2 z_b)} z_i sigma_tr K1(sigma_tr r_i) / r_i,
+        r_i = sqrt(x^2 + z_i^2),
+
+    (``z_i / r_i^2`` for ``sigma_a = 0``) whose integral, the fraction that
+    leaves at all, is ``(exp(-sigma_tr z) + exp(-sigma_tr (z + 2 z_b))) / 2``
+    (1 without absorption).  Bins are integrated exactly up to Gauss-Legendre
+    quadrature, a source spread uniformly over its histogram bin.
+
+    Parameters
+    ----------
+    hist : ndarray (B, nh)
+        Continued weight per batch by the bin ``hmin + j`` of its crossing point.
+    hmin : int
+        Bin of ``hist[:, 0]``.
+    out_bins : ndarray of int
+        Output bins.
+    mm_per_row, z_mm, sigma_a, sigma_tp, n : float
+        Bin width, continuation depth, absorption, transport coefficient
+        ``sigma_a + sigma_s (1 - g)`` and relative index.
+
+    Returns
+    -------
+    exit_bins : ndarray (B, len(out_bins))
+        Weight leaving through each output bin.
+    exit_total : float
+        Fraction of the continued weight that leaves the medium (anywhere).
+    """
+    from scipy.special import k1e
+
+    from ..kernels import boundary_mismatch_A
+
+    sigma_tr = math.sqrt(3.0 * sigma_a * sigma_tp)
+    z_b = 2.0 * boundary_mismatch_A(n) / (3.0 * sigma_tp)
+    depths = np.array([z_mm, z_mm + 2.0 * z_b])
+    nh = hist.shape[1]
+    m = np.arange(int(out_bins.min()) - (hmin + nh - 1), int(out_bins.max()) - hmin + 1)
+    # Triangle weight: source uniform over its bin, flux integrated over the output bin.
+    t, wt = np.polynomial.legendre.leggauss(16)
+    t = 0.5 * (t + 1.0)  # (0, 1)
+    wt = 0.5 * wt
+    u = np.concatenate([m[:, None] - 1.0 + t[None, :], m[:, None] + t[None, :]], axis=1) * mm_per_row
+    tri = np.concatenate([t, 1.0 - t])[None, :] * np.concatenate([wt, wt])[None, :]
+    flux = np.zeros_like(u)
+    for zi in depths:
+        r = np.hypot(u, zi)
+        if sigma_tr > 0.0:
+            flux += zi * sigma_tr * k1e(sigma_tr * r) * np.exp(-sigma_tr * r) / r
+        else:
+            flux += zi / (r * r)
+    P = (flux * tri).sum(axis=1) * mm_per_row / (2.0 * np.pi)
+    idx = out_bins[None, :] - (hmin + np.arange(nh))[:, None] - m[0]
+    exit_bins = hist @ P[idx]
+    exit_total = 0.5 * float(np.exp(-sigma_tr * depths[0]) + np.exp(-sigma_tr * depths[1]))
+    return exit_bins, exit_total
+
+
+def diffusion_normal_radiance_ratio(n):
+    """Normal-view radiance per unit exitance of diffuse light leaving a medium of index ``n``.
+
+    In the diffusion (P1) approximation with the extrapolated boundary the
+    radiance inside the surface is ``L(mu) ~ 2A + 3 mu`` (``mu`` toward the
+    outside); outside, the normal radiance is ``L(1) (1 - R(1)) / n^2`` and the
+    exitance ``2 pi int L(mu) (1 - R(mu)) mu dmu``.  0.398 sr^-1 for ``n = 1``
+    (Lambertian: 1/pi = 0.318; Chandrasekhar's exact H-function value: 0.401).
+    """
+    from ..kernels import boundary_mismatch_A
+
+    A = boundary_mismatch_A(n)
+    mu, wt = np.polynomial.legendre.leggauss(64)
+    mu = 0.5 * (mu + 1.0)
+    wt = 0.5 * wt
+    T = 1.0 - fresnel_unpolarized(mu, n)
+    exitance = 2.0 * np.pi * np.sum(wt * (2.0 * A + 3.0 * mu) * T * mu)
+    return float((2.0 * A + 3.0) * (1.0 - fresnel_unpolarized(1.0, n)) / (n * n) / exitance)
