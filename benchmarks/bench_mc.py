@@ -7,7 +7,8 @@ the *efficiency* ``1 / (seconds * relative variance)`` of the profile, with the
 relative variance taken as the mean of ``(stderr / value)^2`` over the bins
 within 5 transport mean free paths of the line; the ratio of efficiencies is the
 speed-up at equal error.  Also prints photon and collision rates for media from
-the paper's study (Sec. 5.2: sigma_s = 1, sigma_a = 0, g = 0.9) and the wax scene.
+the paper's study (Sec. 5.2: sigma_s = 1, sigma_a = 0, g = 0.9) -- with and without the
+hybrid diffusion hand-off, the baseline of that ratio -- and the wax scene.
 
 Run: ``make bench-mc`` or ``.venv/bin/python benchmarks/bench_mc.py [--photons 1000000]``.
 """
@@ -28,18 +29,23 @@ def rates(n_photons):
     print(f"{'medium':44s} {'s':>7s} {'photons/s':>10s} {'coll/photon':>11s} {'ns/coll/thread':>14s}")
     media = [
         ("study default: 1 / 0 / g 0.9, n 1, +-114 mm", dict(sigma_s=1.0, sigma_a=0.0, g=0.9, offsets_rows=np.arange(-114, 115))),
+        ("  same, full tracing (no diffusion hand-off)", dict(sigma_s=1.0, sigma_a=0.0, g=0.9, offsets_rows=np.arange(-114, 115),
+                                                              diffusion_depth_mfp=None)),
         ("absorbing: 1 / 0.1 / g 0.9, n 1", dict(sigma_s=1.0, sigma_a=0.1, g=0.9)),
         ("wax: 1.5 / 0.003 / g 0.8, n 1.4, 0.3 mm", dict(sigma_s=1.5, sigma_a=0.003, g=0.8, n=1.4,
                                                       offsets_rows=np.arange(-192, 193), mm_per_row=0.3)),
     ]
     mc_line_profile(1.0, 0.1, 0.5, n_photons=1000)  # compile (or load the compiled cache)
+    times = []
     for name, kw in media:
         t0 = time.perf_counter()
         p = mc_line_profile(n_photons=n_photons, **kw)
         dt = time.perf_counter() - t0
+        times.append(dt)
         per = p.n_interactions / p.n_photons
         print(f"{name:44s} {dt:7.2f} {p.n_photons / dt:10.3g} {per:11.0f} "
               f"{dt * numba.get_num_threads() / p.n_interactions * 1e9:14.1f}")
+    print(f"hybrid hand-off vs full tracing on the study default: {times[1] / times[0]:.1f}x faster")
 
 
 def efficiency(seconds, value, stderr, mask):
