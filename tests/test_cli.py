@@ -158,3 +158,11 @@ def test_mc_profile_writes_csv_json_and_png(tmp_path, monkeypatch):
     assert (tmp_path / "p.png").stat().st_size > 10_000
     bad = invoke("mc", "profile", "--out", out, "--g", 1.5, "--photons", 10)
     assert bad.exit_code != 0 and "g must lie in (-1, 1)" in bad.output
+
+
+def test_study_demux_quick(tmp_path):
+    r = invoke("study", "demux", "--out", tmp_path, "--quick", "--provider", "dipole", "--seeds", 1)
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "fig6_mse_vs_params.png").exists() and (tmp_path / "fig6c_mse_vs_g.csv").exists()
+    bad = invoke("study", "demux", "--out", tmp_path, "--provider", "bogus")
+    assert bad.exit_code != 0

@@ -503,6 +503,7 @@ def mc_profile(
     mm_per_row: Annotated[float, typer.Option("--mm-per-row", help="Bin width on the surface (mm).")] = 1.0,
     source_width_mm: Annotated[float, typer.Option("--source-width-mm", help="Width of the lit strip (0 = ideal line).")] = 0.0,
     cutoff_mm: Annotated[Optional[float], typer.Option("--cutoff-mm", help="Stop photons this far from the line (default: automatic).")] = None,
+    diffusion_depth_mfp: Annotated[float, typer.Option("--diffusion-depth-mfp", help="Hand photons this many transport mean free paths deep to diffusion theory (0: trace every photon).")] = 10.0,
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
     plot: Annotated[Optional[Path], typer.Option(help="Also write a PNG of the profile against the dipole.")] = None,
     cache: Annotated[bool, typer.Option(help="Reuse/keep the result in the on-disk cache.")] = True,
@@ -519,7 +520,8 @@ def mc_profile(
     with console.status(f"tracing {photons:,} photons"):
         prof = mc_line_profile(sigma_s, sigma_a, g, n=n, thickness=np.inf if thickness_mm is None else thickness_mm,
                                n_photons=photons, offsets_rows=np.arange(-rows, rows + 1), mm_per_row=mm_per_row,
-                               seed=seed, cache=cache, source_width_mm=source_width_mm, cutoff_mm=cutoff_mm)
+                               seed=seed, cache=cache, source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
+                               diffusion_depth_mfp=diffusion_depth_mfp or None)
     dt = time.perf_counter() - t0
     csv_path, json_path = write_profile(prof, out_path)
     out.print(f"diffuse reflectance {prof.total_reflectance:.5f} +- {prof.total_reflectance_stderr:.5f}, "
@@ -542,7 +544,7 @@ app.add_typer(study_app, name="study")
 @_friendly_errors
 def study_demux(
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the figures (PNG) and numbers (CSV).")],
-    provider: Annotated[str, typer.Option(help="Scattering profiles: dipole or mc.")] = "dipole",
+    provider: Annotated[str, typer.Option(help="Scattering profiles: mc (Monte Carlo, cached) or dipole.")] = "mc",
     seeds: Annotated[int, typer.Option(help="Noise seeds per point.")] = 5,
     quick: Annotated[bool, typer.Option(help="Reduced grids.")] = False,
 ):

@@ -15,9 +15,9 @@ true ``T`` (mean over the 229 offsets):
 
 The profile comes from a *provider* ``profile(sigma_s, sigma_a, g) -> T`` over
 the offsets: the Monte Carlo engine :func:`planeray.mc.mc_line_profile`
-(``provider='mc'``, what the paper did with Mitsuba) or the diffusion-dipole
-line kernel :func:`planeray.kernels.dipole_line_kernel` with the similarity
-relation ``sigma_s' = sigma_s (1 - g)`` (``'dipole'``, the default: instant) --
+(``provider='mc'``, the default, what the paper did with Mitsuba) or the
+diffusion-dipole line kernel :func:`planeray.kernels.dipole_line_kernel` with
+the similarity relation ``sigma_s' = sigma_s (1 - g)`` (``'dipole'``, instant) --
 with the dipole, ``g`` enters *only* through ``sigma_s'`` (no single-scattering,
 no phase-function shape), so its g-sweep measures the profile's width alone.
 
@@ -147,9 +147,9 @@ def default_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons:
 
 
 def _resolve_provider(provider, offsets) -> Provider:
-    if provider is None or provider == "dipole":
+    if provider == "dipole":
         return dipole_provider(offsets)
-    if provider == "mc":
+    if provider is None or provider == "mc":
         return default_provider(offsets, use_mc=True)
     if callable(provider):
         return provider
@@ -321,8 +321,8 @@ def run_study(out_dir, provider: Provider | str | None = None, seeds: int = 5, q
     """Run the whole Sec. 5.2 study, write PNGs and CSVs into ``out_dir``, return the numbers.
 
     ``provider``: a callable ``profile(sigma_s, sigma_a, g)`` over ``study_setup().offsets``,
-    ``'dipole'`` / ``None`` (the dipole kernel, see :func:`default_provider` for why
-    Monte Carlo is not the default) or ``'mc'`` (:mod:`planeray.mc` if importable).
+    ``'mc'`` / ``None`` (Monte Carlo, :func:`mc_provider`) or ``'dipole'``
+    (:func:`dipole_provider`).
 
     Files: ``fig5_reconstruction.png/.csv``, ``fig5c_mse_vs_noise.png/.csv``,
     ``fig6_mse_vs_params.png``, ``fig6{a,b,c}_mse_vs_{sigma_s,sigma_a,g}.csv``,
