@@ -251,3 +251,13 @@ def test_diffusion_exit_law():
     assert bins.sum() == pytest.approx(total, rel=1e-3) and 0.15 < total < 0.25
     # Normal-view radiance per exitance: P1 value 5 / (4 pi) for n = 1 (Chandrasekhar: 0.401).
     assert diffusion_normal_radiance_ratio(1.0) == pytest.approx(5.0 / (4.0 * np.pi), rel=2e-3)
+
+
+def test_unwritable_cache_warns_and_still_returns(tmp_path, monkeypatch):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    (ro / "mc").write_text("a file where the cache folder should be")
+    monkeypatch.setenv("PLANERAY_CACHE", str(ro))
+    with pytest.warns(RuntimeWarning, match="could not write the Monte Carlo cache"):
+        p = mc_line_profile(1.0, 0.2, 0.3, n_photons=500, cache=True)
+    assert abs(p.energy_balance - 1.0) < 1e-9

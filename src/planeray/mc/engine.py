@@ -85,6 +85,7 @@ import hashlib
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -610,7 +611,11 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     prof = _run(sigma_s, sigma_a, g, n, thickness, n_photons, offsets, mm_per_row, int(seed),
                 source_width_mm, cutoff_mm, params)
     if path is not None:
-        _save(path, prof)
+        try:
+            _save(path, prof)
+        except OSError as exc:  # a read-only home must not cost the result
+            warnings.warn(f"{path}: could not write the Monte Carlo cache ({exc}); "
+                          "set PLANERAY_CACHE to a writable folder", RuntimeWarning, stacklevel=2)
     return prof
 
 
