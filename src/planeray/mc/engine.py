@@ -114,7 +114,7 @@ __all__ = [
 DIFFUSION_DEPTH_MFP = 10.0
 ROULETTE_THRESHOLD = 1e-4
 ROULETTE_CHANCE = 10.0
-_ENGINE_VERSION = 3
+_ENGINE_VERSION = 4
 _N_BATCHES = 32
 
 
@@ -319,10 +319,11 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
 
     A photon whose step crosses depth ``z_cont`` stops there; its weight is
     tallied in ``cont_hist`` by the ``x`` of the crossing (bins ``hmin ..
-    hmin + nh - 1``) for the diffusion continuation.
+    hmin + nh - 1``; ``cont_far`` beyond them) for the diffusion continuation.
     """
     B = counts.size
     cont_hist = np.zeros((B, nh))
+    cont_far = np.zeros(B)
     refl_bins = np.zeros((B, nk))
     rad_bins = np.zeros((B, nk))
     refl = np.zeros(B)
@@ -344,6 +345,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
         trans_b = 0.0
         abs_b = 0.0
         trunc_b = 0.0
+        far_b = 0.0
         events_b = 0
         for _ in range(counts[b]):
             x = (_uniform(s) - 0.5) * source_width_mm
@@ -360,8 +362,8 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
                     h = math.floor(xc * inv_bin + 0.5) - hmin
                     if 0 <= h < nh:
                         cont_hist[b, int(h)] += w
-                    else:
-                        trunc_b += w
+                    else:  # so far out that it cannot reach the bins: it still leaves
+                        far_b += w
                     break
                 if zn < 0.0 or (finite and zn > d):
                     top = zn < 0.0
@@ -430,8 +432,9 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
         trans[b] = trans_b
         absorbed[b] = abs_b
         truncated[b] = trunc_b
+        cont_far[b] = far_b
         events[b] = events_b
-    return refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont_hist
+    return refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont_hist, cont_far
 
 
 # ---------------------------------------------------------------- cache
@@ -463,11 +466,14 @@ _SCALARS = ("mm_per_row", "total_reflectance", "total_reflectance_stderr",
 def _save(path: Path, prof: MCProfile) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + f".{os.getpid()}.tmp.npz")
-    np.savez(tmp, **{k: getattr(prof, k) for k in _ARRAYS},
-             n_photons=np.int64(prof.n_photons), n_interactions=np.int64(prof.n_interactions),
-             params=np.array(json.dumps(prof.params, sort_keys=True)),
-             **{k: np.float64(getattr(prof, k)) for k in _SCALARS})
-    os.replace(tmp, path)
+    try:
+        np.savez(tmp, **{k: getattr(prof, k) for k in _ARRAYS},
+                 n_photons=np.int64(prof.n_photons), n_interactions=np.int64(prof.n_interactions),
+                 params=np.array(json.dumps(prof.params, sort_keys=True)),
+                 **{k: np.float64(getattr(prof, k)) for k in _SCALARS})
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _load(path: Path) -> MCProfile:
@@ -642,15 +648,19 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
     depth_mfp = params["diffusion_depth_mfp"]
     sigma_tp = sigma_a + sigma_s * (1.0 - g)
     z_cont = depth_mfp / sigma_tp if (depth_mfp and not np.isfinite(d)) else np.inf
-    reach = int(np.ceil(cutoff_mm / mm_per_row))
+    # Continued photons are histogrammed where they can still reach the bins: within
+    # 20 continuation depths of the window (the exit law's tail beyond carries < 1 %
+    # of a photon's weight into a window of that size).
+    half = max(abs(kmin), abs(kmin + nk - 1)) * mm_per_row
+    reach = int(np.ceil(min(cutoff_mm, half + 20.0 * z_cont) / mm_per_row)) if np.isfinite(z_cont) else 0
     hmin, nh = -reach, 2 * reach + 1
-    refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont = _trace(
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont, far = _trace(
         states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, 1.0 - r_sp,
         source_width_mm, cutoff_mm, z_cont, hmin, nh)
-    if np.isfinite(z_cont) and cont.any():
+    if np.isfinite(z_cont) and (cont.any() or far.any()):
         exit_bins, exit_total = diffusion_exit(cont, hmin, np.arange(kmin, kmin + nk), mm_per_row,
                                                z_cont, sigma_a, sigma_tp, n)
-        w_cont = cont.sum(axis=1)
+        w_cont = cont.sum(axis=1) + far
         refl_bins += exit_bins
         rad_bins += exit_bins * (diffusion_normal_radiance_ratio(n) / mm_per_row)
         refl += w_cont * exit_total
