@@ -166,3 +166,14 @@ def test_study_demux_quick(tmp_path):
     assert (tmp_path / "fig6_mse_vs_params.png").exists() and (tmp_path / "fig6c_mse_vs_g.csv").exists()
     bad = invoke("study", "demux", "--out", tmp_path, "--provider", "bogus")
     assert bad.exit_code != 0
+
+
+def test_mc_profile_point_source(tmp_path, monkeypatch):
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "r.csv"
+    r = invoke("mc", "profile", "--point", "--out", out, "--sigma-a", 0.2, "--g", 0.0,
+               "--photons", 3000, "--rows", 8, "--plot", tmp_path / "r.png")
+    assert r.exit_code == 0, r.output
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("radius_bin,r_mm,exitance") and len(lines) == 1 + 9
+    assert (tmp_path / "r.png").exists()

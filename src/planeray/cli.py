@@ -504,24 +504,31 @@ def mc_profile(
     source_width_mm: Annotated[float, typer.Option("--source-width-mm", help="Width of the lit strip (0 = ideal line).")] = 0.0,
     cutoff_mm: Annotated[Optional[float], typer.Option("--cutoff-mm", help="Stop photons this far from the line (default: automatic).")] = None,
     diffusion_depth_mfp: Annotated[float, typer.Option("--diffusion-depth-mfp", help="Hand photons this many transport mean free paths deep to diffusion theory (0: trace every photon).")] = 10.0,
+    point: Annotated[bool, typer.Option("--point", help="A point (pencil-beam) source: radial bins 0..ROWS of --mm-per-row (MCML's R_d(r)).")] = False,
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
     plot: Annotated[Optional[Path], typer.Option(help="Also write a PNG of the profile against the dipole.")] = None,
     cache: Annotated[bool, typer.Option(help="Reuse/keep the result in the on-disk cache.")] = True,
 ):
-    """Line-source exit profile of a homogeneous HG medium (Sec. 5.2), with Monte Carlo errors."""
+    """Line-source (or --point) exit profile of a homogeneous HG medium (Sec. 5.2), with Monte Carlo errors."""
     import time
 
     import numpy as np
 
-    from .mc import mc_line_profile
+    from .mc import mc_line_profile, mc_point_profile
     from .mc.report import write_profile
 
     t0 = time.perf_counter()
+    thickness = np.inf if thickness_mm is None else thickness_mm
     with console.status(f"tracing {photons:,} photons"):
-        prof = mc_line_profile(sigma_s, sigma_a, g, n=n, thickness=np.inf if thickness_mm is None else thickness_mm,
-                               n_photons=photons, offsets_rows=np.arange(-rows, rows + 1), mm_per_row=mm_per_row,
-                               seed=seed, cache=cache, source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
-                               diffusion_depth_mfp=diffusion_depth_mfp or None)
+        if point:
+            prof = mc_point_profile(sigma_s, sigma_a, g, n=n, thickness=thickness, n_photons=photons,
+                                    radius_bins=np.arange(0, rows + 1), mm_per_bin=mm_per_row, seed=seed,
+                                    cache=cache, cutoff_mm=cutoff_mm)
+        else:
+            prof = mc_line_profile(sigma_s, sigma_a, g, n=n, thickness=thickness, n_photons=photons,
+                                   offsets_rows=np.arange(-rows, rows + 1), mm_per_row=mm_per_row, seed=seed,
+                                   cache=cache, source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
+                                   diffusion_depth_mfp=diffusion_depth_mfp or None)
     dt = time.perf_counter() - t0
     csv_path, json_path = write_profile(prof, out_path)
     out.print(f"diffuse reflectance {prof.total_reflectance:.5f} +- {prof.total_reflectance_stderr:.5f}, "

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import dipole_line_kernel
+from ..kernels import dipole_line_kernel, dipole_reflectance
 from ._common import plt, save_png
 
 __all__ = ["mc_profile_figure"]
 
 
 def mc_profile_figure(prof, path, compare_dipole: bool = True):
-    """Plot exitance per mm (and normal-view radiance) of ``prof`` vs distance from the line.
+    """Plot exitance (and normal-view radiance) of ``prof`` vs distance from the line or point.
 
     Parameters
     ----------
@@ -25,26 +25,36 @@ def mc_profile_figure(prof, path, compare_dipole: bool = True):
         classical approximation the engine should approach far from the line.
     """
     p = prof.params
-    x = np.asarray(prof.offsets_rows, float) * prof.mm_per_row
+    point = p.get("source") == "point"
+    k = np.asarray(prof.offsets_rows)
+    x = k * prof.mm_per_row
     dx = prof.mm_per_row
+    # Exitance per unit length (line) or per unit area (point: annulus areas).
+    measure = np.pi * ((k + 0.5) ** 2 - np.maximum(k - 0.5, 0.0) ** 2) * dx * dx if point else dx
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
     ok = prof.values > 0
-    ax.errorbar(x[ok], prof.values[ok] / dx, yerr=prof.stderr[ok] / dx, fmt=".", ms=3,
+    ax.errorbar(x[ok], (prof.values / measure)[ok], yerr=(prof.stderr / measure)[ok], fmt=".", ms=3,
                 lw=0.8, label="Monte Carlo exitance")
     if compare_dipole and p.get("thickness") is None:
-        k = dipole_line_kernel(prof.offsets_rows, dx, p["sigma_a"], p["sigma_s"] * (1 - p["g"]), eta=p["n"])
-        ax.plot(x, k / dx, "-", lw=1, label="diffusion dipole (Jensen 2001)")
+        sp = p["sigma_s"] * (1 - p["g"])
+        if point:
+            ref = dipole_reflectance(x, p["sigma_a"], sp, eta=p["n"])
+        else:
+            ref = dipole_line_kernel(k, dx, p["sigma_a"], sp, eta=p["n"]) / dx
+        ax.plot(x, ref, "-", lw=1, label="diffusion dipole (Jensen 2001)")
     ax.set_yscale("log")
-    ax.set_xlabel("distance from the lit line x (mm)")
-    ax.set_ylabel("exiting power per mm (per unit line power)")
+    ax.set_xlabel("distance from the entry point r (mm)" if point else "distance from the lit line x (mm)")
+    ax.set_ylabel("exiting power per mm^2 (per unit power)" if point
+                  else "exiting power per mm (per unit line power)")
     ax.set_title(f"sigma_s={p['sigma_s']:g}, sigma_a={p['sigma_a']:g} /mm, g={p['g']:g}, n={p['n']:g}")
     ax.legend(fontsize=8)
     okr = prof.radiance > 0
     ax2.errorbar(x[okr], prof.radiance[okr], yerr=prof.radiance_stderr[okr], fmt=".", ms=3, lw=0.8,
                  color="C2", label="normal-view radiance")
     ax2.set_yscale("log")
-    ax2.set_xlabel("x (mm)")
-    ax2.set_ylabel("radiance (mm^-1 sr^-1 per unit line power)")
+    ax2.set_xlabel("r (mm)" if point else "x (mm)")
+    ax2.set_ylabel("radiance (mm^-2 sr^-1 per unit power)" if point
+                   else "radiance (mm^-1 sr^-1 per unit line power)")
     ax2.set_title(f"{prof.n_photons:.0e} photons; R={prof.total_reflectance:.4f}, "
                   f"truncated {prof.truncated:.3f}")
     ax2.legend(fontsize=8)

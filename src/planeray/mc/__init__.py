@@ -15,12 +15,14 @@ from planeray.mc.engine import (
     fresnel_unpolarized,
     hg_phase,
     mc_line_profile,
+    mc_point_profile,
     sample_hg_cos,
 )
 
 __all__ = [
     "MCProfile",
     "mc_line_profile",
+    "mc_point_profile",
     "default_cutoff_mm",
     "diffusion_exit",
     "diffusion_normal_radiance_ratio",

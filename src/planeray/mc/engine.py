@@ -95,6 +95,7 @@ import numpy as np
 __all__ = [
     "MCProfile",
     "mc_line_profile",
+    "mc_point_profile",
     "default_cutoff_mm",
     "diffusion_exit",
     "diffusion_normal_radiance_ratio",
@@ -312,14 +313,24 @@ def _uniform(s):
 
 
 # ---------------------------------------------------------------- the kernel
+@numba.njit(cache=True, inline="always")
+def _bin(x, y, inv_bin, radial):
+    """Bin index of an exit point: by ``x`` (line source) or by radius (point source)."""
+    if radial:
+        return math.floor(math.sqrt(x * x + y * y) * inv_bin + 0.5)
+    return math.floor(x * inv_bin + 0.5)
+
+
 @numba.njit(cache=True, parallel=True, error_model="numpy")
 def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
-           source_width_mm, cutoff_mm, z_cont, hmin, nh):
+           source_width_mm, cutoff_mm, z_cont, hmin, nh, radial):
     """Trace ``counts[b]`` photons for each batch ``b``; per-batch tallies.
 
     A photon whose step crosses depth ``z_cont`` stops there; its weight is
     tallied in ``cont_hist`` by the ``x`` of the crossing (bins ``hmin ..
     hmin + nh - 1``; ``cont_far`` beyond them) for the diffusion continuation.
+    ``radial``: bin by the distance ``sqrt(x^2 + y^2)`` from the entry point (a
+    point source) instead of by ``x`` (a line along ``y``).
     """
     B = counts.size
     cont_hist = np.zeros((B, nh))
@@ -335,7 +346,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
     albedo = sigma_s / sigma_t
     finite = d < np.inf
     # Straight-up radiance: normal transmission and the n^2 radiance law at the face.
-    up_gain = (1.0 - _fresnel(1.0, n)) / (n * n) / mm_per_row
+    up_gain = (1.0 - _fresnel(1.0, n)) / (n * n)
     inv_bin = 1.0 / mm_per_row
     for b in numba.prange(B):
         s = states[b].copy()
@@ -349,6 +360,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
         events_b = 0
         for _ in range(counts[b]):
             x = (_uniform(s) - 0.5) * source_width_mm
+            y = 0.0
             z = 0.0
             ux = 0.0
             uy = 0.0
@@ -369,12 +381,13 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
                     top = zn < 0.0
                     zf = 0.0 if top else d
                     x += (zf - z) / uz * ux
+                    y += (zf - z) / uz * uy
                     z = zf
                     R = _fresnel(abs(uz), n)
                     esc = w * (1.0 - R)
                     if top:
                         refl_b += esc
-                        k = math.floor(x * inv_bin + 0.5) - kmin
+                        k = _bin(x, y, inv_bin, radial) - kmin
                         if 0 <= k < nk:
                             refl_bins[b, int(k)] += esc
                     else:
@@ -385,12 +398,13 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
                         break
                 else:
                     x += step * ux
+                    y += step * uy
                     z = zn
                     events_b += 1
                     # Collision estimator of the radiance leaving straight up (-z inside).
                     tau = sigma_t * z
                     if tau < 40.0:
-                        k = math.floor(x * inv_bin + 0.5) - kmin
+                        k = _bin(x, y, inv_bin, radial) - kmin
                         if 0 <= k < nk:
                             rad_bins[b, int(k)] += (w * albedo * _hg_pdf(-uz, g)
                                                     * math.exp(-tau) * up_gain)
@@ -425,7 +439,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
                     else:
                         abs_b += w
                         break
-                if z > cutoff_mm or abs(x) > cutoff_mm:
+                if z > cutoff_mm or abs(x) > cutoff_mm or (radial and abs(y) > cutoff_mm):
                     trunc_b += w
                     break
         refl[b] = refl_b
@@ -529,7 +543,8 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     seed : int
         Seed; same seed, same bytes, whatever the number of threads.
     cache : bool
-        Read/write an ``.npz`` result keyed by all parameters under :func:`cache_dir`.
+        Read/write an ``.npz`` result keyed by all parameters under :func:`cache_dir`
+        (after the read-only shipped tables, :data:`TABLES_DIR`).
     source_width_mm : float
         Width of the lit strip (uniform over ``|x| <= w/2``); 0 = ideal line.
     cutoff_mm : float, optional
@@ -561,6 +576,51 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     >>> abs(p.energy_balance - 1.0) < 1e-9
     True
     """
+    if offsets_rows is None:
+        offsets_rows = np.arange(-50, 51)
+    return _profile("line", sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows, mm_per_row,
+                    seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp)
+
+
+def mc_point_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**6,
+                     radius_bins=None, mm_per_bin=1.0, seed=0, cache=False, cutoff_mm=None):
+    """Monte Carlo radial reflectance of a *point* (pencil-beam) source: MCML's ``R_d(r)``.
+
+    Same engine and checks as :func:`mc_line_profile`, with the exit points binned
+    by their distance ``r`` from the entry point: bin ``k`` is the annulus
+    ``[(k - 1/2), (k + 1/2)) * mm_per_bin`` (bin 0 the disk of radius
+    ``mm_per_bin / 2``).  Every photon is traced (no diffusion hand-off), so a
+    non-absorbing medium relies on ``cutoff_mm``.
+
+    Parameters
+    ----------
+    radius_bins : array_like of int, optional
+        Distinct non-negative bins; default ``arange(0, 51)``.
+    mm_per_bin : float
+        Annulus width in mm.
+    Other parameters
+        As :func:`mc_line_profile`.
+
+    Returns
+    -------
+    MCProfile
+        ``offsets_rows`` holds the radial bins and ``mm_per_row`` the annulus
+        width; ``values`` is the power leaving through each annulus (divide by
+        its area for ``R_d(r)`` per mm^2, compare with
+        :func:`planeray.kernels.dipole_reflectance`), ``radiance`` the
+        normal-view radiance averaged over it (mm^-2 sr^-1 per unit power).
+    """
+    if radius_bins is None:
+        radius_bins = np.arange(0, 51)
+    if np.any(np.asarray(radius_bins) < 0):
+        raise ValueError("radius_bins must be non-negative")
+    return _profile("point", sigma_s, sigma_a, g, n, thickness, n_photons, radius_bins, mm_per_bin,
+                    seed, cache, 0.0, cutoff_mm, None)
+
+
+def _profile(source, sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows, mm_per_row,
+             seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp):
+    """Validate, look up the caches, trace (:func:`_run`), store."""
     sigma_s = float(sigma_s)
     sigma_a = float(sigma_a)
     g = float(g)
@@ -583,8 +643,6 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
         raise ValueError(f"mm_per_row must be positive, got {mm_per_row}")
     if not source_width_mm >= 0:
         raise ValueError(f"source_width_mm must be >= 0, got {source_width_mm}")
-    if offsets_rows is None:
-        offsets_rows = np.arange(-50, 51)
     offsets_f = np.asarray(offsets_rows)
     offsets = offsets_f.astype(np.int64).ravel()
     if offsets.size == 0 or np.any(offsets != offsets_f.ravel()) or np.unique(offsets).size != offsets.size:
@@ -603,6 +661,8 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
                   n_photons=n_photons, mm_per_row=mm_per_row, seed=int(seed),
                   source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
                   diffusion_depth_mfp=depth_mfp)
+    if source == "point":
+        params["source"] = "point"  # line-source keys stay as they were: shipped tables remain valid
     path = None
     if cache:
         name = f"{cache_key(params, offsets)}.npz"
@@ -615,7 +675,7 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
                     pass  # unreadable entry: recompute (and overwrite the user cache)
 
     prof = _run(sigma_s, sigma_a, g, n, thickness, n_photons, offsets, mm_per_row, int(seed),
-                source_width_mm, cutoff_mm, params)
+                source_width_mm, cutoff_mm, params, radial=source == "point")
     if path is not None:
         try:
             _save(path, prof)
@@ -637,7 +697,7 @@ def _batch_stats(per_batch, counts):
 
 
 def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
-         source_width_mm, cutoff_mm, params):
+         source_width_mm, cutoff_mm, params, radial=False):
     B = _N_BATCHES
     counts = np.full(B, n_photons // B, dtype=np.int64)
     counts[: n_photons % B] += 1
@@ -647,7 +707,7 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
     r_sp = ((n - 1.0) / (n + 1.0)) ** 2
     depth_mfp = params["diffusion_depth_mfp"]
     sigma_tp = sigma_a + sigma_s * (1.0 - g)
-    z_cont = depth_mfp / sigma_tp if (depth_mfp and not np.isfinite(d)) else np.inf
+    z_cont = depth_mfp / sigma_tp if (depth_mfp and not np.isfinite(d) and not radial) else np.inf
     # Continued photons are histogrammed where they can still reach the bins: within
     # 20 continuation depths of the window (the exit law's tail beyond carries < 1 %
     # of a photon's weight into a window of that size).
@@ -656,7 +716,15 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
     hmin, nh = -reach, 2 * reach + 1
     refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont, far = _trace(
         states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, 1.0 - r_sp,
-        source_width_mm, cutoff_mm, z_cont, hmin, nh)
+        source_width_mm, cutoff_mm, z_cont, hmin, nh, radial)
+    # Radiance is tallied per unit area: divide by the bin's width (line) or annulus area (point).
+    k = np.arange(kmin, kmin + nk, dtype=np.float64)
+    if radial:
+        outer = (k + 0.5) * mm_per_row
+        inner = np.maximum(k - 0.5, 0.0) * mm_per_row
+        rad_bins /= np.pi * (outer ** 2 - inner ** 2)
+    else:
+        rad_bins /= mm_per_row
     if np.isfinite(z_cont) and (cont.any() or far.any()):
         exit_bins, exit_total = diffusion_exit(cont, hmin, np.arange(kmin, kmin + nk), mm_per_row,
                                                z_cont, sigma_a, sigma_tp, n)

@@ -4,6 +4,8 @@ The CSV has one row per offset bin with the columns ``offset_rows``, ``x_mm``
 (bin centre), ``exitance`` and ``exitance_stderr`` (power leaving the top face
 per bin, fraction of the incident line power), ``radiance`` and
 ``radiance_stderr`` (normal-view radiance, mm^-1 sr^-1 per unit line power).
+A point-source profile has ``radius_bin`` and ``r_mm`` (annulus centre) first;
+its exitance is per annulus and its radiance per mm^2.
 The JSON sidecar (same name, ``.json``) holds the totals, the energy balance
 and every parameter of the run, so the file alone reproduces it.
 """
@@ -24,11 +26,20 @@ __all__ = ["profile_columns", "write_profile", "profile_summary"]
 COLUMNS = ("offset_rows", "x_mm", "exitance", "exitance_stderr", "radiance", "radiance_stderr")
 
 
+POINT_COLUMNS = ("radius_bin", "r_mm") + COLUMNS[2:]
+
+
+def _columns(prof: MCProfile):
+    return POINT_COLUMNS if prof.params.get("source") == "point" else COLUMNS
+
+
 def profile_columns(prof: MCProfile) -> dict:
-    """The CSV columns of ``prof`` as float64/int64 arrays keyed by :data:`COLUMNS`."""
+    """The CSV columns of ``prof`` as float64/int64 arrays keyed by :data:`COLUMNS`
+    (:data:`POINT_COLUMNS` for a point source: radial bin and annulus centre ``r_mm``)."""
+    first, second = _columns(prof)[:2]
     return {
-        "offset_rows": np.asarray(prof.offsets_rows, np.int64),
-        "x_mm": np.asarray(prof.offsets_rows, np.float64) * prof.mm_per_row,
+        first: np.asarray(prof.offsets_rows, np.int64),
+        second: np.asarray(prof.offsets_rows, np.float64) * prof.mm_per_row,
         "exitance": np.asarray(prof.values, np.float64),
         "exitance_stderr": np.asarray(prof.stderr, np.float64),
         "radiance": np.asarray(prof.radiance, np.float64),
@@ -58,12 +69,13 @@ def write_profile(prof: MCProfile, path) -> tuple[Path, Path]:
     """Write ``path`` (CSV, see the module docstring) and its ``.json`` sidecar atomically."""
     path = Path(path)
     cols = profile_columns(prof)
+    names = _columns(prof)
     with atomic_file(path) as tmp:
         with open(tmp, "w", newline="") as f:
             w = csv.writer(f)
-            w.writerow(COLUMNS)
-            for i in range(cols["offset_rows"].size):
-                w.writerow([int(cols["offset_rows"][i])] + [repr(float(cols[c][i])) for c in COLUMNS[1:]])
+            w.writerow(names)
+            for i in range(cols[names[0]].size):
+                w.writerow([int(cols[names[0]][i])] + [repr(float(cols[c][i])) for c in names[1:]])
     side = path.with_suffix(".json")
     with atomic_file(side) as tmp:
         tmp.write_text(json.dumps(profile_summary(prof), indent=2, sort_keys=True))
