@@ -27,7 +27,7 @@ bench-demux: venv
 	$(PY) benchmarks/bench_demux.py --pixels 384 --large 512
 
 bench-mc: venv
-	$(PY) benchmarks/bench_mc.py
+	$(PY) benchmarks/bench_mc.py --plot $(OUT)/mc_vs_mitsuba.png
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache

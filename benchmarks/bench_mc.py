@@ -10,7 +10,8 @@ speed-up at equal error.  Also prints photon and collision rates for media from
 the paper's study (Sec. 5.2: sigma_s = 1, sigma_a = 0, g = 0.9) -- with and without the
 hybrid diffusion hand-off, the baseline of that ratio -- and the wax scene.
 
-Run: ``make bench-mc`` or ``.venv/bin/python benchmarks/bench_mc.py [--photons 1000000]``.
+Run: ``make bench-mc`` or ``.venv/bin/python benchmarks/bench_mc.py [--photons 1000000]
+[--plot mc_vs_mitsuba.png]``.
 """
 
 from __future__ import annotations
@@ -53,7 +54,31 @@ def efficiency(seconds, value, stderr, mask):
     return 1.0 / (seconds * rel_var), np.sqrt(rel_var)
 
 
-def versus_mitsuba(n_photons, spp):
+def plot_versus(off, dx, mi, mc, path):
+    """Both radiance profiles with error bars, and their z-scores."""
+    from planeray.figures._common import plt, save_png
+
+    x = off * dx
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    ax.errorbar(x, mi.radiance, yerr=mi.stderr, fmt="o", ms=3, lw=0.8, label="Mitsuba 3 volpath")
+    ax.errorbar(x, mc.radiance, yerr=mc.radiance_stderr, fmt=".", ms=3, lw=0.8, label="planeray MC")
+    ax.set_yscale("log")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("normal-view radiance (mm^-1 sr^-1)")
+    ax.set_title("HG half-space: sigma_s 1, sigma_a 0.05 /mm, g 0.5; 1 mm strip", fontsize=10)
+    ax.legend(fontsize=8)
+    z = (mc.radiance - mi.radiance) / np.hypot(mc.radiance_stderr, mi.stderr)
+    ax2.bar(x, z, width=0.8 * dx)
+    for v in (-3, 3):
+        ax2.axhline(v, color="k", lw=0.5, ls="--")
+    ax2.set_xlabel("x (mm)")
+    ax2.set_ylabel("z = (planeray - Mitsuba) / error")
+    ax2.set_title(f"max |z| {np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.2f}", fontsize=10)
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def versus_mitsuba(n_photons, spp, plot=None):
     try:
         from planeray.mc.mitsuba_ref import mitsuba_line_profile
     except ImportError:
@@ -80,15 +105,20 @@ def versus_mitsuba(n_photons, spp):
     print(f"  planeray MC     : {t_mc:6.2f} s, {n_photons:.0e} photons, rms rel. error {r_mc:.4f}")
     print(f"  agreement: max |z| {np.abs(z).max():.2f}, integrated ratio {mc.radiance.sum() / mi.radiance.sum():.4f}")
     print(f"  efficiency ratio (planeray / Mitsuba, time at equal error): {e_mc / e_mi:.1f}x")
+    if plot:
+        print(f"  {plot_versus(off, dx, mi, mc, plot)}")
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--photons", type=int, default=1_000_000)
     ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--plot", help="write a PNG of the Mitsuba comparison here")
+    ap.add_argument("--skip-rates", action="store_true", help="only the Mitsuba comparison")
     args = ap.parse_args()
-    rates(args.photons)
-    versus_mitsuba(args.photons, args.spp)
+    if not args.skip_rates:
+        rates(args.photons)
+    versus_mitsuba(args.photons, args.spp, args.plot)
 
 
 if __name__ == "__main__":
