@@ -74,6 +74,20 @@ def test_one_sided_decay_is_diffuse_interreflection():
     assert mirrored.label == 3 and mirrored.asymmetry < -0.6
 
 
+def test_a_displaced_spike_must_hold_a_real_share_of_the_light():
+    # A weakly regularized estimate of a broad skirt piles light into spikes (on the
+    # Monte Carlo wax: at u = 50 and 54, 2-4 % of the light). A spike prominent enough
+    # to pass the peak rules but holding 3.8 % of the light is subsurface; the same
+    # spike holding 13 % is a specular reflection.
+    skirt = gaussian(20.0)
+    small = skirt + delta(52, 0.04)
+    assert characterize(small, U, displaced_share_min=0.0).label == 4  # the peak rules alone
+    ch = characterize(small, U)
+    assert ch.label == 2 and np.isnan(ch.displaced_peak_offset_rows)
+    big = characterize(skirt + delta(52, 0.15), U)
+    assert big.label == 4 and big.displaced_peak_offset_rows == pytest.approx(52, abs=3)  # 5-bin smoothing
+
+
 def test_displaced_second_peak_is_specular():
     for at in (40, -40, 75):
         ch = characterize(delta() + delta(at, 0.5), U)

@@ -109,6 +109,7 @@ CLASSIFY_THRESHOLDS = {
     "indirect_fraction_min": 0.07,  # significant light outside the unresolved cell
     "asymmetry_min": 0.75,  # |asymmetry| at or above: one-sided (diffuse interreflection)
     "broadening": 1.3,  # main peak this many times wider than a direct one: broadened
+    "displaced_share_min": 0.05,  # a displaced peak must hold this share of the pixel's light
 }
 
 
@@ -472,7 +473,9 @@ def characterize(
        flanks, floor included; ``core = smooth_bins // 2 + footprint_rows / 2 +
        1``): a sparse estimate of a broad subsurface skirt is spiky, and its
        spikes stand only a few times above their surroundings, a specular spot
-       far more.
+       far more.  A displaced peak that is not the main one must also hold
+       ``displaced_share_min`` [0.05] of the pixel's light within ``core`` of
+       it (the 5 % of :func:`visible_effect_mask`).
     4. **Label**, first rule that applies:
 
        * 0 ``none``: no light above the floor;
@@ -556,7 +559,15 @@ def characterize(
     direct_peak = np.bincount(pix[in_cell], minlength=N) > 0
     apart = direct_peak | ~((left <= zero) & (right >= zero))
     beyond = (np.abs(offsets[k]) > cell) & (~is_main | apart[pix])
+    # The light within +-core of a displaced peak must be a real share of the pixel's
+    # (a visible specular effect holds >= 5 %, see visible_effect_mask); the comb a
+    # weakly regularized estimate makes of a broad subsurface skirt holds ~2-4 %.
+    csum = np.concatenate([np.zeros((N, 1)), np.cumsum(pos, axis=1)], axis=1)
+    lo_k = np.clip(k - core, 0, U)
+    hi_k = np.clip(k + core + 1, 0, U)
+    share = (csum[pix, hi_k] - csum[pix, lo_k]) / safe[pix] if pix.size else np.zeros(0)
     far = counted & beyond & (is_main | strong | (contrast >= float(th["peak_contrast"])))
+    far &= is_main | (share >= float(th["displaced_share_min"]))
     count = np.bincount(pix[counted], minlength=N).astype(np.int16)
     second = np.full(N, np.nan)
     other = np.flatnonzero(counted & ~is_main)
