@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import dipole_line_kernel, dipole_reflectance
+from ..mc.engine import bin_measure
 from ._common import plt, save_png
 
 __all__ = ["mc_profile_figure"]
@@ -29,8 +30,7 @@ def mc_profile_figure(prof, path, compare_dipole: bool = True):
     k = np.asarray(prof.offsets_rows)
     x = k * prof.mm_per_row
     dx = prof.mm_per_row
-    # Exitance per unit length (line) or per unit area (point: annulus areas).
-    measure = np.pi * ((k + 0.5) ** 2 - np.maximum(k - 0.5, 0.0) ** 2) * dx * dx if point else dx
+    measure = bin_measure(k, dx, radial=point)  # exitance per mm (line) or per mm^2 (point)
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
     ok = prof.values > 0
     ax.errorbar(x[ok], (prof.values / measure)[ok], yerr=(prof.stderr / measure)[ok], fmt=".", ms=3,

@@ -97,6 +97,8 @@ __all__ = [
     "mc_line_profile",
     "mc_point_profile",
     "default_cutoff_mm",
+    "check_medium",
+    "bin_measure",
     "diffusion_exit",
     "diffusion_normal_radiance_ratio",
     "DIFFUSION_DEPTH_MFP",
@@ -500,6 +502,33 @@ def _load(path: Path) -> MCProfile:
 
 
 # ---------------------------------------------------------------- public entry point
+def check_medium(sigma_s, sigma_a, g):
+    """Validate a homogeneous HG medium; return ``(sigma_s, sigma_a, g)`` as floats.
+
+    Raises ``ValueError`` unless ``sigma_s, sigma_a >= 0`` are finite with a
+    positive sum and ``-1 < g < 1``.
+    """
+    sigma_s, sigma_a, g = float(sigma_s), float(sigma_a), float(g)
+    if not (np.isfinite(sigma_s) and np.isfinite(sigma_a)) or sigma_s < 0 or sigma_a < 0 or sigma_s + sigma_a <= 0:
+        raise ValueError(f"need finite sigma_s, sigma_a >= 0 with sigma_s + sigma_a > 0, got {sigma_s}, {sigma_a}")
+    if not -1.0 < g < 1.0:
+        raise ValueError(f"g must lie in (-1, 1), got {g}")
+    return sigma_s, sigma_a, g
+
+
+def bin_measure(bins, mm_per_bin, radial=False):
+    """Size of profile bins: their width in mm (line source) or annulus area in mm^2 (point).
+
+    Bin ``k`` covers ``[k - 1/2, k + 1/2) * mm_per_bin``; radial bin 0 is the disk of
+    radius ``mm_per_bin / 2``.  Dividing a bin's power by it gives exitance per mm
+    (line) or per mm^2 (point).
+    """
+    if not radial:
+        return float(mm_per_bin)
+    k = np.asarray(bins, dtype=np.float64)
+    return np.pi * ((k + 0.5) ** 2 - np.maximum(k - 0.5, 0.0) ** 2) * float(mm_per_bin) ** 2
+
+
 def default_cutoff_mm(offsets_rows, mm_per_row, sigma_s, sigma_a, g):
     """Default photon cutoff: far outside both the binned window and the medium's scales.
 
@@ -621,18 +650,12 @@ def mc_point_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10*
 def _profile(source, sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows, mm_per_row,
              seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp):
     """Validate, look up the caches, trace (:func:`_run`), store."""
-    sigma_s = float(sigma_s)
-    sigma_a = float(sigma_a)
-    g = float(g)
+    sigma_s, sigma_a, g = check_medium(sigma_s, sigma_a, g)
     n = float(n)
     thickness = float(thickness)
     n_photons = int(n_photons)
     mm_per_row = float(mm_per_row)
     source_width_mm = float(source_width_mm)
-    if not (np.isfinite(sigma_s) and np.isfinite(sigma_a)) or sigma_s < 0 or sigma_a < 0 or sigma_s + sigma_a <= 0:
-        raise ValueError(f"need finite sigma_s, sigma_a >= 0 with sigma_s + sigma_a > 0, got {sigma_s}, {sigma_a}")
-    if not -1.0 < g < 1.0:
-        raise ValueError(f"g must lie in (-1, 1), got {g}")
     if not n > 0:
         raise ValueError(f"n must be positive, got {n}")
     if not thickness > 0:
@@ -718,13 +741,7 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
         states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, 1.0 - r_sp,
         source_width_mm, cutoff_mm, z_cont, hmin, nh, radial)
     # Radiance is tallied per unit area: divide by the bin's width (line) or annulus area (point).
-    k = np.arange(kmin, kmin + nk, dtype=np.float64)
-    if radial:
-        outer = (k + 0.5) * mm_per_row
-        inner = np.maximum(k - 0.5, 0.0) * mm_per_row
-        rad_bins /= np.pi * (outer ** 2 - inner ** 2)
-    else:
-        rad_bins /= mm_per_row
+    rad_bins /= bin_measure(np.arange(kmin, kmin + nk), mm_per_row, radial)
     if np.isfinite(z_cont) and (cont.any() or far.any()):
         exit_bins, exit_total = diffusion_exit(cont, hmin, np.arange(kmin, kmin + nk), mm_per_row,
                                                z_cont, sigma_a, sigma_tp, n)

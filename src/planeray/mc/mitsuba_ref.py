@@ -82,6 +82,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .engine import check_medium
+
 __all__ = ["MitsubaProfile", "mitsuba_line_profile", "single_scattering_radiance"]
 
 # Heights above the surface (mm): the camera sits below the mask so it sees the surface
@@ -322,16 +324,8 @@ def mitsuba_line_profile(sigma_s, sigma_a, g, offsets_rows, mm_per_row,
     >>> p.radiance[1] / single_scattering_radiance(0.02, 0.98, 0.0, 0.5)  # doctest: +SKIP
     1.0...
     """
-    sigma_s = float(sigma_s)
-    sigma_a = float(sigma_a)
-    g = float(g)
+    sigma_s, sigma_a, g = check_medium(sigma_s, sigma_a, g)
     mm_per_row = float(mm_per_row)
-    if not (math.isfinite(sigma_s) and math.isfinite(sigma_a)) or sigma_s < 0 or sigma_a < 0 \
-            or sigma_s + sigma_a <= 0:
-        raise ValueError(f"need finite sigma_s, sigma_a >= 0 with sigma_s + sigma_a > 0, "
-                         f"got {sigma_s}, {sigma_a}")
-    if not -1.0 < g < 1.0:
-        raise ValueError(f"need -1 < g < 1, got {g}")
     if not (math.isfinite(mm_per_row) and mm_per_row > 0):
         raise ValueError(f"mm_per_row must be positive, got {mm_per_row}")
     width = mm_per_row if source_width_mm is None else float(source_width_mm)
