@@ -46,12 +46,13 @@ Assumptions and approximations
 * The Monte Carlo kernel carries its own ~1 % noise (10^6 photons) in the far
   skirt: it is a fixed property of the scene (traced once with seed 0), not a
   per-capture noise.
-* Defaults (``sigma_a = 0.003 /mm``, ``sigma_s' = 1.0 /mm``, ``eta = 1.4``) are
-  paraffin-like: transport mean free path ~1 mm, diffusion length
-  ``1/sigma_tr ~ 10 mm`` (~30 projector rows at 0.3 mm/row).  The kernel has a
-  sharp cusp (half-maximum within ~3 rows) and a broad exponential skirt: about
-  half of the light inside a 600 us band (32.4 rows) comes from more than 3 rows
-  away, and the glow inside that band is many times the surface reflection.
+* Defaults (``sigma_a = 0.003 /mm``, ``sigma_s' = 0.3 /mm``, ``eta = 1.4``) are
+  a translucent paraffin: transport mean free path ~3.3 mm, diffusion length
+  ``1/sigma_tr ~ 19 mm`` (~64 projector rows at 0.3 mm/row).  The Monte Carlo
+  kernel has a sharp single-scattering cusp (the next bin is already down to
+  77 %) and a broad exponential skirt: two thirds of the light inside a 600 us
+  band (32.4 rows) comes from more than 3 rows away, and the glow inside that
+  band is many times the surface reflection.
 
 References
 ----------
