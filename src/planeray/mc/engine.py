@@ -13,7 +13,8 @@ collimated at normal incidence, spread uniformly over ``|x| <= w / 2``
 binning exit points by ``x`` only integrates the point-source response along
 the line -- the binned form of :func:`planeray.kernels.dipole_line_kernel`
 (Jensen et al. [3]_), used by Kubo et al. (TVCG 2019, Sec. 5.2) with a
-Henyey-Greenstein medium.
+Henyey-Greenstein medium.  :func:`mc_point_profile` bins by the distance from
+a single entry point instead (a pencil beam: MCML's ``R_d(r)``).
 
 Scheme, per photon:
 
@@ -123,7 +124,8 @@ _N_BATCHES = 32
 
 @dataclass(frozen=True)
 class MCProfile:
-    """Result of :func:`mc_line_profile`. Power quantities are fractions of the incident power.
+    """Result of :func:`mc_line_profile` (and :func:`mc_point_profile`, whose bins are
+    radial: see there). Power quantities are fractions of the incident power.
 
     Attributes
     ----------
