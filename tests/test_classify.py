@@ -11,14 +11,14 @@ import pytest
 from planeray.acquire import simulate_stack
 from planeray.demux import demultiplex
 from planeray.errors import InputError
-from planeray.profiles import (
+from planeray.classify import (
     CLASSIFY_THRESHOLDS,
     characterize,
     classify_transport,
     label_agreement,
-    transport_delay_profiles,
     visible_effect_mask,
 )
+from planeray.profiles import transport_delay_profiles
 from planeray.scenes import make_scene
 from planeray.timing import Band, paper_sweep, sweep_support_rows
 

@@ -536,7 +536,7 @@ def test_export_refuses_overwrite_and_is_atomic(tmp_path, monkeypatch):
     with pytest.raises(StackError, match="out: already exists"):
         io.export_folder(make_stack(seed=1), tmp_path / "out")
     calls = {"n": 0}
-    original = io._write_raw
+    original = io.folder.write_raw
 
     def flaky(*args):
         calls["n"] += 1
@@ -544,13 +544,13 @@ def test_export_refuses_overwrite_and_is_atomic(tmp_path, monkeypatch):
             raise OSError("disk full")
         original(*args)
 
-    monkeypatch.setattr(io, "_write_raw", flaky)
+    monkeypatch.setattr(io.folder, "write_raw", flaky)
     with pytest.raises(OSError):
         io.export_folder(make_stack(seed=1), tmp_path / "out", overwrite=True)
     back = io.import_folder(tmp_path / "out")
     np.testing.assert_allclose(back.images, make_stack(seed=0).images, atol=1e-4)
     assert leftovers(tmp_path) == []
-    monkeypatch.setattr(io, "_write_raw", original)
+    monkeypatch.setattr(io.folder, "write_raw", original)
     io.export_folder(make_stack(seed=1), tmp_path / "out", overwrite=True)
     np.testing.assert_allclose(io.import_folder(tmp_path / "out").images, make_stack(seed=1).images, atol=1e-4)
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import trapezoid
 
-from planeray.kernels import dipole_line_kernel, dipole_total_reflectance
+from planeray.mc.diffusion import dipole_line_kernel, dipole_total_reflectance
 from planeray.mc import fresnel_unpolarized, hg_phase, mc_line_profile, sample_hg_cos
 
 # van de Hulst, Multiple Light Scattering (1980), Vol. 2, Table 35 (also MCML's
@@ -264,7 +264,7 @@ def test_unwritable_cache_warns_and_still_returns(tmp_path, monkeypatch):
 
 
 def test_point_source_radial_profile():
-    from planeray.kernels import dipole_reflectance
+    from planeray.mc.diffusion import dipole_reflectance
     from planeray.mc import mc_point_profile
 
     sigma_s, sigma_a, g = 1.0, 0.01, 0.0

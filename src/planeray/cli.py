@@ -189,7 +189,8 @@ def profiles(
 ):
     """Plot area-normalized delay profiles of pixels (the paper's Fig. 9); classify effects from a transport."""
     from .figures import delay_profiles_figure, label_map_figure
-    from .profiles import classify_transport, measured_delay_profiles, transport_delay_profiles
+    from .classify import classify_transport
+    from .profiles import measured_delay_profiles, transport_delay_profiles
 
     if classify is not None and transport is None:
         raise ValueError("--classify needs --transport (the labels come from the transport's profiles)")

@@ -99,7 +99,7 @@ def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float 
     ``g`` enters only through the similarity relation.  ``eta = 1`` (index-matched
     boundary) matches the Monte Carlo engine's default ``n = 1``.
     """
-    from .kernels import dipole_line_kernel
+    from .mc.diffusion import dipole_line_kernel
 
     offsets = np.asarray(offsets)
 

@@ -1,24 +1,17 @@
 """Demultiplexing a delay-exposure stack into 3D light transport (Sec. 4).
 
-Solvers are chosen by name from :data:`SOLVERS` (Mitsuba-style registry):
-
-``fast``   the default: batched over all pixels sharing an illumination matrix,
-           exact to a certified tolerance (see :mod:`planeray.demux.fast`);
-``pinv``   pseudo-inverse (no constraint, no regularization);
-``nnls``   non-negative least squares without regularization;
-``cvxpy``  the paper's formulation solved by CVXPY + Clarabel (slow reference).
-
-Every solver has the signature ``solve(group, B, alpha, beta, tol) -> SolveResult``.
+Modules: :mod:`~planeray.demux.problem` (the per-pixel problem and its row groups),
+:mod:`~planeray.demux.fast` (the default solver), :mod:`~planeray.demux.reference`
+(pinv, nnls, cvxpy), :mod:`~planeray.demux.solvers` (the registry :data:`SOLVERS`,
+chosen by name) and :mod:`~planeray.demux.driver` (chunked, resumable, Dask runs).
 """
 
-from .baselines import solve_cvxpy, solve_nnls, solve_pinv
 from .driver import DEFAULT_CHUNK_ROWS, MAP_NAMES, DemuxResult, demultiplex, demultiplex_to_store, solve_chunk
 from .fast import solve_fast
 from .problem import DemuxProblem, RowGroup, difference_matrix
+from .reference import solve_cvxpy, solve_nnls, solve_pinv
 from .result import SolveResult
-
-#: Demultiplexing methods by name.
-SOLVERS = {"fast": solve_fast, "pinv": solve_pinv, "nnls": solve_nnls, "cvxpy": solve_cvxpy}
+from .solvers import SOLVERS, get_solver
 
 __all__ = [
     "SOLVERS",
@@ -31,6 +24,7 @@ __all__ = [
     "demultiplex",
     "demultiplex_to_store",
     "difference_matrix",
+    "get_solver",
     "solve_chunk",
     "solve_cvxpy",
     "solve_fast",

@@ -25,10 +25,12 @@ import numpy as np
 
 from .. import resumable
 from ..errors import InputError, TransportError
+from ..io import transport_attrs
 from ..stack import Stack
 from ..timing import RowGeometry
 from ..transport import Transport
 from .problem import DemuxProblem, RowGroup
+from .solvers import get_solver
 
 __all__ = ["DEFAULT_CHUNK_ROWS", "DemuxResult", "ChunkResult", "solve_chunk", "demultiplex", "demultiplex_to_store", "MAP_NAMES"]
 
@@ -62,15 +64,6 @@ class DemuxResult:
     attrs: dict
 
 
-def _solver(method: str):
-    from . import SOLVERS
-
-    try:
-        return SOLVERS[method]
-    except KeyError:
-        raise InputError(f"unknown demultiplexing method {method!r}; choose one of {sorted(SOLVERS)}") from None
-
-
 def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, source=None):
     """Observations ``(N, r, W)`` float64 of the used images and their saturation mask."""
     imgs = np.asarray(stack.images[:, rows, :], dtype=np.float64)[problem.image_index]
@@ -102,7 +95,7 @@ def solve_chunk(problem: DemuxProblem, observations, saturated, rows: slice, met
     method : str
         A key of :data:`planeray.demux.SOLVERS`.
     """
-    solve = _solver(method)
+    solve = get_solver(method)
     N, r, W = observations.shape
     U = problem.n_offsets
     T = np.zeros((r, W, U), np.float32)
@@ -234,7 +227,7 @@ def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_ro
 def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
     import zarr
 
-    from ..io import transport_attrs
+
 
     H, W = shape
     U = problem.n_offsets
@@ -289,7 +282,7 @@ def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0
     if out.exists() and not overwrite:
         raise TransportError("already exists (pass --overwrite to replace it)", out)
     problem = DemuxProblem.from_stack(stack, alpha, beta)
-    _solver(method)
+    get_solver(method)
     H, W = stack.shape
     chunks = _chunks(H, chunk_rows)
     fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows)

@@ -158,7 +158,7 @@ class SimulatedEpiscan:
         """
         from scipy.ndimage import gaussian_filter
 
-        from ..calibration import LineSweep
+        from ..linesweep import LineSweep
         from ..timing import RowPattern, band_bin_weights
 
         if not exposure_us > 0:

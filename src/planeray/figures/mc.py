@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import dipole_line_kernel, dipole_reflectance
+from ..mc.diffusion import dipole_line_kernel, dipole_reflectance
 from ..mc.engine import bin_measure
 from ._common import plt, save_png
 

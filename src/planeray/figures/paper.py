@@ -192,7 +192,7 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
 def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
     """Effect classification from demultiplexed delay profiles on every built-in scene,
     with its agreement with the scenes' ground-truth labels (Sec. 8)."""
-    from ..profiles import classify_transport, label_agreement, visible_effect_mask
+    from ..classify import classify_transport, label_agreement, visible_effect_mask
     from ..scenes import list_scenes
     from .labels import label_map_figure
 

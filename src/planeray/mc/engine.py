@@ -93,6 +93,9 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
+from .physics import fresnel_jit, hg_cos_jit, hg_pdf_jit
+
 __all__ = [
     "MCProfile",
     "mc_line_profile",
@@ -100,12 +103,7 @@ __all__ = [
     "default_cutoff_mm",
     "check_medium",
     "bin_measure",
-    "diffusion_exit",
-    "diffusion_normal_radiance_ratio",
     "DIFFUSION_DEPTH_MFP",
-    "fresnel_unpolarized",
-    "sample_hg_cos",
-    "hg_phase",
     "cache_dir",
     "cache_key",
     "TABLES_DIR",
@@ -190,104 +188,6 @@ class MCProfile:
                 + self.transmittance + self.absorbed + self.truncated)
 
 
-# ---------------------------------------------------------------- scalar physics (compiled)
-@numba.njit(cache=True, inline="always")
-def _fresnel(cos_i, n):
-    """Unpolarized Fresnel reflectance from inside (index ``n``) to outside (index 1)."""
-    if n == 1.0:
-        return 0.0
-    cos_i = min(max(cos_i, 0.0), 1.0)
-    sin_t2 = n * n * (1.0 - cos_i * cos_i)
-    if sin_t2 >= 1.0:
-        return 1.0
-    cos_t = math.sqrt(1.0 - sin_t2)
-    rs = (n * cos_i - cos_t) / (n * cos_i + cos_t)
-    rp = (cos_i - n * cos_t) / (cos_i + n * cos_t)
-    return 0.5 * (rs * rs + rp * rp)
-
-
-@numba.njit(cache=True, inline="always")
-def _hg_cos(xi, g):
-    """Inverse-CDF sample of the HG scattering cosine (Prahl 1989 [2]_)."""
-    if abs(g) < 1e-6:
-        return 2.0 * xi - 1.0
-    t = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi)
-    return min(max((1.0 + g * g - t * t) / (2.0 * g), -1.0), 1.0)
-
-
-@numba.njit(cache=True, inline="always")
-def _hg_pdf(mu, g):
-    """HG phase function per steradian, ``(1 - g^2) / (4 pi (1 + g^2 - 2 g mu)^1.5)``."""
-    q = 1.0 + g * g - 2.0 * g * mu
-    return (1.0 - g * g) / (4.0 * math.pi * q * math.sqrt(q))
-
-
-@numba.njit(cache=True)
-def _fresnel_array(cos_i, n, out):
-    for i in range(cos_i.size):
-        out[i] = _fresnel(cos_i[i], n)
-
-
-@numba.njit(cache=True)
-def _hg_cos_array(xi, g, out):
-    for i in range(xi.size):
-        out[i] = _hg_cos(xi[i], g)
-
-
-@numba.njit(cache=True)
-def _hg_pdf_array(mu, g, out):
-    for i in range(mu.size):
-        out[i] = _hg_pdf(mu[i], g)
-
-
-def _apply(kernel, x, *args):
-    x = np.asarray(x, dtype=np.float64)
-    flat = np.ascontiguousarray(x).ravel()
-    out = np.empty_like(flat)
-    kernel(flat, *[float(a) for a in args], out)
-    return out.reshape(x.shape)
-
-
-def fresnel_unpolarized(cos_i, n):
-    """Unpolarized Fresnel reflectance for light inside a medium of index ``n``
-    hitting a face to index 1 at incidence cosine ``cos_i``; 1 beyond the critical angle.
-
-    Parameters
-    ----------
-    cos_i : array_like
-        Cosine of the incidence angle, clipped to ``[0, 1]``.
-    n : float
-        Relative refractive index (inside / outside).
-
-    Returns
-    -------
-    ndarray of float64
-        Reflectance ``(r_s^2 + r_p^2) / 2``.
-    """
-    return _apply(_fresnel_array, cos_i, n)
-
-
-def sample_hg_cos(xi, g):
-    """Sample the cosine of the Henyey-Greenstein scattering angle (Prahl 1989 [2]_).
-
-    ``cos = (1 + g^2 - ((1 - g^2) / (1 - g + 2 g xi))^2) / (2 g)``, and
-    ``cos = 2 xi - 1`` for ``g = 0`` (isotropic).
-
-    Parameters
-    ----------
-    xi : array_like
-        Uniform variates in ``[0, 1)``.
-    g : float
-        Anisotropy, ``-1 < g < 1``.
-    """
-    return _apply(_hg_cos_array, xi, g)
-
-
-def hg_phase(mu, g):
-    """Henyey-Greenstein phase function ``p(mu)`` per steradian (integrates to 1 over the sphere)."""
-    return _apply(_hg_pdf_array, mu, g)
-
-
 # ---------------------------------------------------------------- random numbers
 @numba.njit(cache=True, inline="always")
 def _rotl(x, k):
@@ -350,7 +250,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
     albedo = sigma_s / sigma_t
     finite = d < np.inf
     # Straight-up radiance: normal transmission and the n^2 radiance law at the face.
-    up_gain = (1.0 - _fresnel(1.0, n)) / (n * n)
+    up_gain = (1.0 - fresnel_jit(1.0, n)) / (n * n)
     inv_bin = 1.0 / mm_per_row
     for b in numba.prange(B):
         s = states[b].copy()
@@ -387,7 +287,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
                     x += (zf - z) / uz * ux
                     y += (zf - z) / uz * uy
                     z = zf
-                    R = _fresnel(abs(uz), n)
+                    R = fresnel_jit(abs(uz), n)
                     esc = w * (1.0 - R)
                     if top:
                         refl_b += esc
@@ -410,12 +310,12 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
                     if tau < 40.0:
                         k = _bin(x, y, inv_bin, radial) - kmin
                         if 0 <= k < nk:
-                            rad_bins[b, int(k)] += (w * albedo * _hg_pdf(-uz, g)
+                            rad_bins[b, int(k)] += (w * albedo * hg_pdf_jit(-uz, g)
                                                     * math.exp(-tau) * up_gain)
                     abs_b += w * (1.0 - albedo)
                     w *= albedo
                     # New direction: HG polar angle, uniform azimuth, rotated into the frame.
-                    ct = _hg_cos(_uniform(s), g)
+                    ct = hg_cos_jit(_uniform(s), g)
                     st = math.sqrt(max(1.0 - ct * ct, 0.0))
                     phi = 2.0 * math.pi * _uniform(s)
                     cp = math.cos(phi)
@@ -764,88 +664,3 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
         specular_reflectance=float(r_sp), transmittance=float(T_tot), transmittance_stderr=float(t_err),
         absorbed=float(absorbed.sum() / n_photons), truncated=float(truncated.sum() / n_photons),
         n_photons=n_photons, n_interactions=int(events.sum()), params=params)
-
-
-# ---------------------------------------------------------------- diffusion continuation
-def diffusion_exit(hist, hmin, out_bins, mm_per_row, z_mm, sigma_a, sigma_tp, n):
-    """Where photons diffusing from depth ``z_mm`` leave the top face (hybrid MC-diffusion).
-
-    The 2-D diffusion dipole of a line source at depth ``z`` (the line along
-    ``y``, so the problem is 2-D in ``x, z``) with an extrapolated boundary
-    ``z_b = 2 A D`` above the surface (Farrell et al. [5]_, integrated along the
-    line) gives the exiting flux at lateral offset ``x``::
-
-        J(x) = (1 / 2 pi) sum_{z_i in (z, z + 2 z_b)} z_i sigma_tr K1(sigma_tr r_i) / r_i,
-        r_i = sqrt(x^2 + z_i^2),
-
-    (``z_i / r_i^2`` for ``sigma_a = 0``) whose integral, the fraction that
-    leaves at all, is ``(exp(-sigma_tr z) + exp(-sigma_tr (z + 2 z_b))) / 2``
-    (1 without absorption).  Bins are integrated exactly up to Gauss-Legendre
-    quadrature, a source spread uniformly over its histogram bin.
-
-    Parameters
-    ----------
-    hist : ndarray (B, nh)
-        Continued weight per batch by the bin ``hmin + j`` of its crossing point.
-    hmin : int
-        Bin of ``hist[:, 0]``.
-    out_bins : ndarray of int
-        Output bins.
-    mm_per_row, z_mm, sigma_a, sigma_tp, n : float
-        Bin width, continuation depth, absorption, transport coefficient
-        ``sigma_a + sigma_s (1 - g)`` and relative index.
-
-    Returns
-    -------
-    exit_bins : ndarray (B, len(out_bins))
-        Weight leaving through each output bin.
-    exit_total : float
-        Fraction of the continued weight that leaves the medium (anywhere).
-    """
-    from scipy.special import k1e
-
-    from ..kernels import boundary_mismatch_A
-
-    sigma_tr = math.sqrt(3.0 * sigma_a * sigma_tp)
-    z_b = 2.0 * boundary_mismatch_A(n) / (3.0 * sigma_tp)
-    depths = np.array([z_mm, z_mm + 2.0 * z_b])
-    nh = hist.shape[1]
-    m = np.arange(int(out_bins.min()) - (hmin + nh - 1), int(out_bins.max()) - hmin + 1)
-    # Triangle weight: source uniform over its bin, flux integrated over the output bin.
-    t, wt = np.polynomial.legendre.leggauss(16)
-    t = 0.5 * (t + 1.0)  # (0, 1)
-    wt = 0.5 * wt
-    u = np.concatenate([m[:, None] - 1.0 + t[None, :], m[:, None] + t[None, :]], axis=1) * mm_per_row
-    tri = np.concatenate([t, 1.0 - t])[None, :] * np.concatenate([wt, wt])[None, :]
-    flux = np.zeros_like(u)
-    for zi in depths:
-        r = np.hypot(u, zi)
-        if sigma_tr > 0.0:
-            flux += zi * sigma_tr * k1e(sigma_tr * r) * np.exp(-sigma_tr * r) / r
-        else:
-            flux += zi / (r * r)
-    P = (flux * tri).sum(axis=1) * mm_per_row / (2.0 * np.pi)
-    idx = out_bins[None, :] - (hmin + np.arange(nh))[:, None] - m[0]
-    exit_bins = hist @ P[idx]
-    exit_total = 0.5 * float(np.exp(-sigma_tr * depths[0]) + np.exp(-sigma_tr * depths[1]))
-    return exit_bins, exit_total
-
-
-def diffusion_normal_radiance_ratio(n):
-    """Normal-view radiance per unit exitance of diffuse light leaving a medium of index ``n``.
-
-    In the diffusion (P1) approximation with the extrapolated boundary the
-    radiance inside the surface is ``L(mu) ~ 2A + 3 mu`` (``mu`` toward the
-    outside); outside, the normal radiance is ``L(1) (1 - R(1)) / n^2`` and the
-    exitance ``2 pi int L(mu) (1 - R(mu)) mu dmu``.  0.398 sr^-1 for ``n = 1``
-    (Lambertian: 1/pi = 0.318; Chandrasekhar's exact H-function value: 0.401).
-    """
-    from ..kernels import boundary_mismatch_A
-
-    A = boundary_mismatch_A(n)
-    mu, wt = np.polynomial.legendre.leggauss(64)
-    mu = 0.5 * (mu + 1.0)
-    wt = 0.5 * wt
-    T = 1.0 - fresnel_unpolarized(mu, n)
-    exitance = 2.0 * np.pi * np.sum(wt * (2.0 * A + 3.0 * mu) * T * mu)
-    return float((2.0 * A + 3.0) * (1.0 - fresnel_unpolarized(1.0, n)) / (n * n) / exitance)

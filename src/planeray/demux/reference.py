@@ -1,4 +1,4 @@
-"""Baseline demultiplexers of the Sec. 5.2 study, selectable by name.
+"""Reference demultiplexers (the Sec. 5.2 study's baselines and the trusted slow solver).
 
 * ``pinv`` -- the pseudo-inverse: least squares without constraints or
   regularization (goes negative, Fig. 5a);

@@ -1,0 +1,148 @@
+"""Calibration files: line-sweep captures (``.npz``) and the calibration fields of ``acquisition.json``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io import atomic_file, jsonable
+from ..linesweep import PAPER_CALIBRATION_EXPOSURE_US, LineSweep
+from .delay_zero import DelayZeroCalibration
+from .lines import LineCalibration
+
+
+def write_line_sweep(sweep: LineSweep, path, overwrite: bool = True) -> Path:
+    """Write a :class:`LineSweep` to one ``.npz`` file, atomically."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise InputError("a line sweep is written as .npz", path)
+    meta = {
+        "format": "planeray-line-sweep",
+        "format_version": 1,
+        "exposure_us": sweep.exposure_us,
+        "line_step_rows": sweep.line_step_rows,
+        "phases": None if sweep.phases is None else list(sweep.phases),
+        "flat_exposure_us": sweep.flat_exposure_us,
+        "timing_jitter_us": sweep.timing_jitter_us,
+        "metadata": jsonable(sweep.metadata, "metadata", InputError),
+    }
+    arrays = {"images": np.asarray(sweep.images, np.float32), "meta": np.array(json.dumps(meta))}
+    for name in ("dark", "flat"):
+        if getattr(sweep, name) is not None:
+            arrays[name] = np.asarray(getattr(sweep, name), np.float32)
+    if sweep.saturated is not None:
+        arrays["saturated"] = np.asarray(sweep.saturated, bool)
+    with atomic_file(path, overwrite) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+    return path
+
+
+def read_line_sweep(path, exposure_us: float | None = None, rows_per_line: int | None = None) -> LineSweep:
+    """Read line-sweep images: a ``.npz`` from :func:`write_line_sweep`, or image files.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npz`` (everything included), or one grayscale ``.tif``/``.tiff``/``.png``
+        (a multi-page TIFF holds one comb phase per page).
+    exposure_us, rows_per_line : optional
+        Override (or, for image files, give) the exposure and comb step;
+        image files default to the paper's 500 us and ``k = 1``.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError("file not found", path)
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                if "images" not in z or "meta" not in z:
+                    raise InputError("not a planeray line sweep (arrays 'images' and 'meta' required)", path)
+                meta = json.loads(str(z["meta"]))
+                arr = {name: z[name] for name in ("images", "dark", "flat", "saturated") if name in z}
+            return LineSweep(
+                arr["images"],
+                meta["exposure_us"] if exposure_us is None else exposure_us,
+                meta["line_step_rows"] if rows_per_line is None else rows_per_line,
+                None if meta.get("phases") is None else tuple(meta["phases"]),
+                arr.get("dark"), arr.get("flat"), meta.get("flat_exposure_us"), arr.get("saturated"),
+                float(meta.get("timing_jitter_us", 0.0)), meta.get("metadata", {}),
+            )
+        if suffix in (".tif", ".tiff"):
+            import tifffile
+
+            images = np.asarray(tifffile.imread(path), dtype=np.float64)
+        elif suffix == ".png":
+            from PIL import Image
+
+            with Image.open(path) as im:
+                images = np.asarray(im.convert("I") if im.mode not in ("L", "I", "I;16", "F") else im, dtype=np.float64)
+        else:
+            raise InputError(f"unsupported line-sweep file {suffix!r} (use .npz, .tif, .tiff or .png)", path)
+    except InputError as exc:
+        if exc.path is None:
+            raise InputError(exc.problem, path) from None
+        raise
+    except Exception as exc:  # corrupt files raise many types
+        raise InputError(f"cannot read line sweep ({type(exc).__name__}: {exc})", path) from exc
+    if images.ndim not in (2, 3):
+        raise InputError(f"expected a grayscale image or a stack of them, got shape {images.shape}", path)
+    return LineSweep(images, PAPER_CALIBRATION_EXPOSURE_US if exposure_us is None else exposure_us,
+                     1 if rows_per_line is None else rows_per_line)
+
+
+def write_calibration(path, lines: LineCalibration | None = None, delay_zero: DelayZeroCalibration | None = None) -> dict:
+    """Store calibration results in an ``acquisition.json``, keeping its other fields.
+
+    Writes ``lines_per_second`` (the field the stack import requires),
+    ``lines_per_second_uncertainty``, ``delay_zero_us``,
+    ``delay_zero_uncertainty_us`` and ``sync_offset_us`` as given, and the full
+    results under ``calibration.lines`` / ``calibration.delay_zero``.  The file
+    (or ``path/acquisition.json`` when ``path`` is a folder) is created if missing
+    and replaced atomically.
+
+    Returns
+    -------
+    dict
+        The new content.
+
+    Raises
+    ------
+    InputError
+        Nothing to write, or an existing file that is not a JSON object.
+    """
+
+    if lines is None and delay_zero is None:
+        raise InputError("nothing to write: give a line-velocity and/or a delay-zero calibration")
+    path = Path(path)
+    if path.is_dir():
+        path = path / "acquisition.json"
+    acq: dict = {}
+    if path.exists():
+        try:
+            acq = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"cannot read file ({exc})", path) from exc
+        except json.JSONDecodeError as exc:
+            raise InputError(f"invalid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})", path) from exc
+        if not isinstance(acq, dict):
+            raise InputError(f"expected a JSON object, got {type(acq).__name__}", path)
+    cal = dict(acq.get("calibration") or {}) if isinstance(acq.get("calibration"), dict) else {}
+    if lines is not None:
+        acq["lines_per_second"] = float(lines.lines_per_second)
+        acq["lines_per_second_uncertainty"] = float(lines.uncertainty)
+        cal["lines"] = lines.to_dict()
+    if delay_zero is not None:
+        acq["delay_zero_us"] = float(delay_zero.delay_zero_us)
+        acq["delay_zero_uncertainty_us"] = float(delay_zero.uncertainty_us)
+        acq["sync_offset_us"] = float(delay_zero.sync_offset_us)
+        cal["delay_zero"] = delay_zero.to_dict()
+    acq["calibration"] = cal
+    acq = jsonable(acq, "acquisition.json", InputError)
+    with atomic_file(path) as tmp:
+        tmp.write_text(json.dumps(acq, indent=2) + "\n", encoding="utf-8")
+    return acq

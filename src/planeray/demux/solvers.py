@@ -1,0 +1,32 @@
+"""The demultiplexing solvers, by name (a Mitsuba-style registry).
+
+``fast``   the default: batched over all pixels sharing an illumination matrix,
+           exact to a certified tolerance (:mod:`planeray.demux.fast`);
+``pinv``   pseudo-inverse (no constraint, no regularization);
+``nnls``   non-negative least squares without regularization;
+``cvxpy``  the paper's formulation solved by CVXPY + Clarabel (slow reference).
+
+The last three are in :mod:`planeray.demux.reference`.  Every solver has the
+signature ``solve(group, B, alpha, beta, tol) -> SolveResult``.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from ..errors import InputError
+from .fast import solve_fast
+from .reference import solve_cvxpy, solve_nnls, solve_pinv
+
+__all__ = ["SOLVERS", "get_solver"]
+
+#: Demultiplexing methods by name.
+SOLVERS: dict[str, Callable] = {"fast": solve_fast, "pinv": solve_pinv, "nnls": solve_nnls, "cvxpy": solve_cvxpy}
+
+
+def get_solver(method: str) -> Callable:
+    """The solver registered as ``method``; an :class:`~planeray.errors.InputError` names the choices otherwise."""
+    try:
+        return SOLVERS[method]
+    except KeyError:
+        raise InputError(f"unknown demultiplexing method {method!r}; choose one of {sorted(SOLVERS)}") from None

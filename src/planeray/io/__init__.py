@@ -1,0 +1,117 @@
+"""Reading and writing stacks, captured image folders and transports (public API of ``planeray.io``).
+
+Three on-disk formats are handled here, one module each (:mod:`~planeray.io.stack_store`,
+:mod:`~planeray.io.folder`, :mod:`~planeray.io.transport_store`; single image files in
+:mod:`~planeray.io.images`, atomic writes in :mod:`~planeray.io.atomic`).  All writers are atomic: they write into a
+temporary sibling (``.{name}.tmp-{uuid}`` in the same parent folder) and rename it
+into place, so a crash or an error never leaves a half-written result at the
+target path (see :func:`atomic_directory` and :func:`atomic_file`).
+
+Native stack store
+------------------
+A Zarr v3 directory store (group) written by :func:`write_stack`, read by
+:func:`read_stack`:
+
+=================  ==========  =======  ==========================================
+array              shape       dtype    content
+=================  ==========  =======  ==========================================
+``images``         (N, H, W)   float32  normalized images, chunked ``(1, 32, W)``
+``saturated``      (N, H, W)   bool     saturation mask (all False if unknown)
+``delay_us``       (N,)        float64  delay ``t_d`` of each image
+``exposure_us``    (N,)        float64  exposure ``t_e`` of each image
+``excluded``       (N,)        bool     images left out of demultiplexing
+=================  ==========  =======  ==========================================
+
+Group attributes: ``format = "planeray-stack"``, ``format_version = 1``,
+``lines_per_second`` (float), ``projector_rows`` (int), ``metadata`` (the
+:attr:`planeray.stack.Stack.metadata` dict, JSON) and ``planeray_version``.
+
+Captured-stack import folder (public format)
+--------------------------------------------
+A folder read by :func:`import_folder` (and by :func:`read_stack` when the folder
+holds a ``manifest.csv``), written by :func:`export_folder`::
+
+    my_capture/
+        manifest.csv
+        acquisition.json
+        img_0000.tif            (or .tiff / .png; any names, listed in the manifest)
+        ...
+
+``manifest.csv``
+    Comma-separated, UTF-8, one header line, one line per image.  Required columns
+    ``file,delay_us,exposure_us``; ``file`` is the image path relative to the
+    folder, ``delay_us`` the delay ``t_d`` and ``exposure_us`` the exposure ``t_e``
+    in microseconds (finite numbers, exposure > 0).  Optional column ``excluded``
+    (``0``/``1``/``true``/``false``, case-insensitive) marks images left out of
+    demultiplexing; without it the paper's boundary rule
+    ``||t_d| - t_e/2| <= 75 us`` is applied
+    (:func:`planeray.timing.boundary_images`).  Other columns are ignored.
+
+images
+    Single-channel (grayscale) 2-D images, all of the same size: 8- or 16-bit
+    integer TIFF (``.tif``/``.tiff``) or PNG (``.png``), or float32/float64 TIFF
+    holding raw codes.  Values are raw ADC codes and must not exceed
+    ``2**bit_depth - 1``; float images must not contain NaN.
+
+``acquisition.json``
+    A JSON object with
+
+    * ``lines_per_second`` (required, positive number): projector scanline
+      velocity ``v_p`` (Eq. 2);
+    * ``bit_depth`` (integer 1..16, default 12): ADC bit depth;
+    * ``black_level`` (number >= 0 and < ``2**bit_depth - 1``, default 0): raw code
+      of black;
+    * ``projector_rows`` (integer, optional): projector rows spanned by the image
+      height (default: the image height);
+    * ``saturation_level`` (number, optional): raw code at or above which a pixel
+      counts as saturated (default ``2**bit_depth - 1``);
+    * ``planeray_metadata`` (object, optional): written by :func:`export_folder`;
+      restored as the stack's metadata on import;
+    * any other field, kept verbatim.
+
+    Images are normalized as ``(raw - black_level) / (2**bit_depth - 1 -
+    black_level)`` (float32) and a pixel is flagged saturated where ``raw >=
+    saturation_level``.  The imported stack's metadata is ``planeray_metadata`` (if
+    any) plus ``metadata["acquisition"]`` (the JSON object without
+    ``planeray_metadata``) and ``metadata["source"] = "import:<folder>"``.
+
+Transport store (public format)
+-------------------------------
+A Zarr v3 group written by :func:`write_transport`, read by :func:`read_transport`:
+array ``T`` of shape ``(H, W, U)`` float32 (the dense band of
+:class:`planeray.transport.Transport`) and attributes ``offsets_rows`` (the ``U``
+consecutive integer offsets ``u = v - t``, in projector rows), ``lines_per_second``
+(or null), ``projector_rows``, ``format = "planeray-transport"``,
+``format_version = 1``, plus free-form attributes (``alpha``, ``beta``,
+``method``...).  Sparse long-range entries, when there are any, are stored as the
+1-D arrays ``sparse_row``, ``sparse_col``, ``sparse_offset`` (int32) and
+``sparse_value`` (float32) of equal length.
+"""
+
+from ._common import FORMAT_VERSION, STACK_FORMAT, TRANSPORT_FORMAT, LazyArray, jsonable
+from .atomic import atomic_directory, atomic_file
+from .folder import export_folder, import_folder
+from .images import write_image
+from .stack_store import create_stack_group, read_stack, validate_images, write_stack
+from .transport_store import read_transport, read_transport_maps, transport_attrs, write_transport
+
+__all__ = [
+    "STACK_FORMAT",
+    "TRANSPORT_FORMAT",
+    "FORMAT_VERSION",
+    "LazyArray",
+    "jsonable",
+    "atomic_directory",
+    "atomic_file",
+    "write_stack",
+    "create_stack_group",
+    "read_stack",
+    "validate_images",
+    "import_folder",
+    "export_folder",
+    "write_image",
+    "write_transport",
+    "read_transport",
+    "read_transport_maps",
+    "transport_attrs",
+]

@@ -1,0 +1,285 @@
+"""The captured-stack import folder (``manifest.csv`` + images + ``acquisition.json``): import and export."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import StackError
+from ..stack import Stack
+from ..timing import boundary_images
+from ._common import is_integer, is_number, jsonable, planeray_version
+from .atomic import atomic_directory
+from .images import check_levels, quantize, read_raw_image, write_raw
+
+
+# ----------------------------------------------------------------------------
+def _read_acquisition(folder: Path) -> dict:
+    path = folder / "acquisition.json"
+    if not path.is_file():
+        raise StackError("file not found (acquisition.json is required)", path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StackError(f"cannot read file ({exc})", path) from exc
+    try:
+        acq = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise StackError(f"invalid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})", path) from exc
+    if not isinstance(acq, dict):
+        raise StackError(f"expected a JSON object, got {type(acq).__name__}", path)
+
+    if "lines_per_second" not in acq:
+        raise StackError("missing field 'lines_per_second'", path)
+    lps = acq["lines_per_second"]
+    if not is_number(lps) or not math.isfinite(lps) or lps <= 0:
+        raise StackError(f"field 'lines_per_second' must be a positive number, got {lps!r}", path)
+    bit_depth = acq.get("bit_depth", 12)
+    if not is_integer(bit_depth) or not 1 <= bit_depth <= 16:
+        raise StackError(f"field 'bit_depth' must be an integer in 1..16, got {bit_depth!r}", path)
+    bit_depth = int(bit_depth)
+    max_code = 2**bit_depth - 1
+    black = acq.get("black_level", 0)
+    if not is_number(black) or not math.isfinite(black) or black < 0:
+        raise StackError(f"field 'black_level' must be a number >= 0, got {black!r}", path)
+    if black >= max_code:
+        raise StackError(
+            f"field 'black_level' ({black}) must be below the largest code 2**bit_depth - 1 = {max_code}", path
+        )
+    projector_rows = acq.get("projector_rows")
+    if projector_rows is not None and (not is_integer(projector_rows) or projector_rows < 1):
+        raise StackError(f"field 'projector_rows' must be a positive integer, got {projector_rows!r}", path)
+    saturation = acq.get("saturation_level", max_code)
+    if not is_number(saturation) or not math.isfinite(saturation):
+        raise StackError(f"field 'saturation_level' must be a number, got {saturation!r}", path)
+    planeray_metadata = acq.get("planeray_metadata", {})
+    if not isinstance(planeray_metadata, dict):
+        raise StackError(f"field 'planeray_metadata' must be a JSON object, got {planeray_metadata!r}", path)
+    return {
+        "raw": acq,
+        "lines_per_second": float(lps),
+        "bit_depth": bit_depth,
+        "black_level": float(black),
+        "projector_rows": None if projector_rows is None else int(projector_rows),
+        "saturation_level": float(saturation),
+        "planeray_metadata": planeray_metadata,
+    }
+
+
+_TRUE = {"1", "true"}
+_FALSE = {"0", "false"}
+
+
+def _read_manifest(folder: Path):
+    path = folder / "manifest.csv"
+    if not path.is_file():
+        raise StackError("file not found (manifest.csv is required)", path)
+    files, delays, exposures, excluded, lines = [], [], [], [], []
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh)
+            header = None
+            for row in reader:
+                if not any(cell.strip() for cell in row):
+                    continue  # blank line
+                if header is None:
+                    header = [cell.strip() for cell in row]
+                    for column in ("file", "delay_us", "exposure_us"):
+                        if column not in header:
+                            raise StackError(
+                                f"missing column '{column}' (header has: {', '.join(header)})", path
+                            )
+                    col = {name: header.index(name) for name in header[::-1]}  # first occurrence wins
+                    has_excluded = "excluded" in col
+                    continue
+                line = reader.line_num
+                if len(row) < len(header):
+                    raise StackError(f"line {line}: expected {len(header)} columns, got {len(row)}", path)
+                name = row[col["file"]].strip()
+                if not name:
+                    raise StackError(f"line {line}: empty 'file'", path)
+                values = {}
+                for column in ("delay_us", "exposure_us"):
+                    text = row[col[column]].strip()
+                    try:
+                        value = float(text)
+                    except ValueError:
+                        value = math.nan
+                    if not math.isfinite(value):
+                        raise StackError(f"line {line}: {column} {text!r} is not a finite number", path)
+                    values[column] = value
+                if values["exposure_us"] <= 0:
+                    raise StackError(f"line {line}: exposure_us must be positive, got {values['exposure_us']}", path)
+                if has_excluded:
+                    text = row[col["excluded"]].strip().lower()
+                    if text in _TRUE:
+                        excluded.append(True)
+                    elif text in _FALSE:
+                        excluded.append(False)
+                    else:
+                        raise StackError(f"line {line}: excluded {text!r} is not 0, 1, true or false", path)
+                files.append(name)
+                delays.append(values["delay_us"])
+                exposures.append(values["exposure_us"])
+                lines.append(line)
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise StackError(f"cannot read file ({type(exc).__name__}: {exc})", path) from exc
+    if header is None:
+        raise StackError("empty manifest (no header line)", path)
+    if not files:
+        raise StackError("empty manifest (no image lines)", path)
+    delays = np.asarray(delays, dtype=np.float64)
+    exposures = np.asarray(exposures, dtype=np.float64)
+    excluded = np.asarray(excluded, dtype=bool) if has_excluded else boundary_images(delays, exposures)
+    return files, delays, exposures, excluded, lines
+
+
+def import_folder(path) -> Stack:
+    """Import a captured delay-exposure stack from a folder of images.
+
+    The folder format (``manifest.csv``, ``acquisition.json`` and grayscale TIFF or
+    PNG images) is described in the module docstring of :mod:`planeray.io`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The folder.
+
+    Returns
+    -------
+    stack : Stack
+        In-memory stack: float32 images normalized as ``(raw - black_level) /
+        (2**bit_depth - 1 - black_level)`` and the mask ``raw >= saturation_level``.
+
+    Raises
+    ------
+    StackError
+        Naming the file and the problem (missing or malformed manifest, acquisition
+        record or image; inconsistent image sizes; raw values above the bit depth).
+        Nothing is written to disk.
+    """
+    folder = Path(path)
+    if not folder.exists():
+        raise StackError("folder does not exist", folder)
+    if not folder.is_dir():
+        raise StackError("not a folder", folder)
+    acq = _read_acquisition(folder)
+    files, delays, exposures, excluded, lines = _read_manifest(folder)
+
+    bit_depth, black = acq["bit_depth"], acq["black_level"]
+    max_code = 2**bit_depth - 1
+    scale = 1.0 / (max_code - black)
+    images = saturated = None
+    first = None
+    for i, (name, line) in enumerate(zip(files, lines)):
+        file = folder / name
+        raw = read_raw_image(file, line)
+        if raw.dtype.kind == "f" and not np.all(np.isfinite(raw)):
+            raise StackError("image contains NaN or infinite values", file)
+        if images is None:
+            first = (name, raw.shape)
+            images = np.empty((len(files), *raw.shape), dtype=np.float32)
+            saturated = np.empty((len(files), *raw.shape), dtype=bool)
+        elif raw.shape != first[1]:
+            raise StackError(f"image size {raw.shape} differs from the first image {first[0]!r} {first[1]}", file)
+        if raw.size:
+            top = raw.max()
+            if top > max_code:
+                raise StackError(
+                    f"raw value {top} above the largest code {max_code} of bit_depth {bit_depth}", file
+                )
+            if raw.dtype.kind == "i" and raw.min() < 0:
+                raise StackError(f"negative raw value {raw.min()}", file)
+        images[i] = ((raw.astype(np.float64) - black) * scale).astype(np.float32)
+        saturated[i] = raw >= acq["saturation_level"]
+
+    metadata = dict(acq["planeray_metadata"])
+    metadata["acquisition"] = {k: v for k, v in acq["raw"].items() if k != "planeray_metadata"}
+    metadata["source"] = f"import:{folder}"
+    try:
+        return Stack(
+            images=images,
+            delay_us=delays,
+            exposure_us=exposures,
+            lines_per_second=acq["lines_per_second"],
+            excluded=excluded,
+            saturated=saturated,
+            projector_rows=acq["projector_rows"],
+            metadata=metadata,
+        )
+    except StackError as exc:
+        raise StackError(exc.problem, folder) from exc
+
+
+def export_folder(stack: Stack, folder, fmt: str = "tiff", bit_depth: int = 16, black_level: float = 256,
+                  overwrite: bool = False) -> Path:
+    """Export a stack as an import folder of 16-bit grayscale images, atomically.
+
+    Writes ``img_0000.tif`` (or ``.png``) per image, ``manifest.csv``
+    (``file,delay_us,exposure_us,excluded``) and ``acquisition.json``
+    (``lines_per_second``, ``bit_depth``, ``black_level``, ``projector_rows`` and
+    ``planeray_metadata`` = the stack's metadata), so that :func:`import_folder`
+    reads it back: images within half a quantization step
+    ``0.5 / (2**bit_depth - 1 - black_level)``, everything else exactly.
+
+    Parameters
+    ----------
+    stack : Stack
+    folder : str or os.PathLike
+        Folder to create.
+    fmt : {"tiff", "png"}
+        Image format (16-bit TIFF via tifffile or 16-bit PNG via Pillow).
+    bit_depth : int
+        Bit depth of the raw codes (1..16); images are always stored as 16-bit.
+    black_level : float
+        Raw code of normalized 0.
+    overwrite : bool
+        Replace an existing folder (atomically).
+
+    Returns
+    -------
+    folder : pathlib.Path
+
+    Notes
+    -----
+    Values are clipped to the representable range: below ``-black_level /
+    (2**bit_depth - 1 - black_level)`` they become code 0, above 1 the largest code
+    (and are flagged saturated on import).  The stack's own saturation mask is not
+    exported; import re-derives it from the codes (``raw >= 2**bit_depth - 1``).
+    """
+    folder = Path(folder)
+    kind = {"tiff": "tiff", "tif": "tiff", "png": "png"}.get(str(fmt).lower())
+    if kind is None:
+        raise StackError(f"unknown image format {fmt!r} (use 'tiff' or 'png')", folder)
+    bit_depth, max_code = check_levels(bit_depth, black_level, folder, StackError)
+    n = len(stack)
+    digits = max(4, len(str(max(n - 1, 0))))
+    suffix = ".tif" if kind == "tiff" else ".png"
+    acquisition = {
+        "lines_per_second": float(stack.lines_per_second),
+        "bit_depth": bit_depth,
+        "black_level": black_level.item() if isinstance(black_level, np.generic) else black_level,
+        "projector_rows": int(stack.projector_rows),
+        "planeray_version": planeray_version(),
+        "planeray_metadata": jsonable(stack.metadata, "metadata", StackError),
+    }
+    with atomic_directory(folder, overwrite, error=StackError) as tmp:
+        rows = []
+        for i in range(n):
+            image = np.asarray(stack.images[i], dtype=np.float32)
+            if not np.all(np.isfinite(image)):
+                raise StackError(f"image {i} contains NaN or infinite values", folder)
+            name = f"img_{i:0{digits}d}{suffix}"
+            write_raw(tmp / name, quantize(image, max_code, black_level), kind)
+            rows.append([name, repr(float(stack.delay_us[i])), repr(float(stack.exposure_us[i])),
+                         int(bool(stack.excluded[i]))])
+        with open(tmp / "manifest.csv", "w", newline="", encoding="utf-8") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(["file", "delay_us", "exposure_us", "excluded"])
+            writer.writerows(rows)
+        (tmp / "acquisition.json").write_text(json.dumps(acquisition, indent=2) + "\n", encoding="utf-8")
+    return folder
