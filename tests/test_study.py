@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from planeray import study
+from planeray.experiments.study import run_study
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +51,7 @@ def test_mse_increases_with_noise(setup, provider):
 
 
 def test_run_study_quick_writes_files(tmp_path, provider):
-    r = study.run_study(tmp_path, provider=provider, seeds=2, quick=True)
+    r = run_study(tmp_path, provider=provider, seeds=2, quick=True)
     names = {p.name for p in tmp_path.iterdir()}
     for stem in ("fig5_reconstruction", "fig5c_mse_vs_noise", "regularization_sweep"):
         assert f"{stem}.png" in names and f"{stem}.csv" in names
@@ -70,7 +71,7 @@ def test_custom_provider_and_errors(setup):
     with pytest.raises(ValueError):
         study.parameter_sweep(setup, flat, "n", [1.0])
     with pytest.raises(ValueError):
-        study.run_study("/nonexistent-never", provider="bogus")
+        run_study("/nonexistent-never", provider="bogus")
 
 
 def test_back_scattering_degrades_the_full_method_with_monte_carlo_profiles(setup):

@@ -14,10 +14,9 @@ from typing import Annotated, Optional
 
 import numpy as np
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
+from ._console import console, out, progress_bar
 from .errors import PlanerayError
 
 app = typer.Typer(
@@ -26,10 +25,6 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-console = Console(stderr=True)
-out = Console()
-
-
 def _friendly_errors(fn):
     """Turn planeray's own errors into one red line and exit status 1."""
 
@@ -42,18 +37,6 @@ def _friendly_errors(fn):
             raise typer.Exit(1) from None
 
     return wrapper
-
-
-def progress_bar():
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-    )
 
 
 def _load_stack(path: Path):
@@ -188,9 +171,13 @@ def profiles(
     classify: Annotated[Optional[Path], typer.Option(help="With --transport: write the per-pixel effect label map PNG.")] = None,
 ):
     """Plot area-normalized delay profiles of pixels (the paper's Fig. 9); classify effects from a transport."""
-    from .figures import delay_profiles_figure, label_map_figure
     from .classify import classify_transport
-    from .profiles import measured_delay_profiles, transport_delay_profiles
+    from .figures import delay_profiles_figure, label_map_figure
+    from .profiles import (
+        measured_delay_profiles,
+        transport_delay_profiles,
+        write_profiles_csv,
+    )
 
     if classify is not None and transport is None:
         raise ValueError("--classify needs --transport (the labels come from the transport's profiles)")
@@ -212,7 +199,7 @@ def profiles(
             continuous = transport_delay_profiles(T, prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second)
         path = delay_profiles_figure(st, prof, out_png, exposure_us=exposure, continuous=continuous)
         if csv is not None:
-            _write_profiles_csv(prof, csv)
+            write_profiles_csv(prof, csv)
             out.print(f"profiles CSV: {csv}")
         out.print(f"delay profiles: {path}")
     if classify is not None:
@@ -244,19 +231,6 @@ def _join_pixel_args(argv: list[str]) -> list[str]:
             joined.append(argv[i])
             i += 1
     return joined
-
-
-def _write_profiles_csv(prof, path: Path):
-    from .io import atomic_file
-
-    rows = ["row,col,exposure_us,delay_us,raw,normalized"]
-    for p, (r, c) in enumerate(prof.pixels):
-        for e_i, e in enumerate(prof.exposure_us):
-            for d_i, d in enumerate(prof.delay_us):
-                if np.isfinite(prof.raw[p, e_i, d_i]):
-                    rows.append(f"{r},{c},{e:g},{d:g},{prof.raw[p, e_i, d_i]:.7g},{prof.values[p, e_i, d_i]:.7g}")
-    with atomic_file(path) as tmp:
-        tmp.write_text("\n".join(rows) + "\n")
 
 
 # --------------------------------------------------------------- acquire
@@ -557,7 +531,7 @@ def study_demux(
     quick: Annotated[bool, typer.Option(help="Reduced grids.")] = False,
 ):
     """Reconstruction quality of pinv, NNLS and the full method (Figs. 5, 6) and an alpha/beta sweep."""
-    from .study import run_study
+    from .experiments.study import run_study
 
     with console.status("running the demultiplexing study"):
         numbers = run_study(out_dir, provider, seeds, quick)
@@ -612,8 +586,9 @@ def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
     from .io import write_image
 
     if path.suffix.lower() == ".png":
-        from .figures._common import display_scale
         from PIL import Image
+
+        from .figures._common import display_scale
         from .io import atomic_file
 
         shown = np.clip(image * (scale_to or display_scale([image], 99.5)), 0, 1)
@@ -681,7 +656,7 @@ def figure(
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
 ):
     """Reproduce a paper figure on the built-in scenes (writes PNG + JSON of the measured numbers)."""
-    from .figures.paper import FIGURES
+    from .experiments.paper import FIGURES
 
     names = list(FIGURES) if name == "all" else [name]
     for n in names:

@@ -15,13 +15,17 @@ import argparse
 import time
 from pathlib import Path
 
-
+from ._console import progress_bar
 from .acquire import acquire_sweep
-from .devices import SimulatedEpiscan
 from .demux import demultiplex_to_store
-from .figures import contact_sheet_figure, delay_profiles_figure, transport_profiles_figure
+from .devices import SimulatedEpiscan
+from .figures import (
+    contact_sheet_figure,
+    delay_profiles_figure,
+    transport_profiles_figure,
+)
 from .io import read_transport, read_transport_maps, write_stack, write_transport
-from .profiles import measured_delay_profiles
+from .profiles import measured_delay_profiles, write_profiles_csv
 from .scenes import make_scene, representative_pixels
 from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
 
@@ -52,8 +56,6 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     """Run the demo and return the paths it wrote."""
     from rich.console import Console
 
-    from .cli import progress_bar
-
     console = console or Console()
     progress = progress or progress_bar
     out_dir = Path(out_dir)
@@ -71,9 +73,7 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     pixels, names = representative_pixels(mirror, support, per_label=1)
     prof = measured_delay_profiles(mirror_stack, pixels)
     written["fig9_delay_profiles"] = delay_profiles_figure(mirror_stack, prof, out_dir / "fig9_delay_profiles.png", names=names)
-    from .cli import _write_profiles_csv
-
-    _write_profiles_csv(prof, out_dir / "fig9_delay_profiles.csv")
+    write_profiles_csv(prof, out_dir / "fig9_delay_profiles.csv")
     written["fig9_profiles_csv"] = out_dir / "fig9_delay_profiles.csv"
 
     # Demultiplex the mirror-ball stack (Sec. 4) and hold it against the ground truth.

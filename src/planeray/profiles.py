@@ -10,13 +10,15 @@ their area to cancel albedo (Sec. 8).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
+from .io import atomic_file
 from .stack import Stack
 
-__all__ = ["DelayProfiles", "measured_delay_profiles", "area_normalize"]
+__all__ = ["DelayProfiles", "measured_delay_profiles", "area_normalize", "write_profiles_csv"]
 
 
 @dataclass
@@ -78,6 +80,24 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     for n in range(len(stack)):  # one image at a time: works on lazy stacks
         raw[:, ei[n], di[n]] = stack.image(n)[px[:, 0], px[:, 1]]
     return DelayProfiles(px, delays, exposures, area_normalize(raw, delays), raw)
+
+
+def write_profiles_csv(profiles: DelayProfiles, path) -> Path:
+    """Write measured delay profiles as CSV (``row,col,exposure_us,delay_us,raw,normalized``), atomically.
+
+    One line per pixel, exposure and delay with a measurement (missing ones are skipped).
+    """
+    prof = profiles
+    rows = ["row,col,exposure_us,delay_us,raw,normalized"]
+    for p, (r, c) in enumerate(prof.pixels):
+        for e_i, e in enumerate(prof.exposure_us):
+            for d_i, d in enumerate(prof.delay_us):
+                if np.isfinite(prof.raw[p, e_i, d_i]):
+                    rows.append(f"{r},{c},{e:g},{d:g},{prof.raw[p, e_i, d_i]:.7g},{prof.values[p, e_i, d_i]:.7g}")
+    path = Path(path)
+    with atomic_file(path) as tmp:
+        tmp.write_text("\n".join(rows) + "\n")
+    return path
 
 
 # ============================================================================

@@ -27,15 +27,12 @@ every realization is seeded from ``(seed, point)`` so results are reproducible.
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from .demux import RowGroup, solve_fast, solve_nnls, solve_pinv
-from .io import atomic_file
 from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
 
 __all__ = [
@@ -48,6 +45,9 @@ __all__ = [
     "dipole_provider",
     "mc_provider",
     "default_provider",
+    "resolve_provider",
+    "cached_provider",
+    "grids",
     "scaled_truth",
     "reconstruct",
     "mse_trials",
@@ -55,7 +55,6 @@ __all__ = [
     "noise_sweep",
     "parameter_sweep",
     "regularization_sweep",
-    "run_study",
 ]
 
 #: The paper's default configuration (Figs. 5, 6): sigma_s = 1, sigma_a = 0, g = 0.9 (mm^-1).
@@ -148,7 +147,7 @@ def default_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons:
     return dipole_provider(offsets, mm_per_row)
 
 
-def _resolve_provider(provider, offsets) -> Provider:
+def resolve_provider(provider, offsets) -> Provider:
     if provider is None or provider in ("mc", "dipole"):
         return default_provider(offsets, use_mc=provider != "dipole")
     if callable(provider):
@@ -156,7 +155,7 @@ def _resolve_provider(provider, offsets) -> Provider:
     raise ValueError(f"provider must be None, 'dipole', 'mc' or a callable, got {provider!r}")
 
 
-def _cached(provider: Provider) -> Provider:
+def cached_provider(provider: Provider) -> Provider:
     cache = {}
 
     def profile(sigma_s, sigma_a, g):
@@ -274,28 +273,6 @@ def regularization_sweep(setup: StudySetup, provider: Provider, alphas, betas, s
             "variance": mse - bias2}
 
 
-# ---------------------------------------------------------------------------- output
-def _write_csv(path: Path, header, rows) -> Path:
-    with atomic_file(path) as tmp:
-        with open(tmp, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(header)
-            for r in rows:
-                w.writerow([f"{v:.9g}" if isinstance(v, (float, np.floating)) else v for v in r])
-    return path
-
-
-def _sweep_rows(x, mse, seeds):
-    for i, v in enumerate(x):
-        for s in range(seeds):
-            yield [float(v), s] + [float(mse[m][i, s]) for m in METHODS]
-
-
-def _summary(mse):
-    return {m: {"mean": v.mean(axis=1).tolist(), "std": v.std(axis=1, ddof=1).tolist() if v.shape[1] > 1 else [0.0] * len(v)}
-            for m, v in mse.items()}
-
-
 def grids(quick: bool = False) -> dict:
     """The swept values (full, or reduced for tests)."""
     if quick:
@@ -315,59 +292,3 @@ def grids(quick: bool = False) -> dict:
         "alpha": np.geomspace(1e-4, 1e4, 17),
         "beta": np.geomspace(1e-4, 100.0, 13),
     }
-
-
-def run_study(out_dir, provider: Provider | str | None = None, seeds: int = 5, quick: bool = False, noise: float = DEFAULT_NOISE) -> dict:
-    """Run the whole Sec. 5.2 study, write PNGs and CSVs into ``out_dir``, return the numbers.
-
-    ``provider``: a callable ``profile(sigma_s, sigma_a, g)`` over ``study_setup().offsets``,
-    ``'mc'`` / ``None`` (Monte Carlo, :func:`mc_provider`) or ``'dipole'``
-    (:func:`dipole_provider`).
-
-    Files: ``fig5_reconstruction.png/.csv``, ``fig5c_mse_vs_noise.png/.csv``,
-    ``fig6_mse_vs_params.png``, ``fig6{a,b,c}_mse_vs_{sigma_s,sigma_a,g}.csv``,
-    ``regularization_sweep.png/.csv``.
-    """
-    from .figures import study as figs
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    setup = study_setup()
-    provider = _cached(_resolve_provider(provider, setup.offsets))
-    G = grids(quick)
-    result = {"provider": provider.name, "seeds": seeds, "noise": noise, "n_images": int(setup.A.shape[0]),
-              "n_offsets": int(setup.offsets.size), "files": []}
-
-    ex = reconstruction_example(setup, provider, noise)
-    result["example_mse"] = ex["mse"]
-    result["example_min"] = {m: float(ex[m].min()) for m in METHODS}
-    result["files"].append(_write_csv(out / "fig5_reconstruction.csv", ["offset_rows", "truth", *METHODS],
-                                      ([int(u), ex["truth"][k]] + [ex[m][k] for m in METHODS] for k, u in enumerate(ex["offsets"]))))
-    result["files"].append(figs.plot_reconstruction(ex, out / "fig5_reconstruction.png", noise))
-
-    ns = noise_sweep(setup, provider, G["noise"], seeds)
-    result["noise_sweep"] = {"noise": ns["noise"].tolist(), **_summary(ns["mse"])}
-    result["files"].append(_write_csv(out / "fig5c_mse_vs_noise.csv", ["noise", "seed", *METHODS], _sweep_rows(ns["noise"], ns["mse"], seeds)))
-    result["files"].append(figs.plot_noise_sweep(ns, out / "fig5c_mse_vs_noise.png"))
-
-    sweeps = {}
-    for tag, name in (("a", "sigma_s"), ("b", "sigma_a"), ("c", "g")):
-        ps = parameter_sweep(setup, provider, name, G[name], seeds, noise)
-        sweeps[name] = ps
-        result[f"{name}_sweep"] = {"values": ps["values"].tolist(), "mean_abs_offset": ps["mean_abs_offset"].tolist(), **_summary(ps["mse"])}
-        result["files"].append(_write_csv(out / f"fig6{tag}_mse_vs_{name}.csv", [name, "seed", *METHODS], _sweep_rows(ps["values"], ps["mse"], seeds)))
-    result["files"].append(figs.plot_parameter_sweeps(sweeps, out / "fig6_mse_vs_params.png", noise))
-
-    rs = regularization_sweep(setup, provider, G["alpha"], G["beta"], seeds, noise)
-    i, j = np.unravel_index(np.argmin(rs["mse"]), rs["mse"].shape)
-    ia, ib = int(np.argmin(np.abs(np.log(rs["alphas"] / 0.01)))), int(np.argmin(np.abs(np.log(rs["betas"] / 0.01))))
-    result["regularization"] = {"alphas": rs["alphas"].tolist(), "betas": rs["betas"].tolist(), "mse": rs["mse"].tolist(),
-                                "bias2": rs["bias2"].tolist(), "best": {"alpha": float(rs["alphas"][i]), "beta": float(rs["betas"][j]),
-                                                                         "mse": float(rs["mse"][i, j])},
-                                "paper": {"alpha": float(rs["alphas"][ia]), "beta": float(rs["betas"][ib]), "mse": float(rs["mse"][ia, ib])}}
-    result["files"].append(_write_csv(out / "regularization_sweep.csv", ["alpha", "beta", "mse", "bias2", "variance"],
-                                      ([float(a), float(b), float(rs["mse"][p, q]), float(rs["bias2"][p, q]), float(rs["variance"][p, q])]
-                                       for p, a in enumerate(rs["alphas"]) for q, b in enumerate(rs["betas"]))))
-    result["files"].append(figs.plot_regularization(rs, out / "regularization_sweep.png", noise))
-    result["files"] = [str(f) for f in result["files"]]
-    return result

@@ -21,9 +21,9 @@ from ..profiles import measured_delay_profiles
 from ..scenes import EFFECTS, make_scene, representative_pixels
 from ..synthesis import michelson_contrast, relight, sharpened_epipolar, single_line_pattern
 from ..timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
-from ._common import display_scale, plt, save_png
-from .contact_sheet import contact_sheet_figure
-from .profiles import delay_profiles_figure
+from ..figures._common import display_scale, plt, save_png
+from ..figures.contact_sheet import contact_sheet_figure
+from ..figures.profiles import delay_profiles_figure
 
 __all__ = ["FIGURES", "fig8", "fig9", "fig11", "fig12"]
 
@@ -194,7 +194,7 @@ def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
     with its agreement with the scenes' ground-truth labels (Sec. 8)."""
     from ..classify import classify_transport, label_agreement, visible_effect_mask
     from ..scenes import list_scenes
-    from .labels import label_map_figure
+    from ..figures.labels import label_map_figure
 
     out_dir = Path(out_dir)
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
