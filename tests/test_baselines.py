@@ -79,7 +79,7 @@ def test_stripe_patterns_are_shifted_half_duty_stripes():
     np.testing.assert_array_equal(p.mean(axis=0), 0.5)  # every row lit in half the shifts
     np.testing.assert_array_equal(p[1], np.roll(p[0], 1))  # one-row steps
     np.testing.assert_array_equal(p[0, :8], [1, 1, 1, 1, 0, 0, 0, 0])
-    low = stripe_patterns(40, 8, n_shifts=4, low=0.2)
+    low = stripe_patterns(40, period_rows=8, n_shifts=4, low=0.2)
     assert low.shape == (4, 40) and set(np.unique(low)) == {0.2, 1.0}
     np.testing.assert_array_equal(low[1], np.roll(low[0], 2))
     for bad in (dict(period_rows=7), dict(period_rows=0), dict(period_rows=8, n_shifts=9), dict(period_rows=8, low=1.0)):
@@ -248,7 +248,7 @@ def test_pattern_contrast_correction():
         # up to the model error already in the b = 0 result
         atol = 1e-5 if name == "diffuse_plane" else 0.2 * np.abs(ref.global_ - _truth(scene)[1]).max()
         np.testing.assert_allclose(low.global_, ref.global_, atol=atol)
-        uncorrected, _ = separate_direct_global(low.images, 0.0)
+        uncorrected, _ = separate_direct_global(low.images, pattern_contrast_b=0.0)
         if name == "wax":
             assert np.abs(uncorrected - ref.direct).max() > 0.01  # the correction matters
 

@@ -43,7 +43,7 @@ def synthetic_lines(fractions, spacing=6.0, first=20.0, H=200, W=40, sigma=1.2, 
 # ----------------------------------------------------------------------------- counting
 def test_paper_numbers_27_lines_in_500_us_give_54000_lines_per_second():
     image = synthetic_lines(np.ones(27))
-    cal = calibrate_lines_per_second(image, 500.0, rows_per_line=1)
+    cal = calibrate_lines_per_second(image, exposure_us=500.0, rows_per_line=1)
     assert cal.n_lines == pytest.approx(27.0, abs=0.1)
     assert cal.lines_per_second == pytest.approx(54_000.0, rel=0.005)
     assert abs(cal.lines_per_second - 54_000.0) < 3 * cal.uncertainty + 1.0
@@ -56,7 +56,7 @@ def test_partially_exposed_end_lines_count_as_fractions():
     assert c.spacing_rows == pytest.approx(6.0, abs=0.02)
     assert c.count == pytest.approx(24.95, abs=0.08)
     assert c.count_uncertainty < 0.1
-    cal = calibrate_lines_per_second(synthetic_lines(fractions, first=30.3, sigma=1.5, seed=3), 500.0)
+    cal = calibrate_lines_per_second(synthetic_lines(fractions, first=30.3, sigma=1.5, seed=3), exposure_us=500.0)
     assert cal.window_rows == pytest.approx(24.95, abs=0.08)
 
 
@@ -118,7 +118,7 @@ def test_single_comb_image_and_no_references_still_calibrate(target):
     device = SimulatedEpiscan(target, lines_per_second=54_000.0, seed=7)
     sweep = device.capture_line_sweep(500.0, falloff=0.3)
     full = calibrate_lines_per_second(sweep)
-    one = calibrate_lines_per_second(sweep.images[0], 500.0, 2, dark=sweep.dark, flat=sweep.flat_field(),
+    one = calibrate_lines_per_second(sweep.images[0], exposure_us=500.0, rows_per_line=2, dark=sweep.dark, flat=sweep.flat_field(),
                                      timing_jitter_us=sweep.timing_jitter_us)
     assert one.method == "end positions"
     assert one.uncertainty > full.uncertainty  # a window end in a dark gap is only bounded
@@ -145,21 +145,21 @@ def test_simulated_line_sweep_is_physical(target):
 # ----------------------------------------------------------------------------- bad input
 def test_bad_images_give_clear_input_errors():
     with pytest.raises(InputError, match="blank"):
-        calibrate_lines_per_second(np.zeros((100, 20)), 500.0)
+        calibrate_lines_per_second(np.zeros((100, 20)), exposure_us=500.0)
     with pytest.raises(InputError, match="blank|noise"):
-        calibrate_lines_per_second(np.random.default_rng(0).normal(0, 0.01, (100, 20)), 500.0)
+        calibrate_lines_per_second(np.random.default_rng(0).normal(0, 0.01, (100, 20)), exposure_us=500.0)
     nan = synthetic_lines(np.ones(10))
     nan[5, 5] = np.nan
     with pytest.raises(InputError, match="NaN"):
-        calibrate_lines_per_second(nan, 500.0)
+        calibrate_lines_per_second(nan, exposure_us=500.0)
     with pytest.raises(InputError, match="2-D"):
         count_lines(np.ones(50))
     with pytest.raises(InputError, match="need at least 3"):
-        calibrate_lines_per_second(synthetic_lines(np.ones(2)), 500.0)
+        calibrate_lines_per_second(synthetic_lines(np.ones(2)), exposure_us=500.0)
     with pytest.raises(InputError, match="exposure_us"):
         calibrate_lines_per_second(synthetic_lines(np.ones(10)))
     with pytest.raises(InputError, match="border"):
-        calibrate_lines_per_second(synthetic_lines(np.ones(40), first=2.0), 500.0)
+        calibrate_lines_per_second(synthetic_lines(np.ones(40), first=2.0), exposure_us=500.0)
     with pytest.raises(InputError, match="shape"):
         count_lines(synthetic_lines(np.ones(10)), dark=np.zeros((3, 3)))
 
@@ -170,15 +170,15 @@ def test_delay_zero_recovers_an_injected_sync_error(error_us):
     scene = make_scene("diffuse_plane", (64, 64), projector_rows=360, seed=0)
     device = SimulatedEpiscan(scene, seed=1)
     sweep = delay_zero_sweep(600.0, step_us=10.0)
-    cal = calibrate_delay_zero(device_capture(device, 600.0, delay_error_us=error_us), sweep.delay_us, 600.0)
+    cal = calibrate_delay_zero(device_capture(device, exposure_us=600.0, delay_error_us=error_us), sweep.delay_us, exposure_us=600.0)
     assert cal.delay_zero_us == pytest.approx(error_us, abs=2.0)
     assert abs(cal.delay_zero_us - error_us) < 3 * cal.uncertainty_us + 0.05
     assert 0 < cal.uncertainty_us < 2.0
     assert cal.width_us == pytest.approx(600.0, abs=10.0)  # FWHM of the plateau = exposure
     assert cal.sync_offset_us == pytest.approx(float(sync_offset_from_delay(error_us, 600.0, lines_per_second=54_000.0)), abs=2.0)
     # the same from images already captured (e.g. a stack at one exposure)
-    images = [device_capture(device, 600.0, error_us)(d) for d in sweep.delay_us]
-    again = calibrate_delay_zero(np.array(images), sweep.delay_us, 600.0)
+    images = [device_capture(device, exposure_us=600.0, delay_error_us=error_us)(d) for d in sweep.delay_us]
+    again = calibrate_delay_zero(np.array(images), sweep.delay_us, exposure_us=600.0)
     assert again.delay_zero_us == pytest.approx(error_us, abs=2.0)
 
 
@@ -213,7 +213,7 @@ def test_write_calibration_keeps_other_fields_and_feeds_the_import(tmp_path, tar
     assert import_folder(folder).lines_per_second == pytest.approx(lines.lines_per_second)
     # a later delay-zero calibration adds its fields and keeps the line velocity
     scene = make_scene("diffuse_plane", (32, 32), projector_rows=180, seed=0)
-    dz = calibrate_delay_zero(device_capture(SimulatedEpiscan(scene), 600.0, 20.0), delay_zero_sweep(600.0, 20.0).delay_us)
+    dz = calibrate_delay_zero(device_capture(SimulatedEpiscan(scene), exposure_us=600.0, delay_error_us=20.0), delay_zero_sweep(600.0, step_us=20.0).delay_us)
     both = write_calibration(folder / "acquisition.json", delay_zero=dz)
     assert both["delay_zero_us"] == pytest.approx(dz.delay_zero_us)
     assert both["lines_per_second"] == pytest.approx(lines.lines_per_second)

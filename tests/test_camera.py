@@ -54,8 +54,8 @@ def test_ambient_integrates_over_row_exposure_only():
     """Ambient grows with the row exposure; the laser's direct light does not."""
     cam = CameraModel(ambient_e_per_us=2.0)
     albedo = np.full((4, 4), 0.5)
-    a600, _ = cam.expose(np.zeros((4, 4)), 600.0, None, albedo, noise=False)
-    a1200, _ = cam.expose(np.zeros((4, 4)), 1200.0, None, albedo, noise=False)
+    a600, _ = cam.expose(np.zeros((4, 4)), 600.0, None, ambient_albedo=albedo, noise=False)
+    a1200, _ = cam.expose(np.zeros((4, 4)), 1200.0, None, ambient_albedo=albedo, noise=False)
     np.testing.assert_allclose(a1200, 2 * a600, rtol=1e-6)
     assert a600[0, 0] == pytest.approx(2.0 * 600 * 0.5 / cam.full_well_e, rel=1e-5)
 
@@ -63,7 +63,7 @@ def test_ambient_integrates_over_row_exposure_only():
 def test_epipolar_image_of_diffuse_plane_does_not_grow_with_exposure():
     scene = make_scene("diffuse_plane", (32, 32))
     cam = CameraModel(ambient_e_per_us=0.0, jitter_us=0.0, row_jitter_us=0.0)
-    stack = simulate_stack(scene, Sweep.grid([0.0], [600.0, 1200.0]), cam, noise=False)
+    stack = simulate_stack(scene, Sweep.grid([0.0], [600.0, 1200.0]), camera=cam, noise=False)
     np.testing.assert_allclose(stack.images[0], stack.images[1], rtol=1e-6)
     np.testing.assert_allclose(stack.images[0], cam.signal_scale * scene.direct, rtol=1e-5, atol=1e-6)
 
@@ -72,7 +72,7 @@ def test_row_artifacts_appear_at_the_epipolar_boundary():
     """Per-row trigger jitter stripes images whose band edge sits on the epipolar plane."""
     scene = make_scene("diffuse_plane", (64, 64))
     cam = CameraModel(read_noise_e=0.0, ambient_e_per_us=0.0, row_jitter_us=15.0)
-    stack = simulate_stack(scene, Sweep.grid([0.0, 300.0], [600.0]), cam, seed=4)
+    stack = simulate_stack(scene, Sweep.grid([0.0, 300.0], [600.0]), camera=cam, seed=4)
     ratio = stack.images / scene.direct  # remove the texture
     row_spread = ratio.mean(axis=2).std(axis=1)
     assert row_spread[1] > 10 * row_spread[0]

@@ -283,11 +283,11 @@ def test_labels_agree_on_demultiplexed_scenes(scenes, name):
     scene, result = scenes[name]
     resolution = result.attrs["epipolar_resolution_rows"]
     assert resolution == pytest.approx(6.075)
-    labels, ch = classify_transport(result.transport, resolution, return_character=True)
+    labels, ch = classify_transport(result.transport, resolution_rows=resolution, return_character=True)
     assert labels.shape == scene.shape and labels.dtype == np.uint8
     assert ch.fwhm_rows.shape == scene.shape
-    vis = visible_effect_mask(scene, sweep_support_rows(paper_sweep(), 54000.0), resolution)
-    a = label_agreement(labels, scene.labels, vis)
+    vis = visible_effect_mask(scene, support_rows=sweep_support_rows(paper_sweep(), 54000.0), resolution_rows=resolution)
+    a = label_agreement(labels, scene.labels, mask=vis)
     for k, minimum in DEMUX_MIN[name].items():
         assert a["recall"][k] >= minimum, (name, k, a["recall"], a["confusion"].tolist())
 
@@ -295,8 +295,8 @@ def test_labels_agree_on_demultiplexed_scenes(scenes, name):
 @pytest.mark.parametrize("name", SCENES)
 def test_labels_agree_on_ground_truth(scenes, name):
     scene, _ = scenes[name]
-    labels = classify_transport(scene.transport, 6.075, support_rows=114)
-    a = label_agreement(labels, scene.labels, visible_effect_mask(scene))
+    labels = classify_transport(scene.transport, resolution_rows=6.075, support_rows=114)
+    a = label_agreement(labels, scene.labels, mask=visible_effect_mask(scene))
     for k, minimum in TRUTH_MIN[name].items():
         assert a["recall"][k] >= minimum, (name, k, a["recall"], a["confusion"].tolist())
 
@@ -304,7 +304,7 @@ def test_labels_agree_on_ground_truth(scenes, name):
 def test_mirror_ball_page_specular_light_is_below_the_demux_noise(scenes):
     """Documented limitation: page pixels labelled specular hold 2-4 % specular light."""
     scene, result = scenes["mirror_ball"]
-    labels = classify_transport(result.transport, result.attrs["epipolar_resolution_rows"])
+    labels = classify_transport(result.transport, resolution_rows=result.attrs["epipolar_resolution_rows"])
     page = (scene.labels == 4) & ~visible_effect_mask(scene)
     assert page.sum() > 1000
     assert np.mean(labels[page] == 1) > 0.8

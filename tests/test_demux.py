@@ -85,7 +85,7 @@ def test_fast_matches_cvxpy_optimum(scene_name):
         group = problem.groups[problem.row_group[row]]
         cols = rng.choice(64, 12, replace=False)
         B = obs[:, 0, cols].T
-        fast = solve_chunk(problem, obs, None, rows, "fast")
+        fast = solve_chunk(problem, obs, None, rows, method="fast")
         X_fast = fast.T[0, cols][:, group.valid].astype(np.float64)
         from planeray.demux import solve_cvxpy
 
@@ -146,13 +146,13 @@ def test_held_out_images_are_predicted_within_noise(scene_name, beta, bound):
     """
     scene = make_scene(scene_name, (32, 32), projector_rows=180, seed=3)
     cam = CameraModel(row_jitter_us=0.0, ambient_e_per_us=0.0)
-    stack = simulate_stack(scene, paper_sweep(), cam, seed=3)
+    stack = simulate_stack(scene, paper_sweep(), camera=cam, seed=3)
     held = _predictable_hold_out(stack, 12)
     fit = Stack(stack.images, stack.delay_us, stack.exposure_us, stack.lines_per_second, stack.excluded | held,
                 projector_rows=stack.projector_rows, metadata=stack.metadata)
     est = demultiplex(fit, beta=beta).transport
     # the same images captured again with fresh noise give the noise floor
-    again = simulate_stack(scene, paper_sweep(), cam, seed=99)
+    again = simulate_stack(scene, paper_sweep(), camera=cam, seed=99)
     errs, floor = [], []
     for i in np.flatnonzero(held):
         pred = est.render(Band(stack.delay_us[i], stack.exposure_us[i], stack.lines_per_second, cam.jitter_us))
@@ -170,7 +170,7 @@ def test_epipolar_image_matches_ground_truth():
     """
     scene = make_scene("mirror_ball", (64, 32), projector_rows=360, seed=4)
     cam = CameraModel(ambient_e_per_us=0.0)
-    stack = simulate_stack(scene, paper_sweep(), cam, seed=4)
+    stack = simulate_stack(scene, paper_sweep(), camera=cam, seed=4)
     problem = DemuxProblem.from_stack(stack)
     res = problem.epipolar_resolution_rows
     assert res == pytest.approx(6.075)
@@ -231,7 +231,7 @@ def test_store_is_readable_with_plain_zarr(wax_stack, tmp_path):
 def test_saturated_observations_are_dropped():
     scene = make_scene("diffuse_plane", (16, 16), projector_rows=90)
     cam = CameraModel(laser_electrons=14_000.0)  # bright pixels saturate at delay ~0
-    stack = simulate_stack(scene, paper_sweep(), cam, seed=1)
+    stack = simulate_stack(scene, paper_sweep(), camera=cam, seed=1)
     assert stack.saturated.any()
     res = demultiplex(stack)
     n_obs = res.maps["n_observations"]

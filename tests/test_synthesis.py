@@ -33,7 +33,7 @@ def noise_free():
     out = {}
     for name in ("diffuse_plane", "mirror_ball"):
         scene = make_scene(name, (48, 32), projector_rows=270, seed=1)
-        stack = simulate_stack(scene, paper_sweep(), QUIET, noise=False)
+        stack = simulate_stack(scene, paper_sweep(), camera=QUIET, noise=False)
         out[name] = (scene, stack, demultiplex(stack, tol=1e-5).transport)
     return out
 
@@ -44,10 +44,10 @@ def test_epipolar_equals_direct_where_no_indirect_light_is_near(noise_free):
     # ground truth: Eq. 5 on the scene's transport is its albedo
     np.testing.assert_allclose(scene.transport.epipolar_image(), scene.direct, rtol=1e-5)
     # estimate: at the sweep's resolution the epipolar image is the direct image
-    got = sharpened_epipolar(est, 2 * res) / QUIET.signal_scale
+    got = sharpened_epipolar(est, width_rows=2 * res) / QUIET.signal_scale
     inner = slice(8, 40)  # rows whose cell lies on the projector
     np.testing.assert_allclose(got[inner], scene.direct[inner], rtol=0.02, atol=0.005)
-    non_epi = est.full_image() - sharpened_epipolar(est, 2 * res)
+    non_epi = est.full_image() - sharpened_epipolar(est, width_rows=2 * res)
     assert np.abs(non_epi[inner]).max() < 0.01 * est.full_image().max()
 
 
@@ -100,7 +100,7 @@ def test_sharpened_epipolar_removes_subsurface_glow():
     est = demultiplex(stack).transport
     direct = scene.direct * stack.metadata["signal_scale"]
     captured = stack.image(stack.index_of(0.0, 600.0))
-    sharp = sharpened_epipolar(est, 12.15)
+    sharp = sharpened_epipolar(est, width_rows=12.15)
     wax = scene.labels == 2
 
     def error(img):
@@ -138,7 +138,7 @@ def test_patterns(tmp_path):
 
 def test_synth_cli(noise_free, tmp_path):
     _, _, est = noise_free["mirror_ball"]
-    store = write_transport(est, tmp_path / "T.zarr", {"lines_per_second": 54000.0, "epipolar_resolution_rows": 6.075})
+    store = write_transport(est, tmp_path / "T.zarr", attrs={"lines_per_second": 54000.0, "epipolar_resolution_rows": 6.075})
     runner = CliRunner()
     np.save(tmp_path / "pattern.npy", np.linspace(0, 1, 270))
     for args in (["--epipolar"], ["--non-epipolar"], ["--sharpen", "4"], ["--relight", "100"],

@@ -80,7 +80,7 @@ def _brute_force_bins(k, centre, width, sigma=0.0, line=0.0, n=801):
 @pytest.mark.parametrize("sigma,line", [(0.0, 0.0), (0.8, 0.0), (0.0, 1.5), (0.6, 1.0)])
 def test_bin_weights_match_brute_force_integration(sigma, line):
     k = np.arange(-12, 13)
-    w = band_bin_weights(k, 2.3, 9.7, sigma, line)
+    w = band_bin_weights(k, 2.3, 9.7, blur_sigma_rows=sigma, line_width_rows=line)
     ref = _brute_force_bins(k, 2.3, 9.7, sigma, line)
     np.testing.assert_allclose(w, ref, atol=2e-3)
 
@@ -94,7 +94,7 @@ def test_bin_weights_match_brute_force_integration(sigma, line):
 )
 def test_bin_weights_sum_to_band_width(centre, width, sigma, line):
     k = np.arange(-150, 151)
-    w = band_bin_weights(k, centre, width, sigma, line)
+    w = band_bin_weights(k, centre, width, blur_sigma_rows=sigma, line_width_rows=line)
     assert w.sum() == pytest.approx(width, rel=1e-9, abs=1e-9)
     assert np.all(w >= -1e-12) and np.all(w <= 1 + 1e-12)
 

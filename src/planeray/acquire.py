@@ -23,7 +23,7 @@ from .timing import Sweep
 __all__ = ["acquire_sweep", "acquire_to_store", "simulate_stack"]
 
 
-def acquire_sweep(device: Device, sweep: Sweep, progress: Callable[[int], None] | None = None) -> Stack:
+def acquire_sweep(device: Device, sweep: Sweep, *, progress: Callable[[int], None] | None = None) -> Stack:
     """Capture one averaged image per (delay, exposure) of ``sweep``.
 
     Parameters
@@ -62,13 +62,13 @@ def acquire_sweep(device: Device, sweep: Sweep, progress: Callable[[int], None] 
     )
 
 
-def simulate_stack(scene, sweep: Sweep, camera=None, lines_per_second=None, seed=0, noise=True, progress=None) -> Stack:
+def simulate_stack(scene, sweep: Sweep, *, camera=None, lines_per_second=None, seed=0, noise=True, progress=None) -> Stack:
     """Simulate a sweep of a scene on the simulated Episcan (convenience for notebooks)."""
     from .devices.simulated import SimulatedEpiscan
     from .timing import PAPER_LINES_PER_SECOND
 
-    device = SimulatedEpiscan(scene, camera, lines_per_second or PAPER_LINES_PER_SECOND, seed, noise)
-    return acquire_sweep(device, sweep, progress)
+    device = SimulatedEpiscan(scene, camera, lines_per_second=lines_per_second or PAPER_LINES_PER_SECOND, seed=seed, noise=noise)
+    return acquire_sweep(device, sweep, progress=progress)
 
 
 def _capture_metadata(device: Device, sweep: Sweep) -> dict:
@@ -78,7 +78,7 @@ def _capture_metadata(device: Device, sweep: Sweep) -> dict:
     return meta
 
 
-def acquire_to_store(device: Device, sweep: Sweep, out, overwrite: bool = False, restart: bool = False,
+def acquire_to_store(device: Device, sweep: Sweep, out, *, overwrite: bool = False, restart: bool = False,
                      progress: Callable[[int], None] | None = None, _stop_after: int | None = None) -> Path:
     """Capture a sweep straight into a native stack store; resumable.
 
@@ -127,9 +127,9 @@ def acquire_to_store(device: Device, sweep: Sweep, out, overwrite: bool = False,
 
     def create(directory):
         return create_stack_group(directory, (len(sweep), *shape), sweep.delay_us, sweep.exposure_us, sweep.excluded,
-                                  device.lines_per_second, projector_rows, meta, out)
+                                  device.lines_per_second, projector_rows, meta, path=out)
 
-    group = resumable.open_partial(out, fingerprint, len(sweep), create, restart)
+    group = resumable.open_partial(out, fingerprint, len(sweep), create, restart=restart)
     done = resumable.done_units(group)
     taken = 0
     for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
@@ -155,4 +155,4 @@ def acquire_to_store(device: Device, sweep: Sweep, out, overwrite: bool = False,
         taken += 1
         if progress is not None:
             progress(i)
-    return resumable.promote(out, overwrite, StackError)
+    return resumable.promote(out, overwrite=overwrite, error=StackError)

@@ -107,14 +107,14 @@ class CameraModel:
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def mean_electrons(self, signal, exposure_us, ambient_albedo=None):
+    def mean_electrons(self, signal, exposure_us, *, ambient_albedo=None):
         """Expected electrons per frame: laser signal plus ambient over the row exposure."""
         e = self.laser_electrons * np.asarray(signal, dtype=np.float64)
         if ambient_albedo is not None and self.ambient_e_per_us > 0:
             e = e + self.ambient_e_per_us * float(exposure_us) * np.asarray(ambient_albedo, dtype=np.float64)
         return np.maximum(e, 0.0)
 
-    def expose(self, signal, exposure_us, rng: np.random.Generator, ambient_albedo=None, noise=True):
+    def expose(self, signal, exposure_us, rng: np.random.Generator, *, ambient_albedo=None, noise=True):
         """Capture one stack image: ``frames_averaged`` noisy frames, averaged and normalized.
 
         Parameters
@@ -136,7 +136,7 @@ class CameraModel:
         saturated : ndarray (H, W) bool
             Pixels that reached full well or the top code in any frame.
         """
-        e_mean = self.mean_electrons(signal, exposure_us, ambient_albedo)
+        e_mean = self.mean_electrons(signal, exposure_us, ambient_albedo=ambient_albedo)
         span = self.max_code - self.black_level
         if not noise:
             clipped = np.minimum(e_mean, self.full_well_e)

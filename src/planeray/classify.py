@@ -201,7 +201,7 @@ def _fwhm(S, main_k, main_h):
 def characterize(
     T_profiles,
     offsets_rows,
-    resolution_rows=0.0,
+    *, resolution_rows=0.0,
     footprint_rows=0.0,
     valid=None,
     direct_fwhm_rows=None,
@@ -435,7 +435,7 @@ def _inside_projector(geometry, rows, offsets, margin=EDGE_MARGIN_BINS) -> np.nd
     return full
 
 
-def classify_transport(transport, resolution_rows=0.0, support_rows=None, chunk_rows=32, return_character=False, **thresholds):
+def classify_transport(transport, *, resolution_rows=0.0, support_rows=None, chunk_rows=32, return_character=False, **thresholds):
     """Effect label of every pixel of a transport from its profile ``T(u)``.
 
     Parameters
@@ -507,7 +507,7 @@ def classify_transport(transport, resolution_rows=0.0, support_rows=None, chunk_
     return (ch.label, ch) if return_character else ch.label
 
 
-def visible_effect_mask(scene, support_rows=114, resolution_rows=6.075, min_fraction=0.05) -> np.ndarray:
+def visible_effect_mask(scene, *, support_rows=114, resolution_rows=6.075, min_fraction=0.05) -> np.ndarray:
     """Pixels whose ground-truth effect a sweep can show.
 
     A labelled pixel's effect is *visible* when, in its ground-truth transport,
@@ -548,7 +548,7 @@ def visible_effect_mask(scene, support_rows=114, resolution_rows=6.075, min_frac
     return (labels == 1) | ((labels > 1) & seen)
 
 
-def label_agreement(pred, truth_labels, mask=None, n_labels=5) -> dict:
+def label_agreement(pred, truth_labels, *, mask=None, n_labels=5) -> dict:
     """Agreement of predicted effect labels with ground-truth labels.
 
     Parameters

@@ -33,7 +33,7 @@ def partial_path(out) -> Path:
     return out.parent / f".{out.name}.partial"
 
 
-def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], object], restart: bool = False):
+def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], object], *, restart: bool = False):
     """Open the partial store of ``out`` for ``fingerprint``, creating it with ``create(directory)``.
 
     ``create`` lays out the store's arrays and attributes in an empty directory
@@ -75,7 +75,7 @@ def done_units(group) -> np.ndarray:
     return np.asarray(group[_DONE][:], dtype=bool)
 
 
-def promote(out, overwrite: bool, error=InputError) -> Path:
+def promote(out, *, overwrite: bool, error=InputError) -> Path:
     """Turn a finished partial store into ``out`` (atomic rename; replaces ``out`` if allowed)."""
     import zarr
 

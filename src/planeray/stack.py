@@ -106,7 +106,7 @@ class Stack:
 
     def bands(self):
         """The illumination model of every image (same discretization as the simulator)."""
-        return self.sweep.bands(self.lines_per_second, self.jitter_us, self.line_width_us)
+        return self.sweep.bands(self.lines_per_second, jitter_us=self.jitter_us, line_width_us=self.line_width_us)
 
     def image(self, index: int) -> np.ndarray:
         return np.asarray(self.images[index], dtype=np.float32)

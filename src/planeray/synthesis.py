@@ -63,7 +63,7 @@ def offset_window(centre_rows: float, width_rows: float) -> Band:
     return Band(float(centre_rows), float(width_rows), _ROWS_PER_US)
 
 
-def sharpened_epipolar(transport: Transport, width_rows: float = 1.0) -> np.ndarray:
+def sharpened_epipolar(transport: Transport, *, width_rows: float = 1.0) -> np.ndarray:
     """Sharpened epipolar image (Fig. 11): a band of ``width_rows`` centred on the epipolar plane.
 
     Narrower than the narrowest captured exposure (600 us = 32.4 rows in the
@@ -76,7 +76,7 @@ def sharpened_epipolar(transport: Transport, width_rows: float = 1.0) -> np.ndar
     return transport.render(offset_window(0.0, width_rows))
 
 
-def band_image(transport: Transport, delay_us: float, exposure_us: float, lines_per_second: float = PAPER_LINES_PER_SECOND) -> np.ndarray:
+def band_image(transport: Transport, delay_us: float, exposure_us: float, *, lines_per_second: float = PAPER_LINES_PER_SECOND) -> np.ndarray:
     """Banded (indirect) image for any (delay, exposure) -- captured or not (Secs. 4, 7)."""
     return transport.render(Band(float(delay_us), float(exposure_us), float(lines_per_second)))
 
@@ -156,7 +156,7 @@ def load_pattern(path, projector_rows: int) -> np.ndarray:
     return np.interp(x_new, x_old, values)
 
 
-def short_long_range(transport: Transport, max_rows: float, epipolar_rows: float | None = None):
+def short_long_range(transport: Transport, max_rows: float, *, epipolar_rows: float | None = None):
     """Split indirect light into short range (``epipolar < |u| <= max_rows``) and long range.
 
     Parameters
@@ -187,7 +187,7 @@ def short_long_range(transport: Transport, max_rows: float, epipolar_rows: float
     return short.astype(np.float32), long.astype(np.float32)
 
 
-def michelson_contrast(values, axis=-1) -> np.ndarray:
+def michelson_contrast(values, *, axis=-1) -> np.ndarray:
     """Michelson contrast ``(max - min) / (max + min)`` along ``axis`` (e.g. a scan line)."""
     v = np.asarray(values, dtype=np.float64)
     hi, lo = v.max(axis=axis), v.min(axis=axis)

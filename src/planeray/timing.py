@@ -74,7 +74,7 @@ def _line_time_us(line_time_us, lines_per_second):
     return line_time_us
 
 
-def delay_from_sync_offset(sync_offset_us, exposure_us, line_time_us=None, lines_per_second=None):
+def delay_from_sync_offset(sync_offset_us, exposure_us, *, line_time_us=None, lines_per_second=None):
     """Delay from the synchronization offset, Eq. 1: ``t_d = t_e/2 - t_p/2 - t'_o``.
 
     Parameters
@@ -99,7 +99,7 @@ def delay_from_sync_offset(sync_offset_us, exposure_us, line_time_us=None, lines
     return 0.5 * np.asarray(exposure_us, dtype=float) - 0.5 * t_p - np.asarray(sync_offset_us, dtype=float)
 
 
-def sync_offset_from_delay(delay_us, exposure_us, line_time_us=None, lines_per_second=None):
+def sync_offset_from_delay(delay_us, exposure_us, *, line_time_us=None, lines_per_second=None):
     """Inverse of Eq. 1: ``t'_o = t_e/2 - t_p/2 - t_d`` (see :func:`delay_from_sync_offset`)."""
     t_p = _line_time_us(line_time_us, lines_per_second)
     return 0.5 * np.asarray(exposure_us, dtype=float) - 0.5 * t_p - np.asarray(delay_us, dtype=float)
@@ -166,7 +166,7 @@ def _second_antiderivative(x, sigma, width):
     return out
 
 
-def band_bin_weights(offset_rows, centre_rows, width_rows, blur_sigma_rows=0.0, line_width_rows=0.0):
+def band_bin_weights(offset_rows, centre_rows, width_rows, *, blur_sigma_rows=0.0, line_width_rows=0.0):
     """Exact weights of a (blurred) box band on 1-row offset bins, discretizing Eq. 3.
 
     Parameters
@@ -280,7 +280,7 @@ class Band:
         """Weights over offset bins before clipping to the projector (same for every row)."""
         sigma = self.jitter_us * 1e-6 * self.lines_per_second
         line = self.line_width_us * 1e-6 * self.lines_per_second
-        return band_bin_weights(offsets_rows, self.centre_rows + centre_shift_rows, self.width_rows, sigma, line)
+        return band_bin_weights(offsets_rows, self.centre_rows + centre_shift_rows, self.width_rows, blur_sigma_rows=sigma, line_width_rows=line)
 
     def weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
         """Illumination weight of offset bin ``offsets_rows`` for camera row ``rows`` (broadcast)."""
@@ -350,18 +350,18 @@ class Sweep:
         return self.delay_us.size
 
     @classmethod
-    def grid(cls, delays_us, exposures_us, boundary_margin_us=PAPER_BOUNDARY_MARGIN_US, name="custom"):
+    def grid(cls, delays_us, exposures_us, *, boundary_margin_us=PAPER_BOUNDARY_MARGIN_US, name="custom"):
         """Every delay at every exposure, exposure-major (rows of the Fig. 8 contact sheet)."""
         e, d = np.meshgrid(np.asarray(exposures_us, float), np.asarray(delays_us, float), indexing="ij")
         d, e = d.ravel(), e.ravel()
-        return cls(d, e, boundary_images(d, e, boundary_margin_us), name=name)
+        return cls(d, e, boundary_images(d, e, margin_us=boundary_margin_us), name=name)
 
-    def bands(self, lines_per_second, jitter_us=0.0, line_width_us=0.0):
+    def bands(self, lines_per_second, *, jitter_us=0.0, line_width_us=0.0):
         """One :class:`Band` per image."""
         return [Band(float(d), float(e), lines_per_second, jitter_us, line_width_us) for d, e in zip(self.delay_us, self.exposure_us)]
 
 
-def boundary_images(delay_us, exposure_us, margin_us=PAPER_BOUNDARY_MARGIN_US):
+def boundary_images(delay_us, exposure_us, *, margin_us=PAPER_BOUNDARY_MARGIN_US):
     """Flag images whose band edge sits on the epipolar plane: ``||t_d| - t_e/2| <= margin``."""
     d = np.asarray(delay_us, dtype=float)
     e = np.asarray(exposure_us, dtype=float)
@@ -391,7 +391,7 @@ def make_sweep(name: str) -> Sweep:
         raise ValueError(f"unknown sweep {name!r}; choose one of {sorted(SWEEPS)}") from None
 
 
-def sweep_support_rows(sweep: Sweep, lines_per_second, include_excluded=False) -> int:
+def sweep_support_rows(sweep: Sweep, lines_per_second, *, include_excluded=False) -> int:
     """Half-width ``K`` of the offset support ``-K..K`` reached by a sweep's bands:
     ``max |I_d| + I_w / 2`` rounded up (114 rows -> 229 offsets for the paper's sweep)."""
     keep = np.ones(len(sweep), bool) if include_excluded else ~sweep.excluded

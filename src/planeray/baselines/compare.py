@@ -10,7 +10,7 @@ from .emulation import emulate_delay_image
 from .nayar import capture_direct_global
 
 
-def synchronized_delay_image(device, delay_us: float, exposure_us: float, subtract_dark: bool = True):
+def synchronized_delay_image(device, delay_us: float, exposure_us: float, *, subtract_dark: bool = True):
     """One synchronized capture at (delay, exposure), in transport units.
 
     Sets the device, grabs, restores the previous settings, and removes the
@@ -105,7 +105,7 @@ def _label_masks(scene) -> dict:
 
 def compare_direct_global(
     device,
-    epipolar_exposure_us: float = 600.0,
+    *, epipolar_exposure_us: float = 600.0,
     period_rows: int | None = None,
     n_shifts: int | None = None,
     capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
@@ -138,7 +138,7 @@ def compare_direct_global(
         ``epipolar_direct`` -> region -> ``mae, median_abs, rmse, bias, relative_rmse``.
     """
     nayar = capture_direct_global(
-        device, period_rows, n_shifts, capture_exposure_us, frame_period_us, pattern_contrast_b
+        device, period_rows=period_rows, n_shifts=n_shifts, exposure_us=capture_exposure_us, frame_period_us=frame_period_us, pattern_contrast_b=pattern_contrast_b
     )
     epipolar, sat, n_sync = synchronized_delay_image(device, 0.0, epipolar_exposure_us)
     numbers = {
@@ -172,7 +172,7 @@ def compare_emulation(
     device,
     delay_us: float,
     exposure_us: float,
-    capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
+    *, capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
     frame_period_us: float = DEFAULT_FRAME_PERIOD_US,
     spacing_rows: int | None = None,
 ) -> dict:
@@ -188,7 +188,7 @@ def compare_emulation(
         (``emulated_vs_truth``, ``synchronized_vs_truth``,
         ``emulated_vs_synchronized``: ``mae, median_abs, rmse, bias, relative_rmse``).
     """
-    emulated = emulate_delay_image(device, delay_us, exposure_us, capture_exposure_us, frame_period_us, spacing_rows)
+    emulated = emulate_delay_image(device, delay_us, exposure_us, capture_exposure_us=capture_exposure_us, frame_period_us=frame_period_us, spacing_rows=spacing_rows)
     sync, sat, n_sync = synchronized_delay_image(device, delay_us, exposure_us)
     masks = {"all": np.ones(sync.shape, bool)}
     numbers = {

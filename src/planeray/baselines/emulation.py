@@ -75,7 +75,7 @@ def emulate_delay_image(
     device,
     delay_us: float,
     exposure_us: float,
-    capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
+    *, capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
     frame_period_us: float = DEFAULT_FRAME_PERIOD_US,
     spacing_rows: int | None = None,
     subtract_dark: bool = True,

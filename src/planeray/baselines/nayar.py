@@ -34,7 +34,7 @@ def default_period_rows(geometry: RowGeometry) -> int:
     return int(2 * (np.ceil(geometry.rows_per_camera_row - 1e-9) + 2))
 
 
-def stripe_patterns(projector_rows: int, period_rows: int = 16, n_shifts: int | None = None, low: float = 0.0) -> np.ndarray:
+def stripe_patterns(projector_rows: int, *, period_rows: int = 16, n_shifts: int | None = None, low: float = 0.0) -> np.ndarray:
     """Shifted horizontal stripe patterns (50 % duty cycle) over projector rows.
 
     Pattern ``k`` lights projector row ``v`` when ``(v - s_k) mod period < period / 2``
@@ -83,7 +83,7 @@ def stripe_patterns(projector_rows: int, period_rows: int = 16, n_shifts: int | 
     return np.where(bright, 1.0, float(low))
 
 
-def separate_direct_global(images, pattern_contrast_b: float = 0.0):
+def separate_direct_global(images, *, pattern_contrast_b: float = 0.0):
     """Direct and global images from captures under shifted high-frequency patterns.
 
     With ``L+ = max_k I_k`` and ``L- = min_k I_k`` per pixel, and a projector
@@ -158,7 +158,7 @@ class DirectGlobalResult:
 
 def capture_direct_global(
     device,
-    period_rows: int | None = None,
+    *, period_rows: int | None = None,
     n_shifts: int | None = None,
     exposure_us: float = DEFAULT_FRAME_PERIOD_US,
     frame_period_us: float = DEFAULT_FRAME_PERIOD_US,
@@ -204,7 +204,7 @@ def capture_direct_global(
     """
     geometry = device_geometry(device, projector_rows)
     period = default_period_rows(geometry) if period_rows is None else int(period_rows)
-    patterns = stripe_patterns(geometry.projector_rows, period, n_shifts, pattern_contrast_b)
+    patterns = stripe_patterns(geometry.projector_rows, period_rows=period, n_shifts=n_shifts, low=pattern_contrast_b)
     captures, saturated = [], None
     for pattern in patterns:
         img, sat = capture(device, pattern, exposure_us, frame_period_us)
@@ -215,7 +215,7 @@ def capture_direct_global(
         dark, sat = capture(device, np.zeros(geometry.projector_rows), exposure_us, frame_period_us)
         saturated |= sat
     images = to_transport_units(device, np.stack(captures), dark, exposure_us, frame_period_us)
-    direct, global_ = separate_direct_global(images, pattern_contrast_b)
+    direct, global_ = separate_direct_global(images, pattern_contrast_b=pattern_contrast_b)
     return DirectGlobalResult(
         direct.astype(np.float32),
         global_.astype(np.float32),

@@ -58,7 +58,7 @@ class DelayZeroCalibration:
         }
 
 
-def delay_zero_sweep(exposure_us: float = 600.0, step_us: float = 10.0, half_range_us: float | None = None) -> Sweep:
+def delay_zero_sweep(exposure_us: float = 600.0, *, step_us: float = 10.0, half_range_us: float | None = None) -> Sweep:
     """A fine delay sweep around 0 at one exposure, for :func:`calibrate_delay_zero`.
 
     The default range, ``+-(t_e/2 + max(t_e/2, 250 us))``, brackets the epipolar
@@ -73,7 +73,7 @@ def delay_zero_sweep(exposure_us: float = 600.0, step_us: float = 10.0, half_ran
     return Sweep(d, np.full(d.size, float(exposure_us)), np.zeros(d.size, bool), name="delay-zero")
 
 
-def device_capture(device, exposure_us: float = 600.0, delay_error_us: float = 0.0) -> Callable[[float], np.ndarray]:
+def device_capture(device, *, exposure_us: float = 600.0, delay_error_us: float = 0.0) -> Callable[[float], np.ndarray]:
     """A ``capture(delay_us) -> image`` for :func:`calibrate_delay_zero` from any device.
 
     ``delay_error_us`` simulates an unknown synchronization error: the device
@@ -130,7 +130,7 @@ def _fit_response(d, r, centre, width, ramp, base, amp):
 
     def model(p):
         c, w, f, g, b0, a = p
-        return b0 + a * band_bin_weights(d, c, abs(w), abs(g), abs(f))
+        return b0 + a * band_bin_weights(d, c, abs(w), blur_sigma_rows=abs(g), line_width_rows=abs(f))
 
     p0 = np.array([centre, abs(width), max(abs(ramp), 1.0), max(0.1 * abs(ramp), 1.0), base, amp], float)
     try:
@@ -161,7 +161,7 @@ def _fit_response(d, r, centre, width, ramp, base, amp):
     return c, sigma, params
 
 
-def calibrate_delay_zero(capture, delays_us, exposure_us: float = 600.0, *, lines_per_second=PAPER_LINES_PER_SECOND,
+def calibrate_delay_zero(capture, delays_us, *, exposure_us: float = 600.0, lines_per_second=PAPER_LINES_PER_SECOND,
                          roi=None) -> DelayZeroCalibration:
     """Delay zero: the commanded delay at which the epipolar (direct) response peaks.
 

@@ -14,7 +14,7 @@ from .delay_zero import DelayZeroCalibration
 from .lines import LineCalibration
 
 
-def write_line_sweep(sweep: LineSweep, path, overwrite: bool = True) -> Path:
+def write_line_sweep(sweep: LineSweep, path, *, overwrite: bool = True) -> Path:
     """Write a :class:`LineSweep` to one ``.npz`` file, atomically."""
     path = Path(path)
     if path.suffix.lower() != ".npz":
@@ -35,13 +35,13 @@ def write_line_sweep(sweep: LineSweep, path, overwrite: bool = True) -> Path:
             arrays[name] = np.asarray(getattr(sweep, name), np.float32)
     if sweep.saturated is not None:
         arrays["saturated"] = np.asarray(sweep.saturated, bool)
-    with atomic_file(path, overwrite) as tmp:
+    with atomic_file(path, overwrite=overwrite) as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
     return path
 
 
-def read_line_sweep(path, exposure_us: float | None = None, rows_per_line: int | None = None) -> LineSweep:
+def read_line_sweep(path, *, exposure_us: float | None = None, rows_per_line: int | None = None) -> LineSweep:
     """Read line-sweep images: a ``.npz`` from :func:`write_line_sweep`, or image files.
 
     Parameters
@@ -95,7 +95,7 @@ def read_line_sweep(path, exposure_us: float | None = None, rows_per_line: int |
                      1 if rows_per_line is None else rows_per_line)
 
 
-def write_calibration(path, lines: LineCalibration | None = None, delay_zero: DelayZeroCalibration | None = None) -> dict:
+def write_calibration(path, *, lines: LineCalibration | None = None, delay_zero: DelayZeroCalibration | None = None) -> dict:
     """Store calibration results in an ``acquisition.json``, keeping its other fields.
 
     Writes ``lines_per_second`` (the field the stack import requires),

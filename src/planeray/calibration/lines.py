@@ -405,7 +405,7 @@ class LineCalibration:
         }
 
 
-def calibrate_lines_per_second(data, exposure_us=None, rows_per_line=None, *, dark=None, flat=None,
+def calibrate_lines_per_second(data, *, exposure_us=None, rows_per_line=None, dark=None, flat=None,
                                timing_jitter_us=None, complete=None) -> LineCalibration:
     """Projector scanline velocity ``v_p = n_v / t_e`` from global-shutter line images (Sec. 6).
 

@@ -64,7 +64,7 @@ class DemuxResult:
     attrs: dict
 
 
-def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, source=None):
+def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, *, source=None):
     """Observations ``(N, r, W)`` float64 of the used images and their saturation mask."""
     imgs = np.asarray(stack.images[:, rows, :], dtype=np.float64)[problem.image_index]
     bad = ~np.isfinite(imgs)
@@ -80,7 +80,7 @@ def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, source=N
     return imgs, sat
 
 
-def solve_chunk(problem: DemuxProblem, observations, saturated, rows: slice, method: str = "fast", tol: float | None = None) -> ChunkResult:
+def solve_chunk(problem: DemuxProblem, observations, saturated, rows: slice, *, method: str = "fast", tol: float | None = None) -> ChunkResult:
     """Solve every pixel of camera rows ``rows``.
 
     Parameters
@@ -163,7 +163,7 @@ def _attrs(problem: DemuxProblem, method: str, tol) -> dict:
     }
 
 
-def demultiplex(stack: Stack, alpha: float = 0.01, beta: float = 0.01, method: str = "fast", chunk_rows: int = DEFAULT_CHUNK_ROWS,
+def demultiplex(stack: Stack, *, alpha: float = 0.01, beta: float = 0.01, method: str = "fast", chunk_rows: int = DEFAULT_CHUNK_ROWS,
                 tol: float | None = None, progress: Callable[[int], None] | None = None) -> DemuxResult:
     """Demultiplex a stack in memory (Sec. 4).
 
@@ -185,13 +185,13 @@ def demultiplex(stack: Stack, alpha: float = 0.01, beta: float = 0.01, method: s
     DemuxResult
         ``transport`` (``T`` over ``offsets_rows``), per-pixel ``maps`` and ``attrs``.
     """
-    problem = DemuxProblem.from_stack(stack, alpha, beta)
+    problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
     H, W = stack.shape
     T = np.zeros((H, W, problem.n_offsets), np.float32)
     maps = {name: np.zeros((H, W), dtype) for name, dtype in MAP_NAMES.items()}
     for rows in _chunks(H, chunk_rows):
         obs, sat = read_observations(stack, problem, rows)
-        res = solve_chunk(problem, obs, sat, rows, method, tol)
+        res = solve_chunk(problem, obs, sat, rows, method=method, tol=tol)
         T[rows] = res.T
         for name in maps:
             maps[name][rows] = res.maps[name]
@@ -235,7 +235,7 @@ def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
     group.create_array("T", shape=(H, W, U), chunks=(DEFAULT_CHUNK_ROWS, W, U), dtype="float32", fill_value=0.0)
     for name, dtype in MAP_NAMES.items():
         group.create_array(name, shape=(H, W), chunks=(DEFAULT_CHUNK_ROWS, W), dtype=dtype, fill_value=0)
-    group.attrs.update(transport_attrs(problem.offsets_rows, problem.projector_rows, attrs))
+    group.attrs.update(transport_attrs(problem.offsets_rows, problem.projector_rows, attrs=attrs))
     return group
 
 
@@ -246,7 +246,7 @@ def _write_chunk(group, res: ChunkResult, index: int) -> None:
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 
-def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0.01, method: str = "fast",
+def demultiplex_to_store(stack: Stack, out, *, alpha: float = 0.01, beta: float = 0.01, method: str = "fast",
                          chunk_rows: int = DEFAULT_CHUNK_ROWS, tol: float | None = None, workers: int | None = None,
                          scheduler: str | None = None, overwrite: bool = False, restart: bool = False,
                          progress: Callable[[int], None] | None = None, source=None,
@@ -281,13 +281,13 @@ def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0
     out = Path(out)
     if out.exists() and not overwrite:
         raise TransportError("already exists (pass --overwrite to replace it)", out)
-    problem = DemuxProblem.from_stack(stack, alpha, beta)
+    problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
     get_solver(method)
     H, W = stack.shape
     chunks = _chunks(H, chunk_rows)
     fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows)
     attrs = _attrs(problem, method, tol)
-    group = resumable.open_partial(out, fingerprint, len(chunks), lambda d: _create_store(d, (H, W), problem, attrs), restart)
+    group = resumable.open_partial(out, fingerprint, len(chunks), lambda d: _create_store(d, (H, W), problem, attrs), restart=restart)
     done = resumable.done_units(group)
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():
@@ -298,13 +298,13 @@ def demultiplex_to_store(stack: Stack, out, alpha: float = 0.01, beta: float = 0
         _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source)
     else:
         for i in todo:
-            obs, sat = read_observations(stack, problem, chunks[i], source)
-            _write_chunk(group, solve_chunk(problem, obs, sat, chunks[i], method, tol), i)
+            obs, sat = read_observations(stack, problem, chunks[i], source=source)
+            _write_chunk(group, solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol), i)
             if progress is not None:
                 progress(chunks[i].stop - chunks[i].start)
     if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
         return resumable.partial_path(out)
-    return resumable.promote(out, overwrite, TransportError)
+    return resumable.promote(out, overwrite=overwrite, error=TransportError)
 
 
 def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source):
@@ -327,8 +327,8 @@ def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, schedul
 
         def submit_next():
             i = pending.pop(0)
-            obs, sat = read_observations(stack, problem, chunks[i], source)
-            fut = client.submit(solve_chunk, shared, obs, sat, chunks[i], method, tol, pure=False)
+            obs, sat = read_observations(stack, problem, chunks[i], source=source)
+            fut = client.submit(solve_chunk, shared, obs, sat, chunks[i], method=method, tol=tol, pure=False)
             index_of[fut.key] = i
             futures.add(fut)
 

@@ -126,7 +126,7 @@ class DemuxProblem:
         return self.image_index.size
 
     @classmethod
-    def from_stack(cls, stack: Stack, alpha: float = 0.01, beta: float = 0.01, support_rows: int | None = None) -> "DemuxProblem":
+    def from_stack(cls, stack: Stack, *, alpha: float = 0.01, beta: float = 0.01, support_rows: int | None = None) -> "DemuxProblem":
         """Assemble the problem from a stack's metadata.
 
         Parameters

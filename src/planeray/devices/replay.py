@@ -27,7 +27,7 @@ class ReplayDevice:
 
     kind = "replay"
 
-    def __init__(self, stack: Stack, source: str | None = None):
+    def __init__(self, stack: Stack, *, source: str | None = None):
         self.stack = stack
         self.source = source or stack.metadata.get("source", "stack")
         self.lines_per_second = stack.lines_per_second

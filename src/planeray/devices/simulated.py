@@ -37,7 +37,7 @@ class SimulatedEpiscan:
 
     kind = "simulated"
 
-    def __init__(self, scene: Scene, camera: CameraModel | None = None, lines_per_second=PAPER_LINES_PER_SECOND, seed=0, noise=True):
+    def __init__(self, scene: Scene, camera: CameraModel | None = None, *, lines_per_second=PAPER_LINES_PER_SECOND, seed=0, noise=True):
         self.scene = scene
         self.camera = camera or CameraModel()
         self.lines_per_second = float(lines_per_second)
@@ -73,9 +73,9 @@ class SimulatedEpiscan:
     def grab(self):
         rng = self._rng()
         signal = self.scene.transport.render(self.band(rng))
-        return self.camera.expose(signal, self.exposure_us, rng, self.scene.ambient_albedo, noise=self.noise)
+        return self.camera.expose(signal, self.exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise)
 
-    def capture_pattern(self, pattern, exposure_us: float, frame_period_us: float = 1e6 / 60.0):
+    def capture_pattern(self, pattern, exposure_us: float, *, frame_period_us: float = 1e6 / 60.0):
         """Conventional (unsynchronized) capture: project a row pattern, one full-frame exposure.
 
         The raster projector repeats the pattern every ``frame_period_us``; each
@@ -92,9 +92,9 @@ class SimulatedEpiscan:
         passes = float(exposure_us) / float(frame_period_us)
         rng = np.random.default_rng([self.seed, 2**41, int(round(exposure_us * 1000)), self._next_pattern()])
         signal = passes * self.scene.transport.render(RowPattern(np.asarray(pattern, float)))
-        return self.camera.expose(signal, exposure_us, rng, self.scene.ambient_albedo, noise=self.noise)
+        return self.camera.expose(signal, exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise)
 
-    def capture_line_sweep(self, exposure_us: float = 500.0, line_step_rows: int | None = None, *, start_row: float | None = None,
+    def capture_line_sweep(self, exposure_us: float = 500.0, *, line_step_rows: int | None = None, start_row: float | None = None,
                            phases=None, references: bool = True, falloff: float = 0.0, blur_rows: float = 0.0):
         """Global-shutter images of a swept line comb: the line-velocity calibration (Sec. 6).
 
@@ -190,7 +190,7 @@ class SimulatedEpiscan:
         def exposed(start, length):
             """Exposed fraction of each projector row's scanline, averaged over the frames."""
             if not self.noise:  # expected value over the jitter
-                return band_bin_weights(rows, start + 0.5 * length, length, jitter_rows)
+                return band_bin_weights(rows, start + 0.5 * length, length, blur_sigma_rows=jitter_rows)
             shifts = rng.normal(0.0, jitter_rows, cam.frames_averaged) if jitter_rows > 0 else np.zeros(1)
             return np.mean([band_bin_weights(rows, start + s + 0.5 * length, length) for s in shifts], axis=0)
 
@@ -207,7 +207,7 @@ class SimulatedEpiscan:
             signal = self.scene.transport.render(RowPattern(pattern)) * gain
             if blur_rows > 0:
                 signal = gaussian_filter(np.asarray(signal, np.float64), blur_rows, mode="nearest")
-            return cam.expose(signal, t_us, rng, ambient, noise=self.noise)
+            return cam.expose(signal, t_us, rng, ambient_albedo=ambient, noise=self.noise)
 
         images, saturated = [], []
         for j in phases:

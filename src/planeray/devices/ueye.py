@@ -58,7 +58,7 @@ class UEyeEpiscan:
 
     kind = "ueye"
 
-    def __init__(self, camera_id: int = 0, lines_per_second: float = PAPER_LINES_PER_SECOND, base_trigger_delay_us: float = 0.0,
+    def __init__(self, camera_id: int = 0, *, lines_per_second: float = PAPER_LINES_PER_SECOND, base_trigger_delay_us: float = 0.0,
                  frames_averaged: int = 8, bit_depth: int = 12, black_level: int = 0):
         try:
             from pyueye import ueye

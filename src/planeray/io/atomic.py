@@ -25,7 +25,7 @@ def _remove(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_directory(path, overwrite: bool = False, *, error=InputError):
+def atomic_directory(path, *, overwrite: bool = False, error=InputError):
     """Write a directory atomically: yield a temporary sibling, rename it into place.
 
     Parameters
@@ -73,7 +73,7 @@ def atomic_directory(path, overwrite: bool = False, *, error=InputError):
 
 
 @contextlib.contextmanager
-def atomic_file(path, overwrite: bool = True, *, error=InputError):
+def atomic_file(path, *, overwrite: bool = True, error=InputError):
     """Write a single file atomically: yield a temporary sibling, ``os.replace`` it.
 
     Parameters

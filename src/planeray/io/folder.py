@@ -215,7 +215,7 @@ def import_folder(path) -> Stack:
         raise StackError(exc.problem, folder) from exc
 
 
-def export_folder(stack: Stack, folder, fmt: str = "tiff", bit_depth: int = 16, black_level: float = 256,
+def export_folder(stack: Stack, folder, *, fmt: str = "tiff", bit_depth: int = 16, black_level: float = 256,
                   overwrite: bool = False) -> Path:
     """Export a stack as an import folder of 16-bit grayscale images, atomically.
 
@@ -267,7 +267,7 @@ def export_folder(stack: Stack, folder, fmt: str = "tiff", bit_depth: int = 16, 
         "planeray_version": planeray_version(),
         "planeray_metadata": jsonable(stack.metadata, "metadata", StackError),
     }
-    with atomic_directory(folder, overwrite, error=StackError) as tmp:
+    with atomic_directory(folder, overwrite=overwrite, error=StackError) as tmp:
         rows = []
         for i in range(n):
             image = np.asarray(stack.images[i], dtype=np.float32)

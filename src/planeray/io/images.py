@@ -66,7 +66,7 @@ def read_raw_image(path: Path, manifest_line: int) -> np.ndarray:
     return data
 
 
-def write_image(path, image, bit_depth: int = 16, black_level: float = 0) -> Path:
+def write_image(path, image, *, bit_depth: int = 16, black_level: float = 0) -> Path:
     """Write one normalized image as a 16-bit grayscale TIFF or PNG, atomically.
 
     Parameters

@@ -16,7 +16,7 @@ from .folder import import_folder
 
 
 # ----------------------------------------------------------------------------
-def write_stack(stack: Stack, path, overwrite: bool = False, progress=None) -> Path:
+def write_stack(stack: Stack, path, *, overwrite: bool = False, progress=None) -> Path:
     """Write a stack to a native Zarr v3 store, atomically.
 
     Parameters
@@ -45,9 +45,9 @@ def write_stack(stack: Stack, path, overwrite: bool = False, progress=None) -> P
     if not isinstance(stack, Stack):
         raise StackError(f"expected a Stack, got {type(stack).__name__}", path)
     n, h, w = (int(x) for x in stack.images.shape)
-    with atomic_directory(path, overwrite, error=StackError) as tmp:
+    with atomic_directory(path, overwrite=overwrite, error=StackError) as tmp:
         group = create_stack_group(tmp, (n, h, w), stack.delay_us, stack.exposure_us, stack.excluded,
-                                   stack.lines_per_second, stack.projector_rows, stack.metadata, path)
+                                   stack.lines_per_second, stack.projector_rows, stack.metadata, path=path)
         images, saturated = group["images"], group["saturated"]
         for i in range(n):
             image = np.asarray(stack.images[i], dtype=np.float32)
@@ -65,7 +65,7 @@ def write_stack(stack: Stack, path, overwrite: bool = False, progress=None) -> P
     return path
 
 
-def create_stack_group(directory, shape, delay_us, exposure_us, excluded, lines_per_second, projector_rows, metadata, path=None):
+def create_stack_group(directory, shape, delay_us, exposure_us, excluded, lines_per_second, projector_rows, metadata, *, path=None):
     """Create the layout of a native stack store in ``directory`` (images left at 0).
 
     Shared by :func:`write_stack` and writers that fill a store image by image
@@ -93,7 +93,7 @@ def create_stack_group(directory, shape, delay_us, exposure_us, excluded, lines_
     return group
 
 
-def read_stack(path, lazy: bool = True) -> Stack:
+def read_stack(path, *, lazy: bool = True) -> Stack:
     """Read a stack from a native store, or import it from a captured-image folder.
 
     Parameters

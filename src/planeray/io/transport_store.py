@@ -16,7 +16,7 @@ from .atomic import atomic_directory
 
 
 # ----------------------------------------------------------------------------
-def transport_attrs(offsets_rows, projector_rows: int, attrs: dict | None = None, path=None) -> dict:
+def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = None, path=None) -> dict:
     """Group attributes of a transport store: ``attrs`` plus the reserved format fields.
 
     Used by :func:`write_transport` and by writers that fill a store chunk by chunk
@@ -47,7 +47,7 @@ def read_transport_maps(path) -> dict:
     return maps
 
 
-def write_transport(transport: Transport, path, attrs: dict | None = None, overwrite: bool = False) -> Path:
+def write_transport(transport: Transport, path, *, attrs: dict | None = None, overwrite: bool = False) -> Path:
     """Write a transport to a Zarr v3 store, atomically.
 
     Parameters
@@ -76,10 +76,10 @@ def write_transport(transport: Transport, path, attrs: dict | None = None, overw
     path = Path(path)
     if not isinstance(transport, Transport):
         raise TransportError(f"expected a Transport, got {type(transport).__name__}", path)
-    out = transport_attrs(transport.offsets_rows, transport.geometry.projector_rows, attrs, path)
+    out = transport_attrs(transport.offsets_rows, transport.geometry.projector_rows, attrs=attrs, path=path)
     dense = np.asarray(transport.dense, dtype=np.float32)
     h, w, u = dense.shape
-    with atomic_directory(path, overwrite, error=TransportError) as tmp:
+    with atomic_directory(path, overwrite=overwrite, error=TransportError) as tmp:
         group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
         chunks = (max(min(h, 64), 1), max(min(w, 64), 1), max(u, 1))
         array = group.create_array("T", shape=dense.shape, chunks=chunks, dtype="float32", fill_value=0.0)

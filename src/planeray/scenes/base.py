@@ -124,7 +124,7 @@ def list_scenes() -> dict[str, str]:
     return {k: v.description for k, v in sorted(_REGISTRY.items())}
 
 
-def make_scene(name: str, shape=(128, 128), projector_rows: int | None = None, seed: int = 0, **params) -> Scene:
+def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None, seed: int = 0, **params) -> Scene:
     """Build a registered scene by name.
 
     Parameters
@@ -166,7 +166,7 @@ def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
     return (k / k.sum()).astype(np.float64)
 
 
-def representative_pixels(scene: Scene, support_rows: int, per_label: int = 1, exposure_us: float = 600.0) -> tuple[np.ndarray, list[str]]:
+def representative_pixels(scene: Scene, support_rows: int, *, per_label: int = 1, exposure_us: float = 600.0) -> tuple[np.ndarray, list[str]]:
     """Pick pixels that show each ground-truth effect of a scene most clearly.
 
     Direct/diffuse pixels: the brightest whose in-sweep indirect light is below 1 %

@@ -306,7 +306,7 @@ def sphere_scene_transport(shape, geometry, albedo, trace: SphereTrace, band_row
     direct = ((1.0 - trace.coverage) * albedo + trace.ball_direct).astype(np.float32)
     foot = footprint_kernel(offsets, rpc).astype(np.float32)
     dense = direct[:, :, None] * foot[None, None, :]
-    transport = Transport.from_entries(shape, offsets, trace.row, trace.col, trace.offset, trace.value, geometry, dense=dense)
+    transport = Transport.from_entries(shape, offsets, trace.row, trace.col, trace.offset, trace.value, geometry=geometry, dense=dense)
     return transport, direct
 
 
