@@ -30,7 +30,7 @@ from planeray.acquire import simulate_stack
 from planeray.demux import DemuxProblem, demultiplex, demultiplex_to_store, solve_cvxpy, solve_fast
 from planeray.demux.driver import read_observations
 from planeray.scenes import make_scene
-from planeray.timing import paper_sweep
+from planeray.timing import PAPER_PROJECTOR_ROWS, paper_sweep
 
 PAPER_SECONDS_128 = 9 * 60  # "it takes 9 minutes to demultiplex these images for 128x128" (Sec. 6)
 
@@ -78,10 +78,10 @@ def main():
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
 
-    scene = make_scene(args.scene, (args.size, args.size), projector_rows=720, seed=args.seed)
+    scene = make_scene(args.scene, (args.size, args.size), projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed)
     stack = simulate_stack(scene, paper_sweep(), seed=args.seed)
     problem = DemuxProblem.from_stack(stack)
-    print(f"scene {args.scene} {args.size}x{args.size} (720 projector rows), N = {problem.n_images} images, "
+    print(f"scene {args.scene} {args.size}x{args.size} ({PAPER_PROJECTOR_ROWS} projector rows), N = {problem.n_images} images, "
           f"U = {problem.n_offsets} offsets, {len(problem.groups)} distinct row matrices")
 
     n, t_cvx, t_fast, gaps = compare_with_cvxpy(stack, args.pixels, rng)
@@ -108,7 +108,7 @@ def main():
           f"{res.maps['iterations'].mean():.0f}, max {res.maps['iterations'].max()}")
 
     if args.large:
-        big = make_scene(args.scene, (args.large, args.large), projector_rows=720, seed=args.seed)
+        big = make_scene(args.scene, (args.large, args.large), projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed)
         big_stack = simulate_stack(big, paper_sweep(), seed=args.seed)
         del big
         with tempfile.TemporaryDirectory() as tmp:

@@ -21,7 +21,7 @@ from planeray.camera import CameraModel
 from planeray.devices import SimulatedEpiscan
 from planeray.acquire import acquire_sweep
 from planeray.scenes import make_scene
-from planeray.timing import paper_sweep
+from planeray.timing import PAPER_LINES_PER_SECOND, paper_sweep
 
 
 def main():
@@ -34,7 +34,7 @@ def main():
     scene = make_scene(args.scene, (args.size, args.size), seed=0)
     T = scene.transport
     build_s = time.perf_counter() - t0
-    bands = paper_sweep().bands(54_000, jitter_us=5.0)
+    bands = paper_sweep().bands(PAPER_LINES_PER_SECOND, jitter_us=5.0)
     print(f"scene {args.scene} {args.size}x{args.size}, {T.offsets_rows.size} offsets, "
           f"{len(T.sparse)} sparse entries, T = {T.dense.nbytes / 2**20:.0f} MiB (built in {build_s:.1f} s)")
 

@@ -17,6 +17,7 @@ import numpy as np
 from .errors import InputError
 from .io import atomic_file
 from .stack import Stack
+from .timing import PAPER_LINES_PER_SECOND
 
 __all__ = ["DelayProfiles", "measured_delay_profiles", "area_normalize", "write_profiles_csv"]
 
@@ -156,7 +157,7 @@ def _check_pixels(pixels, shape) -> np.ndarray:
     return px
 
 
-def transport_delay_profiles(transport, pixels=None, *, exposure_us=None, delays_us=None, lines_per_second=54000.0) -> TransportDelayProfiles:
+def transport_delay_profiles(transport, pixels=None, *, exposure_us=None, delays_us=None, lines_per_second=PAPER_LINES_PER_SECOND) -> TransportDelayProfiles:
     """Continuous delay profiles of a transport (Sec. 8 on an estimated or true ``T``).
 
     Parameters
