@@ -32,6 +32,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ._validate import check_integer, check_nonnegative, check_number, check_positive
+
 __all__ = ["CameraModel", "row_shifts_rows"]
 
 
@@ -73,18 +75,13 @@ class CameraModel:
     row_jitter_us: float = 10.0
 
     def __post_init__(self):
-        if not 1 <= self.bit_depth <= 16:
-            raise ValueError(f"bit_depth must be 1..16, got {self.bit_depth}")
-        if not 0 <= self.black_level < self.max_code:
-            raise ValueError(f"black_level must be in [0, {self.max_code}), got {self.black_level}")
+        check_integer(self.bit_depth, "bit_depth", minimum=1, maximum=16)
+        check_number(self.black_level, "black_level", minimum=0, maximum=self.max_code, max_inclusive=False)
         for name in ("full_well_e", "laser_electrons"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be positive")
+            check_positive(getattr(self, name), name)
         for name in ("read_noise_e", "ambient_e_per_us", "jitter_us", "row_jitter_us"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be non-negative")
-        if self.frames_averaged < 1:
-            raise ValueError("frames_averaged must be at least 1")
+            check_nonnegative(getattr(self, name), name)
+        check_integer(self.frames_averaged, "frames_averaged", minimum=1)
 
     @property
     def max_code(self) -> int:

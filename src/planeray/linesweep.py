@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._validate import check_integer, check_nonnegative, check_positive
 from .errors import InputError
 
 __all__ = ["PAPER_CALIBRATION_EXPOSURE_US", "LineSweep"]
@@ -71,12 +72,8 @@ class LineSweep:
         if images.ndim != 3 or images.shape[0] < 1:
             raise InputError(f"line-sweep images must be (H, W) or (n, H, W), got shape {images.shape}")
         self.images = images
-        if not (np.isfinite(self.exposure_us) and self.exposure_us > 0):
-            raise InputError(f"exposure_us must be a positive number, got {self.exposure_us!r}")
-        self.exposure_us = float(self.exposure_us)
-        if int(self.line_step_rows) != self.line_step_rows or self.line_step_rows < 1:
-            raise InputError(f"line_step_rows must be a positive integer, got {self.line_step_rows!r}")
-        self.line_step_rows = int(self.line_step_rows)
+        self.exposure_us = check_positive(self.exposure_us, "exposure_us")
+        self.line_step_rows = check_integer(self.line_step_rows, "line_step_rows", minimum=1)
         if self.phases is not None:
             phases = tuple(int(p) for p in self.phases)
             if len(phases) != images.shape[0]:
@@ -84,8 +81,7 @@ class LineSweep:
             self.phases = phases
         if self.flat is not None and self.flat_exposure_us is None:
             raise InputError("flat needs flat_exposure_us (to scale the dark frame to it)")
-        if not (np.isfinite(self.timing_jitter_us) and self.timing_jitter_us >= 0):
-            raise InputError(f"timing_jitter_us must be >= 0, got {self.timing_jitter_us!r}")
+        check_nonnegative(self.timing_jitter_us, "timing_jitter_us")
 
     @property
     def complete(self) -> bool:
