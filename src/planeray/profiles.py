@@ -72,6 +72,16 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     stack : Stack
     pixels : array_like (P, 2)
         ``(row, col)`` pixel coordinates.
+
+    Examples
+    --------
+    >>> from planeray.acquire import simulate_stack
+    >>> from planeray.scenes import make_scene
+    >>> from planeray.timing import paper_sweep
+    >>> stack = simulate_stack(make_scene("wax", (16, 16), projector_rows=90, seed=0), paper_sweep(), seed=0)
+    >>> prof = measured_delay_profiles(stack, [(8, 8)])
+    >>> prof.values.shape  # (pixels, exposures, delays)
+    (1, 5, 17)
     """
     px = _check_pixels(pixels, stack.shape)
     delays, exposures = stack.delays(), stack.exposures()

@@ -97,6 +97,16 @@ def delay_from_sync_offset(sync_offset_us, exposure_us, *, line_time_us=None, li
     -------
     delay_us : float or ndarray
         Delay ``t_d`` between the centre of exposure and the centre of illumination.
+
+    Examples
+    --------
+    The paper's line time at 54,000 lines/s is 18.5 us; a sync offset of 0 with a
+    600 us exposure puts the band 290.7 us ahead:
+
+    >>> round(float(delay_from_sync_offset(0.0, 600.0, lines_per_second=54_000)), 2)
+    290.74
+    >>> round(float(sync_offset_from_delay(290.74, 600.0, lines_per_second=54_000)), 2)
+    0.0
     """
     t_p = _line_time_us(line_time_us, lines_per_second)
     return 0.5 * np.asarray(exposure_us, dtype=float) - 0.5 * t_p - np.asarray(sync_offset_us, dtype=float)
@@ -188,6 +198,16 @@ def band_bin_weights(offset_rows, centre_rows, width_rows, *, blur_sigma_rows=0.
     -------
     weights : ndarray of float64
         Fraction of each bin lit by the band; they sum to ``width_rows`` over all bins.
+
+    Examples
+    --------
+    A 600 us band at 54,000 lines/s is 32.4 rows wide; its bin weights add up to that
+    width whatever its centre (here 3.7 rows below the camera row):
+
+    >>> import numpy as np
+    >>> w = band_bin_weights(np.arange(-30, 31), 3.7, band_width_rows(600.0, 54_000))
+    >>> round(float(w.sum()), 6), round(float(w[30]), 6)
+    (32.4, 1.0)
     """
     k = np.asarray(offset_rows, dtype=float)
     c = np.asarray(centre_rows, dtype=float)
@@ -373,7 +393,16 @@ def boundary_images(delay_us, exposure_us, *, margin_us=PAPER_BOUNDARY_MARGIN_US
 
 def paper_sweep() -> Sweep:
     """The paper's sweep (Sec. 6): delays -1500..1500 us step 187.5 (17) x exposures
-    600..1200 us step 150 (5) = 85 images, 10 boundary images flagged -> N = 75."""
+    600..1200 us step 150 (5) = 85 images, 10 boundary images flagged -> N = 75.
+
+    Examples
+    --------
+    >>> sweep = paper_sweep()
+    >>> len(sweep), int(sweep.excluded.sum())
+    (85, 10)
+    >>> sweep_support_rows(sweep, PAPER_LINES_PER_SECOND)
+    114
+    """
     return Sweep.grid(np.arange(-8, 9) * 187.5, np.arange(600.0, 1201.0, 150.0), name="paper")
 
 

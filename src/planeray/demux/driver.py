@@ -184,6 +184,16 @@ def demultiplex(stack: Stack, *, alpha: float = 0.01, beta: float = 0.01, method
     -------
     DemuxResult
         ``transport`` (``T`` over ``offsets_rows``), per-pixel ``maps`` and ``attrs``.
+
+    Examples
+    --------
+    >>> from planeray.acquire import simulate_stack
+    >>> from planeray.scenes import make_scene
+    >>> from planeray.timing import paper_sweep
+    >>> stack = simulate_stack(make_scene("wax", (8, 8), projector_rows=45, seed=0), paper_sweep(), seed=0)
+    >>> result = demultiplex(stack)
+    >>> result.transport.dense.shape, bool(result.maps["converged"].all())
+    ((8, 8, 229), True)
     """
     problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
     H, W = stack.shape

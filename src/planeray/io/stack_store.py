@@ -116,6 +116,19 @@ def read_stack(path, *, lazy: bool = True) -> Stack:
         The path does not exist or is not a valid planeray stack; the message names
         the path and the problem (missing array or attribute, inconsistent shapes,
         non-finite image...).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from planeray.acquire import simulate_stack
+    >>> from planeray.scenes import make_scene
+    >>> from planeray.timing import quick_sweep
+    >>> stack = simulate_stack(make_scene("diffuse_plane", (16, 16), seed=0), quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = write_stack(stack, pathlib.Path(tmp) / "s.zarr")
+    ...     back = read_stack(path, lazy=False)
+    >>> bool((back.images == stack.images).all()), back.lines_per_second
+    (True, 54000.0)
     """
     path = Path(path)
     if path.is_dir() and (path / "manifest.csv").is_file():

@@ -139,6 +139,14 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
         Seed of every random element (textures); same seed, same bytes.
     **params
         Scene-specific physical parameters (see each scene's docstring).
+
+    Examples
+    --------
+    >>> scene = make_scene("wax", (32, 32), projector_rows=180, seed=0)
+    >>> scene.shape, scene.geometry.projector_rows
+    ((32, 32), 180)
+    >>> sorted(list_scenes())
+    ['corner', 'diffuse_plane', 'disco_ball', 'mirror_ball', 'wax']
     """
     _discover()
     if name not in _REGISTRY:
