@@ -23,24 +23,26 @@ import numba
 import numpy as np
 
 from planeray.mc import mc_line_profile
+from planeray.medium import Medium
 
 
 def rates(n_photons):
     print(f"planeray MC, {n_photons:.0e} photons, {numba.get_num_threads()} threads")
     print(f"{'medium':44s} {'s':>7s} {'photons/s':>10s} {'coll/photon':>11s} {'ns/coll/thread':>14s}")
+    study = Medium(sigma_s=1.0, sigma_a=0.0, g=0.9)
     media = [
-        ("study default: 1 / 0 / g 0.9, n 1, +-114 mm", dict(sigma_s=1.0, sigma_a=0.0, g=0.9, offsets_rows=np.arange(-114, 115))),
-        ("  same, full tracing (no diffusion hand-off)", dict(sigma_s=1.0, sigma_a=0.0, g=0.9, offsets_rows=np.arange(-114, 115),
-                                                              diffusion_depth_mfp=None)),
-        ("absorbing: 1 / 0.1 / g 0.9, n 1", dict(sigma_s=1.0, sigma_a=0.1, g=0.9)),
-        ("wax: 1.5 / 0.003 / g 0.8, n 1.4, 0.3 mm", dict(sigma_s=1.5, sigma_a=0.003, g=0.8, n=1.4,
-                                                      offsets_rows=np.arange(-192, 193), mm_per_row=0.3)),
+        ("study default: 1 / 0 / g 0.9, n 1, +-114 mm", study, dict(offsets_rows=np.arange(-114, 115))),
+        ("  same, full tracing (no diffusion hand-off)", study, dict(offsets_rows=np.arange(-114, 115),
+                                                                     diffusion_depth_mfp=None)),
+        ("absorbing: 1 / 0.1 / g 0.9, n 1", Medium(sigma_s=1.0, sigma_a=0.1, g=0.9), {}),
+        ("wax: 1.5 / 0.003 / g 0.8, n 1.4, 0.3 mm", Medium(sigma_s=1.5, sigma_a=0.003, g=0.8, n=1.4),
+         dict(offsets_rows=np.arange(-192, 193), mm_per_row=0.3)),
     ]
-    mc_line_profile(1.0, 0.1, 0.5, n_photons=1000)  # compile (or load the compiled cache)
+    mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.1, g=0.5), n_photons=1000)  # compile (or load the compiled cache)
     times = []
-    for name, kw in media:
+    for name, medium, kw in media:
         t0 = time.perf_counter()
-        p = mc_line_profile(n_photons=n_photons, **kw)
+        p = mc_line_profile(medium, n_photons=n_photons, **kw)
         dt = time.perf_counter() - t0
         times.append(dt)
         per = p.n_interactions / p.n_photons
@@ -84,16 +86,17 @@ def versus_mitsuba(n_photons, spp, plot=None):
     except ImportError:
         print("\nMitsuba 3 not installed (pip install 'planeray[mitsuba]'): skipping the comparison")
         return
-    sigma_s, sigma_a, g, dx = 1.0, 0.05, 0.5, 1.0
+    medium, dx = Medium(sigma_s=1.0, sigma_a=0.05, g=0.5, n=1.0), 1.0
+    sigma_s, sigma_a, g = medium.sigma_s, medium.sigma_a, medium.g
     off = np.arange(-10, 11)
-    mfp = 1.0 / (sigma_a + sigma_s * (1 - g))
+    mfp = medium.transport_mfp_mm
     mask = np.abs(off) * dx <= 5 * mfp
-    mitsuba_line_profile(sigma_s, sigma_a, g, off, dx, spp=1, along_pixels=16)  # load variant, warm up
+    mitsuba_line_profile(medium, off, mm_per_row=dx, spp=1, along_pixels=16)  # load variant, warm up
     t0 = time.perf_counter()
-    mi = mitsuba_line_profile(sigma_s, sigma_a, g, off, dx, spp=spp, along_pixels=1024)
+    mi = mitsuba_line_profile(medium, off, mm_per_row=dx, spp=spp, along_pixels=1024)
     t_mi = time.perf_counter() - t0
     t0 = time.perf_counter()
-    mc = mc_line_profile(sigma_s, sigma_a, g, n=1.0, n_photons=n_photons, offsets_rows=off, mm_per_row=dx,
+    mc = mc_line_profile(medium, n_photons=n_photons, offsets_rows=off, mm_per_row=dx,
                          source_width_mm=dx)
     t_mc = time.perf_counter() - t0
     e_mi, r_mi = efficiency(t_mi, mi.radiance, mi.stderr, mask)

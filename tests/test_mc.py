@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import trapezoid
 
-from planeray.mc.diffusion import dipole_line_kernel, dipole_total_reflectance
 from planeray.mc import fresnel_unpolarized, hg_phase, mc_line_profile, sample_hg_cos
+from planeray.mc.diffusion import dipole_line_kernel, dipole_total_reflectance
+from planeray.medium import Medium
 
 # van de Hulst, Multiple Light Scattering (1980), Vol. 2, Table 35 (also MCML's
 # validation case, Wang et al. 1995): slab of optical depth 2, albedo 0.9,
@@ -16,7 +17,7 @@ VDH35 = dict(Rd=0.09739, Tt=0.66096, R_mu1=0.06180)
 
 
 def test_energy_conservation_finite_slab_with_fresnel():
-    p = mc_line_profile(1.0, 0.1, 0.5, n=1.3, thickness=2.0, n_photons=20_000, seed=3)
+    p = mc_line_profile(Medium(1.0, 0.1, 0.5, n=1.3, thickness_mm=2.0), n_photons=20_000, seed=3)
     total = p.total_reflectance + p.specular_reflectance + p.transmittance + p.absorbed + p.truncated
     assert abs(total - 1.0) < 1e-9
     assert p.transmittance > 0 and p.total_reflectance > 0 and p.absorbed > 0
@@ -24,7 +25,7 @@ def test_energy_conservation_finite_slab_with_fresnel():
 
 
 def test_energy_conservation_semi_infinite():
-    p = mc_line_profile(1.0, 0.05, 0.0, n_photons=10_000, seed=5)
+    p = mc_line_profile(Medium(1.0, 0.05, 0.0), n_photons=10_000, seed=5)
     assert p.transmittance == 0.0
     assert abs(p.energy_balance - 1.0) < 1e-9
 
@@ -33,15 +34,15 @@ def test_single_scattering_limit():
     # Normal incidence, isotropic, index matched, semi-infinite:
     # R_1 = (a/2) int_0^1 mu/(1+mu) dmu = (a/2)(1 - ln 2); higher orders are O(a^2).
     a = 0.01
-    p = mc_line_profile(a, 1.0 - a, 0.0, n_photons=100_000, seed=0)
+    p = mc_line_profile(Medium(a, 1.0 - a, 0.0), n_photons=100_000, seed=0)
     expected = 0.5 * a * (1.0 - np.log(2.0))
     tol = 4 * p.total_reflectance_stderr + expected * a
     assert abs(p.total_reflectance - expected) < tol
 
 
 def test_high_albedo_matches_dipole_total_reflectance():
-    p = mc_line_profile(0.999, 0.001, 0.0, n_photons=20_000, seed=0)
-    ref = dipole_total_reflectance(0.001, 0.999, eta=1.0)
+    p = mc_line_profile(Medium(0.999, 0.001, 0.0), n_photons=20_000, seed=0)
+    ref = dipole_total_reflectance(Medium(0.999, 0.001, 0.0))
     assert abs(p.total_reflectance / ref - 1.0) < 0.05
 
 
@@ -50,9 +51,10 @@ def test_far_profile_shape_matches_dipole_line_kernel():
     sp = sigma_s * (1 - g)
     mfp = 1.0 / (sp + sigma_a)
     off = np.arange(-8, 9)
-    p = mc_line_profile(sigma_s, sigma_a, g, n_photons=30_000, offsets_rows=off,
+    medium = Medium(sigma_s, sigma_a, g)
+    p = mc_line_profile(medium, n_photons=30_000, offsets_rows=off,
                         mm_per_row=mfp, seed=2)
-    k = dipole_line_kernel(off, mfp, sigma_a, sp, eta=1.0)
+    k = dipole_line_kernel(medium, off, mm_per_row=mfp)  # sigma_s' = sp, n = 1
     # fold +/- offsets for statistics
     i3, i6 = [np.flatnonzero(np.abs(off) == j) for j in (3, 6)]
     r_mc = p.values[i3].sum() / p.values[i6].sum()
@@ -65,7 +67,7 @@ def test_far_profile_shape_matches_dipole_line_kernel():
 
 
 def test_specular_reflectance_is_normal_fresnel():
-    p = mc_line_profile(1.0, 0.1, 0.0, n=1.4, n_photons=2_000, seed=0)
+    p = mc_line_profile(Medium(1.0, 0.1, 0.0, n=1.4), n_photons=2_000, seed=0)
     assert p.specular_reflectance == pytest.approx(((1.4 - 1) / (1.4 + 1)) ** 2, rel=1e-12)
     assert p.specular_reflectance == pytest.approx(0.0278, abs=1e-4)
     assert abs(p.energy_balance - 1.0) < 1e-9
@@ -82,10 +84,11 @@ def test_fresnel_and_hg_helpers():
 
 
 def test_determinism():
-    kw = dict(sigma_s=1.0, sigma_a=0.1, g=0.8, n=1.33, thickness=3.0, n_photons=5_000)
-    a = mc_line_profile(**kw, seed=7)
-    b = mc_line_profile(**kw, seed=7)
-    c = mc_line_profile(**kw, seed=8)
+    medium = Medium(sigma_s=1.0, sigma_a=0.1, g=0.8, n=1.33, thickness_mm=3.0)
+    kw = dict(n_photons=5_000)
+    a = mc_line_profile(medium, **kw, seed=7)
+    b = mc_line_profile(medium, **kw, seed=7)
+    c = mc_line_profile(medium, **kw, seed=8)
     assert a.values.tobytes() == b.values.tobytes()
     assert a.stderr.tobytes() == b.stderr.tobytes()
     assert (a.total_reflectance, a.transmittance, a.absorbed) == (
@@ -95,26 +98,26 @@ def test_determinism():
 
 def test_cache_roundtrip(tmp_path, monkeypatch):
     monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path))
-    kw = dict(sigma_s=1.0, sigma_a=0.2, g=0.3, n_photons=3_000, seed=1, cache=True)
-    a = mc_line_profile(**kw)
+    kw = dict(n_photons=3_000, seed=1, cache=True)
+    a = mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.2, g=0.3), **kw)
     files = list((tmp_path / "mc").glob("*.npz"))
     assert len(files) == 1
-    b = mc_line_profile(**kw)
+    b = mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.2, g=0.3), **kw)
     assert b.values.tobytes() == a.values.tobytes()
     assert b.total_reflectance == a.total_reflectance and b.params == a.params
 
 
 def test_rejects_bad_parameters():
     with pytest.raises(ValueError):
-        mc_line_profile(1.0, 0.1, 1.0, n_photons=10)
+        mc_line_profile(Medium(1.0, 0.1, 1.0), n_photons=10)
     with pytest.raises(ValueError):
-        mc_line_profile(1.0, 0.1, 0.0, n_photons=10, offsets_rows=[0.5, 1.5])
+        mc_line_profile(Medium(1.0, 0.1, 0.0), n_photons=10, offsets_rows=[0.5, 1.5])
 
 
 def _vdh_slab(n, n_photons, seed, offsets=np.arange(-150, 151)):
     # tau = 2 with sigma_t = 10 / mm -> d = 0.2 mm; bins of 0.02 mm over +-3 mm hold all
     # of the (albedo 0.9, thin) profile.
-    return mc_line_profile(9.0, 1.0, 0.75, n=n, thickness=0.2, n_photons=n_photons,
+    return mc_line_profile(Medium(9.0, 1.0, 0.75, n=n, thickness_mm=0.2), n_photons=n_photons,
                            offsets_rows=offsets, mm_per_row=0.02, seed=seed)
 
 
@@ -149,7 +152,7 @@ def test_radiance_single_scattering_closed_form():
     # only above the strip; higher orders are O(albedo^2).
     sigma_s, sigma_a, w = 0.01, 0.99, 0.5
     for g in (0.0, 0.6, -0.6):
-        p = mc_line_profile(sigma_s, sigma_a, g, n_photons=200_000, offsets_rows=np.arange(-3, 4),
+        p = mc_line_profile(Medium(sigma_s, sigma_a, g), n_photons=200_000, offsets_rows=np.arange(-3, 4),
                             mm_per_row=w, source_width_mm=w, seed=1)
         L1 = sigma_s * hg_phase(-1.0, g) / (2.0 * 1.0 * w)
         a = sigma_s
@@ -167,13 +170,14 @@ def test_hg_phase_normalized_and_sampled():
 
 def test_same_bytes_whatever_the_thread_count():
     numba = pytest.importorskip("numba")
-    kw = dict(sigma_s=1.0, sigma_a=0.05, g=0.9, n=1.3, n_photons=20_000, seed=11)
+    medium = Medium(sigma_s=1.0, sigma_a=0.05, g=0.9, n=1.3)
+    kw = dict(n_photons=20_000, seed=11)
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        a = mc_line_profile(**kw)
+        a = mc_line_profile(medium, **kw)
         numba.set_num_threads(before)
-        b = mc_line_profile(**kw)
+        b = mc_line_profile(medium, **kw)
     finally:
         numba.set_num_threads(before)
     assert a.values.tobytes() == b.values.tobytes()
@@ -182,12 +186,13 @@ def test_same_bytes_whatever_the_thread_count():
 
 def test_non_absorbing_medium_finishes_and_reports_truncation():
     off = np.arange(-30, 31)
-    p = mc_line_profile(1.0, 0.0, 0.9, n_photons=5_000, offsets_rows=off, seed=0)
+    p = mc_line_profile(Medium(1.0, 0.0, 0.9), n_photons=5_000, offsets_rows=off, seed=0)
     assert p.absorbed == pytest.approx(0.0, abs=0.02)  # only roulette's zero-mean net weight
     assert 0.0 < p.truncated < 0.15
     assert abs(p.energy_balance - 1.0) < 1e-9
     # A larger cutoff truncates less (~ 1 / cutoff for a random walk).
-    q = mc_line_profile(1.0, 0.0, 0.9, n_photons=5_000, offsets_rows=off, seed=0, cutoff_mm=4 * p.params["cutoff_mm"])
+    q = mc_line_profile(Medium(1.0, 0.0, 0.9), n_photons=5_000, offsets_rows=off, seed=0,
+                        cutoff_mm=4 * p.params["cutoff_mm"])
     assert q.truncated < 0.5 * p.truncated
 
 
@@ -219,9 +224,9 @@ def test_hybrid_diffusion_continuation_matches_full_tracing(medium):
     # traced photons land (bin by bin within the combined Monte Carlo error), for a
     # fraction of the collisions.
     off = np.arange(-30, 31)
-    kw = dict(offsets_rows=off, mm_per_row=1.0, n_photons=100_000, **medium)
-    hyb = mc_line_profile(**kw, seed=1)
-    full = mc_line_profile(**kw, seed=2, diffusion_depth_mfp=None, cutoff_mm=600.0)  # 20x the window
+    kw = dict(offsets_rows=off, mm_per_row=1.0, n_photons=100_000)
+    hyb = mc_line_profile(Medium(**medium), **kw, seed=1)
+    full = mc_line_profile(Medium(**medium), **kw, seed=2, diffusion_depth_mfp=None, cutoff_mm=600.0)  # 20x the window
     assert hyb.n_interactions < 0.5 * full.n_interactions
     assert abs(hyb.energy_balance - 1.0) < 1e-9 and hyb.truncated < 1e-3
     for a, b, ea, eb in ((hyb.values, full.values, hyb.stderr, full.stderr),
@@ -259,19 +264,20 @@ def test_unwritable_cache_warns_and_still_returns(tmp_path, monkeypatch):
     (ro / "mc").write_text("a file where the cache folder should be")
     monkeypatch.setenv("PLANERAY_CACHE", str(ro))
     with pytest.warns(RuntimeWarning, match="could not write the Monte Carlo cache"):
-        p = mc_line_profile(1.0, 0.2, 0.3, n_photons=500, cache=True)
+        p = mc_line_profile(Medium(1.0, 0.2, 0.3), n_photons=500, cache=True)
     assert abs(p.energy_balance - 1.0) < 1e-9
 
 
 def test_point_source_radial_profile():
-    from planeray.mc.diffusion import dipole_reflectance
     from planeray.mc import mc_point_profile
+    from planeray.mc.diffusion import dipole_reflectance
 
     sigma_s, sigma_a, g = 1.0, 0.01, 0.0
     mfp = 1.0 / (sigma_s * (1 - g) + sigma_a)
     k = np.arange(0, 13)
-    p = mc_point_profile(sigma_s, sigma_a, g, n_photons=60_000, radius_bins=k, mm_per_bin=mfp, seed=3)
-    line = mc_line_profile(sigma_s, sigma_a, g, n_photons=60_000, seed=4)
+    medium = Medium(sigma_s, sigma_a, g)
+    p = mc_point_profile(medium, n_photons=60_000, radius_bins=k, mm_per_bin=mfp, seed=3)
+    line = mc_line_profile(medium, n_photons=60_000, seed=4)
     assert abs(p.energy_balance - 1.0) < 1e-9 and p.params["source"] == "point"
     # Same medium, same total reflectance whatever the source's shape.
     assert abs(p.total_reflectance - line.total_reflectance) < 4 * np.hypot(
@@ -281,10 +287,10 @@ def test_point_source_radial_profile():
     # itself is off by up to 10 % at n = 1: measured ratio 0.91 between 4 and 9 mfp).
     area = np.pi * ((k + 0.5) ** 2 - np.maximum(k - 0.5, 0) ** 2) * mfp ** 2
     rd = p.values / area
-    ref = dipole_reflectance(k * mfp, sigma_a, sigma_s * (1 - g), eta=1.0)
+    ref = dipole_reflectance(medium, k * mfp)
     r_mc, r_dp = rd[8] / rd[12], ref[8] / ref[12]
     rel = np.hypot(p.stderr[8] / p.values[8], p.stderr[12] / p.values[12])
     assert abs(r_mc / r_dp - 1.0) < max(0.1, 3 * rel)
     assert np.all(np.diff(rd) < 0)  # monotone away from the entry point
     with pytest.raises(ValueError):
-        mc_point_profile(1.0, 0.1, 0.0, n_photons=10, radius_bins=[-1, 0])
+        mc_point_profile(Medium(1.0, 0.1, 0.0), n_photons=10, radius_bins=[-1, 0])

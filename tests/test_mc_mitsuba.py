@@ -16,12 +16,13 @@ from planeray.mc.mitsuba_ref import (
     mitsuba_line_profile,
     single_scattering_radiance,
 )
+from planeray.medium import Medium
 
 # Multiple-scattering comparison medium (mm^-1): albedo 0.95, moderately forward
 # scattering.  At g = 0.9 Mitsuba's estimate is heavy-tailed (the HG peak is reached
 # only by next-event estimation towards the delta light): 10x the samples still give
 # per-bin z-scores up to 5, so that case is left to offline runs.
-MS = {"sigma_s": 1.0, "sigma_a": 0.05, "g": 0.5}
+MS = Medium(sigma_s=1.0, sigma_a=0.05, g=0.5)
 MS_MM_PER_ROW = 1.0
 MS_OFFSETS = np.arange(-10, 11)
 
@@ -30,15 +31,15 @@ MS_OFFSETS = np.arange(-10, 11)
 def ms_profiles():
     # ~1e6 camera paths (49k per bin; 1024 rows along the line keep the row-spread
     # standard error honest for the skewed far bins) and 3e5 MC photons: ~10 s.
-    mi = mitsuba_line_profile(**MS, offsets_rows=MS_OFFSETS, mm_per_row=MS_MM_PER_ROW,
+    mi = mitsuba_line_profile(MS, MS_OFFSETS, mm_per_row=MS_MM_PER_ROW,
                               spp=48, along_pixels=1024, seed=1)
-    mc = mc_line_profile(**MS, n=1.0, n_photons=300_000, offsets_rows=MS_OFFSETS,
+    mc = mc_line_profile(MS, n_photons=300_000, offsets_rows=MS_OFFSETS,
                          mm_per_row=MS_MM_PER_ROW, source_width_mm=MS_MM_PER_ROW, seed=0)
     return mi, mc
 
 
 def test_calibration_is_unit_line_power():
-    p = mitsuba_line_profile(0.02, 0.98, 0.0, [0], 0.5, spp=1, along_pixels=2, max_depth=2)
+    p = mitsuba_line_profile(Medium(0.02, 0.98, 0.0), [0], mm_per_row=0.5, spp=1, along_pixels=2, max_depth=2)
     # White Lambertian plane: every lit sample is exactly E / pi, so the measured line
     # power equals the nominal one up to float32 round-off.
     assert abs(p.params["calibrated_line_power"] - 1.0) < 1e-5
@@ -51,8 +52,9 @@ def test_single_scattering_matches_closed_form(g):
     # window checks the pixel <-> offset mapping.
     sigma_s, sigma_a, mm = 0.02, 0.98, 0.5
     offsets = np.arange(-2, 4)
-    l1 = single_scattering_radiance(sigma_s, sigma_a, g, mm)
-    single = mitsuba_line_profile(sigma_s, sigma_a, g, offsets, mm, spp=512, along_pixels=32,
+    medium = Medium(sigma_s, sigma_a, g)
+    l1 = single_scattering_radiance(medium, source_width_mm=mm)
+    single = mitsuba_line_profile(medium, offsets, mm_per_row=mm, spp=512, along_pixels=32,
                                   max_depth=2, seed=2)
     on = offsets == 0
     assert abs(single.radiance[on][0] - l1) < 4 * single.stderr[on][0]
@@ -62,7 +64,7 @@ def test_single_scattering_matches_closed_form(g):
 
     # All orders: multiple scattering adds O(albedo) relative (albedo = 0.02), in the
     # strip and as a faint halo beside it.
-    full = mitsuba_line_profile(sigma_s, sigma_a, g, offsets, mm, spp=512, along_pixels=32,
+    full = mitsuba_line_profile(medium, offsets, mm_per_row=mm, spp=512, along_pixels=32,
                                 seed=3)
     albedo = sigma_s / (sigma_s + sigma_a)
     assert abs(full.radiance[on][0] - l1) < 4 * full.stderr[on][0] + 2 * albedo * l1
@@ -106,8 +108,8 @@ def test_missing_mitsuba_gives_install_hint(monkeypatch):
 
 def test_rejects_bad_parameters():
     with pytest.raises(ValueError):
-        mitsuba_line_profile(1.0, 0.1, 1.0, [0], 1.0)
+        mitsuba_line_profile(Medium(1.0, 0.1, 1.0), [0], mm_per_row=1.0)
     with pytest.raises(ValueError):
-        mitsuba_line_profile(1.0, 0.1, 0.0, [0.5], 1.0)
+        mitsuba_line_profile(Medium(1.0, 0.1, 0.0), [0.5], mm_per_row=1.0)
     with pytest.raises(ValueError):
-        mitsuba_line_profile(1.0, 0.1, 0.0, [0], 1.0, source_width_mm=0.0)
+        mitsuba_line_profile(Medium(1.0, 0.1, 0.0), [0], mm_per_row=1.0, source_width_mm=0.0)

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from planeray.medium import Medium
 from planeray.scenes import EFFECTS, footprint_kernel, list_scenes, make_scene
 from planeray.scenes.wax import wax_kernel
 from planeray.timing import Band
@@ -124,9 +125,9 @@ def test_wax_glow_dominates_regular_epipolar_image(built):
 
 @pytest.mark.parametrize("model", ["mc", "dipole"])
 def test_wax_kernel_is_broad(model):
-    p = dict(mm_per_row=0.3, sigma_a=0.003, sigma_s_prime=0.3, eta=1.4)  # the scene's defaults
+    medium = Medium.from_reduced(0.3, 0.003, g=0.8, n=1.4)  # the scene's defaults
     u = np.arange(-16, 17)  # the 600 us band
-    k, total = wax_kernel(u, 1.0, **p, model=model)
+    k, total = wax_kernel(medium, u, 1.0, mm_per_row=0.3, model=model)
     assert k[np.abs(u) > 3].sum() > 0.3 * k.sum()
     assert np.argmax(k) == 16 and np.all(np.diff(k[16:]) < 0)
     assert 0.3 < total < 0.9 and k.sum() < total
@@ -136,10 +137,10 @@ def test_wax_monte_carlo_kernel_agrees_with_dipole_in_diffusion_regime():
     # Same sigma_s' and eta: the dipole is the diffusion limit of the MC medium, so the
     # skirt (several transport mean free paths out) has the same decay; near the line
     # MC keeps the single-scattering peak the dipole smooths away.
-    p = dict(mm_per_row=0.3, sigma_a=0.003, sigma_s_prime=0.3, eta=1.4)
+    medium = Medium.from_reduced(0.3, 0.003, g=0.8, n=1.4)
     u = np.arange(-128, 129)
-    k_mc, r_mc = wax_kernel(u, 1.0, **p, model="mc")
-    k_dp, r_dp = wax_kernel(u, 1.0, **p, model="dipole")
+    k_mc, r_mc = wax_kernel(medium, u, 1.0, mm_per_row=0.3, model="mc")
+    k_dp, r_dp = wax_kernel(medium, u, 1.0, mm_per_row=0.3, model="dipole")
     assert abs(r_mc / r_dp - 1.0) < 0.1
     far = (np.abs(u) >= 40) & (np.abs(u) <= 100)  # 12-30 mm: 4-9 transport mfp
     slope_mc = np.polyfit(np.abs(u[far]), np.log(k_mc[far]), 1)[0]

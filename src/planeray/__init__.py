@@ -80,6 +80,7 @@ _EXPORTS = {
     "transport_delay_profiles": "profiles",
     "classify_transport": "classify",
     # subsurface scattering (Sec. 5.2)
+    "Medium": "medium",
     "mc_line_profile": "mc",
     "line_kernel": "kernels",
 }
@@ -117,6 +118,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from .io import export_folder, import_folder, read_stack, read_transport, write_stack, write_transport
     from .kernels import line_kernel
     from .mc import mc_line_profile
+    from .medium import Medium
     from .profiles import measured_delay_profiles, transport_delay_profiles
     from .scenes import list_scenes, make_scene
     from .stack import Stack

@@ -491,16 +491,18 @@ def mc_profile(
 
     from .mc import mc_line_profile, mc_point_profile
     from .mc.report import write_profile
+    from .medium import Medium
 
     t0 = time.perf_counter()
     thickness = np.inf if thickness_mm is None else thickness_mm
+    medium = Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n, thickness_mm=thickness)
     with console.status(f"tracing {photons:,} photons"):
         if point:
-            prof = mc_point_profile(sigma_s, sigma_a, g, n=n, thickness=thickness, n_photons=photons,
+            prof = mc_point_profile(medium, n_photons=photons,
                                     radius_bins=np.arange(0, rows + 1), mm_per_bin=mm_per_row, seed=seed,
                                     cache=cache, cutoff_mm=cutoff_mm)
         else:
-            prof = mc_line_profile(sigma_s, sigma_a, g, n=n, thickness=thickness, n_photons=photons,
+            prof = mc_line_profile(medium, n_photons=photons,
                                    offsets_rows=np.arange(-rows, rows + 1), mm_per_row=mm_per_row, seed=seed,
                                    cache=cache, source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
                                    diffusion_depth_mfp=diffusion_depth_mfp or None)

@@ -26,7 +26,13 @@ from __future__ import annotations
 import numpy as np
 
 from .mc import mc_line_profile
-from .mc.diffusion import boundary_mismatch_A, dipole_line_kernel, dipole_reflectance, dipole_total_reflectance
+from .mc.diffusion import (
+    boundary_mismatch_A,
+    dipole_line_kernel,
+    dipole_reflectance,
+    dipole_total_reflectance,
+)
+from .medium import Medium, as_medium
 
 __all__ = [
     "boundary_mismatch_A",
@@ -48,8 +54,7 @@ MC_KERNEL_PHOTONS = 1_000_000
 MC_KERNEL_REACH_ROWS = 192
 
 
-def mc_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s, g, eta=1.4,
-                   n_photons=MC_KERNEL_PHOTONS, seed=0):
+def mc_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, n_photons=MC_KERNEL_PHOTONS, seed=0):
     """Monte Carlo line kernel: the exitance profile of :func:`planeray.mc.mc_line_profile`.
 
     The profile is traced once over a canonical symmetric range (at least
@@ -59,16 +64,16 @@ def mc_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s, g, eta=1.4,
 
     Parameters
     ----------
+    medium : Medium
+        The HG medium (``sigma_s``, ``sigma_a``, ``g``, ``n``: Fresnel boundary).
     offsets_rows : array_like of int
         Offset bins ``k`` in projector rows.
     mm_per_row : float
         Size of one projector row on the surface, in mm.
-    sigma_a, sigma_s : float
-        Absorption and scattering coefficients, mm^-1.
-    g : float
-        Henyey-Greenstein anisotropy.
-    eta : float
-        Relative refractive index (Fresnel boundary).
+    n_photons : int
+        Photon packets of the canonical profile.
+    seed : int
+        Its seed.
 
     Returns
     -------
@@ -80,22 +85,28 @@ def mc_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s, g, eta=1.4,
     k = np.asarray(offsets_rows, dtype=np.int64)
     reach = max(MC_KERNEL_REACH_ROWS, int(64 * np.ceil((np.abs(k).max() + 1) / 64.0)))
     canon = np.arange(-reach, reach + 1)
-    prof = mc_line_profile(sigma_s, sigma_a, g, n=eta, n_photons=n_photons, offsets_rows=canon,
+    prof = mc_line_profile(as_medium(medium), n_photons=n_photons, offsets_rows=canon,
                            mm_per_row=mm_per_row, seed=seed, cache=True)
     return prof.values[k + reach], prof.total_reflectance
 
 
-def line_kernel(model, offsets_rows, mm_per_row, sigma_a, sigma_s_prime, eta=1.4, g=0.8):
+def line_kernel(medium: Medium, offsets_rows, *, mm_per_row, model):
     """Binned line kernel and the medium's total diffuse reflectance, by model name.
 
     Parameters
     ----------
+    medium : Medium
+        The medium.  The dipole sees it only through ``sigma_a``,
+        ``sigma_s_prime = sigma_s (1 - g)`` and ``n`` (build one from
+        ``sigma_s'`` with :meth:`Medium.from_reduced`: by the similarity
+        relation both models then describe the same diffusion regime); the
+        Monte Carlo kernel traces its HG phase function.
+    offsets_rows : array_like of int
+        Offset bins ``k`` in projector rows.
+    mm_per_row : float
+        Size of one projector row on the surface, in mm.
     model : {"mc", "dipole"}
         See the module docstring.
-    sigma_s_prime : float
-        Reduced scattering coefficient; the Monte Carlo medium has
-        ``sigma_s = sigma_s_prime / (1 - g)`` with HG anisotropy ``g`` (the
-        similarity relation, so both models describe the same diffusion regime).
 
     Returns
     -------
@@ -103,8 +114,8 @@ def line_kernel(model, offsets_rows, mm_per_row, sigma_a, sigma_s_prime, eta=1.4
     total : float
     """
     if model == "dipole":
-        return (dipole_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s_prime, eta),
-                float(dipole_total_reflectance(sigma_a, sigma_s_prime, eta)))
+        return (dipole_line_kernel(medium, offsets_rows, mm_per_row=mm_per_row),
+                float(dipole_total_reflectance(medium)))
     if model == "mc":
-        return mc_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s_prime / (1.0 - g), g, eta)
+        return mc_line_kernel(medium, offsets_rows, mm_per_row=mm_per_row)
     raise ValueError(f"unknown kernel model {model!r}; expected one of {KERNEL_MODELS}")

@@ -14,8 +14,10 @@ true ``T`` (mean over the 229 offsets):
   beta ||T||_1``), solved by :func:`planeray.demux.solve_fast`.
 
 The profile comes from a *provider* ``profile(sigma_s, sigma_a, g) -> T`` over
-the offsets: the Monte Carlo engine :func:`planeray.mc.mc_line_profile`
-(``provider='mc'``, the default, what the paper did with Mitsuba) or the
+the offsets (the swept coordinates; the built-in providers make a
+:class:`~planeray.medium.Medium` of them with their own index ``n``): the Monte
+Carlo engine :func:`planeray.mc.mc_line_profile` (``provider='mc'``, the
+default, what the paper did with Mitsuba) or the
 diffusion-dipole line kernel :func:`planeray.kernels.dipole_line_kernel` with
 the similarity relation ``sigma_s' = sigma_s (1 - g)`` (``'dipole'``, instant) --
 with the dipole, ``g`` enters *only* through ``sigma_s'`` (no single-scattering,
@@ -33,6 +35,7 @@ from typing import Callable
 import numpy as np
 
 from .demux import RowGroup, solve_fast, solve_nnls, solve_pinv
+from .medium import Medium
 from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
 
 __all__ = [
@@ -103,8 +106,8 @@ def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float 
     offsets = np.asarray(offsets)
 
     def profile(sigma_s, sigma_a, g):
-        sp = float(sigma_s) * (1.0 - float(g))
-        return dipole_line_kernel(offsets, mm_per_row, float(sigma_a), sp, eta=eta)
+        return dipole_line_kernel(Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=eta), offsets,
+                                  mm_per_row=mm_per_row)
 
     profile.name = f"dipole (sigma_s' = sigma_s (1 - g), {mm_per_row} mm/row, eta {eta})"
     return profile
@@ -125,7 +128,7 @@ def mc_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int 
     offsets = np.asarray(offsets)
 
     def profile(sigma_s, sigma_a, g):
-        res = mc_line_profile(float(sigma_s), float(sigma_a), float(g), n=n, n_photons=int(n_photons),
+        res = mc_line_profile(Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n), n_photons=int(n_photons),
                               offsets_rows=offsets, mm_per_row=mm_per_row, seed=seed, cache=cache)
         return np.asarray(res.values, np.float64)
 

@@ -21,8 +21,8 @@ def mc_profile_figure(prof, path, compare_dipole: bool = True):
     path : str or os.PathLike
         PNG to write.
     compare_dipole : bool
-        Overlay :func:`planeray.kernels.dipole_line_kernel` with
-        ``sigma_s' = sigma_s (1 - g)`` and ``eta = n`` (Jensen et al. 2001), the
+        Overlay :func:`planeray.kernels.dipole_line_kernel` of the same medium
+        (``sigma_s' = sigma_s (1 - g)`` and ``n``; Jensen et al. 2001), the
         classical approximation the engine should approach far from the line.
     """
     p = prof.params
@@ -35,18 +35,18 @@ def mc_profile_figure(prof, path, compare_dipole: bool = True):
     ok = prof.values > 0
     ax.errorbar(x[ok], (prof.values / measure)[ok], yerr=(prof.stderr / measure)[ok], fmt=".", ms=3,
                 lw=0.8, label="Monte Carlo exitance")
-    if compare_dipole and p.get("thickness") is None:
-        sp = p["sigma_s"] * (1 - p["g"])
+    medium = prof.medium
+    if compare_dipole and medium.semi_infinite:
         if point:
-            ref = dipole_reflectance(x, p["sigma_a"], sp, eta=p["n"])
+            ref = dipole_reflectance(medium, x)
         else:
-            ref = dipole_line_kernel(k, dx, p["sigma_a"], sp, eta=p["n"]) / dx
+            ref = dipole_line_kernel(medium, k, mm_per_row=dx) / dx
         ax.plot(x, ref, "-", lw=1, label="diffusion dipole (Jensen 2001)")
     ax.set_yscale("log")
     ax.set_xlabel("distance from the entry point r (mm)" if point else "distance from the lit line x (mm)")
     ax.set_ylabel("exiting power per mm^2 (per unit power)" if point
                   else "exiting power per mm (per unit line power)")
-    ax.set_title(f"sigma_s={p['sigma_s']:g}, sigma_a={p['sigma_a']:g} /mm, g={p['g']:g}, n={p['n']:g}")
+    ax.set_title(f"sigma_s={medium.sigma_s:g}, sigma_a={medium.sigma_a:g} /mm, g={medium.g:g}, n={medium.n:g}")
     ax.legend(fontsize=8)
     okr = prof.radiance > 0
     ax2.errorbar(x[okr], prof.radiance[okr], yerr=prof.radiance_stderr[okr], fmt=".", ms=3, lw=0.8,

@@ -3,7 +3,9 @@ hybrid Monte Carlo-diffusion hand-off (Wang & Jacques 1993).
 
 * :func:`dipole_reflectance`, :func:`dipole_total_reflectance`, :func:`dipole_line_kernel`:
   the classical point-source dipole, its total reflectance and its integral along a
-  lit line binned to projector rows (the ``"dipole"`` scene kernel);
+  lit line binned to projector rows (the ``"dipole"`` scene kernel), of a
+  semi-infinite :class:`~planeray.medium.Medium` -- which they see only through
+  ``sigma_a``, the reduced scattering ``sigma_s' = sigma_s (1 - g)`` and ``n``;
 * :func:`diffusion_exit`, :func:`diffusion_normal_radiance_ratio`: where photons handed
   to diffusion at some depth leave the surface, and with what normal radiance (used
   by :mod:`planeray.mc.engine`).
@@ -25,6 +27,8 @@ import math
 import numpy as np
 from scipy.special import k1e
 
+from ..errors import InputError
+from ..medium import Medium, as_medium
 from .physics import fresnel_unpolarized
 
 __all__ = [
@@ -45,6 +49,15 @@ def boundary_mismatch_A(eta):
     return (1.0 + f_dr) / (1.0 - f_dr)
 
 
+def _dipole_medium(medium) -> tuple[float, float, float]:
+    """``(sigma_a, sigma_s', n)`` of a semi-infinite medium (the dipole knows nothing else)."""
+    medium = as_medium(medium)
+    if not medium.semi_infinite:
+        raise InputError(f"the diffusion dipole models a semi-infinite medium, got thickness_mm "
+                         f"{medium.thickness_mm}")
+    return medium.sigma_a, medium.sigma_s_prime, medium.n
+
+
 def _dipole_constants(sigma_a, sigma_s_prime, eta):
     sigma_t = sigma_a + sigma_s_prime
     albedo = sigma_s_prime / sigma_t
@@ -55,8 +68,7 @@ def _dipole_constants(sigma_a, sigma_s_prime, eta):
     return albedo, sigma_tr, z_r, z_v, A
 
 
-def dipole_reflectance(r_mm, sigma_a, sigma_s_prime, eta=1.4):
-    """Diffuse reflectance ``R_d(r)`` (per mm^2) of a point source, dipole model [1]_."""
+def _reflectance(r_mm, sigma_a, sigma_s_prime, eta):
     albedo, sigma_tr, z_r, z_v, _ = _dipole_constants(sigma_a, sigma_s_prime, eta)
     r2 = np.asarray(r_mm, dtype=float) ** 2
     d_r = np.sqrt(r2 + z_r**2)
@@ -67,14 +79,31 @@ def dipole_reflectance(r_mm, sigma_a, sigma_s_prime, eta=1.4):
     )
 
 
-def dipole_total_reflectance(sigma_a, sigma_s_prime, eta=1.4):
-    """Total diffuse reflectance ``R_d = int R_d(r) 2 pi r dr`` of the dipole (closed form [1]_)."""
-    albedo, _, _, _, A = _dipole_constants(sigma_a, sigma_s_prime, eta)
+def dipole_reflectance(medium: Medium, r_mm):
+    """Diffuse reflectance ``R_d(r)`` (per mm^2) of a point source, dipole model [1]_.
+
+    Parameters
+    ----------
+    medium : Medium
+        A semi-infinite medium; the dipole uses ``sigma_a``, ``sigma_s_prime`` and ``n``.
+    r_mm : array_like of float
+        Distances from the entry point, mm.
+    """
+    sigma_a, sigma_s_prime, eta = _dipole_medium(medium)
+    return _reflectance(r_mm, sigma_a, sigma_s_prime, eta)
+
+
+def dipole_total_reflectance(medium: Medium):
+    """Total diffuse reflectance ``R_d = int R_d(r) 2 pi r dr`` of the dipole (closed form [1]_).
+
+    ``medium`` is semi-infinite; only ``sigma_a``, ``sigma_s_prime`` and ``n`` matter.
+    """
+    albedo, _, _, _, A = _dipole_constants(*_dipole_medium(medium))
     s = np.sqrt(3.0 * (1.0 - albedo))
     return 0.5 * albedo * (1.0 + np.exp(-4.0 / 3.0 * A * s)) * np.exp(-s)
 
 
-def dipole_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s_prime, eta=1.4, subsamples=16):
+def dipole_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, subsamples=16):
     """Reflectance of a lit line, binned to projector-row offsets.
 
     ``R_line(x) = int R_d(sqrt(x^2 + y^2)) dy`` integrated over each offset bin
@@ -83,14 +112,15 @@ def dipole_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s_prime, eta=1.4
 
     Parameters
     ----------
+    medium : Medium
+        A semi-infinite medium; the dipole uses ``sigma_a``, the reduced
+        scattering coefficient ``sigma_s_prime`` and the relative index ``n``.
     offsets_rows : array_like of int
         Offset bins ``k`` in projector rows.
     mm_per_row : float
         Size of one projector row on the surface, in mm.
-    sigma_a, sigma_s_prime : float
-        Absorption and reduced scattering coefficients, mm^-1.
-    eta : float
-        Relative refractive index of the medium.
+    subsamples : int
+        Midpoint-rule points per bin across the line.
 
     Returns
     -------
@@ -98,6 +128,7 @@ def dipole_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s_prime, eta=1.4
         Light reaching each bin per unit of line illumination; sums to the total
         diffuse reflectance of the medium when the bins cover the whole profile.
     """
+    sigma_a, sigma_s_prime, eta = _dipole_medium(medium)
     k = np.asarray(offsets_rows, dtype=float)
     frac = (np.arange(subsamples) + 0.5) / subsamples - 0.5
     x = (k[:, None] + frac[None, :]) * mm_per_row  # (K, S) mm across the line
@@ -109,7 +140,7 @@ def dipole_line_kernel(offsets_rows, mm_per_row, sigma_a, sigma_s_prime, eta=1.4
     scale = np.maximum(np.abs(x), 1.0 / (sigma_a + sigma_s_prime))[..., None]
     y = scale * np.tan(theta)
     dy = scale / np.cos(theta) ** 2
-    R = dipole_reflectance(np.sqrt(x[..., None] ** 2 + y**2), sigma_a, sigma_s_prime, eta)
+    R = _reflectance(np.sqrt(x[..., None] ** 2 + y**2), sigma_a, sigma_s_prime, eta)
     line = 2.0 * np.sum(R * dy * jac, axis=-1)  # per mm across the line
     return line.mean(axis=1) * mm_per_row
 

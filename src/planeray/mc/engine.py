@@ -4,10 +4,11 @@ Photon packets are traced one by one inside a Numba kernel (the *MCML* scheme of
 Wang, Jacques & Zheng [1]_: weights, implicit capture, Russian roulette), in 32
 fixed batches run in parallel; each batch owns a xoshiro256+ stream seeded from
 ``numpy.random.SeedSequence(seed).spawn(32)``, so a result depends only on the
-seed, never on the number of threads.  The medium has absorption ``sigma_a`` and
-scattering ``sigma_s`` coefficients (mm^-1), a Henyey-Greenstein phase function
-with anisotropy ``g``, a relative refractive index ``n`` against the outside
-(same on both faces) and a thickness (``inf`` = semi-infinite).  Light enters
+seed, never on the number of threads.  The medium (a :class:`planeray.medium.Medium`)
+has absorption ``sigma_a`` and scattering ``sigma_s`` coefficients (mm^-1), a
+Henyey-Greenstein phase function with anisotropy ``g``, a relative refractive
+index ``n`` against the outside (same on both faces) and a thickness
+``thickness_mm`` (``inf`` = semi-infinite).  Light enters
 collimated at normal incidence, spread uniformly over ``|x| <= w / 2``
 (``w = source_width_mm``; 0 is an ideal line) and infinitely long along ``y``:
 binning exit points by ``x`` only integrates the point-source response along
@@ -93,6 +94,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from ..medium import Medium, as_medium
 from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
 from .physics import fresnel_jit, hg_cos_jit, hg_pdf_jit
 
@@ -101,7 +103,6 @@ __all__ = [
     "mc_line_profile",
     "mc_point_profile",
     "default_cutoff_mm",
-    "check_medium",
     "bin_measure",
     "DIFFUSION_DEPTH_MFP",
     "cache_dir",
@@ -161,7 +162,8 @@ class MCProfile:
     n_interactions : int
         Number of collisions traced (a measure of the run's cost).
     params : dict
-        The parameters of the run.
+        The parameters of the run (the cache key's content; the medium's
+        thickness is under ``thickness``, ``None`` for a semi-infinite one).
     """
 
     offsets_rows: np.ndarray
@@ -180,6 +182,14 @@ class MCProfile:
     n_photons: int
     n_interactions: int = 0
     params: dict = field(default_factory=dict)
+
+    @property
+    def medium(self) -> Medium:
+        """The :class:`~planeray.medium.Medium` of the run, rebuilt from :attr:`params`."""
+        p = self.params
+        thickness = p.get("thickness")
+        return Medium(sigma_s=p["sigma_s"], sigma_a=p["sigma_a"], g=p["g"], n=p["n"],
+                      thickness_mm=math.inf if thickness is None else thickness)
 
     @property
     def energy_balance(self) -> float:
@@ -404,20 +414,6 @@ def _load(path: Path) -> MCProfile:
 
 
 # ---------------------------------------------------------------- public entry point
-def check_medium(sigma_s, sigma_a, g):
-    """Validate a homogeneous HG medium; return ``(sigma_s, sigma_a, g)`` as floats.
-
-    Raises ``ValueError`` unless ``sigma_s, sigma_a >= 0`` are finite with a
-    positive sum and ``-1 < g < 1``.
-    """
-    sigma_s, sigma_a, g = float(sigma_s), float(sigma_a), float(g)
-    if not (np.isfinite(sigma_s) and np.isfinite(sigma_a)) or sigma_s < 0 or sigma_a < 0 or sigma_s + sigma_a <= 0:
-        raise ValueError(f"need finite sigma_s, sigma_a >= 0 with sigma_s + sigma_a > 0, got {sigma_s}, {sigma_a}")
-    if not -1.0 < g < 1.0:
-        raise ValueError(f"g must lie in (-1, 1), got {g}")
-    return sigma_s, sigma_a, g
-
-
 def bin_measure(bins, mm_per_bin, radial=False):
     """Size of profile bins: their width in mm (line source) or annulus area in mm^2 (point).
 
@@ -431,7 +427,7 @@ def bin_measure(bins, mm_per_bin, radial=False):
     return np.pi * ((k + 0.5) ** 2 - np.maximum(k - 0.5, 0.0) ** 2) * float(mm_per_bin) ** 2
 
 
-def default_cutoff_mm(offsets_rows, mm_per_row, sigma_s, sigma_a, g):
+def default_cutoff_mm(medium: Medium, offsets_rows, *, mm_per_row) -> float:
     """Default photon cutoff: far outside both the binned window and the medium's scales.
 
     ``max(4 * window half-width, 20 / sigma_tr, 20 / sigma_t')`` with the
@@ -441,51 +437,58 @@ def default_cutoff_mm(offsets_rows, mm_per_row, sigma_s, sigma_a, g):
     so it adds at most ~1/4 of its weight (a non-absorbing medium) to the
     window and much less with absorption -- and :attr:`MCProfile.truncated`
     says how much weight that was.
+
+    Parameters
+    ----------
+    medium : Medium
+        The medium.
+    offsets_rows : array_like of int
+        The binned window (bins of ``mm_per_row``).
+    mm_per_row : float
+        Bin width in mm.
     """
+    medium = as_medium(medium)
+    sigma_a = medium.sigma_a
     half = (np.max(np.abs(np.asarray(offsets_rows))) + 0.5) * float(mm_per_row)
-    sigma_tp = float(sigma_a) + float(sigma_s) * (1.0 - float(g))
+    sigma_tp = sigma_a + medium.sigma_s_prime
     scales = [4.0 * half, 20.0 / sigma_tp]
     if sigma_a > 0:
         scales.append(20.0 / math.sqrt(3.0 * sigma_a * sigma_tp))
     return float(min(max(scales), 1e6))
 
 
-def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**6,
-                    offsets_rows=None, mm_per_row=1.0, seed=0, cache=False,
-                    source_width_mm=0.0, cutoff_mm=None, diffusion_depth_mfp=DIFFUSION_DEPTH_MFP):
+def mc_line_profile(medium: Medium, *, n_photons=10**6, offsets_rows=None, mm_per_row=1.0,
+                    source_width_mm=0.0, diffusion_depth_mfp=DIFFUSION_DEPTH_MFP, cutoff_mm=None,
+                    seed=0, cache=False) -> MCProfile:
     """Monte Carlo line-source reflectance profile of a homogeneous slab.
 
     Parameters
     ----------
-    sigma_s, sigma_a : float
-        Scattering and absorption coefficients, mm^-1 (``sigma_s + sigma_a > 0``).
-    g : float
-        Henyey-Greenstein anisotropy, ``-1 < g < 1``.
-    n : float
-        Relative refractive index of the medium against the outside (1 = index matched).
-    thickness : float
-        Slab thickness in mm; ``inf`` for a semi-infinite medium.
+    medium : Medium
+        The slab: ``sigma_s``, ``sigma_a`` (mm^-1), HG ``g``, relative index ``n``
+        against the outside (1 = index matched) and ``thickness_mm`` (``inf``:
+        semi-infinite).
     n_photons : int
         Number of photon packets.
     offsets_rows : array_like of int, optional
         Distinct integer offset bins; default ``arange(-50, 51)``.
     mm_per_row : float
         Bin width in mm.
-    seed : int
-        Seed; same seed, same bytes, whatever the number of threads.
-    cache : bool
-        Read/write an ``.npz`` result keyed by all parameters under :func:`cache_dir`
-        (after the read-only shipped tables, :data:`TABLES_DIR`).
     source_width_mm : float
         Width of the lit strip (uniform over ``|x| <= w/2``); 0 = ideal line.
-    cutoff_mm : float, optional
-        Stop photons farther than this from the line (``|x|``) or deeper (``z``);
-        default :func:`default_cutoff_mm`.  Their weight is reported as ``truncated``.
     diffusion_depth_mfp : float or None
         Semi-infinite media only: a photon reaching this depth, in transport mean
         free paths ``1 / (sigma_a + sigma_s (1 - g))``, is handed to diffusion
         theory (:func:`diffusion_exit`; the hybrid model of Wang & Jacques [6]_)
         instead of being traced on.  ``None`` or 0 traces every photon to the end.
+    cutoff_mm : float, optional
+        Stop photons farther than this from the line (``|x|``) or deeper (``z``);
+        default :func:`default_cutoff_mm`.  Their weight is reported as ``truncated``.
+    seed : int
+        Seed; same seed, same bytes, whatever the number of threads.
+    cache : bool
+        Read/write an ``.npz`` result keyed by the medium and every option under
+        :func:`cache_dir` (after the read-only shipped tables, :data:`TABLES_DIR`).
 
     Returns
     -------
@@ -498,23 +501,24 @@ def mc_line_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**
     -----
     See the module docstring for the transport scheme (MCML [1]_, HG sampling
     [2]_) and the radiance estimator.  Compare with
-    :func:`planeray.kernels.dipole_line_kernel` using
-    ``sigma_s_prime = sigma_s * (1 - g)`` and ``eta = n`` [3]_.
+    :func:`planeray.kernels.dipole_line_kernel` on the same medium (which uses
+    ``sigma_s' = sigma_s (1 - g)`` and ``n``) [3]_.
 
     Examples
     --------
-    >>> p = mc_line_profile(1.0, 0.1, 0.9, n_photons=20_000)
+    >>> from planeray.medium import Medium
+    >>> p = mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.1, g=0.9), n_photons=20_000)
     >>> abs(p.energy_balance - 1.0) < 1e-9
     True
     """
     if offsets_rows is None:
         offsets_rows = np.arange(-50, 51)
-    return _profile("line", sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows, mm_per_row,
+    return _profile("line", as_medium(medium), n_photons, offsets_rows, mm_per_row,
                     seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp)
 
 
-def mc_point_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10**6,
-                     radius_bins=None, mm_per_bin=1.0, seed=0, cache=False, cutoff_mm=None):
+def mc_point_profile(medium: Medium, *, n_photons=10**6, radius_bins=None, mm_per_bin=1.0,
+                     cutoff_mm=None, seed=0, cache=False) -> MCProfile:
     """Monte Carlo radial reflectance of a *point* (pencil-beam) source: MCML's ``R_d(r)``.
 
     Same engine and checks as :func:`mc_line_profile`, with the exit points binned
@@ -525,11 +529,13 @@ def mc_point_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10*
 
     Parameters
     ----------
+    medium : Medium
+        The slab, as in :func:`mc_line_profile`.
     radius_bins : array_like of int, optional
         Distinct non-negative bins; default ``arange(0, 51)``.
     mm_per_bin : float
         Annulus width in mm.
-    Other parameters
+    n_photons, cutoff_mm, seed, cache
         As :func:`mc_line_profile`.
 
     Returns
@@ -541,27 +547,21 @@ def mc_point_profile(sigma_s, sigma_a, g, n=1.0, thickness=np.inf, n_photons=10*
         :func:`planeray.kernels.dipole_reflectance`), ``radiance`` the
         normal-view radiance averaged over it (mm^-2 sr^-1 per unit power).
     """
+    medium = as_medium(medium)
     if radius_bins is None:
         radius_bins = np.arange(0, 51)
     if np.any(np.asarray(radius_bins) < 0):
         raise ValueError("radius_bins must be non-negative")
-    return _profile("point", sigma_s, sigma_a, g, n, thickness, n_photons, radius_bins, mm_per_bin,
+    return _profile("point", medium, n_photons, radius_bins, mm_per_bin,
                     seed, cache, 0.0, cutoff_mm, None)
 
 
-def _profile(source, sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows, mm_per_row,
+def _profile(source, medium, n_photons, offsets_rows, mm_per_row,
              seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp):
     """Validate, look up the caches, trace (:func:`_run`), store."""
-    sigma_s, sigma_a, g = check_medium(sigma_s, sigma_a, g)
-    n = float(n)
-    thickness = float(thickness)
     n_photons = int(n_photons)
     mm_per_row = float(mm_per_row)
     source_width_mm = float(source_width_mm)
-    if not n > 0:
-        raise ValueError(f"n must be positive, got {n}")
-    if not thickness > 0:
-        raise ValueError(f"thickness must be positive, got {thickness}")
     if n_photons < 1:
         raise ValueError(f"n_photons must be >= 1, got {n_photons}")
     if not mm_per_row > 0:
@@ -573,7 +573,7 @@ def _profile(source, sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows,
     if offsets.size == 0 or np.any(offsets != offsets_f.ravel()) or np.unique(offsets).size != offsets.size:
         raise ValueError("offsets_rows must be distinct integers")
     if cutoff_mm is None:
-        cutoff_mm = default_cutoff_mm(offsets, mm_per_row, sigma_s, sigma_a, g)
+        cutoff_mm = default_cutoff_mm(medium, offsets, mm_per_row=mm_per_row)
     cutoff_mm = float(cutoff_mm)
     if not cutoff_mm > 0:
         raise ValueError(f"cutoff_mm must be positive, got {cutoff_mm}")
@@ -581,8 +581,10 @@ def _profile(source, sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows,
     depth_mfp = float(diffusion_depth_mfp) if diffusion_depth_mfp else None
     if depth_mfp is not None and not depth_mfp > 0:
         raise ValueError(f"diffusion_depth_mfp must be positive or None, got {diffusion_depth_mfp}")
-    params = dict(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n,
-                  thickness=None if np.isinf(thickness) else thickness,
+    # The cache key (and MCProfile.params): these keys, values and order are what the
+    # shipped tables were hashed with -- keep them as they are.
+    params = dict(sigma_s=medium.sigma_s, sigma_a=medium.sigma_a, g=medium.g, n=medium.n,
+                  thickness=None if medium.semi_infinite else medium.thickness_mm,
                   n_photons=n_photons, mm_per_row=mm_per_row, seed=int(seed),
                   source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
                   diffusion_depth_mfp=depth_mfp)
@@ -599,7 +601,7 @@ def _profile(source, sigma_s, sigma_a, g, n, thickness, n_photons, offsets_rows,
                 except (OSError, ValueError, KeyError):
                     pass  # unreadable entry: recompute (and overwrite the user cache)
 
-    prof = _run(sigma_s, sigma_a, g, n, thickness, n_photons, offsets, mm_per_row, int(seed),
+    prof = _run(medium, n_photons, offsets, mm_per_row, int(seed),
                 source_width_mm, cutoff_mm, params, radial=source == "point")
     if path is not None:
         try:
@@ -621,8 +623,9 @@ def _batch_stats(per_batch, counts):
     return mean, means.std(axis=0, ddof=1) / np.sqrt(used.sum())
 
 
-def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
+def _run(medium, n_photons, offsets, mm_per_row, seed,
          source_width_mm, cutoff_mm, params, radial=False):
+    sigma_s, sigma_a, g, n, d = medium.sigma_s, medium.sigma_a, medium.g, medium.n, medium.thickness_mm
     B = _N_BATCHES
     counts = np.full(B, n_photons // B, dtype=np.int64)
     counts[: n_photons % B] += 1
@@ -631,7 +634,7 @@ def _run(sigma_s, sigma_a, g, n, d, n_photons, offsets, mm_per_row, seed,
     nk = int(offsets.max()) - kmin + 1
     r_sp = ((n - 1.0) / (n + 1.0)) ** 2
     depth_mfp = params["diffusion_depth_mfp"]
-    sigma_tp = sigma_a + sigma_s * (1.0 - g)
+    sigma_tp = sigma_a + medium.sigma_s_prime
     z_cont = depth_mfp / sigma_tp if (depth_mfp and not np.isfinite(d) and not radial) else np.inf
     # Continued photons are histogrammed where they can still reach the bins: within
     # 20 continuation depths of the window (the exit law's tail beyond carries < 1 %

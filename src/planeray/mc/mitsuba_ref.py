@@ -82,7 +82,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .engine import check_medium
+from ..errors import InputError
+from ..medium import Medium, as_medium
 
 __all__ = ["MitsubaProfile", "mitsuba_line_profile", "single_scattering_radiance"]
 
@@ -124,7 +125,16 @@ class MitsubaProfile:
     seconds: float = 0.0
 
 
-def single_scattering_radiance(sigma_s, sigma_a, g, source_width_mm):
+def _index_matched_half_space(medium, what) -> Medium:
+    """``medium`` if it is what the Mitsuba scene models: ``n = 1``, semi-infinite."""
+    medium = as_medium(medium)
+    if medium.n != 1.0 or not medium.semi_infinite:
+        raise InputError(f"{what} models an index-matched (n = 1) semi-infinite medium, got n {medium.n}, "
+                         f"thickness_mm {medium.thickness_mm}")
+    return medium
+
+
+def single_scattering_radiance(medium: Medium, *, source_width_mm):
     """Closed-form single-scattering radiance along ``+z`` inside the lit strip.
 
     For collimated irradiance ``E = 1 / w`` at normal incidence on an
@@ -135,10 +145,8 @@ def single_scattering_radiance(sigma_s, sigma_a, g, source_width_mm):
 
     Parameters
     ----------
-    sigma_s, sigma_a : float
-        Scattering and absorption coefficients, mm^-1.
-    g : float
-        Henyey-Greenstein anisotropy.
+    medium : Medium
+        An index-matched (``n = 1``) semi-infinite medium.
     source_width_mm : float
         Width ``w`` of the strip carrying unit line power.
 
@@ -147,7 +155,9 @@ def single_scattering_radiance(sigma_s, sigma_a, g, source_width_mm):
     float
         ``L1`` in mm^-1 sr^-1 per unit line power.
     """
-    sigma_t = sigma_s + sigma_a
+    medium = _index_matched_half_space(medium, "single_scattering_radiance")
+    sigma_s, g = medium.sigma_s, medium.g
+    sigma_t = sigma_s + medium.sigma_a
     p_back = (1.0 - g) / (4.0 * math.pi * (1.0 + g) ** 2)
     return sigma_s * p_back / (2.0 * sigma_t * source_width_mm)
 
@@ -165,10 +175,11 @@ def _mitsuba(variant):
     return mi
 
 
-def _default_medium_size_mm(sigma_s, sigma_a, g, extent_mm):
+def _default_medium_size_mm(medium, extent_mm):
     """Half-size of the medium cube: many transport lengths beyond the binned window."""
-    sigma_t = sigma_s + sigma_a
-    mu_tr = sigma_a + sigma_s * (1.0 - g)
+    sigma_a = medium.sigma_a
+    sigma_t = medium.sigma_s + sigma_a
+    mu_tr = sigma_a + medium.sigma_s_prime
     sigma_eff = math.sqrt(3.0 * sigma_a * mu_tr) if sigma_a > 0 else 0.0
     # 1 / sigma_eff is the diffusion length; a non-absorbing medium has none, so cap.
     diffusion_mm = 1.0 / sigma_eff if sigma_eff > 0 else math.inf
@@ -225,8 +236,8 @@ def _scene(mi, *, medium, x_left_mm, ncols, pixel_mm, source_width_mm, along_pix
         scene["white"] = {"type": "rectangle", "to_world": T.scale([big, big, 1.0]),
                           "bsdf": {"type": "diffuse", "reflectance": 1.0}}
     else:
-        sigma_s, sigma_a, g = medium
-        sigma_t = sigma_s + sigma_a
+        sigma_s, g = medium.sigma_s, medium.g
+        sigma_t = sigma_s + medium.sigma_a
         scene["medium"] = {
             "type": "cube",
             "to_world": T.translate([0.0, 0.0, -size_mm]) @ T.scale([size_mm] * 3),
@@ -259,7 +270,7 @@ def _line_power(mi, source_width_mm, size_mm):
     return float(math.pi * img.mean(axis=0).sum() * pixel_mm)
 
 
-def mitsuba_line_profile(sigma_s, sigma_a, g, offsets_rows, mm_per_row,
+def mitsuba_line_profile(medium: Medium, offsets_rows, *, mm_per_row,
                          source_width_mm=None, spp=64, passes=1, seed=0,
                          along_pixels=1024, variant="scalar_rgb", max_depth=-1,
                          rr_depth=5, medium_size_mm=None):
@@ -267,10 +278,9 @@ def mitsuba_line_profile(sigma_s, sigma_a, g, offsets_rows, mm_per_row,
 
     Parameters
     ----------
-    sigma_s, sigma_a : float
-        Scattering and absorption coefficients, mm^-1 (``sigma_s + sigma_a > 0``).
-    g : float
-        Henyey-Greenstein anisotropy, ``-1 < g < 1``.
+    medium : Medium
+        ``sigma_s``, ``sigma_a`` (mm^-1) and HG ``g`` of an index-matched
+        (``n = 1``) semi-infinite medium: the scene models no other.
     offsets_rows : array_like of int
         Offset bins to return; the image spans ``min .. max`` contiguously.
     mm_per_row : float
@@ -319,12 +329,15 @@ def mitsuba_line_profile(sigma_s, sigma_a, g, offsets_rows, mm_per_row,
 
     Examples
     --------
-    >>> p = mitsuba_line_profile(0.02, 0.98, 0.0, [-1, 0, 1], 0.5,
+    >>> from planeray.medium import Medium
+    >>> m = Medium(sigma_s=0.02, sigma_a=0.98, g=0.0)
+    >>> p = mitsuba_line_profile(m, [-1, 0, 1], mm_per_row=0.5,
     ...                          spp=64, max_depth=2)  # doctest: +SKIP
-    >>> p.radiance[1] / single_scattering_radiance(0.02, 0.98, 0.0, 0.5)  # doctest: +SKIP
+    >>> p.radiance[1] / single_scattering_radiance(m, source_width_mm=0.5)  # doctest: +SKIP
     1.0...
     """
-    sigma_s, sigma_a, g = check_medium(sigma_s, sigma_a, g)
+    medium = _index_matched_half_space(medium, "mitsuba_line_profile")
+    sigma_s, sigma_a, g = medium.sigma_s, medium.sigma_a, medium.g
     mm_per_row = float(mm_per_row)
     if not (math.isfinite(mm_per_row) and mm_per_row > 0):
         raise ValueError(f"mm_per_row must be positive, got {mm_per_row}")
@@ -344,7 +357,7 @@ def mitsuba_line_profile(sigma_s, sigma_a, g, offsets_rows, mm_per_row,
     kmin, kmax = int(offsets.min()), int(offsets.max())
     ncols = kmax - kmin + 1
     extent_mm = (max(abs(kmin), abs(kmax)) + 0.5) * mm_per_row
-    size_mm = (_default_medium_size_mm(sigma_s, sigma_a, g, extent_mm)
+    size_mm = (_default_medium_size_mm(medium, extent_mm)
                if medium_size_mm is None else float(medium_size_mm))
 
     t0 = time.perf_counter()
@@ -353,7 +366,7 @@ def mitsuba_line_profile(sigma_s, sigma_a, g, offsets_rows, mm_per_row,
     # Keep seeds in int32 range: the plugin property is a signed integer.
     seeds = (seeds >> np.uint32(1)).astype(np.int64)
     images = [
-        _render(mi, _scene(mi, medium=(sigma_s, sigma_a, g),
+        _render(mi, _scene(mi, medium=medium,
                            x_left_mm=(kmin - 0.5) * mm_per_row, ncols=ncols,
                            pixel_mm=mm_per_row, source_width_mm=width,
                            along_pixels=along_pixels, spp=spp, seed=int(s),

@@ -7,7 +7,10 @@ per bin, fraction of the incident line power), ``radiance`` and
 A point-source profile has ``radius_bin`` and ``r_mm`` (annulus centre) first;
 its exitance is per annulus and its radiance per mm^2.
 The JSON sidecar (same name, ``.json``) holds the totals, the energy balance
-and every parameter of the run, so the file alone reproduces it.
+and every parameter of the run, so the file alone reproduces it: ``medium``
+is the :class:`~planeray.medium.Medium` as :meth:`~planeray.medium.Medium.to_dict`
+(read it back with :meth:`~planeray.medium.Medium.from_dict`), ``params`` the
+run's cache-key parameters.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ def profile_columns(prof: MCProfile) -> dict:
 
 
 def profile_summary(prof: MCProfile) -> dict:
-    """Scalars of a run (JSON-ready): totals with errors, energy balance, cost, parameters."""
+    """Scalars of a run (JSON-ready): totals with errors, energy balance, cost, medium, parameters."""
     return {
         "total_reflectance": prof.total_reflectance,
         "total_reflectance_stderr": prof.total_reflectance_stderr,
@@ -61,6 +64,7 @@ def profile_summary(prof: MCProfile) -> dict:
         "binned_exitance": float(np.sum(prof.values)),
         "n_photons": prof.n_photons,
         "n_interactions": prof.n_interactions,
+        "medium": prof.medium.to_dict(),
         "params": prof.params,
     }
 

@@ -17,9 +17,10 @@ wood texture with direct reflection only.  A wax pixel ``(t, s)`` receives
 
       T_ss[t, s, u] = rho_ss(s, t) * K(u) * inside(t, s, u)
 
-  ``K`` is the line kernel of the wax (:func:`planeray.kernels.line_kernel`):
-  by default the Monte Carlo exitance profile of a Henyey-Greenstein medium
-  (``g = 0.8``, ``sigma_s = sigma_s' / (1 - g)``, Fresnel boundary at ``eta``;
+  ``K`` is the line kernel of the wax, a :class:`~planeray.medium.Medium`
+  (:func:`planeray.kernels.line_kernel`): by default the Monte Carlo exitance
+  profile of a Henyey-Greenstein medium (:data:`WAX_MEDIUM`: ``g = 0.8``,
+  ``sigma_s = sigma_s' / (1 - g)``, Fresnel boundary at ``n = 1.4``;
   :mod:`planeray.mc`), or with ``kernel="dipole"`` the classical diffusion
   dipole integrated along the lit line (Jensen et al. 2001) -- binned to
   projector-row offsets at ``mm_per_row`` and, when one camera row spans several
@@ -46,7 +47,7 @@ Assumptions and approximations
 * The Monte Carlo kernel carries its own ~1 % noise (10^6 photons) in the far
   skirt: it is a fixed property of the scene (traced once with seed 0), not a
   per-capture noise.
-* Defaults (``sigma_a = 0.003 /mm``, ``sigma_s' = 0.3 /mm``, ``eta = 1.4``) are
+* Defaults (``sigma_a = 0.003 /mm``, ``sigma_s' = 0.3 /mm``, ``n = 1.4``) are
   a translucent paraffin: transport mean free path ~3.3 mm, diffusion length
   ``1/sigma_tr ~ 19 mm`` (~64 projector rows at 0.3 mm/row).  The Monte Carlo
   kernel has a sharp single-scattering cusp (the next bin is already down to
@@ -67,30 +68,55 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import line_kernel
+from ..medium import Medium, as_medium
 from ..timing import RowGeometry
 from ..transport import Transport
 from ._textures import image_grid, smooth_noise, wood_grain
-from .base import DEFAULT_BAND_ROWS, DEFAULT_MM_PER_ROW, Scene, footprint_kernel, register_scene, scene_offsets
+from .base import (
+    DEFAULT_BAND_ROWS,
+    DEFAULT_MM_PER_ROW,
+    Scene,
+    footprint_kernel,
+    register_scene,
+    scene_offsets,
+)
 
-__all__ = ["build", "wax_kernel", "rose_pattern"]
+__all__ = ["build", "wax_kernel", "rose_pattern", "WAX_MEDIUM"]
+
+#: The default wax: a translucent paraffin with sigma_s' = 0.3 /mm, sigma_a = 0.003 /mm,
+#: HG g = 0.8 (sigma_s = sigma_s' / (1 - g)) and index 1.4, semi-infinite.  Its Monte
+#: Carlo kernel ships precomputed (:data:`planeray.mc.engine.TABLES_DIR`).
+WAX_MEDIUM = Medium.from_reduced(0.3, 0.003, g=0.8, n=1.4)
 
 
-def wax_kernel(offsets_rows, rows_per_camera_row, mm_per_row, sigma_a, sigma_s_prime, eta,
-               model="mc", g=0.8):
-    """Line kernel on ``offsets_rows`` seen by one camera row (footprint-convolved).
+def wax_kernel(medium: Medium, offsets_rows, rows_per_camera_row, *, mm_per_row, model="mc"):
+    """Line kernel of ``medium`` on ``offsets_rows`` seen by one camera row (footprint-convolved).
 
     Returns the kernel and the medium's total diffuse reflectance
-    (:func:`planeray.kernels.line_kernel`).
+    (:func:`planeray.kernels.line_kernel`, ``model`` ``"mc"`` or ``"dipole"``).
     """
     offsets = np.asarray(offsets_rows)
     if rows_per_camera_row <= 1.0:
-        return line_kernel(model, offsets, mm_per_row, sigma_a, sigma_s_prime, eta, g)
+        return line_kernel(medium, offsets, mm_per_row=mm_per_row, model=model)
     half = int(np.ceil(0.5 * rows_per_camera_row + 0.5))
     foot = footprint_kernel(np.arange(-half, half + 1), rows_per_camera_row)
     # A wider offset range first, so the convolution is exact inside ``offsets``.
     wide = np.arange(offsets[0] - half, offsets[-1] + half + 1)
-    kernel, total = line_kernel(model, wide, mm_per_row, sigma_a, sigma_s_prime, eta, g)
+    kernel, total = line_kernel(medium, wide, mm_per_row=mm_per_row, model=model)
     return np.convolve(kernel, foot, mode="valid"), total
+
+
+def _scene_medium(medium, sigma_a, sigma_s_prime, eta, g) -> Medium:
+    """``medium`` with the legacy keyword overrides applied (in reduced terms: ``sigma_s'`` held)."""
+    medium = as_medium(medium)
+    if sigma_a is None and sigma_s_prime is None and eta is None and g is None:
+        return medium
+    return Medium.from_reduced(
+        medium.sigma_s_prime if sigma_s_prime is None else sigma_s_prime,
+        medium.sigma_a if sigma_a is None else sigma_a,
+        g=medium.g if g is None else g,
+        n=medium.n if eta is None else eta,
+        thickness_mm=medium.thickness_mm)
 
 
 def rose_pattern(shape, centre, radii, rng: np.random.Generator, petals=5, turns=3.0):
@@ -125,15 +151,16 @@ def build(
     projector_rows,
     seed,
     mm_per_row: float = DEFAULT_MM_PER_ROW,
-    sigma_a: float = 0.003,
-    sigma_s_prime: float = 0.3,
-    eta: float = 1.4,
+    medium: Medium = WAX_MEDIUM,
     surface_reflectance: float = 0.08,
     background_albedo: float = 0.2,
     size: float = 0.36,
     band_rows: int = DEFAULT_BAND_ROWS,
     kernel: str = "mc",
-    g: float = 0.8,
+    sigma_a: float | None = None,
+    sigma_s_prime: float | None = None,
+    eta: float | None = None,
+    g: float | None = None,
 ):
     """Build the scene.
 
@@ -141,14 +168,20 @@ def build(
     ----------
     mm_per_row : float
         Size of one projector row on the wax, mm.
-    sigma_a, sigma_s_prime, eta : float
-        Wax absorption and reduced scattering coefficients (mm^-1) and refractive index.
+    medium : Medium
+        The wax (default :data:`WAX_MEDIUM`).  The dipole kernel sees it through
+        ``sigma_a``, ``sigma_s_prime`` and ``n``; the Monte Carlo kernel traces
+        its HG phase function.
     kernel : {"mc", "dipole"}
         Subsurface kernel model (:func:`planeray.kernels.line_kernel`): Monte
         Carlo of an HG medium (default; traced once, then cached on disk) or
         the diffusion dipole.
-    g : float
-        HG anisotropy of the Monte Carlo medium (``sigma_s = sigma_s' / (1 - g)``).
+    sigma_a, sigma_s_prime, eta, g : float, optional
+        Overrides of the medium's absorption, reduced scattering (mm^-1),
+        refractive index and HG anisotropy, as ``make_scene("wax", ...,
+        sigma_a=...)`` keywords; the medium is rebuilt with
+        :meth:`Medium.from_reduced`, so ``sigma_s'`` is held when only ``g``
+        changes (``sigma_s = sigma_s' / (1 - g)``).
     surface_reflectance : float
         Mean surface (direct) reflectance of the wax before the petal pattern.
     background_albedo : float
@@ -158,6 +191,7 @@ def build(
     band_rows : int
         Half-width of the dense offset band (projector rows).
     """
+    medium = _scene_medium(medium, sigma_a, sigma_s_prime, eta, g)
     H, W = shape
     rng = np.random.default_rng(seed)
     geometry = RowGeometry(H, projector_rows)
@@ -186,7 +220,7 @@ def build(
     dense = direct[:, :, None] * foot[None, None, :]
 
     # Subsurface: kernel x (fraction of the offset bin on the wax in this column).
-    ss_kernel, r_total = wax_kernel(offsets, rpc, mm_per_row, sigma_a, sigma_s_prime, eta, kernel, g)
+    ss_kernel, r_total = wax_kernel(medium, offsets, rpc, mm_per_row=mm_per_row, model=kernel)
     ss_kernel = ss_kernel.astype(np.float32)
     p_t = geometry.projector_row_of(np.arange(H)).astype(np.float32)
     lo = p_t[:, None] + offsets[None, :].astype(np.float32) - 0.5  # (H, U)
@@ -205,15 +239,17 @@ def build(
     labels = np.where(mask, 2, 1).astype(np.uint8)
     params = {
         "mm_per_row": float(mm_per_row),
-        "sigma_a": float(sigma_a),
-        "sigma_s_prime": float(sigma_s_prime),
-        "eta": float(eta),
+        "sigma_a": medium.sigma_a,
+        "sigma_s_prime": medium.sigma_s_prime,
+        "eta": medium.n,
         "surface_reflectance": float(surface_reflectance),
         "background_albedo": float(background_albedo),
         "size": float(size),
         "band_rows": int(band_rows),
         "kernel": str(kernel),
-        "g": float(g),
+        "g": medium.g,
         "subsurface_total_reflectance": r_total,
     }
+    if not medium.semi_infinite:
+        params["thickness_mm"] = medium.thickness_mm
     return Scene("wax", transport, direct, ambient, labels, params)
