@@ -191,7 +191,7 @@ def test_corner_energy_bounded_by_form_factor(built):
 def test_corner_matches_closed_form_total(projector_rows):
     """Uniform faces: a wall row gets rho_A rho_B 1/2 (1 - a / sqrt(a^2 + B^2)) in total."""
     H = 64 if projector_rows is None else 128
-    s = make_scene("corner", (H, 48), projector_rows, seed=0, textured=False)
+    s = make_scene("corner", (H, 48), projector_rows=projector_rows, seed=0, textured=False)
     g, p = s.geometry, s.params
     rpc, crease = g.rows_per_camera_row, p["crease_row"]
     x_c = crease * rpc - 0.5
