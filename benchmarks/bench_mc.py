@@ -58,10 +58,11 @@ def efficiency(seconds, value, stderr, mask):
 
 def plot_versus(off, dx, mi, mc, path):
     """Both radiance profiles with error bars, and their z-scores."""
-    from planeray.figures._common import plt, save_png
+    from planeray.figures._common import new_figure, save_png
 
     x = off * dx
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    fig = new_figure((11, 4))
+    ax, ax2 = fig.subplots(1, 2)
     ax.errorbar(x, mi.radiance, yerr=mi.stderr, fmt="o", ms=3, lw=0.8, label="Mitsuba 3 volpath")
     ax.errorbar(x, mc.radiance, yerr=mc.radiance_stderr, fmt=".", ms=3, lw=0.8, label="planeray MC")
     ax.set_yscale("log")

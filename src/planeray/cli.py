@@ -154,8 +154,8 @@ def contact_sheet(
 
     st = _load_stack(stack_path)
     with console.status("drawing contact sheet"):
-        path = contact_sheet_figure(st, out_png, gamma=gamma, max_delays=max_delays)
-    out.print(f"contact sheet: {path}")
+        contact_sheet_figure(st, out=out_png, gamma=gamma, max_delays=max_delays)
+    out.print(f"contact sheet: {out_png}")
 
 
 # -------------------------------------------------------------- profiles
@@ -197,20 +197,20 @@ def profiles(
         if T is not None:
             e = exposure if exposure is not None else float(prof.exposure_us.min())
             continuous = transport_delay_profiles(T, prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second)
-        path = delay_profiles_figure(st, prof, out_png, exposure_us=exposure, continuous=continuous)
+        delay_profiles_figure(st, prof, out=out_png, exposure_us=exposure, continuous=continuous)
         if csv is not None:
             write_profiles_csv(prof, csv)
             out.print(f"profiles CSV: {csv}")
-        out.print(f"delay profiles: {path}")
+        out.print(f"delay profiles: {out_png}")
     if classify is not None:
         from .scenes import EFFECTS
 
         labels = classify_transport(T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0))
         ref = st.image(st.index_of(0.0, float(st.exposures().min())) or 0)
-        path = label_map_figure(labels, classify, reference=ref)
+        label_map_figure(labels, out=classify, reference=ref)
         counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
         summary = ", ".join(f"{EFFECTS[k]} {counts[k] / labels.size * 100:.1f} %" for k in EFFECTS if counts[k])
-        out.print(f"label map: {path}  ({summary})")
+        out.print(f"label map: {classify}  ({summary})")
 
 
 def _parse_pixel(text: str) -> tuple[int, int]:
@@ -516,7 +516,8 @@ def mc_profile(
     if plot is not None:
         from .figures.mc import mc_profile_figure
 
-        out.print(f"  {mc_profile_figure(prof, plot)}")
+        mc_profile_figure(prof, out=plot)
+        out.print(f"  {plot}")
 
 
 # ----------------------------------------------------------------- study

@@ -65,14 +65,16 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
 
     disco, disco_stack = _simulate("disco_ball", out_dir, size, seed, console, progress)
     written["stack_disco_ball"] = out_dir / "disco_ball.zarr"
-    written["fig8_contact_sheet"] = contact_sheet_figure(disco_stack, out_dir / "fig8_contact_sheet.png")
+    written["fig8_contact_sheet"] = out_dir / "fig8_contact_sheet.png"
+    contact_sheet_figure(disco_stack, out=written["fig8_contact_sheet"])
 
     mirror, mirror_stack = _simulate("mirror_ball", out_dir, size, seed, console, progress)
     written["stack_mirror_ball"] = out_dir / "mirror_ball.zarr"
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
     pixels, names = representative_pixels(mirror, support, per_label=1)
     prof = measured_delay_profiles(mirror_stack, pixels)
-    written["fig9_delay_profiles"] = delay_profiles_figure(mirror_stack, prof, out_dir / "fig9_delay_profiles.png", names=names)
+    written["fig9_delay_profiles"] = out_dir / "fig9_delay_profiles.png"
+    delay_profiles_figure(mirror_stack, prof, out=written["fig9_delay_profiles"], names=names)
     write_profiles_csv(prof, out_dir / "fig9_delay_profiles.csv")
     written["fig9_profiles_csv"] = out_dir / "fig9_delay_profiles.csv"
 
@@ -89,8 +91,9 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
         f"(converged {maps['converged'].mean() * 100:.1f} %) -> {transport_path}"
     )
     written["transport_mirror_ball"] = transport_path
-    written["transport_vs_truth"] = transport_profiles_figure(
-        estimate, pixels, out_dir / "transport_vs_truth.png", truth=mirror.transport,
+    written["transport_vs_truth"] = out_dir / "transport_vs_truth.png"
+    transport_profiles_figure(
+        estimate, pixels, out=written["transport_vs_truth"], truth=mirror.transport,
         truth_scale=float(mirror_stack.metadata["signal_scale"]), names=names,
         resolution_rows=attrs["epipolar_resolution_rows"],
         title="Demultiplexed T(u) (solid) vs ground truth x signal scale (dashed); grey: cell the sweep cannot split",

@@ -16,14 +16,19 @@ from ..acquire import simulate_stack
 from ..camera import CameraModel
 from ..demux import demultiplex
 from ..devices import SimulatedEpiscan
+from ..figures._common import display_scale, new_figure, save_png
+from ..figures.contact_sheet import contact_sheet_figure
+from ..figures.profiles import delay_profiles_figure
 from ..io import atomic_file
 from ..profiles import measured_delay_profiles
 from ..scenes import EFFECTS, make_scene, representative_pixels
-from ..synthesis import michelson_contrast, relight, sharpened_epipolar, single_line_pattern
+from ..synthesis import (
+    michelson_contrast,
+    relight,
+    sharpened_epipolar,
+    single_line_pattern,
+)
 from ..timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
-from ..figures._common import display_scale, plt, save_png
-from ..figures.contact_sheet import contact_sheet_figure
-from ..figures.profiles import delay_profiles_figure
 
 __all__ = ["FIGURES", "fig8", "fig9", "fig11", "fig12"]
 
@@ -41,7 +46,8 @@ def fig8(out_dir, size: int = 128, seed: int = 0) -> dict:
     out_dir = Path(out_dir)
     scene = make_scene("disco_ball", (size, size), PROJECTOR_ROWS, seed)
     stack = simulate_stack(scene, paper_sweep(), seed=seed)
-    png = contact_sheet_figure(stack, out_dir / "fig8_contact_sheet.png")
+    png = out_dir / "fig8_contact_sheet.png"
+    contact_sheet_figure(stack, out=png)
     return _write_numbers(out_dir, "fig8", {"png": str(png), "images": len(stack)})
 
 
@@ -57,13 +63,14 @@ def fig9(out_dir, size: int = 128, seed: int = 0) -> dict:
         pixels, names = representative_pixels(scene, support)
         prof = measured_delay_profiles(stack, pixels)
         if name == "mirror_ball":
-            delay_profiles_figure(stack, prof, out_dir / "fig9_mirror_ball.png", names=names)
+            delay_profiles_figure(stack, prof, out=out_dir / "fig9_mirror_ball.png", names=names)
         e0 = list(prof.exposure_us).index(prof.exposure_us.min())
         for p, label in enumerate(names):
             if name != "mirror_ball" and label == "diffuse":
                 continue  # one diffuse curve is enough
             curves.append((f"{label} ({name} {tuple(int(x) for x in pixels[p])})", prof.delay_us, prof.values[p, e0]))
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig = new_figure((8, 4.5))
+    ax = fig.subplots()
     for label, d, v in curves:
         ax.plot(d, v, "-o", ms=3, lw=1.8, label=label)
     ax.axvline(0, color="0.7", lw=0.8)
@@ -111,7 +118,7 @@ def fig11(out_dir, size: int = 128, seed: int = 0, scan_row: int | None = None) 
             "michelson_scan_line": float(michelson_contrast(img[row, cols])),
             "relative_error_vs_direct": float(np.sqrt(np.mean((k * img[wax] - direct[wax]) ** 2)) / direct[wax].mean()),
         }
-    fig = plt.figure(figsize=(13, 7))
+    fig = new_figure((13, 7))
     grid = fig.add_gridspec(2, 4, height_ratios=[1.1, 1])
     for i, (name, img) in enumerate(images.items()):
         ax = fig.add_subplot(grid[0, i])
@@ -174,7 +181,8 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
             "rmse_vs_truth": float(np.sqrt(np.mean(err**2))),
             "relative_rmse": float(np.sqrt(np.mean(err**2)) / np.abs(truth[region]).mean()),
         }
-    fig, axes = plt.subplots(1, 4, figsize=(14, 4))
+    fig = new_figure((14, 4))
+    axes = fig.subplots(1, 4)
     s = display_scale([truth], 99.8)
     for ax, (name, img) in zip(axes, images.items()):
         ax.imshow(np.clip(img * s, 0, 1), cmap="gray", vmin=0, vmax=1)
@@ -193,8 +201,8 @@ def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
     """Effect classification from demultiplexed delay profiles on every built-in scene,
     with its agreement with the scenes' ground-truth labels (Sec. 8)."""
     from ..classify import classify_transport, label_agreement, visible_effect_mask
-    from ..scenes import list_scenes
     from ..figures.labels import label_map_figure
+    from ..scenes import list_scenes
 
     out_dir = Path(out_dir)
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
@@ -214,7 +222,7 @@ def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
             "recall_all_labelled": {EFFECTS[k]: float(v) for k, v in agree_all["recall"].items()},
             "overall_visible": float(agree["overall"]),
         }
-        label_map_figure(labels, out_dir / f"effects_{name}.png", reference=stack.image(stack.index_of(0.0, 600.0)),
+        label_map_figure(labels, out=out_dir / f"effects_{name}.png", reference=stack.image(stack.index_of(0.0, 600.0)),
                          title=f"{name}: effect from demultiplexed delay profiles")
     return _write_numbers(out_dir, "effects", numbers)
 

@@ -17,12 +17,12 @@ from ..study import (
     METHODS,
     Provider,
     cached_provider,
-    resolve_provider,
     grids,
     noise_sweep,
     parameter_sweep,
     reconstruction_example,
     regularization_sweep,
+    resolve_provider,
     study_setup,
 )
 
@@ -74,12 +74,16 @@ def run_study(out_dir, provider: Provider | str | None = None, seeds: int = 5, q
     result["example_min"] = {m: float(ex[m].min()) for m in METHODS}
     result["files"].append(_write_csv(out / "fig5_reconstruction.csv", ["offset_rows", "truth", *METHODS],
                                       ([int(u), ex["truth"][k]] + [ex[m][k] for m in METHODS] for k, u in enumerate(ex["offsets"]))))
-    result["files"].append(figs.plot_reconstruction(ex, out / "fig5_reconstruction.png", noise))
+    png = out / "fig5_reconstruction.png"
+    figs.plot_reconstruction(ex, noise=noise, out=png)
+    result["files"].append(png)
 
     ns = noise_sweep(setup, provider, G["noise"], seeds)
     result["noise_sweep"] = {"noise": ns["noise"].tolist(), **_summary(ns["mse"])}
     result["files"].append(_write_csv(out / "fig5c_mse_vs_noise.csv", ["noise", "seed", *METHODS], _sweep_rows(ns["noise"], ns["mse"], seeds)))
-    result["files"].append(figs.plot_noise_sweep(ns, out / "fig5c_mse_vs_noise.png"))
+    png = out / "fig5c_mse_vs_noise.png"
+    figs.plot_noise_sweep(ns, out=png)
+    result["files"].append(png)
 
     sweeps = {}
     for tag, name in (("a", "sigma_s"), ("b", "sigma_a"), ("c", "g")):
@@ -87,7 +91,9 @@ def run_study(out_dir, provider: Provider | str | None = None, seeds: int = 5, q
         sweeps[name] = ps
         result[f"{name}_sweep"] = {"values": ps["values"].tolist(), "mean_abs_offset": ps["mean_abs_offset"].tolist(), **_summary(ps["mse"])}
         result["files"].append(_write_csv(out / f"fig6{tag}_mse_vs_{name}.csv", [name, "seed", *METHODS], _sweep_rows(ps["values"], ps["mse"], seeds)))
-    result["files"].append(figs.plot_parameter_sweeps(sweeps, out / "fig6_mse_vs_params.png", noise))
+    png = out / "fig6_mse_vs_params.png"
+    figs.plot_parameter_sweeps(sweeps, noise=noise, out=png)
+    result["files"].append(png)
 
     rs = regularization_sweep(setup, provider, G["alpha"], G["beta"], seeds, noise)
     i, j = np.unravel_index(np.argmin(rs["mse"]), rs["mse"].shape)
@@ -99,6 +105,8 @@ def run_study(out_dir, provider: Provider | str | None = None, seeds: int = 5, q
     result["files"].append(_write_csv(out / "regularization_sweep.csv", ["alpha", "beta", "mse", "bias2", "variance"],
                                       ([float(a), float(b), float(rs["mse"][p, q]), float(rs["bias2"][p, q]), float(rs["variance"][p, q])]
                                        for p, a in enumerate(rs["alphas"]) for q, b in enumerate(rs["betas"]))))
-    result["files"].append(figs.plot_regularization(rs, out / "regularization_sweep.png", noise))
+    png = out / "regularization_sweep.png"
+    figs.plot_regularization(rs, noise=noise, out=png)
+    result["files"].append(png)
     result["files"] = [str(f) for f in result["files"]]
     return result

@@ -1,4 +1,12 @@
-"""Paper figures, one function each (matplotlib, Agg backend, PNG output)."""
+"""Paper figures, one function each.
+
+Every function draws on a new :class:`matplotlib.figure.Figure` (built without
+pyplot, so importing this package leaves the matplotlib backend alone and no
+figure stays open) and returns it; it displays in Jupyter by itself.  Pass
+``out=`` to also write the PNG.  Single-panel figures also take ``ax=``, an Axes
+to draw into.  More figures: :mod:`planeray.figures.mc` (Monte Carlo profiles)
+and :mod:`planeray.figures.study` (the Sec. 5.2 study).
+"""
 
 from .contact_sheet import contact_sheet_figure
 from .labels import label_map_figure

@@ -1,17 +1,21 @@
-"""Shared plotting helpers: a headless backend and atomic PNG saving."""
+"""Shared plotting helpers: figures without pyplot, atomic PNG saving, a common brightening.
+
+Figures are plain :class:`matplotlib.figure.Figure` objects, not pyplot-managed
+ones: building and saving them needs no backend (``savefig`` renders with Agg by
+itself), importing :mod:`planeray.figures` leaves the session's backend alone, and
+no figure stays registered with pyplot after a call.  A returned ``Figure``
+displays in Jupyter by itself.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from ..io import atomic_file
 
-from ..io import atomic_file  # noqa: E402
-
-__all__ = ["plt", "save_png", "display_scale"]
+__all__ = ["new_figure", "figure_for", "finish", "save_png", "display_scale"]
 
 
 def display_scale(images, percentile=99.5):
@@ -23,10 +27,39 @@ def display_scale(images, percentile=99.5):
     return 1.0 / top if top > 0 else 1.0
 
 
+def new_figure(figsize, **kwargs) -> Figure:
+    """A fresh :class:`~matplotlib.figure.Figure`, outside pyplot (nothing to close)."""
+    return Figure(figsize=figsize, **kwargs)
+
+
+def figure_for(ax, figsize):
+    """``(fig, ax, own)``: a new single-panel figure, or the figure that holds ``ax``.
+
+    ``own`` tells whether the figure is ours (then its layout may be adjusted) or
+    the caller's (then it is left as it is).
+    """
+    if ax is None:
+        fig = new_figure(figsize)
+        return fig, fig.subplots(), True
+    return ax.figure, ax, False
+
+
+def finish(fig, out=None, dpi=100):
+    """Write ``fig`` to ``out`` (PNG) if given, and return ``fig``."""
+    if out is not None:
+        save_png(fig, out, dpi=dpi)
+    return fig
+
+
 def save_png(fig, path, dpi=100) -> Path:
-    """Save a figure as PNG atomically and close it."""
+    """Save a figure as PNG atomically and return the path.
+
+    ``fig`` may be a :class:`~matplotlib.figure.SubFigure`; its whole figure is saved.
+    The figure is not closed: figures built with :func:`new_figure` are not held by
+    pyplot and go away with their last reference.
+    """
     path = Path(path)
+    root = fig.figure  # the Figure itself, or the Figure that holds a SubFigure
     with atomic_file(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=dpi)
-    plt.close(fig)
+        root.savefig(tmp, format="png", dpi=dpi)
     return path

@@ -7,7 +7,7 @@ from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
 
 from ..scenes import EFFECTS
-from ._common import plt, save_png
+from ._common import finish, new_figure
 
 __all__ = ["label_map_figure", "EFFECT_COLORS"]
 
@@ -15,11 +15,50 @@ __all__ = ["label_map_figure", "EFFECT_COLORS"]
 EFFECT_COLORS = ["#202020", "#9e9e9e", "#f2a541", "#3f88c5", "#d1495b"]
 
 
-def label_map_figure(labels, out_png, reference=None, title: str = "Light-transport effect per pixel"):
-    """Write a label map (keys of :data:`planeray.scenes.EFFECTS`), beside an optional reference image."""
+def label_map_figure(labels, *, out=None, reference=None, title: str = "Light-transport effect per pixel", ax=None):
+    """Draw a label map (keys of :data:`planeray.scenes.EFFECTS`), beside an optional reference image.
+
+    Parameters
+    ----------
+    labels : array_like of int, (H, W)
+        Effect label per pixel, e.g. from :func:`planeray.classify.classify_transport`.
+    out : str or os.PathLike, optional
+        Also write the figure to this PNG (110 dpi).
+    reference : array_like (H, W), optional
+        An image shown to the left of the labels (brightened, gamma 0.5).
+    title : str
+        Title of the label panel.
+    ax : matplotlib.axes.Axes, optional
+        Draw the label map into this Axes (without ``reference``) instead of a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The new figure (one Axes, two with ``reference``), or ``ax.figure``.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> from planeray.figures import label_map_figure
+    >>> scene = pr.make_scene("diffuse_plane", (16, 16), seed=0)
+    >>> fig = label_map_figure(scene.labels, reference=scene.direct)
+    >>> type(fig).__name__, len(fig.axes)
+    ('Figure', 2)
+    >>> from matplotlib.figure import Figure
+    >>> ax = Figure().subplots()
+    >>> label_map_figure(scene.labels, ax=ax, title="ground truth") is ax.figure
+    True
+    """
     labels = np.asarray(labels)
-    n = 2 if reference is not None else 1
-    fig, axes = plt.subplots(1, n, figsize=(5.2 * n + 1.5, 5), squeeze=False)
+    own = ax is None  # a caller's figure keeps its own layout
+    if not own:
+        if reference is not None:
+            raise ValueError("label_map_figure: pass either ax (a single panel) or reference (two panels), not both")
+        fig, axes = ax.figure, np.array([[ax]], dtype=object)
+    else:
+        n = 2 if reference is not None else 1
+        fig = new_figure((5.2 * n + 1.5, 5))
+        axes = fig.subplots(1, n, squeeze=False)
     if reference is not None:
         ref = np.asarray(reference, np.float32)
         top = np.percentile(ref, 99.5) or 1.0
@@ -34,5 +73,6 @@ def label_map_figure(labels, out_png, reference=None, title: str = "Light-transp
     for a in axes.ravel():
         a.set_xticks([])
         a.set_yticks([])
-    fig.tight_layout()
-    return save_png(fig, out_png, dpi=110)
+    if own:
+        fig.tight_layout()
+    return finish(fig, out, dpi=110)

@@ -6,24 +6,38 @@ import numpy as np
 
 from ..mc.diffusion import dipole_line_kernel, dipole_reflectance
 from ..mc.engine import bin_measure
-from ._common import plt, save_png
+from ._common import finish, new_figure
 
 __all__ = ["mc_profile_figure"]
 
 
-def mc_profile_figure(prof, path, compare_dipole: bool = True):
+def mc_profile_figure(prof, *, out=None, compare_dipole: bool = True):
     """Plot exitance (and normal-view radiance) of ``prof`` vs distance from the line or point.
 
     Parameters
     ----------
     prof : planeray.mc.MCProfile
         The profile to plot.
-    path : str or os.PathLike
-        PNG to write.
+    out : str or os.PathLike, optional
+        Also write the figure to this PNG (100 dpi).
     compare_dipole : bool
         Overlay :func:`planeray.kernels.dipole_line_kernel` of the same medium
         (``sigma_s' = sigma_s (1 - g)`` and ``n``; Jensen et al. 2001), the
         classical approximation the engine should approach far from the line.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two Axes: exitance (left) and normal-view radiance (right), log scale.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> from planeray.figures.mc import mc_profile_figure
+    >>> prof = pr.mc_line_profile(1.0, 0.1, 0.5, n_photons=2000)
+    >>> fig = mc_profile_figure(prof)
+    >>> type(fig).__name__, len(fig.axes)
+    ('Figure', 2)
     """
     p = prof.params
     point = p.get("source") == "point"
@@ -31,7 +45,8 @@ def mc_profile_figure(prof, path, compare_dipole: bool = True):
     x = k * prof.mm_per_row
     dx = prof.mm_per_row
     measure = bin_measure(k, dx, radial=point)  # exitance per mm (line) or per mm^2 (point)
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig = new_figure((11, 4.2))
+    ax, ax2 = fig.subplots(1, 2)
     ok = prof.values > 0
     ax.errorbar(x[ok], (prof.values / measure)[ok], yerr=(prof.stderr / measure)[ok], fmt=".", ms=3,
                 lw=0.8, label="Monte Carlo exitance")
@@ -59,4 +74,4 @@ def mc_profile_figure(prof, path, compare_dipole: bool = True):
                   f"truncated {prof.truncated:.3f}")
     ax2.legend(fontsize=8)
     fig.tight_layout()
-    return save_png(fig, path)
+    return finish(fig, out)

@@ -6,16 +6,16 @@ import numpy as np
 
 from ..profiles import DelayProfiles
 from ..stack import Stack
-from ._common import display_scale, plt, save_png
+from ._common import display_scale, finish, new_figure
 
 __all__ = ["delay_profiles_figure"]
 
 _COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive"]
 
 
-def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposure_us: float | None = None, names=None,
+def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, *, out=None, exposure_us: float | None = None, names=None,
                           continuous=None):
-    """Write Fig. 9: the scene with the pixels marked, and each pixel's delay profile.
+    """Draw Fig. 9: the scene with the pixels marked, and each pixel's delay profile.
 
     Parameters
     ----------
@@ -23,6 +23,8 @@ def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposu
         Used for the reference image (the epipolar image at the smallest exposure).
     profiles : DelayProfiles
         From :func:`planeray.profiles.measured_delay_profiles`.
+    out : str or os.PathLike, optional
+        Also write the figure to this PNG (110 dpi).
     exposure_us : float, optional
         Plot only this exposure (solid); by default all exposures are drawn,
         the smallest solid and the others fainter.
@@ -31,11 +33,28 @@ def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposu
     continuous : TransportDelayProfiles, optional
         Profiles of the same pixels from a transport
         (:func:`planeray.profiles.transport_delay_profiles`), drawn dashed.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two Axes: the reference image with the pixels circled, and the profiles.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> from planeray.figures import delay_profiles_figure
+    >>> scene = pr.make_scene("diffuse_plane", (16, 16), seed=0)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> profiles = pr.measured_delay_profiles(stack, [(4, 5), (10, 12)])
+    >>> fig = delay_profiles_figure(stack, profiles, names=["left", "right"])
+    >>> type(fig).__name__, len(fig.axes)
+    ('Figure', 2)
     """
     e0 = profiles.exposure_us.min() if exposure_us is None else exposure_us
     ref_idx = stack.index_of(profiles.delay_us[np.argmin(np.abs(profiles.delay_us))], e0)
     ref = stack.image(ref_idx if ref_idx is not None else 0)
-    fig, (ax_img, ax_prof) = plt.subplots(1, 2, figsize=(11, 4.6), gridspec_kw={"width_ratios": [1, 1.5]})
+    fig = new_figure((11, 4.6))
+    ax_img, ax_prof = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.5]})
     ax_img.imshow(np.clip(ref * display_scale([ref]), 0, 1) ** 0.5, cmap="gray", vmin=0, vmax=1)
     ax_img.set_title(f"$t_d$ = 0, $t_e$ = {e0:g} µs", fontsize=10)
     ax_img.set_xticks([])
@@ -69,4 +88,4 @@ def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, out_png, exposu
     ax_prof.legend(fontsize=8)
     ax_prof.grid(alpha=0.3)
     fig.tight_layout()
-    return save_png(fig, out_png, dpi=110)
+    return finish(fig, out, dpi=110)

@@ -1,10 +1,16 @@
-"""Figures of the Sec. 5.2 demultiplexing study (Figs. 5, 6 and the alpha/beta grid)."""
+"""Figures of the Sec. 5.2 demultiplexing study (Figs. 5, 6 and the alpha/beta grid).
+
+Each function draws one result of :mod:`planeray.study` and returns the
+:class:`~matplotlib.figure.Figure`.  The examples use the paper sweep's band
+matrix and the diffusion dipole as the profile provider (fast).
+"""
 
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.ticker import NullFormatter
 
-from ._common import plt, save_png
+from ._common import figure_for, finish, new_figure
 
 __all__ = ["plot_reconstruction", "plot_noise_sweep", "plot_parameter_sweeps", "plot_regularization"]
 
@@ -14,10 +20,37 @@ COLORS = {"pinv": "tab:red", "nnls": "tab:orange", "full": "tab:blue"}
 SYMBOLS = {"sigma_s": r"$\sigma_s$ (mm$^{-1}$)", "sigma_a": r"$\sigma_a$ (mm$^{-1}$)", "g": "g"}
 
 
-def plot_reconstruction(ex: dict, path, noise):
-    """Fig. 5a/b: reconstructions vs truth, full support and close-up of the peak."""
+def plot_reconstruction(ex: dict, *, noise, out=None):
+    """Fig. 5a/b: reconstructions vs truth, full support and close-up of the peak.
+
+    Parameters
+    ----------
+    ex : dict
+        From :func:`planeray.study.reconstruction_example`.
+    noise : float
+        The noise level of ``ex`` (for the title).
+    out : str or os.PathLike, optional
+        Also write the figure to this PNG (100 dpi).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two Axes: the whole support and a close-up of the peak.
+
+    Examples
+    --------
+    >>> from planeray.figures.study import plot_reconstruction
+    >>> from planeray import study
+    >>> setup = study.study_setup()
+    >>> provider = study.dipole_provider(setup.offsets)
+    >>> ex = study.reconstruction_example(setup, provider, noise=0.05)
+    >>> fig = plot_reconstruction(ex, noise=0.05)
+    >>> type(fig).__name__, len(fig.axes)
+    ('Figure', 2)
+    """
     u = ex["offsets"]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
+    fig = new_figure((12, 4.2))
+    axes = fig.subplots(1, 2)
     for ax, lim in zip(axes, (None, 25)):
         ax.plot(u, ex["truth"], "k-", lw=2.2, label="truth")
         for m in METHODS:
@@ -35,7 +68,7 @@ def plot_reconstruction(ex: dict, path, noise):
             ax.set_title(f"(a) reconstructions, noise eta = {noise}")
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    return save_png(fig, path)
+    return finish(fig, out)
 
 
 def _errorbars(ax, x, mse):
@@ -46,9 +79,39 @@ def _errorbars(ax, x, mse):
         ax.errorbar(x, mean, yerr=err, color=COLORS[m], marker="o", ms=3.5, capsize=2.5, label=LABELS[m])
 
 
-def plot_noise_sweep(ns: dict, path):
-    """Fig. 5c: MSE vs noise level, log-log, mean +- std over seeds."""
-    fig, ax = plt.subplots(figsize=(6, 4.2))
+def plot_noise_sweep(ns: dict, *, out=None, ax=None):
+    """Fig. 5c: MSE vs noise level, log-log, mean +- std over seeds.
+
+    Parameters
+    ----------
+    ns : dict
+        From :func:`planeray.study.noise_sweep`.
+    out : str or os.PathLike, optional
+        Also write the figure to this PNG (100 dpi).
+    ax : matplotlib.axes.Axes, optional
+        Draw into this Axes instead of a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The new figure (one Axes), or ``ax.figure``.
+
+    Examples
+    --------
+    >>> from planeray.figures.study import plot_noise_sweep
+    >>> from planeray import study
+    >>> setup = study.study_setup()
+    >>> provider = study.dipole_provider(setup.offsets)
+    >>> ns = study.noise_sweep(setup, provider, [0.01, 0.1], seeds=2)
+    >>> fig = plot_noise_sweep(ns)
+    >>> type(fig).__name__, len(fig.axes)
+    ('Figure', 1)
+    >>> from matplotlib.figure import Figure
+    >>> ax = Figure().subplots()
+    >>> plot_noise_sweep(ns, ax=ax) is ax.figure
+    True
+    """
+    fig, ax, own = figure_for(ax, (6, 4.2))
     _errorbars(ax, ns["noise"], ns["mse"])
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -57,20 +120,51 @@ def plot_noise_sweep(ns: dict, path):
     ax.set_title("(c) MSE vs noise (mean +- std over seeds)")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    return save_png(fig, path)
+    if own:  # a caller's figure keeps its own layout
+        fig.tight_layout()
+    return finish(fig, out)
 
 
-def plot_parameter_sweeps(sweeps: dict, path, noise):
-    """Fig. 6a/b/c: MSE vs sigma_s, sigma_a and g."""
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.2))
+def plot_parameter_sweeps(sweeps: dict, *, noise, out=None):
+    """Fig. 6a/b/c: MSE vs sigma_s, sigma_a and g.
+
+    Parameters
+    ----------
+    sweeps : dict
+        ``{"sigma_s": ..., "sigma_a": ..., "g": ...}``, each from
+        :func:`planeray.study.parameter_sweep`.
+    noise : float
+        The noise level of the sweeps (for the titles).
+    out : str or os.PathLike, optional
+        Also write the figure to this PNG (100 dpi).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Three Axes, one per parameter.
+
+    Examples
+    --------
+    >>> from planeray.figures.study import plot_parameter_sweeps
+    >>> from planeray import study
+    >>> setup = study.study_setup()
+    >>> provider = study.dipole_provider(setup.offsets)
+    >>> grid = {"sigma_s": [0.5, 2.0], "sigma_a": [0.0, 0.1], "g": [0.0, 0.9]}
+    >>> sweeps = {name: study.parameter_sweep(setup, provider, name, values, seeds=1, noise=0.05)
+    ...           for name, values in grid.items()}
+    >>> fig = plot_parameter_sweeps(sweeps, noise=0.05)
+    >>> type(fig).__name__, len(fig.axes)
+    ('Figure', 3)
+    """
+    fig = new_figure((16, 4.2))
+    axes = fig.subplots(1, 3)
     for ax, tag, name in zip(axes, "abc", ("sigma_s", "sigma_a", "g")):
         ps = sweeps[name]
         _errorbars(ax, ps["values"], ps["mse"])
         ax.set_yscale("log")
         if name == "sigma_s":
             ax.set_xscale("log")
-            ax.xaxis.set_minor_formatter(plt.NullFormatter())
+            ax.xaxis.set_minor_formatter(NullFormatter())
         elif name == "sigma_a":
             ax.set_xscale("symlog", linthresh=0.002)
             ax.set_xlim(left=0.0)
@@ -80,12 +174,39 @@ def plot_parameter_sweeps(sweeps: dict, path, noise):
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    return save_png(fig, path)
+    return finish(fig, out)
 
 
-def plot_regularization(rs: dict, path, noise):
-    """Heatmaps of MSE and squared bias of the full method over (alpha, beta)."""
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
+def plot_regularization(rs: dict, *, noise, out=None):
+    """Heatmaps of MSE and squared bias of the full method over (alpha, beta).
+
+    Parameters
+    ----------
+    rs : dict
+        From :func:`planeray.study.regularization_sweep`.
+    noise : float
+        The noise level of the sweep (for the titles).
+    out : str or os.PathLike, optional
+        Also write the figure to this PNG (100 dpi).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Four Axes: the MSE and squared-bias heatmaps and their colorbars.
+
+    Examples
+    --------
+    >>> from planeray.figures.study import plot_regularization
+    >>> from planeray import study
+    >>> setup = study.study_setup()
+    >>> provider = study.dipole_provider(setup.offsets)
+    >>> rs = study.regularization_sweep(setup, provider, [1e-2, 1e-1], [1e-2, 1e-1], seeds=2, noise=0.05)
+    >>> fig = plot_regularization(rs, noise=0.05)
+    >>> type(fig).__name__, len(fig.axes)
+    ('Figure', 4)
+    """
+    fig = new_figure((12, 4.8))
+    axes = fig.subplots(1, 2)
     a, b = rs["alphas"], rs["betas"]
     i, j = np.unravel_index(np.argmin(rs["mse"]), rs["mse"].shape)
     for ax, key, title in zip(axes, ("mse", "bias2"), ("MSE", "squared bias")):
@@ -104,4 +225,4 @@ def plot_regularization(rs: dict, path, noise):
                      "red square: the paper's 0.01 / 0.01, white x: lowest MSE", fontsize=10)
         fig.colorbar(im, ax=ax)
     fig.tight_layout()
-    return save_png(fig, path)
+    return finish(fig, out)
