@@ -44,7 +44,7 @@ def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
 def fig8(out_dir, size: int = 128, seed: int = 0) -> dict:
     """Fig. 8: delay x exposure contact sheet of the disco-ball scene."""
     out_dir = Path(out_dir)
-    scene = make_scene("disco_ball", (size, size), PROJECTOR_ROWS, seed)
+    scene = make_scene("disco_ball", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
     stack = simulate_stack(scene, paper_sweep(), seed=seed)
     png = out_dir / "fig8_contact_sheet.png"
     contact_sheet_figure(stack, out=png)
@@ -58,7 +58,7 @@ def fig9(out_dir, size: int = 128, seed: int = 0) -> dict:
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
     curves = []
     for name in ("mirror_ball", "wax", "corner"):
-        scene = make_scene(name, (size, size), PROJECTOR_ROWS, seed)
+        scene = make_scene(name, (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
         stack = simulate_stack(scene, paper_sweep(), seed=seed)
         pixels, names = representative_pixels(scene, support)
         prof = measured_delay_profiles(stack, pixels)
@@ -94,7 +94,7 @@ def fig11(out_dir, size: int = 128, seed: int = 0, scan_row: int | None = None) 
     scaled to it by least squares, since they integrate different amounts of light).
     """
     out_dir = Path(out_dir)
-    scene = make_scene("wax", (size, size), PROJECTOR_ROWS, seed)
+    scene = make_scene("wax", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
     stack = simulate_stack(scene, paper_sweep(), seed=seed)
     result = demultiplex(stack)
     T = result.transport
@@ -105,8 +105,8 @@ def fig11(out_dir, size: int = 128, seed: int = 0, scan_row: int | None = None) 
     images = {
         "ground-truth direct": direct,
         "captured epipolar, $t_e$ = 600 µs (32.4 rows)": captured,
-        f"sharpened, {2 * res:.2f} rows": sharpened_epipolar(T, 2 * res),
-        "sharpened, 1 row": sharpened_epipolar(T, 1.0),
+        f"sharpened, {2 * res:.2f} rows": sharpened_epipolar(T, width_rows=2 * res),
+        "sharpened, 1 row": sharpened_epipolar(T, width_rows=1.0),
     }
     wax = scene.labels == 2
     row = scan_row if scan_row is not None else int(np.argmax(wax.sum(axis=1)))
@@ -153,9 +153,9 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
     dark (ambient 0.01 e-/us).
     """
     out_dir = Path(out_dir)
-    scene = make_scene("wax", (size, size), PROJECTOR_ROWS, seed)
+    scene = make_scene("wax", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
     camera = CameraModel(laser_electrons=1500.0, ambient_e_per_us=0.01)
-    stack = simulate_stack(scene, paper_sweep(), camera, seed=seed)
+    stack = simulate_stack(scene, paper_sweep(), camera=camera, seed=seed)
     T = demultiplex(stack).transport
     scale = camera.signal_scale
     wax = scene.labels == 2
@@ -166,8 +166,8 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
     single = SimulatedEpiscan(scene, CameraModel(laser_electrons=1500.0, ambient_e_per_us=0.01, frames_averaged=1), seed=seed)
     frame_us = 1e6 / 60.0
     for exposure_ms in (16.0, 800.0):
-        lit, _ = single.capture_pattern(pattern, exposure_ms * 1000.0, frame_us)
-        dark, _ = single.capture_pattern(np.zeros_like(pattern), exposure_ms * 1000.0, frame_us)
+        lit, _ = single.capture_pattern(pattern, exposure_ms * 1000.0, frame_period_us=frame_us)
+        dark, _ = single.capture_pattern(np.zeros_like(pattern), exposure_ms * 1000.0, frame_period_us=frame_us)
         # the conventional practice: subtract a dark frame (projector off) of the same exposure
         images[f"single line, {exposure_ms:g} ms"] = (lit - dark) / (exposure_ms * 1000.0 / frame_us * scale)
     # judge where the line's light is (near the line, on the wax)
@@ -208,12 +208,12 @@ def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
     numbers = {}
     for name in list_scenes():
-        scene = make_scene(name, (size, size), PROJECTOR_ROWS, seed)
+        scene = make_scene(name, (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
         stack = simulate_stack(scene, paper_sweep(), seed=seed)
         result = demultiplex(stack)
         res = result.attrs["epipolar_resolution_rows"]
         labels = classify_transport(result.transport, resolution_rows=res)
-        visible = visible_effect_mask(scene, support, res)
+        visible = visible_effect_mask(scene, support_rows=support, resolution_rows=res)
         agree = label_agreement(labels, scene.labels, mask=visible)
         agree_all = label_agreement(labels, scene.labels)
         numbers[name] = {
