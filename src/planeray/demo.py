@@ -16,9 +16,8 @@ import time
 from pathlib import Path
 
 from ._console import progress_bar
-from .acquire import acquire_sweep
+from .acquire import simulate_stack
 from .demux import demultiplex_to_store
-from .devices import SimulatedEpiscan
 from .figures import (
     contact_sheet_figure,
     delay_profiles_figure,
@@ -27,27 +26,30 @@ from .figures import (
 from .io import read_transport, read_transport_maps, write_stack, write_transport
 from .profiles import measured_delay_profiles, write_profiles_csv
 from .scenes import make_scene, representative_pixels
-from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
+from .timing import (
+    PAPER_LINES_PER_SECOND,
+    PAPER_PROJECTOR_ROWS,
+    paper_sweep,
+    sweep_support_rows,
+)
 
 __all__ = ["run_demo"]
-
-#: The paper's projector (Celluon PicoPro) has 720 rows.
-DEMO_PROJECTOR_ROWS = 720
 
 
 def _simulate(name, out_dir, size, seed, console, progress):
     sweep = paper_sweep()
     t0 = time.perf_counter()
-    scene = make_scene(name, (size, size), DEMO_PROJECTOR_ROWS, seed)
-    device = SimulatedEpiscan(scene, lines_per_second=PAPER_LINES_PER_SECOND, seed=seed)
+    scene = make_scene(name, (size, size), projector_rows=PAPER_PROJECTOR_ROWS, seed=seed)
     stack_path = out_dir / f"{name}.zarr"
     with progress() as bar:
         task = bar.add_task(f"{name}: capturing {len(sweep)} images", total=len(sweep))
-        stack = acquire_sweep(device, sweep, progress=lambda i: bar.advance(task))
+        stack = simulate_stack(scene, sweep, lines_per_second=PAPER_LINES_PER_SECOND, seed=seed,
+                               progress=lambda i: bar.advance(task))
         task = bar.add_task(f"{name}: writing stack", total=len(sweep))
         write_stack(stack, stack_path, overwrite=True, progress=lambda i: bar.advance(task))
     truth_path = out_dir / f"{name}_truth.zarr"
-    write_transport(scene.transport, truth_path, {"lines_per_second": PAPER_LINES_PER_SECOND, "method": "ground_truth", "scene": scene.params}, overwrite=True)
+    attrs = {"lines_per_second": PAPER_LINES_PER_SECOND, "method": "ground_truth", "scene": scene.params}
+    write_transport(scene.transport, truth_path, attrs=attrs, overwrite=True)
     console.print(f"  {name}: {len(stack)} images {size}x{size} in {time.perf_counter() - t0:.1f} s -> {stack_path}")
     return scene, stack
 
@@ -63,14 +65,14 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     console.print("[bold]planeray demo[/]: the paper's sweep (17 delays x 5 exposures) on the simulated Episcan")
     written = {}
 
-    disco, disco_stack = _simulate("disco_ball", out_dir, size, seed, console, progress)
+    disco, disco_stack = _simulate("disco_ball", out_dir, size=size, seed=seed, console=console, progress=progress)
     written["stack_disco_ball"] = out_dir / "disco_ball.zarr"
     written["fig8_contact_sheet"] = contact_sheet_figure(disco_stack, out_dir / "fig8_contact_sheet.png")
 
-    mirror, mirror_stack = _simulate("mirror_ball", out_dir, size, seed, console, progress)
+    mirror, mirror_stack = _simulate("mirror_ball", out_dir, size=size, seed=seed, console=console, progress=progress)
     written["stack_mirror_ball"] = out_dir / "mirror_ball.zarr"
-    support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
-    pixels, names = representative_pixels(mirror, support, per_label=1)
+    support = sweep_support_rows(paper_sweep(), lines_per_second=PAPER_LINES_PER_SECOND)
+    pixels, names = representative_pixels(mirror, support_rows=support, per_label=1)
     prof = measured_delay_profiles(mirror_stack, pixels)
     written["fig9_delay_profiles"] = delay_profiles_figure(mirror_stack, prof, out_dir / "fig9_delay_profiles.png", names=names)
     write_profiles_csv(prof, out_dir / "fig9_delay_profiles.csv")
@@ -108,7 +110,7 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
-    run_demo(args.out, args.size, args.seed)
+    run_demo(args.out, size=args.size, seed=args.seed)
 
 
 if __name__ == "__main__":

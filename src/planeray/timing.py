@@ -37,6 +37,7 @@ from scipy.special import ndtr
 
 __all__ = [
     "PAPER_LINES_PER_SECOND",
+    "PAPER_PROJECTOR_ROWS",
     "PAPER_BOUNDARY_MARGIN_US",
     "delay_from_sync_offset",
     "sync_offset_from_delay",
@@ -58,6 +59,8 @@ __all__ = [
 
 #: Projector scanline velocity measured in the paper (27 lines in 500 us, Sec. 6).
 PAPER_LINES_PER_SECOND = 54_000.0
+#: Rows of the paper's projector (the paper's PicoPro, a Celluon laser projector).
+PAPER_PROJECTOR_ROWS = 720
 #: Images with ``||t_d| - t_e/2| <= 75 us`` sit on the epipolar/non-epipolar
 #: boundary and show synchronization artifacts; the paper leaves them out (N = 75).
 PAPER_BOUNDARY_MARGIN_US = 75.0

@@ -20,14 +20,14 @@ from ..io import atomic_file
 from ..profiles import measured_delay_profiles
 from ..scenes import EFFECTS, make_scene, representative_pixels
 from ..synthesis import michelson_contrast, relight, sharpened_epipolar, single_line_pattern
-from ..timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
+from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, paper_sweep, sweep_support_rows
 from ..figures._common import display_scale, plt, save_png
 from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
 
 __all__ = ["FIGURES", "fig8", "fig9", "fig11", "fig12"]
 
-PROJECTOR_ROWS = 720  # the paper's PicoPro
+PROJECTOR_ROWS = PAPER_PROJECTOR_ROWS  # the paper's PicoPro
 
 
 def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
