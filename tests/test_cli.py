@@ -149,7 +149,8 @@ def test_mc_profile_writes_csv_json_and_png(tmp_path, monkeypatch):
     import csv
     import json
 
-    rows = list(csv.DictReader(open(out)))
+    with open(out) as fh:
+        rows = list(csv.DictReader(fh))
     assert len(rows) == 21 and rows[10]["offset_rows"] == "0"
     assert float(rows[10]["exitance"]) > float(rows[0]["exitance"]) > 0
     summary = json.loads(out.with_suffix(".json").read_text())
@@ -177,3 +178,43 @@ def test_mc_profile_point_source(tmp_path, monkeypatch):
     lines = out.read_text().splitlines()
     assert lines[0].startswith("radius_bin,r_mm,exitance") and len(lines) == 1 + 9
     assert (tmp_path / "r.png").exists()
+
+
+@pytest.mark.parametrize(
+    "new,old,value,field",
+    [
+        ("--full-well-e", "--full-well", 9000, "full_well_e"),
+        ("--read-noise-e", "--read-noise", 3, "read_noise_e"),
+        ("--ambient-e-per-us", "--ambient", 0.25, "ambient_e_per_us"),
+    ],
+)
+def test_unit_option_names_and_their_old_spellings_agree(tmp_path, new, old, value, field):
+    stacks = []
+    for i, name in enumerate((new, old)):
+        path = tmp_path / f"{i}.zarr"
+        res = invoke("simulate", "diffuse_plane", "--out", path, "--size", 16, 16, "--sweep", "quick", name, value)
+        assert res.exit_code == 0, res.output
+        stacks.append(read_stack(path))
+    a, b = stacks
+    assert a.metadata["camera"][field] == b.metadata["camera"][field] == value
+    np.testing.assert_array_equal(np.asarray(a.images[:]), np.asarray(b.images[:]))
+
+
+def test_every_renamed_option_keeps_its_old_spelling():
+    import typer.main
+
+    group = typer.main.get_command(app)
+    renamed = {
+        ("simulate",): {"--full-well-e": "--full-well", "--read-noise-e": "--read-noise", "--ambient-e-per-us": "--ambient"},
+        ("profiles",): {"--exposure-us": "--exposure"},
+        ("demux",): {"--chunk-rows": "--chunk"},
+        ("emulate",): {"--ambient-e-per-us": "--ambient"},
+        ("separate", "direct-global"): {"--ambient-e-per-us": "--ambient", "--period-rows": "--period"},
+    }
+    for path, names in renamed.items():
+        cmd = group
+        for part in path:
+            cmd = cmd.commands[part]
+        opts = [p.opts for p in cmd.params]
+        for new, old in names.items():
+            assert [new, old] in opts, f"{' '.join(path)}: {new} / {old}"

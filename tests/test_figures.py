@@ -49,7 +49,7 @@ def stack(scene):
 
 @pytest.fixture(scope="module")
 def mc_profile():
-    return pr.mc_line_profile(1.0, 0.1, 0.5, n_photons=2000, offsets_rows=np.arange(-6, 7))
+    return pr.mc_line_profile(pr.Medium(sigma_s=1.0, sigma_a=0.1, g=0.5), n_photons=2000, offsets_rows=np.arange(-6, 7))
 
 
 def _study_results():
@@ -78,7 +78,7 @@ def _cases(scene, stack, mc_profile):
                                              lines_per_second=stack.lines_per_second)
     ref = stack.image(0)
     ex, ns, sweeps, rs = _study_results()
-    point = pr.mc.mc_point_profile(1.0, 0.1, 0.5, n_photons=1000, radius_bins=np.arange(6))
+    point = pr.mc.mc_point_profile(pr.Medium(sigma_s=1.0, sigma_a=0.1, g=0.5), n_photons=1000, radius_bins=np.arange(6))
     return [
         ("contact_sheet", lambda **kw: contact_sheet_figure(stack, **kw), E * D, 110),
         ("contact_sheet_max_delays", lambda **kw: contact_sheet_figure(stack, max_delays=4, gamma=1.0, **kw), E * 4, 110),

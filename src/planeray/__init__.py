@@ -37,6 +37,7 @@ except _metadata.PackageNotFoundError:  # pragma: no cover - a bare source check
 _EXPORTS = {
     # imaging model (Eqs. 1-6)
     "PAPER_LINES_PER_SECOND": "timing",
+    "PAPER_PROJECTOR_ROWS": "timing",
     "Band": "timing",
     "RowPattern": "timing",
     "RowGeometry": "timing",
@@ -123,5 +124,5 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from .scenes import list_scenes, make_scene
     from .stack import Stack
     from .synthesis import band_image, epipolar_image, non_epipolar_image, relight, sharpened_epipolar, short_long_range
-    from .timing import PAPER_LINES_PER_SECOND, Band, RowGeometry, RowPattern, Sweep, make_sweep, paper_sweep, quick_sweep
+    from .timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, Band, RowGeometry, RowPattern, Sweep, make_sweep, paper_sweep, quick_sweep
     from .transport import SparseEntries, Transport

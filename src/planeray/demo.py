@@ -1,4 +1,5 @@
-"""The newcomer's first run (``make demo``): simulate, store, look.
+"""The newcomer's first run (``make demo``): simulate, store, look -- through the top-level API
+(``import planeray as pr``), as a notebook would.
 
 1. The disco-ball scene swept over the paper's 85 delay-exposure pairs on the
    simulated Episcan, stored as a Zarr stack, drawn as the Fig. 8 contact sheet.
@@ -15,39 +16,32 @@ import argparse
 import time
 from pathlib import Path
 
+import planeray as pr
+
 from ._console import progress_bar
-from .acquire import acquire_sweep
-from .demux import demultiplex_to_store
-from .devices import SimulatedEpiscan
-from .figures import (
-    contact_sheet_figure,
-    delay_profiles_figure,
-    transport_profiles_figure,
-)
-from .io import read_transport, read_transport_maps, write_stack, write_transport
-from .profiles import measured_delay_profiles, write_profiles_csv
-from .scenes import make_scene, representative_pixels
-from .timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
+from .figures import contact_sheet_figure, delay_profiles_figure, transport_profiles_figure
+from .io import read_transport_maps
+from .profiles import write_profiles_csv
+from .scenes import representative_pixels
+from .timing import sweep_support_rows
 
 __all__ = ["run_demo"]
 
-#: The paper's projector (Celluon PicoPro) has 720 rows.
-DEMO_PROJECTOR_ROWS = 720
-
 
 def _simulate(name, out_dir, size, seed, console, progress):
-    sweep = paper_sweep()
+    sweep = pr.paper_sweep()
     t0 = time.perf_counter()
-    scene = make_scene(name, (size, size), DEMO_PROJECTOR_ROWS, seed)
-    device = SimulatedEpiscan(scene, lines_per_second=PAPER_LINES_PER_SECOND, seed=seed)
+    scene = pr.make_scene(name, (size, size), projector_rows=pr.PAPER_PROJECTOR_ROWS, seed=seed)
     stack_path = out_dir / f"{name}.zarr"
     with progress() as bar:
         task = bar.add_task(f"{name}: capturing {len(sweep)} images", total=len(sweep))
-        stack = acquire_sweep(device, sweep, progress=lambda i: bar.advance(task))
+        stack = pr.simulate_stack(scene, sweep, lines_per_second=pr.PAPER_LINES_PER_SECOND, seed=seed,
+                               progress=lambda i: bar.advance(task))
         task = bar.add_task(f"{name}: writing stack", total=len(sweep))
-        write_stack(stack, stack_path, overwrite=True, progress=lambda i: bar.advance(task))
+        pr.write_stack(stack, stack_path, overwrite=True, progress=lambda i: bar.advance(task))
     truth_path = out_dir / f"{name}_truth.zarr"
-    write_transport(scene.transport, truth_path, {"lines_per_second": PAPER_LINES_PER_SECOND, "method": "ground_truth", "scene": scene.params}, overwrite=True)
+    attrs = {"lines_per_second": pr.PAPER_LINES_PER_SECOND, "method": "ground_truth", "scene": scene.params}
+    pr.write_transport(scene.transport, truth_path, attrs=attrs, overwrite=True)
     console.print(f"  {name}: {len(stack)} images {size}x{size} in {time.perf_counter() - t0:.1f} s -> {stack_path}")
     return scene, stack
 
@@ -63,16 +57,16 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     console.print("[bold]planeray demo[/]: the paper's sweep (17 delays x 5 exposures) on the simulated Episcan")
     written = {}
 
-    disco, disco_stack = _simulate("disco_ball", out_dir, size, seed, console, progress)
+    disco, disco_stack = _simulate("disco_ball", out_dir, size=size, seed=seed, console=console, progress=progress)
     written["stack_disco_ball"] = out_dir / "disco_ball.zarr"
     written["fig8_contact_sheet"] = out_dir / "fig8_contact_sheet.png"
     contact_sheet_figure(disco_stack, out=written["fig8_contact_sheet"])
 
-    mirror, mirror_stack = _simulate("mirror_ball", out_dir, size, seed, console, progress)
+    mirror, mirror_stack = _simulate("mirror_ball", out_dir, size=size, seed=seed, console=console, progress=progress)
     written["stack_mirror_ball"] = out_dir / "mirror_ball.zarr"
-    support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
-    pixels, names = representative_pixels(mirror, support, per_label=1)
-    prof = measured_delay_profiles(mirror_stack, pixels)
+    support = sweep_support_rows(pr.paper_sweep(), lines_per_second=pr.PAPER_LINES_PER_SECOND)
+    pixels, names = representative_pixels(mirror, support_rows=support, per_label=1)
+    prof = pr.measured_delay_profiles(mirror_stack, pixels)
     written["fig9_delay_profiles"] = out_dir / "fig9_delay_profiles.png"
     delay_profiles_figure(mirror_stack, prof, out=written["fig9_delay_profiles"], names=names)
     write_profiles_csv(prof, out_dir / "fig9_delay_profiles.csv")
@@ -83,8 +77,8 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     transport_path = out_dir / "mirror_ball_transport.zarr"
     with progress() as bar:
         task = bar.add_task("mirror_ball: demultiplexing", total=mirror_stack.shape[0])
-        demultiplex_to_store(mirror_stack, transport_path, overwrite=True, progress=lambda n: bar.advance(task, n))
-    estimate, attrs = read_transport(transport_path)
+        pr.demultiplex_to_store(mirror_stack, transport_path, overwrite=True, progress=lambda n: bar.advance(task, n))
+    estimate, attrs = pr.read_transport(transport_path)
     maps = read_transport_maps(transport_path)
     console.print(
         f"  mirror_ball: demultiplexed {size}x{size} pixels in {time.perf_counter() - t0:.1f} s "
@@ -111,7 +105,7 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
-    run_demo(args.out, args.size, args.seed)
+    run_demo(args.out, size=args.size, seed=args.seed)
 
 
 if __name__ == "__main__":

@@ -28,11 +28,11 @@ from ..synthesis import (
     sharpened_epipolar,
     single_line_pattern,
 )
-from ..timing import PAPER_LINES_PER_SECOND, paper_sweep, sweep_support_rows
+from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, paper_sweep, sweep_support_rows
 
 __all__ = ["FIGURES", "fig8", "fig9", "fig11", "fig12"]
 
-PROJECTOR_ROWS = 720  # the paper's PicoPro
+PROJECTOR_ROWS = PAPER_PROJECTOR_ROWS  # the paper's PicoPro
 
 
 def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:

@@ -34,7 +34,7 @@ def mc_profile_figure(prof, *, out=None, compare_dipole: bool = True):
     --------
     >>> import planeray as pr
     >>> from planeray.figures.mc import mc_profile_figure
-    >>> prof = pr.mc_line_profile(1.0, 0.1, 0.5, n_photons=2000)
+    >>> prof = pr.mc_line_profile(pr.Medium(sigma_s=1.0, sigma_a=0.1, g=0.5), n_photons=2000)
     >>> fig = mc_profile_figure(prof)
     >>> type(fig).__name__, len(fig.axes)
     ('Figure', 2)

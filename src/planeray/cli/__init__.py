@@ -1,0 +1,82 @@
+"""Command-line interface: a thin shell over the library (typer + rich).
+
+Every command that takes a stack accepts a native Zarr stack or a captured
+import folder (``manifest.csv`` + images + ``acquisition.json``).  Bad input
+prints one line naming the file and the problem and exits with status 1.
+
+One module per command group; this file names the commands (in ``planeray --help``
+order) and holds the entry point:
+
+* ``simulate.py``   scenes, simulate (built-in scenes on the simulated Episcan)
+* ``stacks.py``     info, export, import (describe a stack; the import folder format)
+* ``acquire.py``    acquire (a sweep from a device into a resumable native stack)
+* ``demux.py``      demux (stack -> 3D light transport, Sec. 4)
+* ``analysis.py``   contact-sheet, profiles, synth, figure (look at stacks and transports)
+* ``baselines.py``  emulate, separate direct-global (conventional projector-camera)
+* ``calibrate.py``  calibrate lines | simulate-lines | delay-zero (Sec. 6)
+* ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
+* ``study.py``      study demux (the Sec. 5.2 study)
+* ``demo.py``       demo (``make demo``)
+* ``_common.py``    shared helpers: one-line errors, stack loading, ``--pixel`` parsing, image saving
+
+The consoles and the progress bar are in :mod:`planeray._console` (shared with the demo).
+"""
+
+from __future__ import annotations
+
+import typer
+
+from . import (
+    acquire,
+    analysis,
+    baselines,
+    calibrate,
+    demo,
+    demux,
+    mc,
+    simulate,
+    stacks,
+    study,
+)
+from ._common import _join_pixel_args
+
+__all__ = ["app", "main"]
+
+app = typer.Typer(
+    help="planeray: programmable plane-to-ray light transport (simulate, capture, analyse delay-exposure stacks).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+# Commands, in the order `planeray --help` lists them.
+app.command()(simulate.scenes)
+app.command()(simulate.simulate)
+app.command()(stacks.info)
+app.command("contact-sheet")(analysis.contact_sheet)
+app.command()(analysis.profiles)
+app.command()(acquire.acquire)
+app.command()(baselines.emulate)
+app.command()(demux.demux)
+app.command()(analysis.synth)
+app.command()(analysis.figure)
+app.command()(stacks.export)
+app.command("import")(stacks.import_)
+app.command()(demo.demo)
+# Command groups (sub-apps).
+app.add_typer(baselines.separate_app, name="separate")
+app.add_typer(calibrate.calibrate_app, name="calibrate")
+app.add_typer(mc.mc_app, name="mc")
+app.add_typer(study.study_app, name="study")
+
+
+def main(argv: list[str] | None = None):
+    """Console entry point (``planeray``)."""
+    import sys
+
+    args = _join_pixel_args(list(sys.argv[1:] if argv is None else argv))
+    app(args=args, prog_name="planeray")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

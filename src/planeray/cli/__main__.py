@@ -1,0 +1,5 @@
+"""``python -m planeray.cli``: the same as the ``planeray`` command."""
+
+from . import main
+
+main()

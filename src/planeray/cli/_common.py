@@ -1,0 +1,81 @@
+"""What every command group shares: one-line errors, stack loading, ``--pixel`` parsing, image saving.
+
+The consoles (``console`` for messages on stderr, ``out`` for results on stdout) and
+the progress bar live in :mod:`planeray._console`, shared with the demo.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from .._console import console
+from ..errors import PlanerayError
+
+#: The positional argument of every command that reads a stack.
+StackArg = Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")]
+
+
+def _friendly_errors(fn):
+    """Turn planeray's own errors into one red line and exit status 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except (PlanerayError, ValueError, FileNotFoundError) as exc:
+            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            raise typer.Exit(1) from None
+
+    return wrapper
+
+
+def _load_stack(path: Path):
+    """A native Zarr stack or a captured import folder, read lazily."""
+    from ..io import read_stack
+
+    return read_stack(path)
+
+
+def _parse_pixel(text: str) -> tuple[int, int]:
+    """``"ROW,COL"`` or ``"ROW COL"`` -> ``(row, col)``."""
+    parts = text.replace(",", " ").split()
+    if len(parts) != 2 or not all(p.lstrip("-").isdigit() for p in parts):
+        raise ValueError(f"--pixel expects ROW COL (two integers), got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+def _join_pixel_args(argv: list[str]) -> list[str]:
+    """Let ``--pixel ROW COL`` (two words) through typer, which takes one value per option."""
+    joined, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--pixel" and i + 2 < len(argv) and argv[i + 1].lstrip("-").isdigit() and argv[i + 2].lstrip("-").isdigit():
+            joined += ["--pixel", f"{argv[i + 1]},{argv[i + 2]}"]
+            i += 3
+        else:
+            joined.append(argv[i])
+            i += 1
+    return joined
+
+
+def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
+    """PNG: display-scaled 8-bit preview; TIFF: the values as 16-bit codes (0..1 -> 0..65535)."""
+    from ..io import write_image
+
+    if path.suffix.lower() == ".png":
+        from PIL import Image
+
+        from ..figures._common import display_scale
+        from ..io import atomic_file
+
+        shown = np.clip(image * (scale_to or display_scale([image], percentile=99.5)), 0, 1)
+        with atomic_file(path) as tmp:
+            Image.fromarray((shown * 255 + 0.5).astype(np.uint8)).save(tmp, format="PNG")
+        return path
+    if path.suffix.lower() in (".tif", ".tiff"):
+        return write_image(path, image, bit_depth=16)
+    raise ValueError(f"--out must end in .png, .tif or .tiff, got {path.name}")

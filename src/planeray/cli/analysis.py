@@ -1,0 +1,152 @@
+"""Looking at stacks and transports: ``contact-sheet``, ``profiles`` (and effect labels), ``synth``, ``figure``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Optional
+
+import numpy as np
+import typer
+
+from .._console import console, out
+from ..timing import PAPER_LINES_PER_SECOND
+from ._common import StackArg, _friendly_errors, _load_stack, _parse_pixel, _save_image
+
+
+@_friendly_errors
+def contact_sheet(
+    stack_path: StackArg,
+    out_png: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")],
+    gamma: Annotated[float, typer.Option(help="Display gamma.")] = 0.5,
+    max_delays: Annotated[Optional[int], typer.Option(help="Show at most this many delays.")] = None,
+):
+    """Write the delay x exposure grid of a stack (the paper's Fig. 8)."""
+    from ..figures import contact_sheet_figure
+
+    st = _load_stack(stack_path)
+    with console.status("drawing contact sheet"):
+        contact_sheet_figure(st, out=out_png, gamma=gamma, max_delays=max_delays)
+    out.print(f"contact sheet: {out_png}")
+
+
+@_friendly_errors
+def profiles(
+    stack_path: StackArg,
+    out_png: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")],
+    pixel: Annotated[Optional[list[str]], typer.Option(help="Pixel as ROW COL or ROW,COL (repeat for more pixels).")] = None,
+    exposure_us: Annotated[Optional[float], typer.Option("--exposure-us", "--exposure", help="Plot only this exposure (us).")] = None,
+    csv: Annotated[Optional[Path], typer.Option(help="Also write the profiles as CSV.")] = None,
+    transport: Annotated[Optional[Path], typer.Option(help="Transport store: also draw its continuous delay profiles.")] = None,
+    classify: Annotated[Optional[Path], typer.Option(help="With --transport: write the per-pixel effect label map PNG.")] = None,
+):
+    """Plot area-normalized delay profiles of pixels (the paper's Fig. 9); classify effects from a transport."""
+    from ..classify import classify_transport
+    from ..figures import delay_profiles_figure, label_map_figure
+    from ..profiles import (
+        measured_delay_profiles,
+        transport_delay_profiles,
+        write_profiles_csv,
+    )
+
+    if classify is not None and transport is None:
+        raise ValueError("--classify needs --transport (the labels come from the transport's profiles)")
+    if not pixel and classify is None:
+        raise ValueError("give at least one --pixel ROW COL (or --classify with --transport)")
+    st = _load_stack(stack_path)
+    T = attrs = None
+    if transport is not None:
+        from ..io import read_transport
+
+        T, attrs = read_transport(transport)
+        if T.shape != st.shape:
+            raise ValueError(f"{transport}: transport is {T.shape[0]}x{T.shape[1]}, stack {st.shape[0]}x{st.shape[1]}")
+    if pixel:
+        prof = measured_delay_profiles(st, [_parse_pixel(p) for p in pixel])
+        continuous = None
+        if T is not None:
+            e = exposure_us if exposure_us is not None else float(prof.exposure_us.min())
+            continuous = transport_delay_profiles(T, pixels=prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second)
+        delay_profiles_figure(st, prof, out=out_png, exposure_us=exposure_us, continuous=continuous)
+        if csv is not None:
+            write_profiles_csv(prof, csv)
+            out.print(f"profiles CSV: {csv}")
+        out.print(f"delay profiles: {out_png}")
+    if classify is not None:
+        from ..scenes import EFFECTS
+
+        labels = classify_transport(T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0))
+        ref = st.image(st.index_of(delay_us=0.0, exposure_us=float(st.exposures().min())) or 0)
+        label_map_figure(labels, out=classify, reference=ref)
+        counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
+        summary = ", ".join(f"{EFFECTS[k]} {counts[k] / labels.size * 100:.1f} %" for k in EFFECTS if counts[k])
+        out.print(f"label map: {classify}  ({summary})")
+
+
+@_friendly_errors
+def synth(
+    transport_path: Annotated[Path, typer.Argument(help="Transport store (Zarr).")],
+    out_path: Annotated[Path, typer.Option("--out", "-o", help="Image to write (.png preview, .tif 16-bit values).")],
+    epipolar: Annotated[bool, typer.Option("--epipolar", help="Epipolar image (Eq. 5).")] = False,
+    non_epipolar: Annotated[bool, typer.Option("--non-epipolar", help="Non-epipolar image (Eq. 6).")] = False,
+    sharpen: Annotated[Optional[float], typer.Option(help="Sharpened epipolar image with a band of ROWS projector rows.")] = None,
+    relight: Annotated[Optional[str], typer.Option(help="Relight: a projector row number, or a pattern file (.npy/.csv/image).")] = None,
+    band: Annotated[Optional[tuple[float, float]], typer.Option(help="Banded image for DELAY_US EXPOSURE_US (any pair, us).")] = None,
+    short_range: Annotated[Optional[float], typer.Option(help="Short-range indirect light up to MAX_ROWS offsets (projector rows).")] = None,
+    long_range: Annotated[Optional[float], typer.Option(help="Long-range indirect light beyond MAX_ROWS offsets (projector rows).")] = None,
+):
+    """Synthesize an image from a transport: epipolar, non-epipolar, sharpened, relit, banded, short/long range."""
+    from .. import synthesis as syn
+    from ..io import read_transport
+
+    chosen = [x for x in (epipolar, non_epipolar, sharpen is not None, relight is not None, band is not None,
+                          short_range is not None, long_range is not None) if x]
+    if len(chosen) != 1:
+        raise ValueError("choose exactly one of --epipolar, --non-epipolar, --sharpen, --relight, --band, --short-range, --long-range")
+    T, attrs = read_transport(transport_path)
+    lps = attrs.get("lines_per_second") or PAPER_LINES_PER_SECOND
+    if epipolar:
+        image, what = syn.epipolar_image(T), "epipolar image"
+    elif non_epipolar:
+        image, what = syn.non_epipolar_image(T), "non-epipolar image"
+    elif sharpen is not None:
+        image, what = syn.sharpened_epipolar(T, width_rows=sharpen), f"sharpened epipolar image ({sharpen:g} rows)"
+        res = attrs.get("epipolar_resolution_rows")
+        if res and sharpen < 2 * res:
+            console.print(f"[yellow]note:[/] the sweep cannot split light within +-{res:.2f} rows of the epipolar plane; "
+                          f"a {sharpen:g}-row band shows the regularizer's spread there")
+    elif relight is not None:
+        P = T.geometry.projector_rows
+        if relight.lstrip("-").isdigit():
+            pattern = syn.single_line_pattern(P, row=int(relight))
+        else:
+            pattern = syn.load_pattern(relight, projector_rows=P)
+        image, what = syn.relight(T, pattern), "relit image"
+    elif band is not None:
+        image = syn.band_image(T, delay_us=band[0], exposure_us=band[1], lines_per_second=lps)
+        what = f"band image (t_d {band[0]:g} us, t_e {band[1]:g} us)"
+    else:
+        short, long = syn.short_long_range(T, max_rows=short_range if short_range is not None else long_range)
+        image, what = (short, "short-range indirect image") if short_range is not None else (long, "long-range indirect image")
+    path = _save_image(image, out_path)
+    out.print(f"{what}: {path}  (min {image.min():.3g}, max {image.max():.3g})")
+
+
+@_friendly_errors
+def figure(
+    name: Annotated[str, typer.Argument(help="fig8 | fig9 | fig11 | fig12 | effects | all")],
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the PNGs and their numbers (JSON).")] = Path("out/figures"),
+    size: Annotated[int, typer.Option(help="Image size (square, camera pixels).")] = 128,
+    seed: Annotated[int, typer.Option(help="Seed.")] = 0,
+):
+    """Reproduce a paper figure on the built-in scenes (writes PNG + JSON of the measured numbers)."""
+    from ..experiments.paper import FIGURES
+
+    names = list(FIGURES) if name == "all" else [name]
+    for n in names:
+        if n not in FIGURES:
+            raise ValueError(f"unknown figure {n!r}; choose one of {sorted(FIGURES)} or all")
+        with console.status(f"reproducing {n}"):
+            numbers = FIGURES[n](out_dir, size=size, seed=seed)
+        shown = numbers.get("images", numbers)
+        out.print(f"{n}: {out_dir / (n + '.json')}  {json.dumps(shown, default=float)[:400]}")

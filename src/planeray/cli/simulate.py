@@ -1,0 +1,76 @@
+"""``planeray scenes`` and ``planeray simulate``: the built-in scenes swept on the simulated Episcan."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.table import Table
+
+from .._console import console, out, progress_bar
+from ..timing import PAPER_LINES_PER_SECOND
+from ._common import _friendly_errors
+
+
+@_friendly_errors
+def scenes():
+    """List the built-in scenes of the simulated device."""
+    from ..scenes import list_scenes
+
+    table = Table("scene", "what it shows")
+    for name, description in list_scenes().items():
+        table.add_row(name, description)
+    out.print(table)
+
+
+@_friendly_errors
+def simulate(
+    scene: Annotated[str, typer.Argument(help="Built-in scene (see `planeray scenes`).")],
+    out_path: Annotated[Path, typer.Option("--out", "-o", help="Stack to write (Zarr directory).")],
+    size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
+    projector_rows: Annotated[Optional[int], typer.Option(help="Projector rows spanned by the image (default: H).")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the scene textures and the camera noise.")] = 0,
+    sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep: paper (85 images) or quick.")] = "paper",
+    lines_per_second: Annotated[float, typer.Option(help="Projector scanline velocity v_p (lines/s).")] = PAPER_LINES_PER_SECOND,
+    frames: Annotated[int, typer.Option(help="Frames averaged per image.")] = 8,
+    bit_depth: Annotated[int, typer.Option(help="ADC bits.")] = 12,
+    black_level: Annotated[int, typer.Option(help="ADC black level (codes).")] = 64,
+    full_well_e: Annotated[float, typer.Option("--full-well-e", "--full-well", help="Full-well capacity (electrons).")] = 10_000.0,
+    read_noise_e: Annotated[float, typer.Option("--read-noise-e", "--read-noise", help="Read noise (electrons RMS).")] = 7.0,
+    laser_electrons: Annotated[float, typer.Option(help="Electrons from a white surface under its own row.")] = 6_000.0,
+    ambient_e_per_us: Annotated[float, typer.Option("--ambient-e-per-us", "--ambient",
+                                                    help="Ambient light, electrons per microsecond of exposure (albedo 1).")] = 0.5,
+    jitter_us: Annotated[float, typer.Option(help="Laser-shutter timing jitter sigma (us; blurs band edges).")] = 5.0,
+    row_jitter_us: Annotated[float, typer.Option(help="Per-row trigger jitter sigma (us; row artifacts at the boundary).")] = 10.0,
+    noise: Annotated[bool, typer.Option(help="Simulate noise (--no-noise: expected images).")] = True,
+    truth: Annotated[Optional[Path], typer.Option(help="Also write the scene's ground-truth transport store here.")] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
+):
+    """Simulate a delay-exposure sweep of a built-in scene on the simulated Episcan."""
+    from ..acquire import acquire_sweep
+    from ..camera import CameraModel
+    from ..devices import SimulatedEpiscan
+    from ..io import write_stack, write_transport
+    from ..scenes import make_scene
+    from ..timing import make_sweep
+
+    camera = CameraModel(
+        bit_depth=bit_depth, black_level=black_level, full_well_e=full_well_e, read_noise_e=read_noise_e,
+        laser_electrons=laser_electrons, ambient_e_per_us=ambient_e_per_us, frames_averaged=frames,
+        jitter_us=jitter_us, row_jitter_us=row_jitter_us,
+    )
+    sw = make_sweep(sweep)
+    with console.status(f"building scene {scene} {size[0]}x{size[1]}"):
+        sc = make_scene(scene, size, projector_rows=projector_rows, seed=seed)
+    device = SimulatedEpiscan(sc, camera=camera, lines_per_second=lines_per_second, seed=seed, noise=noise)
+    with progress_bar() as bar:
+        task = bar.add_task(f"capturing {len(sw)} images", total=len(sw))
+        stack = acquire_sweep(device, sw, progress=lambda i: bar.advance(task))
+        task = bar.add_task("writing stack", total=len(sw))
+        write_stack(stack, out_path, overwrite=overwrite, progress=lambda i: bar.advance(task))
+    if truth is not None:
+        attrs = {"lines_per_second": lines_per_second, "method": "ground_truth", "scene": sc.params}
+        write_transport(sc.transport, truth, attrs=attrs, overwrite=overwrite)
+        out.print(f"ground-truth transport: {truth}")
+    out.print(f"stack: {out_path}  ({len(stack)} images, {size[0]}x{size[1]}, {int((~stack.excluded).sum())} used for demultiplexing)")

@@ -1,0 +1,30 @@
+"""``planeray study demux``: the Sec. 5.2 study of the demultiplexing method (Figs. 5, 6)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .._console import console, out
+from ._common import _friendly_errors
+
+study_app = typer.Typer(help="Studies of the method (Sec. 5.2).", no_args_is_help=True)
+
+
+@study_app.command("demux")
+@_friendly_errors
+def study_demux(
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the figures (PNG) and numbers (CSV).")],
+    provider: Annotated[str, typer.Option(help="Scattering profiles: mc (Monte Carlo, cached) or dipole.")] = "mc",
+    seeds: Annotated[int, typer.Option(help="Noise seeds per point.")] = 5,
+    quick: Annotated[bool, typer.Option(help="Reduced grids.")] = False,
+):
+    """Reconstruction quality of pinv, NNLS and the full method (Figs. 5, 6) and an alpha/beta sweep."""
+    from ..experiments.study import run_study
+
+    with console.status("running the demultiplexing study"):
+        numbers = run_study(out_dir, provider=provider, seeds=seeds, quick=quick)
+    for f in numbers.get("files", []):
+        out.print(f"  {f}")
