@@ -48,7 +48,9 @@ def compare_with_cvxpy(stack, n_pixels, rng):
     n_rows = max(1, int(round(n_pixels / W)))
     # the same mix of interior and edge rows as the image
     n_edge = int(round(n_rows * edge.size / H))
-    rows = np.concatenate([rng.choice(interior, n_rows - n_edge, replace=False), rng.choice(edge, n_edge, replace=False)])
+    rows = np.concatenate(
+        [rng.choice(interior, n_rows - n_edge, replace=False), rng.choice(edge, n_edge, replace=False)]
+    )
     t_cvx = t_fast = 0.0
     gaps = []
     for r in rows:
@@ -81,16 +83,20 @@ def main():
     scene = make_scene(args.scene, (args.size, args.size), projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed)
     stack = simulate_stack(scene, paper_sweep(), seed=args.seed)
     problem = DemuxProblem.from_stack(stack)
-    print(f"scene {args.scene} {args.size}x{args.size} ({PAPER_PROJECTOR_ROWS} projector rows), N = {problem.n_images} images, "
-          f"U = {problem.n_offsets} offsets, {len(problem.groups)} distinct row matrices")
+    print(
+        f"scene {args.scene} {args.size}x{args.size} ({PAPER_PROJECTOR_ROWS} projector rows), N = {problem.n_images} images, "
+        f"U = {problem.n_offsets} offsets, {len(problem.groups)} distinct row matrices"
+    )
 
     n, t_cvx, t_fast, gaps = compare_with_cvxpy(stack, args.pixels, rng)
     print(f"\n[same {n} pixels: {n // args.size} whole camera rows]")
     print(f"  CVXPY + Clarabel (compiled once per row) : {t_cvx / n * 1e3:8.3f} ms/pixel")
     print(f"  planeray fast                            : {t_fast / n * 1e3:8.3f} ms/pixel")
     print(f"  speed-up                                 : {t_cvx / t_fast:8.1f}x")
-    print(f"  relative objective gap to CVXPY          : median {np.median(gaps):.2e}, worst {gaps.max():.2e}"
-          f"  (negative: planeray lower)")
+    print(
+        f"  relative objective gap to CVXPY          : median {np.median(gaps):.2e}, worst {gaps.max():.2e}"
+        f"  (negative: planeray lower)"
+    )
 
     demultiplex(stack)  # warm-up (imports, caches)
     times = []
@@ -104,8 +110,10 @@ def main():
     print(f"  time                 : {best:.2f} s   (runs: {', '.join(f'{t:.2f}' for t in times)})")
     print(f"  CVXPY extrapolated   : {cvx_full:.0f} s  -> ratio {cvx_full / best:.0f}x")
     print(f"  paper (9 min @128^2) : ratio {PAPER_SECONDS_128 * (args.size / 128) ** 2 / best:.0f}x")
-    print(f"  converged            : {res.maps['converged'].mean() * 100:.2f} %, iterations mean "
-          f"{res.maps['iterations'].mean():.0f}, max {res.maps['iterations'].max()}")
+    print(
+        f"  converged            : {res.maps['converged'].mean() * 100:.2f} %, iterations mean "
+        f"{res.maps['iterations'].mean():.0f}, max {res.maps['iterations'].max()}"
+    )
 
     if args.large:
         big = make_scene(args.scene, (args.large, args.large), projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed)
@@ -117,12 +125,20 @@ def main():
             path = write_stack(big_stack, Path(tmp) / "big.zarr")
             del big_stack
             # a fresh process, so its peak memory is the demultiplexing's alone
-            run = subprocess.run([sys.executable, __file__, "--demux-store", str(path), str(Path(tmp) / "T.zarr")],
-                                 capture_output=True, text=True, check=True)
+            run = subprocess.run(
+                [sys.executable, __file__, "--demux-store", str(path), str(Path(tmp) / "T.zarr")],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             dt, peak = (float(x) for x in run.stdout.split())
-        print(f"\n[{args.large}x{args.large} stack read lazily from a Zarr store, chunks of 16 rows, written to a transport store]")
-        print(f"  time: {dt:.1f} s   peak resident memory of that process: {peak:.0f} MiB "
-              f"(stack {85 * args.large**2 * 4 / 2**20:.0f} MiB, transport {args.large**2 * 229 * 4 / 2**20:.0f} MiB on disk)")
+        print(
+            f"\n[{args.large}x{args.large} stack read lazily from a Zarr store, chunks of 16 rows, written to a transport store]"
+        )
+        print(
+            f"  time: {dt:.1f} s   peak resident memory of that process: {peak:.0f} MiB "
+            f"(stack {85 * args.large**2 * 4 / 2**20:.0f} MiB, transport {args.large**2 * 229 * 4 / 2**20:.0f} MiB on disk)"
+        )
 
 
 def _demux_store(stack_path, out_path):

@@ -32,11 +32,17 @@ def rates(n_photons):
     study = Medium(sigma_s=1.0, sigma_a=0.0, g=0.9)
     media = [
         ("study default: 1 / 0 / g 0.9, n 1, +-114 mm", study, dict(offsets_rows=np.arange(-114, 115))),
-        ("  same, full tracing (no diffusion hand-off)", study, dict(offsets_rows=np.arange(-114, 115),
-                                                                     diffusion_depth_mfp=None)),
+        (
+            "  same, full tracing (no diffusion hand-off)",
+            study,
+            dict(offsets_rows=np.arange(-114, 115), diffusion_depth_mfp=None),
+        ),
         ("absorbing: 1 / 0.1 / g 0.9, n 1", Medium(sigma_s=1.0, sigma_a=0.1, g=0.9), {}),
-        ("wax: 1.5 / 0.003 / g 0.8, n 1.4, 0.3 mm", Medium(sigma_s=1.5, sigma_a=0.003, g=0.8, n=1.4),
-         dict(offsets_rows=np.arange(-192, 193), mm_per_row=0.3)),
+        (
+            "wax: 1.5 / 0.003 / g 0.8, n 1.4, 0.3 mm",
+            Medium(sigma_s=1.5, sigma_a=0.003, g=0.8, n=1.4),
+            dict(offsets_rows=np.arange(-192, 193), mm_per_row=0.3),
+        ),
     ]
     mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.1, g=0.5), n_photons=1000)  # compile (or load the compiled cache)
     times = []
@@ -46,8 +52,10 @@ def rates(n_photons):
         dt = time.perf_counter() - t0
         times.append(dt)
         per = p.n_interactions / p.n_photons
-        print(f"{name:44s} {dt:7.2f} {p.n_photons / dt:10.3g} {per:11.0f} "
-              f"{dt * numba.get_num_threads() / p.n_interactions * 1e9:14.1f}")
+        print(
+            f"{name:44s} {dt:7.2f} {p.n_photons / dt:10.3g} {per:11.0f} "
+            f"{dt * numba.get_num_threads() / p.n_interactions * 1e9:14.1f}"
+        )
     print(f"hybrid hand-off vs full tracing on the study default: {times[1] / times[0]:.1f}x faster")
 
 
@@ -76,7 +84,7 @@ def plot_versus(off, dx, mi, mc, path):
         ax2.axhline(v, color="k", lw=0.5, ls="--")
     ax2.set_xlabel("x (mm)")
     ax2.set_ylabel("z = (planeray - Mitsuba) / error")
-    ax2.set_title(f"max |z| {np.abs(z).max():.2f}, mean z^2 {np.mean(z ** 2):.2f}", fontsize=10)
+    ax2.set_title(f"max |z| {np.abs(z).max():.2f}, mean z^2 {np.mean(z**2):.2f}", fontsize=10)
     fig.tight_layout()
     return save_png(fig, path)
 
@@ -97,14 +105,15 @@ def versus_mitsuba(n_photons, spp, plot=None):
     mi = mitsuba_line_profile(medium, off, mm_per_row=dx, spp=spp, along_pixels=1024)
     t_mi = time.perf_counter() - t0
     t0 = time.perf_counter()
-    mc = mc_line_profile(medium, n_photons=n_photons, offsets_rows=off, mm_per_row=dx,
-                         source_width_mm=dx)
+    mc = mc_line_profile(medium, n_photons=n_photons, offsets_rows=off, mm_per_row=dx, source_width_mm=dx)
     t_mc = time.perf_counter() - t0
     e_mi, r_mi = efficiency(t_mi, mi.radiance, mi.stderr, mask)
     e_mc, r_mc = efficiency(t_mc, mc.radiance, mc.radiance_stderr, mask)
     z = (mc.radiance - mi.radiance) / np.hypot(mc.radiance_stderr, mi.stderr)
-    print(f"\nsame profile (sigma_s {sigma_s}, sigma_a {sigma_a}, g {g}, {off.size} bins of {dx} mm, "
-          f"bins within 5 mfp: {mask.sum()})")
+    print(
+        f"\nsame profile (sigma_s {sigma_s}, sigma_a {sigma_a}, g {g}, {off.size} bins of {dx} mm, "
+        f"bins within 5 mfp: {mask.sum()})"
+    )
     print(f"  Mitsuba volpath : {t_mi:6.2f} s, {spp} spp x 1024 rows, rms rel. error {r_mi:.4f}")
     print(f"  planeray MC     : {t_mc:6.2f} s, {n_photons:.0e} photons, rms rel. error {r_mc:.4f}")
     print(f"  agreement: max |z| {np.abs(z).max():.2f}, integrated ratio {mc.radiance.sum() / mi.radiance.sum():.4f}")

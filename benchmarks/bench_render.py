@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
+from planeray.acquire import acquire_sweep
 from planeray.camera import CameraModel
 from planeray.devices import SimulatedEpiscan
-from planeray.acquire import acquire_sweep
 from planeray.scenes import make_scene
 from planeray.timing import PAPER_LINES_PER_SECOND, paper_sweep
 
@@ -35,8 +35,10 @@ def main():
     T = scene.transport
     build_s = time.perf_counter() - t0
     bands = paper_sweep().bands(PAPER_LINES_PER_SECOND, jitter_us=5.0)
-    print(f"scene {args.scene} {args.size}x{args.size}, {T.offsets_rows.size} offsets, "
-          f"{len(T.sparse)} sparse entries, T = {T.dense.nbytes / 2**20:.0f} MiB (built in {build_s:.1f} s)")
+    print(
+        f"scene {args.scene} {args.size}x{args.size}, {T.offsets_rows.size} offsets, "
+        f"{len(T.sparse)} sparse entries, T = {T.dense.nbytes / 2**20:.0f} MiB (built in {build_s:.1f} s)"
+    )
 
     T.render(bands[0])  # build the prefix-sum cache once (reported separately)
     t0 = time.perf_counter()
@@ -45,7 +47,7 @@ def main():
     cache_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    fast = [T.render(b) for b in bands]
+    _ = [T.render(b) for b in bands]
     fast_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -68,7 +70,9 @@ def main():
     t0 = time.perf_counter()
     acquire_sweep(device, paper_sweep())
     cap_s = time.perf_counter() - t0
-    print(f"full simulated capture (render + 8-frame Poisson/read noise + ADC): {n} images in {cap_s:.2f} s = {n / cap_s:.1f} images/s")
+    print(
+        f"full simulated capture (render + 8-frame Poisson/read noise + ADC): {n} images in {cap_s:.2f} s = {n / cap_s:.1f} images/s"
+    )
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak resident memory: {peak:.0f} MiB")
 

@@ -14,7 +14,7 @@ from planeray.scenes import make_scene
 from planeray.timing import paper_sweep, quick_sweep
 
 
-@pytest.fixture()
+@pytest.fixture
 def device():
     return SimulatedEpiscan(make_scene("corner", (24, 20), projector_rows=90, seed=1), seed=3)
 
@@ -70,11 +70,38 @@ def test_ueye_driver_imports_and_fails_clearly_without_hardware():
 
 def test_acquire_cli(tmp_path):
     runner = CliRunner()
-    res = runner.invoke(app, ["acquire", "--device", "sim", "--scene", "diffuse_plane", "--size", "16", "16",
-                              "--sweep", "quick", "--out", str(tmp_path / "a.zarr")])
+    res = runner.invoke(
+        app,
+        [
+            "acquire",
+            "--device",
+            "sim",
+            "--scene",
+            "diffuse_plane",
+            "--size",
+            "16",
+            "16",
+            "--sweep",
+            "quick",
+            "--out",
+            str(tmp_path / "a.zarr"),
+        ],
+    )
     assert res.exit_code == 0, res.output
-    res = runner.invoke(app, ["acquire", "--device", "replay", "--replay", str(tmp_path / "a.zarr"), "--sweep", "quick",
-                              "--out", str(tmp_path / "b.zarr")])
+    res = runner.invoke(
+        app,
+        [
+            "acquire",
+            "--device",
+            "replay",
+            "--replay",
+            str(tmp_path / "a.zarr"),
+            "--sweep",
+            "quick",
+            "--out",
+            str(tmp_path / "b.zarr"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     np.testing.assert_array_equal(read_stack(tmp_path / "b.zarr").images[:], read_stack(tmp_path / "a.zarr").images[:])
     res = runner.invoke(app, ["acquire", "--device", "ueye", "--out", str(tmp_path / "c.zarr")])

@@ -62,7 +62,12 @@ def _noise_sigma(signal, exposure_lit_us, exposure_dark_us, albedo, cam=DIM, pas
     camera model: Poisson shot noise of laser + ambient electrons, read noise, ADC rounding
     (1/12 ADU^2), each per frame, averaged over ``frames_averaged`` frames."""
     quant = (1.0 / 12.0) / cam.gain_adu_per_e**2
-    var = cam.laser_electrons * passes * signal + cam.ambient_e_per_us * exposure_lit_us * albedo + cam.read_noise_e**2 + quant
+    var = (
+        cam.laser_electrons * passes * signal
+        + cam.ambient_e_per_us * exposure_lit_us * albedo
+        + cam.read_noise_e**2
+        + quant
+    )
     if exposure_dark_us is not None:
         var = var + cam.ambient_e_per_us * exposure_dark_us * albedo + cam.read_noise_e**2 + quant
     return np.sqrt(var / cam.frames_averaged) / (cam.laser_electrons * passes)
@@ -82,7 +87,12 @@ def test_stripe_patterns_are_shifted_half_duty_stripes():
     low = stripe_patterns(40, period_rows=8, n_shifts=4, low=0.2)
     assert low.shape == (4, 40) and set(np.unique(low)) == {0.2, 1.0}
     np.testing.assert_array_equal(low[1], np.roll(low[0], 2))
-    for bad in (dict(period_rows=7), dict(period_rows=0), dict(period_rows=8, n_shifts=9), dict(period_rows=8, low=1.0)):
+    for bad in (
+        dict(period_rows=7),
+        dict(period_rows=0),
+        dict(period_rows=8, n_shifts=9),
+        dict(period_rows=8, low=1.0),
+    ):
         with pytest.raises(ValueError):
             stripe_patterns(40, **bad)
 
@@ -268,7 +278,7 @@ def test_dark_frame_removes_ambient_light_from_global():
 # Digital emulation of delay images (Sec. 5.1, Fig. 4)
 # ----------------------------------------------------------------------------
 @pytest.mark.parametrize("name", ["wax", "disco_ball"])
-@pytest.mark.parametrize("delay_us, exposure_us", [(0.0, 200.0), (375.0, 200.0), (-750.0, 600.0)])
+@pytest.mark.parametrize(("delay_us", "exposure_us"), [(0.0, 200.0), (375.0, 200.0), (-750.0, 600.0)])
 def test_emulation_noise_free_equals_the_delay_image(name, delay_us, exposure_us):
     for P in (48, 270):
         scene = _scene(name, P)
@@ -290,7 +300,7 @@ def test_emulation_noise_free_equals_the_delay_image(name, delay_us, exposure_us
             assert z.max() < 8.0
 
 
-@pytest.mark.parametrize("name, P", [("wax", 48), ("disco_ball", 48), ("mirror_ball", 270)])
+@pytest.mark.parametrize(("name", "P"), [("wax", 48), ("disco_ball", 48), ("mirror_ball", 270)])
 def test_emulation_matches_within_noise(name, P):
     """Emulated - truth, in units of the camera model's predicted noise, is N(0, 1)."""
     scene = _scene(name, P)
@@ -378,14 +388,41 @@ def test_separate_and_emulate_cli(tmp_path):
     from planeray.cli import app
 
     runner = CliRunner()
-    res = runner.invoke(app, ["separate", "direct-global", "diffuse_plane", "--out", str(tmp_path / "dg"),
-                              "--size", "32", "32", "--projector-rows", "96"])
+    res = runner.invoke(
+        app,
+        [
+            "separate",
+            "direct-global",
+            "diffuse_plane",
+            "--out",
+            str(tmp_path / "dg"),
+            "--size",
+            "32",
+            "32",
+            "--projector-rows",
+            "96",
+        ],
+    )
     assert res.exit_code == 0, res.output
     numbers = json.loads((tmp_path / "dg" / "direct_global.json").read_text())
     assert numbers["errors"]["nayar_direct"]["all"]["relative_rmse"] < 0.05
     assert (tmp_path / "dg" / "nayar_direct.png").exists() and (tmp_path / "dg" / "truth_global.tif").exists()
-    res = runner.invoke(app, ["emulate", "wax", "--out", str(tmp_path / "em"), "--size", "24", "24",
-                              "--projector-rows", "96", "--delay-us", "375"])
+    res = runner.invoke(
+        app,
+        [
+            "emulate",
+            "wax",
+            "--out",
+            str(tmp_path / "em"),
+            "--size",
+            "24",
+            "24",
+            "--projector-rows",
+            "96",
+            "--delay-us",
+            "375",
+        ],
+    )
     assert res.exit_code == 0, res.output
     numbers = json.loads((tmp_path / "em" / "emulation.json").read_text())
     assert numbers["n_captures"] == {"emulated": 25, "synchronized": 2}

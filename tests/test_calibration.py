@@ -118,8 +118,14 @@ def test_single_comb_image_and_no_references_still_calibrate(target):
     device = SimulatedEpiscan(target, lines_per_second=54_000.0, seed=7)
     sweep = device.capture_line_sweep(500.0, falloff=0.3)
     full = calibrate_lines_per_second(sweep)
-    one = calibrate_lines_per_second(sweep.images[0], exposure_us=500.0, rows_per_line=2, dark=sweep.dark, flat=sweep.flat_field(),
-                                     timing_jitter_us=sweep.timing_jitter_us)
+    one = calibrate_lines_per_second(
+        sweep.images[0],
+        exposure_us=500.0,
+        rows_per_line=2,
+        dark=sweep.dark,
+        flat=sweep.flat_field(),
+        timing_jitter_us=sweep.timing_jitter_us,
+    )
     assert one.method == "end positions"
     assert one.uncertainty > full.uncertainty  # a window end in a dark gap is only bounded
     assert abs(one.lines_per_second - 54_000.0) < 3 * one.uncertainty
@@ -170,12 +176,16 @@ def test_delay_zero_recovers_an_injected_sync_error(error_us):
     scene = make_scene("diffuse_plane", (64, 64), projector_rows=360, seed=0)
     device = SimulatedEpiscan(scene, seed=1)
     sweep = delay_zero_sweep(600.0, step_us=10.0)
-    cal = calibrate_delay_zero(device_capture(device, exposure_us=600.0, delay_error_us=error_us), sweep.delay_us, exposure_us=600.0)
+    cal = calibrate_delay_zero(
+        device_capture(device, exposure_us=600.0, delay_error_us=error_us), sweep.delay_us, exposure_us=600.0
+    )
     assert cal.delay_zero_us == pytest.approx(error_us, abs=2.0)
     assert abs(cal.delay_zero_us - error_us) < 3 * cal.uncertainty_us + 0.05
     assert 0 < cal.uncertainty_us < 2.0
     assert cal.width_us == pytest.approx(600.0, abs=10.0)  # FWHM of the plateau = exposure
-    assert cal.sync_offset_us == pytest.approx(float(sync_offset_from_delay(error_us, 600.0, lines_per_second=54_000.0)), abs=2.0)
+    assert cal.sync_offset_us == pytest.approx(
+        float(sync_offset_from_delay(error_us, 600.0, lines_per_second=54_000.0)), abs=2.0
+    )
     # the same from images already captured (e.g. a stack at one exposure)
     images = [device_capture(device, exposure_us=600.0, delay_error_us=error_us)(d) for d in sweep.delay_us]
     again = calibrate_delay_zero(np.array(images), sweep.delay_us, exposure_us=600.0)
@@ -199,9 +209,13 @@ def test_write_calibration_keeps_other_fields_and_feeds_the_import(tmp_path, tar
     from planeray.io import export_folder, import_folder
     from planeray.timing import quick_sweep
 
-    folder = export_folder(simulate_stack(make_scene("diffuse_plane", (16, 16), seed=0), quick_sweep()), tmp_path / "cap")
+    folder = export_folder(
+        simulate_stack(make_scene("diffuse_plane", (16, 16), seed=0), quick_sweep()), tmp_path / "cap"
+    )
     before = json.loads((folder / "acquisition.json").read_text())
-    lines = calibrate_lines_per_second(SimulatedEpiscan(target, lines_per_second=52_000.0, seed=2).capture_line_sweep(500.0))
+    lines = calibrate_lines_per_second(
+        SimulatedEpiscan(target, lines_per_second=52_000.0, seed=2).capture_line_sweep(500.0)
+    )
     written = write_calibration(folder, lines=lines)
     after = json.loads((folder / "acquisition.json").read_text())
     assert after == written
@@ -213,7 +227,10 @@ def test_write_calibration_keeps_other_fields_and_feeds_the_import(tmp_path, tar
     assert import_folder(folder).lines_per_second == pytest.approx(lines.lines_per_second)
     # a later delay-zero calibration adds its fields and keeps the line velocity
     scene = make_scene("diffuse_plane", (32, 32), projector_rows=180, seed=0)
-    dz = calibrate_delay_zero(device_capture(SimulatedEpiscan(scene), exposure_us=600.0, delay_error_us=20.0), delay_zero_sweep(600.0, step_us=20.0).delay_us)
+    dz = calibrate_delay_zero(
+        device_capture(SimulatedEpiscan(scene), exposure_us=600.0, delay_error_us=20.0),
+        delay_zero_sweep(600.0, step_us=20.0).delay_us,
+    )
     both = write_calibration(folder / "acquisition.json", delay_zero=dz)
     assert both["delay_zero_us"] == pytest.approx(dz.delay_zero_us)
     assert both["lines_per_second"] == pytest.approx(lines.lines_per_second)
@@ -256,7 +273,9 @@ def test_calibrate_cli(tmp_path):
     from planeray.cli import app
 
     runner = CliRunner()
-    res = runner.invoke(app, ["calibrate", "simulate-lines", "--out", str(tmp_path / "l.npz"), "--lines-per-second", "60000"])
+    res = runner.invoke(
+        app, ["calibrate", "simulate-lines", "--out", str(tmp_path / "l.npz"), "--lines-per-second", "60000"]
+    )
     assert res.exit_code == 0, res.output
     acq = tmp_path / "acquisition.json"
     acq.write_text(json.dumps({"bit_depth": 12}))

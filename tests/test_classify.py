@@ -9,8 +9,6 @@ import numpy as np
 import pytest
 
 from planeray.acquire import simulate_stack
-from planeray.demux import demultiplex
-from planeray.errors import InputError
 from planeray.classify import (
     CLASSIFY_THRESHOLDS,
     characterize,
@@ -18,6 +16,8 @@ from planeray.classify import (
     label_agreement,
     visible_effect_mask,
 )
+from planeray.demux import demultiplex
+from planeray.errors import InputError
 from planeray.profiles import transport_delay_profiles
 from planeray.scenes import make_scene
 from planeray.timing import Band, paper_sweep, sweep_support_rows
@@ -286,7 +286,9 @@ def test_labels_agree_on_demultiplexed_scenes(scenes, name):
     labels, ch = classify_transport(result.transport, resolution_rows=resolution, return_character=True)
     assert labels.shape == scene.shape and labels.dtype == np.uint8
     assert ch.fwhm_rows.shape == scene.shape
-    vis = visible_effect_mask(scene, support_rows=sweep_support_rows(paper_sweep(), 54000.0), resolution_rows=resolution)
+    vis = visible_effect_mask(
+        scene, support_rows=sweep_support_rows(paper_sweep(), 54000.0), resolution_rows=resolution
+    )
     a = label_agreement(labels, scene.labels, mask=vis)
     for k, minimum in DEMUX_MIN[name].items():
         assert a["recall"][k] >= minimum, (name, k, a["recall"], a["confusion"].tolist())

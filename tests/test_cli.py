@@ -37,8 +37,25 @@ def test_simulate_writes_a_stack_with_its_parameters(stack_path, tmp_path):
     assert st.metadata["camera"]["frames_averaged"] == 8
     assert st.metadata["scene"]["seed"] == 3
     truth = tmp_path / "truth.zarr"
-    res = invoke("simulate", "wax", "--out", tmp_path / "w.zarr", "--size", 32, 32, "--sweep", "quick",
-                 "--frames", 2, "--read-noise", 3, "--projector-rows", 96, "--truth", truth)
+    res = invoke(
+        "simulate",
+        "wax",
+        "--out",
+        tmp_path / "w.zarr",
+        "--size",
+        32,
+        32,
+        "--sweep",
+        "quick",
+        "--frames",
+        2,
+        "--read-noise",
+        3,
+        "--projector-rows",
+        96,
+        "--truth",
+        truth,
+    )
     assert res.exit_code == 0, res.output
     st = read_stack(tmp_path / "w.zarr")
     assert st.projector_rows == 96 and st.metadata["camera"]["read_noise_e"] == 3
@@ -62,7 +79,18 @@ def test_contact_sheet_and_profiles_write_pngs(stack_path, tmp_path):
     res = invoke("contact-sheet", stack_path, "--out", tmp_path / "cs.png")
     assert res.exit_code == 0, res.output
     assert (tmp_path / "cs.png").read_bytes()[:4] == b"\x89PNG"
-    res = invoke("profiles", stack_path, "--pixel", "5,6", "--pixel", "20,30", "--out", tmp_path / "p.png", "--csv", tmp_path / "p.csv")
+    res = invoke(
+        "profiles",
+        stack_path,
+        "--pixel",
+        "5,6",
+        "--pixel",
+        "20,30",
+        "--out",
+        tmp_path / "p.png",
+        "--csv",
+        tmp_path / "p.csv",
+    )
     assert res.exit_code == 0, res.output
     assert (tmp_path / "p.png").exists()
     lines = (tmp_path / "p.csv").read_text().splitlines()
@@ -70,7 +98,14 @@ def test_contact_sheet_and_profiles_write_pngs(stack_path, tmp_path):
 
 
 def test_pixel_accepts_two_words(stack_path, tmp_path):
-    assert _join_pixel_args(["profiles", "s", "--pixel", "5", "6", "--out", "x"]) == ["profiles", "s", "--pixel", "5,6", "--out", "x"]
+    assert _join_pixel_args(["profiles", "s", "--pixel", "5", "6", "--out", "x"]) == [
+        "profiles",
+        "s",
+        "--pixel",
+        "5,6",
+        "--out",
+        "x",
+    ]
     with pytest.raises(SystemExit) as exc:
         main(["profiles", str(stack_path), "--pixel", "5", "6", "--out", str(tmp_path / "p2.png")])
     assert exc.value.code == 0
@@ -89,7 +124,7 @@ def test_export_import_round_trip(stack_path, tmp_path):
 
 
 @pytest.mark.parametrize(
-    "args,message",
+    ("args", "message"),
     [
         (("info", "/no/such/stack"), "does not exist"),
         (("simulate", "no_such_scene", "--out", "/tmp/x.zarr"), "unknown scene"),
@@ -131,8 +166,18 @@ def test_profiles_from_transport_and_classification(tmp_path):
     stack = tmp_path / "mb.zarr"
     assert invoke("simulate", "mirror_ball", "--out", stack, "--size", 32, 32, "--projector-rows", 180).exit_code == 0
     assert invoke("demux", stack, "--out", tmp_path / "T.zarr").exit_code == 0
-    res = invoke("profiles", stack, "--pixel", "10,10", "--transport", tmp_path / "T.zarr",
-                 "--classify", tmp_path / "labels.png", "--out", tmp_path / "p.png")
+    res = invoke(
+        "profiles",
+        stack,
+        "--pixel",
+        "10,10",
+        "--transport",
+        tmp_path / "T.zarr",
+        "--classify",
+        tmp_path / "labels.png",
+        "--out",
+        tmp_path / "p.png",
+    )
     assert res.exit_code == 0, res.output
     assert (tmp_path / "labels.png").read_bytes()[:4] == b"\x89PNG" and (tmp_path / "p.png").exists()
     assert "specular_interreflection" in res.output
@@ -143,8 +188,24 @@ def test_profiles_from_transport_and_classification(tmp_path):
 def test_mc_profile_writes_csv_json_and_png(tmp_path, monkeypatch):
     monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "p.csv"
-    r = invoke("mc", "profile", "--out", out, "--sigma-s", 1.0, "--sigma-a", 0.1, "--g", 0.5,
-               "--photons", 4000, "--rows", 10, "--plot", tmp_path / "p.png")
+    r = invoke(
+        "mc",
+        "profile",
+        "--out",
+        out,
+        "--sigma-s",
+        1.0,
+        "--sigma-a",
+        0.1,
+        "--g",
+        0.5,
+        "--photons",
+        4000,
+        "--rows",
+        10,
+        "--plot",
+        tmp_path / "p.png",
+    )
     assert r.exit_code == 0, r.output
     import csv
     import json
@@ -172,8 +233,23 @@ def test_study_demux_quick(tmp_path):
 def test_mc_profile_point_source(tmp_path, monkeypatch):
     monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "r.csv"
-    r = invoke("mc", "profile", "--point", "--out", out, "--sigma-a", 0.2, "--g", 0.0,
-               "--photons", 3000, "--rows", 8, "--plot", tmp_path / "r.png")
+    r = invoke(
+        "mc",
+        "profile",
+        "--point",
+        "--out",
+        out,
+        "--sigma-a",
+        0.2,
+        "--g",
+        0.0,
+        "--photons",
+        3000,
+        "--rows",
+        8,
+        "--plot",
+        tmp_path / "r.png",
+    )
     assert r.exit_code == 0, r.output
     lines = out.read_text().splitlines()
     assert lines[0].startswith("radius_bin,r_mm,exitance") and len(lines) == 1 + 9
@@ -181,7 +257,7 @@ def test_mc_profile_point_source(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize(
-    "new,old,value,field",
+    ("new", "old", "value", "field"),
     [
         ("--full-well-e", "--full-well", 9000, "full_well_e"),
         ("--read-noise-e", "--read-noise", 3, "read_noise_e"),
@@ -205,7 +281,11 @@ def test_every_renamed_option_keeps_its_old_spelling():
 
     group = typer.main.get_command(app)
     renamed = {
-        ("simulate",): {"--full-well-e": "--full-well", "--read-noise-e": "--read-noise", "--ambient-e-per-us": "--ambient"},
+        ("simulate",): {
+            "--full-well-e": "--full-well",
+            "--read-noise-e": "--read-noise",
+            "--ambient-e-per-us": "--ambient",
+        },
         ("profiles",): {"--exposure-us": "--exposure"},
         ("demux",): {"--chunk-rows": "--chunk"},
         ("emulate",): {"--ambient-e-per-us": "--ambient"},

@@ -15,6 +15,7 @@ from planeray.scenes import make_scene
 from planeray.stack import Stack
 from planeray.timing import Band, Sweep, paper_sweep
 
+
 @pytest.fixture(scope="module")
 def wax_stack():
     scene = make_scene("wax", (24, 20), projector_rows=135, seed=2)
@@ -57,7 +58,14 @@ def test_nan_in_stack_is_reported(wax_stack):
     _, stack = wax_stack
     images = np.array(stack.images)
     images[5, 3, 4] = np.nan
-    bad = Stack(images, stack.delay_us, stack.exposure_us, stack.lines_per_second, stack.excluded, projector_rows=stack.projector_rows)
+    bad = Stack(
+        images,
+        stack.delay_us,
+        stack.exposure_us,
+        stack.lines_per_second,
+        stack.excluded,
+        projector_rows=stack.projector_rows,
+    )
     with pytest.raises(InputError, match=r"image 5 has a non-finite value at pixel \(3, 4\)"):
         demultiplex(bad, method="pinv")
 
@@ -126,7 +134,7 @@ def _predictable_hold_out(stack, n):
 
 
 @pytest.mark.parametrize(
-    "scene_name,beta,bound",
+    ("scene_name", "beta", "bound"),
     [
         ("mirror_ball", 0.01, 1.5),
         ("corner", 0.01, 1.5),
@@ -146,8 +154,15 @@ def test_held_out_images_are_predicted_within_noise(scene_name, beta, bound):
     cam = CameraModel(row_jitter_us=0.0, ambient_e_per_us=0.0)
     stack = simulate_stack(scene, paper_sweep(), camera=cam, seed=3)
     held = _predictable_hold_out(stack, 12)
-    fit = Stack(stack.images, stack.delay_us, stack.exposure_us, stack.lines_per_second, stack.excluded | held,
-                projector_rows=stack.projector_rows, metadata=stack.metadata)
+    fit = Stack(
+        stack.images,
+        stack.delay_us,
+        stack.exposure_us,
+        stack.lines_per_second,
+        stack.excluded | held,
+        projector_rows=stack.projector_rows,
+        metadata=stack.metadata,
+    )
     est = demultiplex(fit, beta=beta).transport
     # the same images captured again with fresh noise give the noise floor
     again = simulate_stack(scene, paper_sweep(), camera=cam, seed=99)
@@ -269,8 +284,16 @@ class _GuardedImages:
 
 def test_memory_is_bounded_by_the_chunk(wax_stack, tmp_path):
     _, stack = wax_stack
-    guarded = Stack(_GuardedImages(np.asarray(stack.images), 4), stack.delay_us, stack.exposure_us, stack.lines_per_second,
-                    stack.excluded, saturated=None, projector_rows=stack.projector_rows, metadata=stack.metadata)
+    guarded = Stack(
+        _GuardedImages(np.asarray(stack.images), 4),
+        stack.delay_us,
+        stack.exposure_us,
+        stack.lines_per_second,
+        stack.excluded,
+        saturated=None,
+        projector_rows=stack.projector_rows,
+        metadata=stack.metadata,
+    )
     out = demultiplex_to_store(guarded, tmp_path / "t.zarr", chunk_rows=4)
     ref = demultiplex(stack, chunk_rows=24).transport.dense
     np.testing.assert_allclose(read_transport(out)[0].dense, ref, rtol=1e-5, atol=1e-7)
@@ -281,6 +304,8 @@ def test_existing_dask_cluster_by_address(wax_stack, tmp_path):
     _, stack = wax_stack
     local = demultiplex_to_store(stack, tmp_path / "local.zarr", chunk_rows=8)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
-        remote = demultiplex_to_store(stack, tmp_path / "remote.zarr", chunk_rows=8, scheduler=cluster.scheduler_address)
+        remote = demultiplex_to_store(
+            stack, tmp_path / "remote.zarr", chunk_rows=8, scheduler=cluster.scheduler_address
+        )
     np.testing.assert_allclose(read_transport(remote)[0].dense, read_transport(local)[0].dense, rtol=1e-5, atol=1e-7)
     assert read_transport_maps(remote)["converged"].all()

@@ -57,12 +57,22 @@ def _study_results():
     rng = np.random.default_rng(0)
     u = np.arange(-20, 21)
     truth = np.exp(-np.abs(u) / 4.0)
-    ex = {"offsets": u, "truth": truth, **{m: truth + 0.01 * rng.standard_normal(u.size) for m in METHODS},
-          "mse": {m: 1e-4 * (k + 1) for k, m in enumerate(METHODS)}}
+    ex = {
+        "offsets": u,
+        "truth": truth,
+        **{m: truth + 0.01 * rng.standard_normal(u.size) for m in METHODS},
+        "mse": {m: 1e-4 * (k + 1) for k, m in enumerate(METHODS)},
+    }
     ns = {"noise": np.array([0.01, 0.05, 0.2]), "mse": {m: rng.uniform(1e-5, 1e-3, (3, 2)) for m in METHODS}}
-    sweeps = {name: {"name": name, "values": np.asarray(vals, float), "mse": {m: rng.uniform(1e-5, 1e-3, (len(vals), 2)) for m in METHODS},
-                     "mean_abs_offset": np.ones(len(vals))}
-              for name, vals in (("sigma_s", [0.5, 1.0, 2.0]), ("sigma_a", [0.0, 0.01, 0.1]), ("g", [-0.5, 0.0, 0.9]))}
+    sweeps = {
+        name: {
+            "name": name,
+            "values": np.asarray(vals, float),
+            "mse": {m: rng.uniform(1e-5, 1e-3, (len(vals), 2)) for m in METHODS},
+            "mean_abs_offset": np.ones(len(vals)),
+        }
+        for name, vals in (("sigma_s", [0.5, 1.0, 2.0]), ("sigma_a", [0.0, 0.01, 0.1]), ("g", [-0.5, 0.0, 0.9]))
+    }
     a, b = np.array([1e-3, 1e-2, 1e-1]), np.array([1e-3, 1e-2, 1e-1])
     mse = rng.uniform(1e-5, 1e-3, (3, 3))
     rs = {"alphas": a, "betas": b, "mse": mse, "bias2": mse / 2, "variance": mse / 2}
@@ -74,27 +84,56 @@ def _cases(scene, stack, mc_profile):
     E, D = stack.exposures().size, stack.delays().size
     pixels = [(5, 6), (12, 12), (20, 3)]
     prof = pr.measured_delay_profiles(stack, pixels)
-    continuous = pr.transport_delay_profiles(scene.transport, prof.pixels, exposure_us=float(prof.exposure_us.min()),
-                                             lines_per_second=stack.lines_per_second)
+    continuous = pr.transport_delay_profiles(
+        scene.transport, prof.pixels, exposure_us=float(prof.exposure_us.min()), lines_per_second=stack.lines_per_second
+    )
     ref = stack.image(0)
     ex, ns, sweeps, rs = _study_results()
     point = pr.mc.mc_point_profile(pr.Medium(sigma_s=1.0, sigma_a=0.1, g=0.5), n_photons=1000, radius_bins=np.arange(6))
     return [
         ("contact_sheet", lambda **kw: contact_sheet_figure(stack, **kw), E * D, 110),
-        ("contact_sheet_max_delays", lambda **kw: contact_sheet_figure(stack, max_delays=4, gamma=1.0, **kw), E * 4, 110),
+        (
+            "contact_sheet_max_delays",
+            lambda **kw: contact_sheet_figure(stack, max_delays=4, gamma=1.0, **kw),
+            E * 4,
+            110,
+        ),
         ("delay_profiles", lambda **kw: delay_profiles_figure(stack, prof, names=["a", "b", "c"], **kw), 2, 110),
-        ("delay_profiles_continuous", lambda **kw: delay_profiles_figure(stack, prof, exposure_us=float(prof.exposure_us.min()),
-                                                                         continuous=continuous, **kw), 2, 110),
+        (
+            "delay_profiles_continuous",
+            lambda **kw: delay_profiles_figure(
+                stack, prof, exposure_us=float(prof.exposure_us.min()), continuous=continuous, **kw
+            ),
+            2,
+            110,
+        ),
         ("label_map", lambda **kw: label_map_figure(scene.labels, **kw), 1, 110),
         ("label_map_reference", lambda **kw: label_map_figure(scene.labels, reference=ref, title="t", **kw), 2, 110),
-        ("transport_profiles", lambda **kw: transport_profiles_figure(scene.transport, pixels, truth=scene.transport, truth_scale=2.0,
-                                                                      names=["a", "b", "c"], resolution_rows=3.0, **kw), 3, 110),
+        (
+            "transport_profiles",
+            lambda **kw: transport_profiles_figure(
+                scene.transport,
+                pixels,
+                truth=scene.transport,
+                truth_scale=2.0,
+                names=["a", "b", "c"],
+                resolution_rows=3.0,
+                **kw,
+            ),
+            3,
+            110,
+        ),
         ("mc_profile", lambda **kw: mc_profile_figure(mc_profile, **kw), 2, 100),
         ("mc_profile_point", lambda **kw: mc_profile_figure(point, compare_dipole=False, **kw), 2, 100),
         ("plot_reconstruction", lambda **kw: study_figs.plot_reconstruction(ex, noise=0.05, **kw), 2, 100),
         ("plot_noise_sweep", lambda **kw: study_figs.plot_noise_sweep(ns, **kw), 1, 100),
         ("plot_parameter_sweeps", lambda **kw: study_figs.plot_parameter_sweeps(sweeps, noise=0.05, **kw), 3, 100),
-        ("plot_regularization", lambda **kw: study_figs.plot_regularization(rs, noise=0.05, **kw), 4, 100),  # 2 maps + 2 colorbars
+        (
+            "plot_regularization",
+            lambda **kw: study_figs.plot_regularization(rs, noise=0.05, **kw),
+            4,
+            100,
+        ),  # 2 maps + 2 colorbars
     ]
 
 
@@ -103,9 +142,21 @@ def cases(scene, stack, mc_profile):
     return {name: (draw, n_axes, dpi) for name, draw, n_axes, dpi in _cases(scene, stack, mc_profile)}
 
 
-CASE_NAMES = ["contact_sheet", "contact_sheet_max_delays", "delay_profiles", "delay_profiles_continuous", "label_map",
-              "label_map_reference", "transport_profiles", "mc_profile", "mc_profile_point", "plot_reconstruction",
-              "plot_noise_sweep", "plot_parameter_sweeps", "plot_regularization"]
+CASE_NAMES = [
+    "contact_sheet",
+    "contact_sheet_max_delays",
+    "delay_profiles",
+    "delay_profiles_continuous",
+    "label_map",
+    "label_map_reference",
+    "transport_profiles",
+    "mc_profile",
+    "mc_profile_point",
+    "plot_reconstruction",
+    "plot_noise_sweep",
+    "plot_parameter_sweeps",
+    "plot_regularization",
+]
 
 
 # ------------------------------------------------------------------ backend
@@ -149,7 +200,9 @@ def _calls(path: Path):
                 if a.name == "matplotlib.pyplot":
                     yield "import matplotlib.pyplot", node.lineno
         elif isinstance(node, ast.ImportFrom):
-            if node.module == "matplotlib.pyplot" or (node.module == "matplotlib" and any(a.name == "pyplot" for a in node.names)):
+            if node.module == "matplotlib.pyplot" or (
+                node.module == "matplotlib" and any(a.name == "pyplot" for a in node.names)
+            ):
                 yield "from matplotlib import pyplot", node.lineno
             if node.module == "matplotlib" and any(a.name == "use" for a in node.names):
                 yield "from matplotlib import use", node.lineno
@@ -159,7 +212,9 @@ def _calls(path: Path):
 
 
 def test_no_module_chooses_a_backend_or_uses_pyplot():
-    found = [f"{p.relative_to(SRC.parent)}:{line}: {what}" for p in sorted(SRC.rglob("*.py")) for what, line in _calls(p)]
+    found = [
+        f"{p.relative_to(SRC.parent)}:{line}: {what}" for p in sorted(SRC.rglob("*.py")) for what, line in _calls(p)
+    ]
     assert not found, "\n".join(found)
 
 
@@ -216,9 +271,16 @@ def test_single_panel_figures_draw_into_a_given_ax(scene, stack, tmp_path):
     ns = _study_results()[1]
     draws = {  # name: (draw, dpi of the PNG)
         "label_map": (lambda ax, **kw: label_map_figure(scene.labels, ax=ax, title="mine", **kw), 110),
-        "transport_profiles": (lambda ax, **kw: transport_profiles_figure(scene.transport, [(12, 12)], truth=scene.transport,
-                                                                          title="mine", ax=ax, **kw), 110),
-        "transport_profiles_1d_pixel": (lambda ax, **kw: transport_profiles_figure(scene.transport, (12, 12), ax=ax, **kw), 110),
+        "transport_profiles": (
+            lambda ax, **kw: transport_profiles_figure(
+                scene.transport, [(12, 12)], truth=scene.transport, title="mine", ax=ax, **kw
+            ),
+            110,
+        ),
+        "transport_profiles_1d_pixel": (
+            lambda ax, **kw: transport_profiles_figure(scene.transport, (12, 12), ax=ax, **kw),
+            110,
+        ),
         "plot_noise_sweep": (lambda ax, **kw: study_figs.plot_noise_sweep(ns, ax=ax, **kw), 100),
     }
     for name, (draw, dpi) in draws.items():

@@ -296,7 +296,9 @@ def test_read_stack_errors(tmp_path):
         io.read_stack(_raw_store(tmp_path / "g.zarr", attrs={"format": "planeray-stack", "format_version": 1}))
     with pytest.raises(StackError, match="unsupported format_version 2"):
         io.read_stack(
-            _raw_store(tmp_path / "h.zarr", attrs={"format": "planeray-stack", "format_version": 2, "lines_per_second": 1.0})
+            _raw_store(
+                tmp_path / "h.zarr", attrs={"format": "planeray-stack", "format_version": 2, "lines_per_second": 1.0}
+            )
         )
     # a problem Stack itself finds is re-raised with the path
     group = zarr.open_group(str(_raw_store(tmp_path / "i.zarr")), mode="r+")
@@ -435,39 +437,129 @@ def _truncate(index, suffix="tif"):
 BAD_INPUTS = [
     # (id, mutation, file named in the message, problem regex)
     ("manifest missing", lambda f: (f / "manifest.csv").unlink(), "manifest.csv", "file not found"),
-    ("missing column", _break_manifest("file,delay_us\nframe0.tif,0\n"), "manifest.csv", "missing column 'exposure_us'"),
+    (
+        "missing column",
+        _break_manifest("file,delay_us\nframe0.tif,0\n"),
+        "manifest.csv",
+        "missing column 'exposure_us'",
+    ),
     ("empty manifest", _break_manifest(""), "manifest.csv", "empty manifest"),
     ("header only", _break_manifest("file,delay_us,exposure_us\n"), "manifest.csv", "empty manifest"),
-    ("non-numeric delay", lambda f: _edit(f / "manifest.csv", ",0.0,", ",abc,"), "manifest.csv", "line 3: delay_us 'abc' is not a finite number"),
-    ("nan exposure", lambda f: _edit(f / "manifest.csv", "900.0\n", "nan\n"), "manifest.csv", "line 2: exposure_us 'nan' is not a finite number"),
-    ("zero exposure", lambda f: _edit(f / "manifest.csv", "900.0\n", "0\n"), "manifest.csv", "line 2: exposure_us must be positive"),
-    ("bad excluded", _break_manifest("file,delay_us,exposure_us,excluded\nframe0.tif,0,600,maybe\n"), "manifest.csv", "line 2: excluded 'maybe'"),
+    (
+        "non-numeric delay",
+        lambda f: _edit(f / "manifest.csv", ",0.0,", ",abc,"),
+        "manifest.csv",
+        "line 3: delay_us 'abc' is not a finite number",
+    ),
+    (
+        "nan exposure",
+        lambda f: _edit(f / "manifest.csv", "900.0\n", "nan\n"),
+        "manifest.csv",
+        "line 2: exposure_us 'nan' is not a finite number",
+    ),
+    (
+        "zero exposure",
+        lambda f: _edit(f / "manifest.csv", "900.0\n", "0\n"),
+        "manifest.csv",
+        "line 2: exposure_us must be positive",
+    ),
+    (
+        "bad excluded",
+        _break_manifest("file,delay_us,exposure_us,excluded\nframe0.tif,0,600,maybe\n"),
+        "manifest.csv",
+        "line 2: excluded 'maybe'",
+    ),
     ("image missing", lambda f: (f / "frame1.tif").unlink(), "frame1.tif", r"image not found \(manifest.csv line 3\)"),
     ("truncated tiff", _truncate(2), "frame2.tif", "cannot read image"),
     ("truncated png", _truncate(1, "png"), "frame1.png", "cannot read image"),
     ("not an image", lambda f: (f / "frame0.tif").write_text("hello"), "frame0.tif", "cannot read image"),
-    ("unsupported suffix", lambda f: _edit(f / "manifest.csv", "frame0.tif", "frame0.jpg") or (f / "frame0.jpg").write_text("x"), "frame0.jpg", "unsupported image format"),
-    ("rgb tiff", _replace_image(1, np.zeros((8, 10, 3), np.uint8)), "frame1.tif", r"expected a grayscale image, got shape \(8, 10, 3\)"),
-    ("rgb png", _replace_image(1, np.zeros((8, 10, 3), np.uint8), fmt="png"), "frame1.png", r"expected a grayscale image, got shape \(8, 10, 3\)"),
-    ("size mismatch", _replace_image(2, np.zeros((8, 11), np.uint16)), "frame2.tif", r"image size \(8, 11\) differs from the first image 'frame0.tif' \(8, 10\)"),
-    ("above bit depth", _replace_image(1, np.full((8, 10), 5000, np.uint16)), "frame1.tif", "raw value 5000 above the largest code 4095 of bit_depth 12"),
+    (
+        "unsupported suffix",
+        lambda f: _edit(f / "manifest.csv", "frame0.tif", "frame0.jpg") or (f / "frame0.jpg").write_text("x"),
+        "frame0.jpg",
+        "unsupported image format",
+    ),
+    (
+        "rgb tiff",
+        _replace_image(1, np.zeros((8, 10, 3), np.uint8)),
+        "frame1.tif",
+        r"expected a grayscale image, got shape \(8, 10, 3\)",
+    ),
+    (
+        "rgb png",
+        _replace_image(1, np.zeros((8, 10, 3), np.uint8), fmt="png"),
+        "frame1.png",
+        r"expected a grayscale image, got shape \(8, 10, 3\)",
+    ),
+    (
+        "size mismatch",
+        _replace_image(2, np.zeros((8, 11), np.uint16)),
+        "frame2.tif",
+        r"image size \(8, 11\) differs from the first image 'frame0.tif' \(8, 10\)",
+    ),
+    (
+        "above bit depth",
+        _replace_image(1, np.full((8, 10), 5000, np.uint16)),
+        "frame1.tif",
+        "raw value 5000 above the largest code 4095 of bit_depth 12",
+    ),
     ("nan float image", _replace_image(1, np.full((8, 10), np.nan, np.float32)), "frame1.tif", "NaN"),
     ("acquisition missing", lambda f: (f / "acquisition.json").unlink(), "acquisition.json", "file not found"),
-    ("invalid json", lambda f: (f / "acquisition.json").write_text("{lines_per_second: 1"), "acquisition.json", "invalid JSON"),
-    ("json not object", lambda f: (f / "acquisition.json").write_text("[1, 2]"), "acquisition.json", "expected a JSON object"),
-    ("no lines_per_second", lambda f: _set_acq(f, lines_per_second=DROP), "acquisition.json", "missing field 'lines_per_second'"),
-    ("string lines_per_second", lambda f: _set_acq(f, lines_per_second="fast"), "acquisition.json", "'lines_per_second' must be a positive number"),
-    ("negative lines_per_second", lambda f: _set_acq(f, lines_per_second=-1), "acquisition.json", "'lines_per_second' must be a positive number"),
-    ("bit depth 17", lambda f: _set_acq(f, bit_depth=17), "acquisition.json", r"'bit_depth' must be an integer in 1\.\.16"),
+    (
+        "invalid json",
+        lambda f: (f / "acquisition.json").write_text("{lines_per_second: 1"),
+        "acquisition.json",
+        "invalid JSON",
+    ),
+    (
+        "json not object",
+        lambda f: (f / "acquisition.json").write_text("[1, 2]"),
+        "acquisition.json",
+        "expected a JSON object",
+    ),
+    (
+        "no lines_per_second",
+        lambda f: _set_acq(f, lines_per_second=DROP),
+        "acquisition.json",
+        "missing field 'lines_per_second'",
+    ),
+    (
+        "string lines_per_second",
+        lambda f: _set_acq(f, lines_per_second="fast"),
+        "acquisition.json",
+        "'lines_per_second' must be a positive number",
+    ),
+    (
+        "negative lines_per_second",
+        lambda f: _set_acq(f, lines_per_second=-1),
+        "acquisition.json",
+        "'lines_per_second' must be a positive number",
+    ),
+    (
+        "bit depth 17",
+        lambda f: _set_acq(f, bit_depth=17),
+        "acquisition.json",
+        r"'bit_depth' must be an integer in 1\.\.16",
+    ),
     ("bit depth 0", lambda f: _set_acq(f, bit_depth=0), "acquisition.json", "'bit_depth' must be an integer"),
     ("bit depth str", lambda f: _set_acq(f, bit_depth="12"), "acquisition.json", "'bit_depth' must be an integer"),
-    ("black level too high", lambda f: _set_acq(f, black_level=4095), "acquisition.json", "'black_level' .* must be below"),
+    (
+        "black level too high",
+        lambda f: _set_acq(f, black_level=4095),
+        "acquisition.json",
+        "'black_level' .* must be below",
+    ),
     ("black level type", lambda f: _set_acq(f, black_level=[1]), "acquisition.json", "'black_level' must be a number"),
-    ("projector rows", lambda f: _set_acq(f, projector_rows=2.5), "acquisition.json", "'projector_rows' must be a positive integer"),
+    (
+        "projector rows",
+        lambda f: _set_acq(f, projector_rows=2.5),
+        "acquisition.json",
+        "'projector_rows' must be a positive integer",
+    ),
 ]
 
 
-@pytest.mark.parametrize("mutate, filename, problem", [b[1:] for b in BAD_INPUTS], ids=[b[0] for b in BAD_INPUTS])
+@pytest.mark.parametrize(("mutate", "filename", "problem"), [b[1:] for b in BAD_INPUTS], ids=[b[0] for b in BAD_INPUTS])
 def test_import_bad_inputs(tmp_path, mutate, filename, problem):
     folder = _bad(tmp_path)
     mutate(folder)
@@ -495,7 +587,9 @@ def test_stack_error_is_input_error():
 # ----------------------------------------------------------------------------
 # export
 # ----------------------------------------------------------------------------
-@pytest.mark.parametrize("fmt, bit_depth, black_level", [("tiff", 16, 256), ("png", 16, 256), ("tiff", 12, 64), ("png", 10, 0)])
+@pytest.mark.parametrize(
+    ("fmt", "bit_depth", "black_level"), [("tiff", 16, 256), ("png", 16, 256), ("tiff", 12, 64), ("png", 10, 0)]
+)
 def test_export_import_round_trip(tmp_path, fmt, bit_depth, black_level):
     stack = make_stack()
     stack.images[0, 0, :3] = [1.0, 1.5, -1e6]  # saturated, above range, below range (clipped)
@@ -577,7 +671,9 @@ def test_export_quantization_property(tmp_path_factory, bit_depth, black_frac, f
     black = int(black_frac * (max_code - 1))
     images = np.array(values, np.float32).reshape(1, 2, 3)
     stack = Stack(images=images, delay_us=[0.0], exposure_us=[600.0], lines_per_second=1000.0)
-    folder = io.export_folder(stack, tmp_path_factory.mktemp("q") / "out", fmt=fmt, bit_depth=bit_depth, black_level=black)
+    folder = io.export_folder(
+        stack, tmp_path_factory.mktemp("q") / "out", fmt=fmt, bit_depth=bit_depth, black_level=black
+    )
     back = io.import_folder(folder)
     span = max_code - black
     expected = np.clip(images, -black / span, 1.0)
@@ -724,9 +820,16 @@ def test_read_transport_errors(tmp_path):
     with pytest.raises(TransportError, match="f.zarr: offsets_rows must be consecutive"):
         io.read_transport(_raw_transport(tmp_path / "f.zarr", attrs={"offsets_rows": [0, 2, 3]}))
     with pytest.raises(TransportError, match="g.zarr: missing array 'sparse_value'"):
-        io.read_transport(_raw_transport(tmp_path / "g.zarr", sparse={"sparse_row": np.zeros(2, np.int32),
-                                                                       "sparse_col": np.zeros(2, np.int32),
-                                                                       "sparse_offset": np.zeros(2, np.int32)}))
+        io.read_transport(
+            _raw_transport(
+                tmp_path / "g.zarr",
+                sparse={
+                    "sparse_row": np.zeros(2, np.int32),
+                    "sparse_col": np.zeros(2, np.int32),
+                    "sparse_offset": np.zeros(2, np.int32),
+                },
+            )
+        )
     io.write_stack(make_stack(), tmp_path / "s.zarr")
     with pytest.raises(TransportError, match="s.zarr: not a planeray transport"):
         io.read_transport(tmp_path / "s.zarr")

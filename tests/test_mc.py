@@ -52,15 +52,13 @@ def test_far_profile_shape_matches_dipole_line_kernel():
     mfp = 1.0 / (sp + sigma_a)
     off = np.arange(-8, 9)
     medium = Medium(sigma_s, sigma_a, g)
-    p = mc_line_profile(medium, n_photons=30_000, offsets_rows=off,
-                        mm_per_row=mfp, seed=2)
+    p = mc_line_profile(medium, n_photons=30_000, offsets_rows=off, mm_per_row=mfp, seed=2)
     k = dipole_line_kernel(medium, off, mm_per_row=mfp)  # sigma_s' = sp, n = 1
     # fold +/- offsets for statistics
     i3, i6 = [np.flatnonzero(np.abs(off) == j) for j in (3, 6)]
     r_mc = p.values[i3].sum() / p.values[i6].sum()
     r_dp = k[i3].sum() / k[i6].sum()
-    rel = np.hypot(np.linalg.norm(p.stderr[i3]) / p.values[i3].sum(),
-                   np.linalg.norm(p.stderr[i6]) / p.values[i6].sum())
+    rel = np.hypot(np.linalg.norm(p.stderr[i3]) / p.values[i3].sum(), np.linalg.norm(p.stderr[i6]) / p.values[i6].sum())
     assert abs(r_mc / r_dp - 1.0) < max(0.1, 3 * rel)
     # symmetric about the line
     assert np.allclose(p.values, p.values[::-1], atol=5 * p.stderr.max())
@@ -91,8 +89,7 @@ def test_determinism():
     c = mc_line_profile(medium, **kw, seed=8)
     assert a.values.tobytes() == b.values.tobytes()
     assert a.stderr.tobytes() == b.stderr.tobytes()
-    assert (a.total_reflectance, a.transmittance, a.absorbed) == (
-        b.total_reflectance, b.transmittance, b.absorbed)
+    assert (a.total_reflectance, a.transmittance, a.absorbed) == (b.total_reflectance, b.transmittance, b.absorbed)
     assert a.values.tobytes() != c.values.tobytes()
 
 
@@ -117,8 +114,13 @@ def test_rejects_bad_parameters():
 def _vdh_slab(n, n_photons, seed, offsets=np.arange(-150, 151)):
     # tau = 2 with sigma_t = 10 / mm -> d = 0.2 mm; bins of 0.02 mm over +-3 mm hold all
     # of the (albedo 0.9, thin) profile.
-    return mc_line_profile(Medium(9.0, 1.0, 0.75, n=n, thickness_mm=0.2), n_photons=n_photons,
-                           offsets_rows=offsets, mm_per_row=0.02, seed=seed)
+    return mc_line_profile(
+        Medium(9.0, 1.0, 0.75, n=n, thickness_mm=0.2),
+        n_photons=n_photons,
+        offsets_rows=offsets,
+        mm_per_row=0.02,
+        seed=seed,
+    )
 
 
 def test_published_slab_van_de_hulst_table35():
@@ -129,7 +131,7 @@ def test_published_slab_van_de_hulst_table35():
     # radiance under uniform unit irradiance: R(1) / pi.
     dx = p.mm_per_row
     L = p.radiance.sum() * dx
-    L_err = np.sqrt((p.radiance_stderr ** 2).sum()) * dx  # bins independent across batches: conservative
+    L_err = np.sqrt((p.radiance_stderr**2).sum()) * dx  # bins independent across batches: conservative
     assert abs(L - VDH35["R_mu1"] / np.pi) < 4 * L_err + 1e-4
     assert p.truncated == 0.0 and abs(p.energy_balance - 1.0) < 1e-9
 
@@ -137,8 +139,7 @@ def test_published_slab_van_de_hulst_table35():
 def test_mismatched_slab_against_adding_doubling():
     iad = pytest.importorskip("iadpython")
     for n in (1.4, 1.33):
-        ref_R, ref_T, _, _ = iad.Sample(a=0.9, b=2.0, g=0.75, d=1.0, n=n, n_above=1.0,
-                                        n_below=1.0, quad_pts=16).rt()
+        ref_R, ref_T, _, _ = iad.Sample(a=0.9, b=2.0, g=0.75, d=1.0, n=n, n_above=1.0, n_below=1.0, quad_pts=16).rt()
         p = _vdh_slab(n, 500_000, seed=4, offsets=np.arange(-2, 3))
         # Prahl's UR1 counts the specular reflection at entry, UT1 the unscattered light.
         R = p.total_reflectance + p.specular_reflectance
@@ -152,8 +153,14 @@ def test_radiance_single_scattering_closed_form():
     # only above the strip; higher orders are O(albedo^2).
     sigma_s, sigma_a, w = 0.01, 0.99, 0.5
     for g in (0.0, 0.6, -0.6):
-        p = mc_line_profile(Medium(sigma_s, sigma_a, g), n_photons=200_000, offsets_rows=np.arange(-3, 4),
-                            mm_per_row=w, source_width_mm=w, seed=1)
+        p = mc_line_profile(
+            Medium(sigma_s, sigma_a, g),
+            n_photons=200_000,
+            offsets_rows=np.arange(-3, 4),
+            mm_per_row=w,
+            source_width_mm=w,
+            seed=1,
+        )
         L1 = sigma_s * hg_phase(-1.0, g) / (2.0 * 1.0 * w)
         a = sigma_s
         assert abs(p.radiance[3] - L1) < 4 * p.radiance_stderr[3] + 3 * a * L1, (g, p.radiance[3], L1)
@@ -191,8 +198,9 @@ def test_non_absorbing_medium_finishes_and_reports_truncation():
     assert 0.0 < p.truncated < 0.15
     assert abs(p.energy_balance - 1.0) < 1e-9
     # A larger cutoff truncates less (~ 1 / cutoff for a random walk).
-    q = mc_line_profile(Medium(1.0, 0.0, 0.9), n_photons=5_000, offsets_rows=off, seed=0,
-                        cutoff_mm=4 * p.params["cutoff_mm"])
+    q = mc_line_profile(
+        Medium(1.0, 0.0, 0.9), n_photons=5_000, offsets_rows=off, seed=0, cutoff_mm=4 * p.params["cutoff_mm"]
+    )
     assert q.truncated < 0.5 * p.truncated
 
 
@@ -215,10 +223,13 @@ def test_default_wax_scene_uses_the_shipped_kernel(tmp_path, monkeypatch):
     assert not any(tmp_path.rglob("*.npz"))
 
 
-@pytest.mark.parametrize("medium", [
-    dict(sigma_s=1.0, sigma_a=0.0, g=0.5, n=1.0),    # non-absorbing: the case the hybrid is for
-    dict(sigma_s=2.0, sigma_a=0.01, g=0.8, n=1.4),   # absorption (K1 law) and a Fresnel boundary (A > 1)
-])
+@pytest.mark.parametrize(
+    "medium",
+    [
+        dict(sigma_s=1.0, sigma_a=0.0, g=0.5, n=1.0),  # non-absorbing: the case the hybrid is for
+        dict(sigma_s=2.0, sigma_a=0.01, g=0.8, n=1.4),  # absorption (K1 law) and a Fresnel boundary (A > 1)
+    ],
+)
 def test_hybrid_diffusion_continuation_matches_full_tracing(medium):
     # Photons handed to diffusion theory 10 transport mfp deep must land where fully
     # traced photons land (bin by bin within the combined Monte Carlo error), for a
@@ -229,16 +240,20 @@ def test_hybrid_diffusion_continuation_matches_full_tracing(medium):
     full = mc_line_profile(Medium(**medium), **kw, seed=2, diffusion_depth_mfp=None, cutoff_mm=600.0)  # 20x the window
     assert hyb.n_interactions < 0.5 * full.n_interactions
     assert abs(hyb.energy_balance - 1.0) < 1e-9 and hyb.truncated < 1e-3
-    for a, b, ea, eb in ((hyb.values, full.values, hyb.stderr, full.stderr),
-                         (hyb.radiance, full.radiance, hyb.radiance_stderr, full.radiance_stderr)):
+    for a, b, ea, eb in (
+        (hyb.values, full.values, hyb.stderr, full.stderr),
+        (hyb.radiance, full.radiance, hyb.radiance_stderr, full.radiance_stderr),
+    ):
         z = (a - b) / np.hypot(ea, eb)
-        assert np.mean(z ** 2) < 2.0 and np.abs(z).max() < 5.0
+        assert np.mean(z**2) < 2.0 and np.abs(z).max() < 5.0
         for lo, hi in ((0, 5), (5, 15), (15, 31)):
             m = (np.abs(off) >= lo) & (np.abs(off) < hi)
             err = np.sqrt((ea[m] ** 2).sum() + (eb[m] ** 2).sum())  # bins independent: conservative
             assert abs(a[m].sum() - b[m].sum()) < 4 * err + 0.01 * b[m].sum(), (lo, hi)
-    assert abs(hyb.total_reflectance - full.total_reflectance - full.truncated) < \
-        4 * np.hypot(hyb.total_reflectance_stderr, full.total_reflectance_stderr) + 2e-3
+    assert (
+        abs(hyb.total_reflectance - full.total_reflectance - full.truncated)
+        < 4 * np.hypot(hyb.total_reflectance_stderr, full.total_reflectance_stderr) + 2e-3
+    )
 
 
 def test_diffusion_exit_law():
@@ -281,11 +296,12 @@ def test_point_source_radial_profile():
     assert abs(p.energy_balance - 1.0) < 1e-9 and p.params["source"] == "point"
     # Same medium, same total reflectance whatever the source's shape.
     assert abs(p.total_reflectance - line.total_reflectance) < 4 * np.hypot(
-        p.total_reflectance_stderr, line.total_reflectance_stderr)
+        p.total_reflectance_stderr, line.total_reflectance_stderr
+    )
     # Annuli: per-area reflectance decays like the diffusion dipole's R_d(r) far out
     # (Farrell 1992 / Jensen 2001), here between 8 and 12 mfp (nearer the source the dipole
     # itself is off by up to 10 % at n = 1: measured ratio 0.91 between 4 and 9 mfp).
-    area = np.pi * ((k + 0.5) ** 2 - np.maximum(k - 0.5, 0) ** 2) * mfp ** 2
+    area = np.pi * ((k + 0.5) ** 2 - np.maximum(k - 0.5, 0) ** 2) * mfp**2
     rd = p.values / area
     ref = dipole_reflectance(medium, k * mfp)
     r_mc, r_dp = rd[8] / rd[12], ref[8] / ref[12]

@@ -31,10 +31,10 @@ MS_OFFSETS = np.arange(-10, 11)
 def ms_profiles():
     # ~1e6 camera paths (49k per bin; 1024 rows along the line keep the row-spread
     # standard error honest for the skewed far bins) and 3e5 MC photons: ~10 s.
-    mi = mitsuba_line_profile(MS, MS_OFFSETS, mm_per_row=MS_MM_PER_ROW,
-                              spp=48, along_pixels=1024, seed=1)
-    mc = mc_line_profile(MS, n_photons=300_000, offsets_rows=MS_OFFSETS,
-                         mm_per_row=MS_MM_PER_ROW, source_width_mm=MS_MM_PER_ROW, seed=0)
+    mi = mitsuba_line_profile(MS, MS_OFFSETS, mm_per_row=MS_MM_PER_ROW, spp=48, along_pixels=1024, seed=1)
+    mc = mc_line_profile(
+        MS, n_photons=300_000, offsets_rows=MS_OFFSETS, mm_per_row=MS_MM_PER_ROW, source_width_mm=MS_MM_PER_ROW, seed=0
+    )
     return mi, mc
 
 
@@ -54,8 +54,7 @@ def test_single_scattering_matches_closed_form(g):
     offsets = np.arange(-2, 4)
     medium = Medium(sigma_s, sigma_a, g)
     l1 = single_scattering_radiance(medium, source_width_mm=mm)
-    single = mitsuba_line_profile(medium, offsets, mm_per_row=mm, spp=512, along_pixels=32,
-                                  max_depth=2, seed=2)
+    single = mitsuba_line_profile(medium, offsets, mm_per_row=mm, spp=512, along_pixels=32, max_depth=2, seed=2)
     on = offsets == 0
     assert abs(single.radiance[on][0] - l1) < 4 * single.stderr[on][0]
     assert single.stderr[on][0] < 0.01 * l1
@@ -64,8 +63,7 @@ def test_single_scattering_matches_closed_form(g):
 
     # All orders: multiple scattering adds O(albedo) relative (albedo = 0.02), in the
     # strip and as a faint halo beside it.
-    full = mitsuba_line_profile(medium, offsets, mm_per_row=mm, spp=512, along_pixels=32,
-                                seed=3)
+    full = mitsuba_line_profile(medium, offsets, mm_per_row=mm, spp=512, along_pixels=32, seed=3)
     albedo = sigma_s / (sigma_s + sigma_a)
     assert abs(full.radiance[on][0] - l1) < 4 * full.stderr[on][0] + 2 * albedo * l1
     assert np.all(full.radiance[~on] < albedo * l1)
@@ -75,9 +73,9 @@ def test_profile_symmetric_and_peaked_at_zero(ms_profiles):
     mi, _ = ms_profiles
     assert mi.offsets_rows[np.argmax(mi.radiance)] == 0
     center = len(MS_OFFSETS) // 2
-    right = mi.radiance[center + 1:]
+    right = mi.radiance[center + 1 :]
     left = mi.radiance[:center][::-1]
-    se = np.hypot(mi.stderr[center + 1:], mi.stderr[:center][::-1])
+    se = np.hypot(mi.stderr[center + 1 :], mi.stderr[:center][::-1])
     assert np.all(np.abs(right - left) < 4 * se)
     # Monotone decay away from the line on both sides, beyond the noise.
     assert np.all(np.diff(right[:5]) < 0) and np.all(np.diff(left[:5]) < 0)
@@ -95,8 +93,9 @@ def test_matches_planeray_mc(ms_profiles):
     z = diff / se
     assert np.mean(z**2) < 2.5
     ratio = mi.radiance.sum() / mc.radiance.sum()
-    ratio_se = np.hypot(np.sqrt(np.sum(mi.stderr**2)) / mi.radiance.sum(),
-                        np.sqrt(np.sum(mc.radiance_stderr**2)) / mc.radiance.sum())
+    ratio_se = np.hypot(
+        np.sqrt(np.sum(mi.stderr**2)) / mi.radiance.sum(), np.sqrt(np.sum(mc.radiance_stderr**2)) / mc.radiance.sum()
+    )
     assert abs(ratio - 1.0) < min(0.03, 4 * ratio_se + 0.01)
 
 

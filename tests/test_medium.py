@@ -18,26 +18,29 @@ from planeray.medium import Medium, as_medium
 # ----------------------------------------------------------------------------- the value
 
 
-@pytest.mark.parametrize("field, kwargs", [
-    ("sigma_s", dict(sigma_s=-0.1)),
-    ("sigma_s", dict(sigma_s=math.inf)),
-    ("sigma_s", dict(sigma_s=math.nan)),
-    ("sigma_s", dict(sigma_s="thick")),
-    ("sigma_a", dict(sigma_a=-1e-9)),
-    ("sigma_a", dict(sigma_a=math.nan)),
-    ("sigma_a", dict(sigma_a=None)),
-    ("g", dict(g=1.0)),
-    ("g", dict(g=-1.0)),
-    ("g", dict(g=1.5)),
-    ("g", dict(g=math.nan)),
-    ("n", dict(n=0.0)),
-    ("n", dict(n=-1.4)),
-    ("n", dict(n=math.inf)),
-    ("thickness_mm", dict(thickness_mm=0.0)),
-    ("thickness_mm", dict(thickness_mm=-2.0)),
-    ("thickness_mm", dict(thickness_mm=math.nan)),
-    ("sigma_s + sigma_a", dict(sigma_s=0.0, sigma_a=0.0)),
-])
+@pytest.mark.parametrize(
+    ("field", "kwargs"),
+    [
+        ("sigma_s", dict(sigma_s=-0.1)),
+        ("sigma_s", dict(sigma_s=math.inf)),
+        ("sigma_s", dict(sigma_s=math.nan)),
+        ("sigma_s", dict(sigma_s="thick")),
+        ("sigma_a", dict(sigma_a=-1e-9)),
+        ("sigma_a", dict(sigma_a=math.nan)),
+        ("sigma_a", dict(sigma_a=None)),
+        ("g", dict(g=1.0)),
+        ("g", dict(g=-1.0)),
+        ("g", dict(g=1.5)),
+        ("g", dict(g=math.nan)),
+        ("n", dict(n=0.0)),
+        ("n", dict(n=-1.4)),
+        ("n", dict(n=math.inf)),
+        ("thickness_mm", dict(thickness_mm=0.0)),
+        ("thickness_mm", dict(thickness_mm=-2.0)),
+        ("thickness_mm", dict(thickness_mm=math.nan)),
+        ("sigma_s + sigma_a", dict(sigma_s=0.0, sigma_a=0.0)),
+    ],
+)
 def test_bad_fields_raise_input_error_naming_them(field, kwargs):
     base = dict(sigma_s=1.0, sigma_a=0.01, g=0.9)
     with pytest.raises(InputError, match=field.replace("+", r"\+")):
@@ -153,9 +156,18 @@ def test_mc_line_profile_of_a_medium_is_the_cached_result_of_the_same_parameters
     # values, so entries written earlier (and the shipped tables) are still found.
     assert [p.name for p in (tmp_path / "mc").glob("*.npz")] == ["7fe25a03cb3c0f1f0e498f1c0672a6c3.npz"]
     assert list(fresh.params.items()) == [
-        ("sigma_s", 1.0), ("sigma_a", 0.2), ("g", 0.3), ("n", 1.33), ("thickness", 4.0),
-        ("n_photons", 3000), ("mm_per_row", 1.0), ("seed", 1), ("source_width_mm", 0.0),
-        ("cutoff_mm", 202.0), ("diffusion_depth_mfp", 10.0)]
+        ("sigma_s", 1.0),
+        ("sigma_a", 0.2),
+        ("g", 0.3),
+        ("n", 1.33),
+        ("thickness", 4.0),
+        ("n_photons", 3000),
+        ("mm_per_row", 1.0),
+        ("seed", 1),
+        ("source_width_mm", 0.0),
+        ("cutoff_mm", 202.0),
+        ("diffusion_depth_mfp", 10.0),
+    ]
     loaded = mc_line_profile(Medium(1, 0.2, 0.3, n=1.33, thickness_mm=4), **kw, cache=True)
     for p in (stored, loaded):
         assert p.values.tobytes() == fresh.values.tobytes()
@@ -175,9 +187,19 @@ def test_the_default_wax_medium_keys_the_shipped_table():
 
     assert WAX_MEDIUM == Medium.from_reduced(0.3, 0.003, g=0.8, n=1.4)
     canon = np.arange(-MC_KERNEL_REACH_ROWS, MC_KERNEL_REACH_ROWS + 1)
-    params = dict(sigma_s=WAX_MEDIUM.sigma_s, sigma_a=0.003, g=0.8, n=1.4, thickness=None,
-                  n_photons=1_000_000, mm_per_row=0.3, seed=0, source_width_mm=0.0,
-                  cutoff_mm=default_cutoff_mm(WAX_MEDIUM, canon, mm_per_row=0.3), diffusion_depth_mfp=10.0)
+    params = dict(
+        sigma_s=WAX_MEDIUM.sigma_s,
+        sigma_a=0.003,
+        g=0.8,
+        n=1.4,
+        thickness=None,
+        n_photons=1_000_000,
+        mm_per_row=0.3,
+        seed=0,
+        source_width_mm=0.0,
+        cutoff_mm=default_cutoff_mm(WAX_MEDIUM, canon, mm_per_row=0.3),
+        diffusion_depth_mfp=10.0,
+    )
     assert (TABLES_DIR / f"{cache_key(params, canon)}.npz").exists()
 
 
@@ -198,11 +220,14 @@ def test_models_take_a_medium_and_refuse_loose_floats():
     slab = Medium(1.0, 0.1, 0.5, thickness_mm=2.0)
     u = np.arange(-3, 4)
     # The dipole and the Mitsuba scene model half-spaces only (the latter index-matched).
-    for call in (lambda: dipole_total_reflectance(slab), lambda: dipole_reflectance(slab, [1.0]),
-                 lambda: dipole_line_kernel(slab, u, mm_per_row=1.0),
-                 lambda: line_kernel(slab, u, mm_per_row=1.0, model="dipole"),
-                 lambda: mitsuba_line_profile(Medium(1.0, 0.1, 0.5, n=1.4), u, mm_per_row=1.0),
-                 lambda: single_scattering_radiance(slab, source_width_mm=1.0)):
+    for call in (
+        lambda: dipole_total_reflectance(slab),
+        lambda: dipole_reflectance(slab, [1.0]),
+        lambda: dipole_line_kernel(slab, u, mm_per_row=1.0),
+        lambda: line_kernel(slab, u, mm_per_row=1.0, model="dipole"),
+        lambda: mitsuba_line_profile(Medium(1.0, 0.1, 0.5, n=1.4), u, mm_per_row=1.0),
+        lambda: single_scattering_radiance(slab, source_width_mm=1.0),
+    ):
         with pytest.raises(InputError):
             call()
     # The dipole sees only sigma_a, sigma_s' and n: media of equal sigma_s' agree.

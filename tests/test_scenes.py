@@ -103,7 +103,9 @@ def test_projector_rows_720(name):
     prof = T.dense[t, c]
     support = T.offsets_rows[prof > 1e-6 * prof.max()]
     assert 5 <= support.size <= 8 and support.min() >= -4 and support.max() <= 4
-    np.testing.assert_allclose(prof[near] / s.direct[t, c], footprint_kernel(T.offsets_rows, 720 / 128)[near], atol=1e-5)
+    np.testing.assert_allclose(
+        prof[near] / s.direct[t, c], footprint_kernel(T.offsets_rows, 720 / 128)[near], atol=1e-5
+    )
     img = T.render(Band(0.0, 600.0, LPS))
     assert img.shape == (128, 128) and np.all(np.isfinite(img))
 

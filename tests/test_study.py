@@ -55,7 +55,12 @@ def test_run_study_quick_writes_files(tmp_path, provider):
     names = {p.name for p in tmp_path.iterdir()}
     for stem in ("fig5_reconstruction", "fig5c_mse_vs_noise", "regularization_sweep"):
         assert f"{stem}.png" in names and f"{stem}.csv" in names
-    assert {"fig6_mse_vs_params.png", "fig6a_mse_vs_sigma_s.csv", "fig6b_mse_vs_sigma_a.csv", "fig6c_mse_vs_g.csv"} <= names
+    assert {
+        "fig6_mse_vs_params.png",
+        "fig6a_mse_vs_sigma_s.csv",
+        "fig6b_mse_vs_sigma_a.csv",
+        "fig6c_mse_vs_g.csv",
+    } <= names
     assert not any(n.startswith(".") for n in names)  # no temporaries left
     header = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()[0]
     assert header == "noise,seed,pinv,nnls,full"

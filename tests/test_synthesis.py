@@ -61,7 +61,11 @@ def test_relighting_is_linear(noise_free):
 def test_relighting_is_exact_on_a_noise_free_stack(noise_free):
     scene, _, est = noise_free["mirror_ball"]
     rows = np.arange(270)
-    for pattern in (np.ones(270), np.exp(-0.5 * ((rows - 135) / 50.0) ** 2), 0.5 + 0.5 * np.cos(rows / 270 * 2 * np.pi)):
+    for pattern in (
+        np.ones(270),
+        np.exp(-0.5 * ((rows - 135) / 50.0) ** 2),
+        0.5 + 0.5 * np.cos(rows / 270 * 2 * np.pi),
+    ):
         truth = relight(scene.transport, pattern) * QUIET.signal_scale
         got = relight(est, pattern)
         # light from beyond the sweep's +-114 rows (far specular reflections) is not in the estimate
@@ -138,12 +142,21 @@ def test_patterns(tmp_path):
 
 def test_synth_cli(noise_free, tmp_path):
     _, _, est = noise_free["mirror_ball"]
-    store = write_transport(est, tmp_path / "T.zarr", attrs={"lines_per_second": 54000.0, "epipolar_resolution_rows": 6.075})
+    store = write_transport(
+        est, tmp_path / "T.zarr", attrs={"lines_per_second": 54000.0, "epipolar_resolution_rows": 6.075}
+    )
     runner = CliRunner()
     np.save(tmp_path / "pattern.npy", np.linspace(0, 1, 270))
-    for args in (["--epipolar"], ["--non-epipolar"], ["--sharpen", "4"], ["--relight", "100"],
-                 ["--relight", str(tmp_path / "pattern.npy")], ["--band", "937.5", "1000"], ["--short-range", "40"],
-                 ["--long-range", "40"]):
+    for args in (
+        ["--epipolar"],
+        ["--non-epipolar"],
+        ["--sharpen", "4"],
+        ["--relight", "100"],
+        ["--relight", str(tmp_path / "pattern.npy")],
+        ["--band", "937.5", "1000"],
+        ["--short-range", "40"],
+        ["--long-range", "40"],
+    ):
         res = runner.invoke(app, ["synth", str(store), *args, "--out", str(tmp_path / "x.png")])
         assert res.exit_code == 0, (args, res.output)
     res = runner.invoke(app, ["synth", str(store), "--band", "0", "600", "--out", str(tmp_path / "x.tif")])

@@ -77,7 +77,7 @@ def _brute_force_bins(k, centre, width, sigma=0.0, line=0.0, n=801):
     return np.array(out)
 
 
-@pytest.mark.parametrize("sigma,line", [(0.0, 0.0), (0.8, 0.0), (0.0, 1.5), (0.6, 1.0)])
+@pytest.mark.parametrize(("sigma", "line"), [(0.0, 0.0), (0.8, 0.0), (0.0, 1.5), (0.6, 1.0)])
 def test_bin_weights_match_brute_force_integration(sigma, line):
     k = np.arange(-12, 13)
     w = band_bin_weights(k, 2.3, 9.7, blur_sigma_rows=sigma, line_width_rows=line)

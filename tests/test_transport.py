@@ -59,7 +59,9 @@ def test_pattern_render_and_scaled_geometry():
 def test_sparse_entries_render_like_a_wide_dense_band():
     wide = _random_transport(K=60, seed=3)
     rows, cols, ks = np.nonzero(wide.dense)
-    narrow = Transport.from_entries(wide.shape, np.arange(-20, 21), rows, cols, wide.offsets_rows[ks], wide.dense[rows, cols, ks])
+    narrow = Transport.from_entries(
+        wide.shape, np.arange(-20, 21), rows, cols, wide.offsets_rows[ks], wide.dense[rows, cols, ks]
+    )
     assert len(narrow.sparse) > 0
     for band in [Band(900.0, 900.0, 54000), Band(-1100.0, 600.0, 54000), Band(0.0, 1200.0, 54000)]:
         np.testing.assert_allclose(narrow.render(band), wide.render(band), rtol=1e-5, atol=1e-4)

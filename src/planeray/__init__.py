@@ -87,9 +87,27 @@ _EXPORTS = {
 }
 
 _SUBMODULES = {
-    "timing", "transport", "stack", "camera", "scenes", "devices", "acquire", "calibration", "io",
-    "demux", "synthesis", "profiles", "classify", "baselines", "mc", "kernels", "study", "figures",
-    "experiments", "errors", "medium",
+    "timing",
+    "transport",
+    "stack",
+    "camera",
+    "scenes",
+    "devices",
+    "acquire",
+    "calibration",
+    "io",
+    "demux",
+    "synthesis",
+    "profiles",
+    "classify",
+    "baselines",
+    "mc",
+    "kernels",
+    "study",
+    "figures",
+    "experiments",
+    "errors",
+    "medium",
 }
 
 __all__ = ["__version__", *_EXPORTS]
@@ -124,5 +142,15 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from .scenes import list_scenes, make_scene
     from .stack import Stack
     from .synthesis import band_image, epipolar_image, non_epipolar_image, relight, sharpened_epipolar, short_long_range
-    from .timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, Band, RowGeometry, RowPattern, Sweep, make_sweep, paper_sweep, quick_sweep
+    from .timing import (
+        PAPER_LINES_PER_SECOND,
+        PAPER_PROJECTOR_ROWS,
+        Band,
+        RowGeometry,
+        RowPattern,
+        Sweep,
+        make_sweep,
+        paper_sweep,
+        quick_sweep,
+    )
     from .transport import SparseEntries, Transport

@@ -33,8 +33,17 @@ def _is_real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
-def check_number(value, name: str, *, minimum=None, maximum=None, min_inclusive=True, max_inclusive=True,
-                 requirement: str | None = None, error=InputError) -> float:
+def check_number(
+    value,
+    name: str,
+    *,
+    minimum=None,
+    maximum=None,
+    min_inclusive=True,
+    max_inclusive=True,
+    requirement: str | None = None,
+    error=InputError,
+) -> float:
     """A finite real number inside ``[minimum, maximum]`` (bounds optional, inclusive by default).
 
     Parameters

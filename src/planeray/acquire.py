@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -62,12 +62,16 @@ def acquire_sweep(device: Device, sweep: Sweep, *, progress: Callable[[int], Non
     )
 
 
-def simulate_stack(scene, sweep: Sweep, *, camera=None, lines_per_second=None, seed=0, noise=True, progress=None) -> Stack:
+def simulate_stack(
+    scene, sweep: Sweep, *, camera=None, lines_per_second=None, seed=0, noise=True, progress=None
+) -> Stack:
     """Simulate a sweep of a scene on the simulated Episcan (convenience for notebooks)."""
     from .devices.simulated import SimulatedEpiscan
     from .timing import PAPER_LINES_PER_SECOND
 
-    device = SimulatedEpiscan(scene, camera, lines_per_second=lines_per_second or PAPER_LINES_PER_SECOND, seed=seed, noise=noise)
+    device = SimulatedEpiscan(
+        scene, camera, lines_per_second=lines_per_second or PAPER_LINES_PER_SECOND, seed=seed, noise=noise
+    )
     return acquire_sweep(device, sweep, progress=progress)
 
 
@@ -78,8 +82,16 @@ def _capture_metadata(device: Device, sweep: Sweep) -> dict:
     return meta
 
 
-def acquire_to_store(device: Device, sweep: Sweep, out, *, overwrite: bool = False, restart: bool = False,
-                     progress: Callable[[int], None] | None = None, _stop_after: int | None = None) -> Path:
+def acquire_to_store(
+    device: Device,
+    sweep: Sweep,
+    out,
+    *,
+    overwrite: bool = False,
+    restart: bool = False,
+    progress: Callable[[int], None] | None = None,
+    _stop_after: int | None = None,
+) -> Path:
     """Capture a sweep straight into a native stack store; resumable.
 
     Each image is written, then marked captured.  A capture that is killed and
@@ -123,11 +135,22 @@ def acquire_to_store(device: Device, sweep: Sweep, out, *, overwrite: bool = Fal
         device.set_exposure(float(sweep.exposure_us[0]))
         first = device.grab()
         shape = first[0].shape
-    projector_rows = meta.get("projector_rows") or meta.get("scene", {}).get("projector_rows") or (shape[0] if shape else None)
+    projector_rows = (
+        meta.get("projector_rows") or meta.get("scene", {}).get("projector_rows") or (shape[0] if shape else None)
+    )
 
     def create(directory):
-        return create_stack_group(directory, (len(sweep), *shape), sweep.delay_us, sweep.exposure_us, sweep.excluded,
-                                  device.lines_per_second, projector_rows, meta, path=out)
+        return create_stack_group(
+            directory,
+            (len(sweep), *shape),
+            sweep.delay_us,
+            sweep.exposure_us,
+            sweep.excluded,
+            device.lines_per_second,
+            projector_rows,
+            meta,
+            path=out,
+        )
 
     group = resumable.open_partial(out, fingerprint, len(sweep), create, restart=restart)
     done = resumable.done_units(group)

@@ -177,7 +177,9 @@ class CameraModel:
         return total, saturated
 
 
-def row_shifts_rows(rng: np.random.Generator, n_frames: int, camera_rows: int, row_jitter_us: float, lines_per_second: float):
+def row_shifts_rows(
+    rng: np.random.Generator, n_frames: int, camera_rows: int, row_jitter_us: float, lines_per_second: float
+):
     """Realized per-frame, per-row trigger offsets ``(n_frames, H)`` in projector rows.
 
     Returns None when ``row_jitter_us`` is 0 (no artifacts).

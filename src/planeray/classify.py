@@ -18,7 +18,14 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["CLASSIFY_THRESHOLDS", "ProfileCharacter", "characterize", "classify_transport", "visible_effect_mask", "label_agreement"]
+__all__ = [
+    "CLASSIFY_THRESHOLDS",
+    "ProfileCharacter",
+    "characterize",
+    "classify_transport",
+    "visible_effect_mask",
+    "label_agreement",
+]
 
 #: Rule thresholds of :func:`characterize` and :func:`classify_transport`, by
 #: keyword (tuned on demultiplexed transports of the built-in scenes: 64x64
@@ -201,7 +208,8 @@ def _fwhm(S, main_k, main_h):
 def characterize(
     T_profiles,
     offsets_rows,
-    *, resolution_rows=0.0,
+    *,
+    resolution_rows=0.0,
     footprint_rows=0.0,
     valid=None,
     direct_fwhm_rows=None,
@@ -312,7 +320,11 @@ def characterize(
     U = offsets.size
     P = T.reshape(-1, U)
     N = P.shape[0]
-    V = np.ones_like(P, dtype=bool) if valid is None else np.broadcast_to(np.asarray(valid, bool), T.shape).reshape(N, U)
+    V = (
+        np.ones_like(P, dtype=bool)
+        if valid is None
+        else np.broadcast_to(np.asarray(valid, bool), T.shape).reshape(N, U)
+    )
     P = np.where(V & np.isfinite(P), P, 0.0)
     cell = float(resolution_rows) + 0.5 * float(footprint_rows) + 0.5
     bins = int(th["smooth_bins"])
@@ -435,7 +447,9 @@ def _inside_projector(geometry, rows, offsets, margin=EDGE_MARGIN_BINS) -> np.nd
     return full
 
 
-def classify_transport(transport, *, resolution_rows=0.0, support_rows=None, chunk_rows=32, return_character=False, **thresholds):
+def classify_transport(
+    transport, *, resolution_rows=0.0, support_rows=None, chunk_rows=32, return_character=False, **thresholds
+):
     """Effect label of every pixel of a transport from its profile ``T(u)``.
 
     Parameters
@@ -497,7 +511,9 @@ def classify_transport(transport, *, resolution_rows=0.0, support_rows=None, chu
             )
         )
     fields = [f for f in ProfileCharacter.__dataclass_fields__ if f != "cell_rows"]
-    ch = ProfileCharacter(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}, cell_rows=parts[0].cell_rows)
+    ch = ProfileCharacter(
+        **{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}, cell_rows=parts[0].cell_rows
+    )
     direct = (ch.label == 1) & np.isfinite(ch.fwhm_rows)
     if direct.sum() >= MIN_DIRECT_PIXELS:
         broadening = thresholds.get("broadening")
@@ -584,4 +600,10 @@ def label_agreement(pred, truth_labels, *, mask=None, n_labels=5) -> dict:
     recall = {k: float(confusion[k, k] / counts[k]) for k in range(1, n_labels) if counts[k] > 0}
     n = int(counts.sum())
     overall = float(np.trace(confusion[1:, 1:]) / n) if n else float("nan")
-    return {"recall": recall, "counts": {k: int(counts[k]) for k in range(1, n_labels) if counts[k] > 0}, "confusion": confusion, "overall": overall, "n": n}
+    return {
+        "recall": recall,
+        "counts": {k: int(counts[k]) for k in range(1, n_labels) if counts[k] > 0},
+        "confusion": confusion,
+        "overall": overall,
+        "n": n,
+    }

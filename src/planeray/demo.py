@@ -35,8 +35,9 @@ def _simulate(name, out_dir, size, seed, console, progress):
     stack_path = out_dir / f"{name}.zarr"
     with progress() as bar:
         task = bar.add_task(f"{name}: capturing {len(sweep)} images", total=len(sweep))
-        stack = pr.simulate_stack(scene, sweep, lines_per_second=pr.PAPER_LINES_PER_SECOND, seed=seed,
-                               progress=lambda i: bar.advance(task))
+        stack = pr.simulate_stack(
+            scene, sweep, lines_per_second=pr.PAPER_LINES_PER_SECOND, seed=seed, progress=lambda i: bar.advance(task)
+        )
         task = bar.add_task(f"{name}: writing stack", total=len(sweep))
         pr.write_stack(stack, stack_path, overwrite=True, progress=lambda i: bar.advance(task))
     truth_path = out_dir / f"{name}_truth.zarr"
@@ -87,8 +88,12 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
     written["transport_mirror_ball"] = transport_path
     written["transport_vs_truth"] = out_dir / "transport_vs_truth.png"
     transport_profiles_figure(
-        estimate, pixels, out=written["transport_vs_truth"], truth=mirror.transport,
-        truth_scale=float(mirror_stack.metadata["signal_scale"]), names=names,
+        estimate,
+        pixels,
+        out=written["transport_vs_truth"],
+        truth=mirror.transport,
+        truth_scale=float(mirror_stack.metadata["signal_scale"]),
+        names=names,
         resolution_rows=attrs["epipolar_resolution_rows"],
         title="Demultiplexed T(u) (solid) vs ground truth x signal scale (dashed); grey: cell the sweep cannot split",
     )

@@ -85,8 +85,9 @@ def mc_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, n_photons=MC_KER
     k = np.asarray(offsets_rows, dtype=np.int64)
     reach = max(MC_KERNEL_REACH_ROWS, int(64 * np.ceil((np.abs(k).max() + 1) / 64.0)))
     canon = np.arange(-reach, reach + 1)
-    prof = mc_line_profile(as_medium(medium), n_photons=n_photons, offsets_rows=canon,
-                           mm_per_row=mm_per_row, seed=seed, cache=True)
+    prof = mc_line_profile(
+        as_medium(medium), n_photons=n_photons, offsets_rows=canon, mm_per_row=mm_per_row, seed=seed, cache=True
+    )
     return prof.values[k + reach], prof.total_reflectance
 
 
@@ -114,8 +115,10 @@ def line_kernel(medium: Medium, offsets_rows, *, mm_per_row, model):
     total : float
     """
     if model == "dipole":
-        return (dipole_line_kernel(medium, offsets_rows, mm_per_row=mm_per_row),
-                float(dipole_total_reflectance(medium)))
+        return (
+            dipole_line_kernel(medium, offsets_rows, mm_per_row=mm_per_row),
+            float(dipole_total_reflectance(medium)),
+        )
     if model == "mc":
         return mc_line_kernel(medium, offsets_rows, mm_per_row=mm_per_row)
     raise ValueError(f"unknown kernel model {model!r}; expected one of {KERNEL_MODELS}")

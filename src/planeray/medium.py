@@ -107,8 +107,9 @@ class Medium:
         if sigma_a < 0:
             raise InputError(f"sigma_a must be >= 0, got {sigma_a}")
         if not sigma_s + sigma_a > 0:
-            raise InputError(f"need sigma_s + sigma_a > 0 (a medium that interacts), got sigma_s {sigma_s}, "
-                             f"sigma_a {sigma_a}")
+            raise InputError(
+                f"need sigma_s + sigma_a > 0 (a medium that interacts), got sigma_s {sigma_s}, sigma_a {sigma_a}"
+            )
         if not -1.0 < g < 1.0:
             raise InputError(f"g must lie in (-1, 1), got {g}")
         if not n > 0:
@@ -175,8 +176,13 @@ class Medium:
     # ------------------------------------------------------------ plain data
     def to_dict(self) -> dict:
         """JSON-ready fields; a semi-infinite medium has ``thickness_mm: None``."""
-        return {"sigma_s": self.sigma_s, "sigma_a": self.sigma_a, "g": self.g, "n": self.n,
-                "thickness_mm": None if self.semi_infinite else self.thickness_mm}
+        return {
+            "sigma_s": self.sigma_s,
+            "sigma_a": self.sigma_a,
+            "g": self.g,
+            "n": self.n,
+            "thickness_mm": None if self.semi_infinite else self.thickness_mm,
+        }
 
     @classmethod
     def from_dict(cls, data) -> Medium:
@@ -201,5 +207,7 @@ def as_medium(value) -> Medium:
     """``value`` if it is a :class:`Medium`; otherwise a ``TypeError`` saying how to build one."""
     if isinstance(value, Medium):
         return value
-    raise TypeError(f"expected a planeray.Medium, got {type(value).__name__} {value!r}; build one with "
-                    "Medium(sigma_s=..., sigma_a=..., g=..., n=..., thickness_mm=...)")
+    raise TypeError(
+        f"expected a planeray.Medium, got {type(value).__name__} {value!r}; build one with "
+        "Medium(sigma_s=..., sigma_a=..., g=..., n=..., thickness_mm=...)"
+    )

@@ -167,7 +167,9 @@ def _check_pixels(pixels, shape) -> np.ndarray:
     return px
 
 
-def transport_delay_profiles(transport, pixels=None, *, exposure_us=None, delays_us=None, lines_per_second=PAPER_LINES_PER_SECOND) -> TransportDelayProfiles:
+def transport_delay_profiles(
+    transport, pixels=None, *, exposure_us=None, delays_us=None, lines_per_second=PAPER_LINES_PER_SECOND
+) -> TransportDelayProfiles:
     """Continuous delay profiles of a transport (Sec. 8 on an estimated or true ``T``).
 
     Parameters

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -48,7 +48,10 @@ def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], o
     if partial.exists():
         group = zarr.open_group(str(partial), mode="r+")
         if group.attrs.get(_FINGERPRINT) != fingerprint or _DONE not in group:
-            raise InputError("an unfinished run with different inputs or parameters is in the way; remove it or run with --restart", partial)
+            raise InputError(
+                "an unfinished run with different inputs or parameters is in the way; remove it or run with --restart",
+                partial,
+            )
         return group
     tmp = partial.parent / f"{partial.name}.init"
     shutil.rmtree(tmp, ignore_errors=True)

@@ -57,9 +57,7 @@ class Stack:
         self.exposure_us = np.asarray(self.exposure_us, dtype=np.float64).ravel()
         n = len(self.images)
         if self.delay_us.size != n or self.exposure_us.size != n:
-            raise StackError(
-                f"{n} images but {self.delay_us.size} delays and {self.exposure_us.size} exposures"
-            )
+            raise StackError(f"{n} images but {self.delay_us.size} delays and {self.exposure_us.size} exposures")
         if len(self.images.shape) != 3:
             raise StackError(f"images must be (N, H, W), got shape {tuple(self.images.shape)}")
         if not np.isfinite(self.lines_per_second) or self.lines_per_second <= 0:
@@ -74,7 +72,9 @@ class Stack:
         if self.excluded.size != n:
             raise StackError(f"excluded has {self.excluded.size} entries for {n} images")
         if self.saturated is not None and tuple(self.saturated.shape) != tuple(self.images.shape):
-            raise StackError(f"saturation mask {tuple(self.saturated.shape)} does not match images {tuple(self.images.shape)}")
+            raise StackError(
+                f"saturation mask {tuple(self.saturated.shape)} does not match images {tuple(self.images.shape)}"
+            )
         if self.projector_rows is None:
             self.projector_rows = int(self.images.shape[1])
         self.lines_per_second = float(self.lines_per_second)

@@ -29,8 +29,8 @@ every realization is seeded from ``(seed, point)`` so results are reproducible.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -106,15 +106,20 @@ def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float 
     offsets = np.asarray(offsets)
 
     def profile(sigma_s, sigma_a, g):
-        return dipole_line_kernel(Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=eta), offsets,
-                                  mm_per_row=mm_per_row)
+        return dipole_line_kernel(Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=eta), offsets, mm_per_row=mm_per_row)
 
     profile.name = f"dipole (sigma_s' = sigma_s (1 - g), {mm_per_row} mm/row, eta {eta})"
     return profile
 
 
-def mc_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, seed: int = 0,
-                n: float = 1.0, cache: bool = True) -> Provider:
+def mc_provider(
+    offsets,
+    mm_per_row: float = DEFAULT_MM_PER_ROW,
+    n_photons: int = 200_000,
+    seed: int = 0,
+    n: float = 1.0,
+    cache: bool = True,
+) -> Provider:
     """Profile from :func:`planeray.mc.mc_line_profile`: exitance of a semi-infinite HG medium.
 
     Results are cached on disk (:func:`planeray.mc.cache_dir`), so a second run of
@@ -128,15 +133,23 @@ def mc_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int 
     offsets = np.asarray(offsets)
 
     def profile(sigma_s, sigma_a, g):
-        res = mc_line_profile(Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n), n_photons=int(n_photons),
-                              offsets_rows=offsets, mm_per_row=mm_per_row, seed=seed, cache=cache)
+        res = mc_line_profile(
+            Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n),
+            n_photons=int(n_photons),
+            offsets_rows=offsets,
+            mm_per_row=mm_per_row,
+            seed=seed,
+            cache=cache,
+        )
         return np.asarray(res.values, np.float64)
 
     profile.name = f"Monte Carlo ({n_photons:.0e} photons, {mm_per_row} mm/row, n {n})"
     return profile
 
 
-def default_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, use_mc: bool = True) -> Provider:
+def default_provider(
+    offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, n_photons: int = 200_000, use_mc: bool = True
+) -> Provider:
     """The provider :func:`run_study` uses unless told otherwise: :func:`mc_provider`
     (``use_mc=False``: :func:`dipole_provider`).
 
@@ -219,10 +232,14 @@ def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_
     """Fig. 5a/b: truth and one reconstruction per method (noise realization ``seed``)."""
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
-    B = _observations(setup, T, noise, seed + 1)[seed:seed + 1]
+    B = _observations(setup, T, noise, seed + 1)[seed : seed + 1]
     X = reconstruct(setup, B)
-    return {"offsets": setup.offsets, "truth": T, **{m: x[0] for m, x in X.items()},
-            "mse": {m: float(((x[0] - T) ** 2).mean()) for m, x in X.items()}}
+    return {
+        "offsets": setup.offsets,
+        "truth": T,
+        **{m: x[0] for m, x in X.items()},
+        "mse": {m: float(((x[0] - T) ** 2).mean()) for m, x in X.items()},
+    }
 
 
 def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, **params) -> dict:
@@ -237,7 +254,9 @@ def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, **params
     return {"noise": np.asarray(noises, float), "mse": mse}
 
 
-def parameter_sweep(setup: StudySetup, provider: Provider, name: str, values, seeds=5, noise=DEFAULT_NOISE, **params) -> dict:
+def parameter_sweep(
+    setup: StudySetup, provider: Provider, name: str, values, seeds=5, noise=DEFAULT_NOISE, **params
+) -> dict:
     """Fig. 6: ``mse[method]`` of shape ``(len(values), seeds)`` as ``name`` in
     {'sigma_s', 'sigma_a', 'g'} varies, the others at their defaults."""
     if name not in DEFAULT_PARAMS:
@@ -254,7 +273,9 @@ def parameter_sweep(setup: StudySetup, provider: Provider, name: str, values, se
     return {"name": name, "values": np.asarray(values, float), "mse": mse, "mean_abs_offset": width}
 
 
-def regularization_sweep(setup: StudySetup, provider: Provider, alphas, betas, seeds=5, noise=DEFAULT_NOISE, **params) -> dict:
+def regularization_sweep(
+    setup: StudySetup, provider: Provider, alphas, betas, seeds=5, noise=DEFAULT_NOISE, **params
+) -> dict:
     """MSE, squared bias and variance of the full method over an ``alpha x beta`` grid.
 
     Returns ``mse``, ``bias2`` (mean over offsets of the squared mean error over
@@ -272,8 +293,13 @@ def regularization_sweep(setup: StudySetup, provider: Provider, alphas, betas, s
             err = X - T[None]
             mse[i, j] = (err**2).mean()
             bias2[i, j] = (err.mean(axis=0) ** 2).mean()
-    return {"alphas": np.asarray(alphas, float), "betas": np.asarray(betas, float), "mse": mse, "bias2": bias2,
-            "variance": mse - bias2}
+    return {
+        "alphas": np.asarray(alphas, float),
+        "betas": np.asarray(betas, float),
+        "mse": mse,
+        "bias2": bias2,
+        "variance": mse - bias2,
+    }
 
 
 def grids(quick: bool = False) -> dict:

@@ -86,7 +86,9 @@ def sharpened_epipolar(transport: Transport, *, width_rows: float = 1.0) -> np.n
     return transport.render(offset_window(0.0, width_rows))
 
 
-def band_image(transport: Transport, delay_us: float, exposure_us: float, *, lines_per_second: float = PAPER_LINES_PER_SECOND) -> np.ndarray:
+def band_image(
+    transport: Transport, delay_us: float, exposure_us: float, *, lines_per_second: float = PAPER_LINES_PER_SECOND
+) -> np.ndarray:
     """Banded (indirect) image for any (delay, exposure) -- captured or not (Secs. 4, 7)."""
     return transport.render(Band(float(delay_us), float(exposure_us), float(lines_per_second)))
 

@@ -303,7 +303,13 @@ class Band:
         """Weights over offset bins before clipping to the projector (same for every row)."""
         sigma = self.jitter_us * 1e-6 * self.lines_per_second
         line = self.line_width_us * 1e-6 * self.lines_per_second
-        return band_bin_weights(offsets_rows, self.centre_rows + centre_shift_rows, self.width_rows, blur_sigma_rows=sigma, line_width_rows=line)
+        return band_bin_weights(
+            offsets_rows,
+            self.centre_rows + centre_shift_rows,
+            self.width_rows,
+            blur_sigma_rows=sigma,
+            line_width_rows=line,
+        )
 
     def weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
         """Illumination weight of offset bin ``offsets_rows`` for camera row ``rows`` (broadcast)."""
@@ -381,7 +387,10 @@ class Sweep:
 
     def bands(self, lines_per_second, *, jitter_us=0.0, line_width_us=0.0):
         """One :class:`Band` per image."""
-        return [Band(float(d), float(e), lines_per_second, jitter_us, line_width_us) for d, e in zip(self.delay_us, self.exposure_us)]
+        return [
+            Band(float(d), float(e), lines_per_second, jitter_us, line_width_us)
+            for d, e in zip(self.delay_us, self.exposure_us)
+        ]
 
 
 def boundary_images(delay_us, exposure_us, *, margin_us=PAPER_BOUNDARY_MARGIN_US):

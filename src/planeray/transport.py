@@ -59,7 +59,7 @@ class SparseEntries:
         return self.value.size
 
     @classmethod
-    def empty(cls) -> "SparseEntries":
+    def empty(cls) -> SparseEntries:
         z = np.zeros(0)
         return cls(z, z, z, z)
 
@@ -112,12 +112,12 @@ class Transport:
         return self.dense.shape[:2]
 
     @classmethod
-    def zeros(cls, shape, offsets_rows, *, geometry=None) -> "Transport":
+    def zeros(cls, shape, offsets_rows, *, geometry=None) -> Transport:
         offsets = np.asarray(offsets_rows)
         return cls(np.zeros((*shape, offsets.size), np.float32), offsets, geometry)
 
     @classmethod
-    def from_entries(cls, shape, offsets_rows, row, col, offset, value, *, geometry=None, dense=None) -> "Transport":
+    def from_entries(cls, shape, offsets_rows, row, col, offset, value, *, geometry=None, dense=None) -> Transport:
         """Build a transport from coordinate entries, binning each offset into its bin.
 
         Entries with offsets inside ``offsets_rows`` are added to the dense band (to

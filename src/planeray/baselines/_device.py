@@ -44,7 +44,9 @@ def signal_scale(device) -> float:
 
 
 def capture(device, pattern, exposure_us, frame_period_us):
-    image, saturated = device.capture_pattern(np.asarray(pattern, np.float64), exposure_us, frame_period_us=frame_period_us)
+    image, saturated = device.capture_pattern(
+        np.asarray(pattern, np.float64), exposure_us, frame_period_us=frame_period_us
+    )
     return np.asarray(image, np.float64), np.asarray(saturated, bool)
 
 

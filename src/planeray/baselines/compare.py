@@ -105,7 +105,8 @@ def _label_masks(scene) -> dict:
 
 def compare_direct_global(
     device,
-    *, epipolar_exposure_us: float = 600.0,
+    *,
+    epipolar_exposure_us: float = 600.0,
     period_rows: int | None = None,
     n_shifts: int | None = None,
     capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
@@ -138,7 +139,12 @@ def compare_direct_global(
         ``epipolar_direct`` -> region -> ``mae, median_abs, rmse, bias, relative_rmse``.
     """
     nayar = capture_direct_global(
-        device, period_rows=period_rows, n_shifts=n_shifts, exposure_us=capture_exposure_us, frame_period_us=frame_period_us, pattern_contrast_b=pattern_contrast_b
+        device,
+        period_rows=period_rows,
+        n_shifts=n_shifts,
+        exposure_us=capture_exposure_us,
+        frame_period_us=frame_period_us,
+        pattern_contrast_b=pattern_contrast_b,
     )
     epipolar, sat, n_sync = synchronized_delay_image(device, 0.0, epipolar_exposure_us)
     numbers = {
@@ -172,7 +178,8 @@ def compare_emulation(
     device,
     delay_us: float,
     exposure_us: float,
-    *, capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
+    *,
+    capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
     frame_period_us: float = DEFAULT_FRAME_PERIOD_US,
     spacing_rows: int | None = None,
 ) -> dict:
@@ -188,7 +195,14 @@ def compare_emulation(
         (``emulated_vs_truth``, ``synchronized_vs_truth``,
         ``emulated_vs_synchronized``: ``mae, median_abs, rmse, bias, relative_rmse``).
     """
-    emulated = emulate_delay_image(device, delay_us, exposure_us, capture_exposure_us=capture_exposure_us, frame_period_us=frame_period_us, spacing_rows=spacing_rows)
+    emulated = emulate_delay_image(
+        device,
+        delay_us,
+        exposure_us,
+        capture_exposure_us=capture_exposure_us,
+        frame_period_us=frame_period_us,
+        spacing_rows=spacing_rows,
+    )
     sync, sat, n_sync = synchronized_delay_image(device, delay_us, exposure_us)
     masks = {"all": np.ones(sync.shape, bool)}
     numbers = {
@@ -198,7 +212,11 @@ def compare_emulation(
         "n_captures": {"emulated": emulated.n_captures, "synchronized": n_sync},
         "rows_per_capture": emulated.rows_per_capture,
         "saturated_pixels": {"emulated": int(emulated.saturated.sum()), "synchronized": int(sat.sum())},
-        "errors": {"emulated_vs_synchronized": _errors(emulated.image, sync, masks, valid=~(sat | emulated.saturated)).get("all")},
+        "errors": {
+            "emulated_vs_synchronized": _errors(emulated.image, sync, masks, valid=~(sat | emulated.saturated)).get(
+                "all"
+            )
+        },
     }
     out = {"emulated": emulated, "synchronized": sync, "truth": None, "numbers": numbers}
     scene = getattr(device, "scene", None)
@@ -206,7 +224,9 @@ def compare_emulation(
         from ..timing import Band
 
         truth = scene.transport.render(Band(float(delay_us), float(exposure_us), float(device.lines_per_second)))
-        numbers["errors"]["emulated_vs_truth"] = _errors(emulated.image, truth, masks, valid=~emulated.saturated).get("all")
+        numbers["errors"]["emulated_vs_truth"] = _errors(emulated.image, truth, masks, valid=~emulated.saturated).get(
+            "all"
+        )
         numbers["errors"]["synchronized_vs_truth"] = _errors(sync, truth, masks, valid=~sat).get("all")
         out["truth"] = truth
     return out

@@ -15,7 +15,9 @@ from ._device import (
 )
 
 
-def band_pattern(geometry: RowGeometry, camera_rows, delay_us: float, exposure_us: float, lines_per_second: float) -> np.ndarray:
+def band_pattern(
+    geometry: RowGeometry, camera_rows, delay_us: float, exposure_us: float, lines_per_second: float
+) -> np.ndarray:
     """Projector-row pattern of the bands that emulate (delay, exposure) for some camera rows.
 
     For each camera row ``t`` the band ``[p_t + I_d - I_w/2, p_t + I_d + I_w/2]``
@@ -75,7 +77,8 @@ def emulate_delay_image(
     device,
     delay_us: float,
     exposure_us: float,
-    *, capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
+    *,
+    capture_exposure_us: float = DEFAULT_FRAME_PERIOD_US,
     frame_period_us: float = DEFAULT_FRAME_PERIOD_US,
     spacing_rows: int | None = None,
     subtract_dark: bool = True,

@@ -34,7 +34,9 @@ def default_period_rows(geometry: RowGeometry) -> int:
     return int(2 * (np.ceil(geometry.rows_per_camera_row - 1e-9) + 2))
 
 
-def stripe_patterns(projector_rows: int, *, period_rows: int = 16, n_shifts: int | None = None, low: float = 0.0) -> np.ndarray:
+def stripe_patterns(
+    projector_rows: int, *, period_rows: int = 16, n_shifts: int | None = None, low: float = 0.0
+) -> np.ndarray:
     """Shifted horizontal stripe patterns (50 % duty cycle) over projector rows.
 
     Pattern ``k`` lights projector row ``v`` when ``(v - s_k) mod period < period / 2``
@@ -158,7 +160,8 @@ class DirectGlobalResult:
 
 def capture_direct_global(
     device,
-    *, period_rows: int | None = None,
+    *,
+    period_rows: int | None = None,
     n_shifts: int | None = None,
     exposure_us: float = DEFAULT_FRAME_PERIOD_US,
     frame_period_us: float = DEFAULT_FRAME_PERIOD_US,

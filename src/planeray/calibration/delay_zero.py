@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -156,13 +156,21 @@ def _fit_response(d, r, centre, width, ramp, base, amp):
     if not np.isfinite(sigma):
         return None
     c, w, f, g, b0, a = (float(v) for v in sol.x)
-    params = {"centre_us": c, "width_us": abs(w), "ramp_us": abs(f), "blur_us": abs(g), "baseline": b0, "amplitude": a,
-              "residual_rms": math.sqrt(s2)}
+    params = {
+        "centre_us": c,
+        "width_us": abs(w),
+        "ramp_us": abs(f),
+        "blur_us": abs(g),
+        "baseline": b0,
+        "amplitude": a,
+        "residual_rms": math.sqrt(s2),
+    }
     return c, sigma, params
 
 
-def calibrate_delay_zero(capture, delays_us, *, exposure_us: float = 600.0, lines_per_second=PAPER_LINES_PER_SECOND,
-                         roi=None) -> DelayZeroCalibration:
+def calibrate_delay_zero(
+    capture, delays_us, *, exposure_us: float = 600.0, lines_per_second=PAPER_LINES_PER_SECOND, roi=None
+) -> DelayZeroCalibration:
     """Delay zero: the commanded delay at which the epipolar (direct) response peaks.
 
     On a diffuse calibration target the direct light of a camera row comes from its

@@ -69,8 +69,12 @@ def read_line_sweep(path, *, exposure_us: float | None = None, rows_per_line: in
                 meta["exposure_us"] if exposure_us is None else exposure_us,
                 meta["line_step_rows"] if rows_per_line is None else rows_per_line,
                 None if meta.get("phases") is None else tuple(meta["phases"]),
-                arr.get("dark"), arr.get("flat"), meta.get("flat_exposure_us"), arr.get("saturated"),
-                float(meta.get("timing_jitter_us", 0.0)), meta.get("metadata", {}),
+                arr.get("dark"),
+                arr.get("flat"),
+                meta.get("flat_exposure_us"),
+                arr.get("saturated"),
+                float(meta.get("timing_jitter_us", 0.0)),
+                meta.get("metadata", {}),
             )
         if suffix in (".tif", ".tiff"):
             import tifffile
@@ -91,11 +95,16 @@ def read_line_sweep(path, *, exposure_us: float | None = None, rows_per_line: in
         raise InputError(f"cannot read line sweep ({type(exc).__name__}: {exc})", path) from exc
     if images.ndim not in (2, 3):
         raise InputError(f"expected a grayscale image or a stack of them, got shape {images.shape}", path)
-    return LineSweep(images, PAPER_CALIBRATION_EXPOSURE_US if exposure_us is None else exposure_us,
-                     1 if rows_per_line is None else rows_per_line)
+    return LineSweep(
+        images,
+        PAPER_CALIBRATION_EXPOSURE_US if exposure_us is None else exposure_us,
+        1 if rows_per_line is None else rows_per_line,
+    )
 
 
-def write_calibration(path, *, lines: LineCalibration | None = None, delay_zero: DelayZeroCalibration | None = None) -> dict:
+def write_calibration(
+    path, *, lines: LineCalibration | None = None, delay_zero: DelayZeroCalibration | None = None
+) -> dict:
     """Store calibration results in an ``acquisition.json``, keeping its other fields.
 
     Writes ``lines_per_second`` (the field the stack import requires),

@@ -353,7 +353,9 @@ def count_lines(image, *, dark=None, flat=None) -> LineCount:
     f_sum = float(fractions[measured].sum())
     count = float(n_int - (interior & measured).sum()) + f_sum
     var = int(measured.sum()) * sf**2 + (f_sum * sf) ** 2 / max(n_ref, 1)
-    return LineCount(pos, cand, areas, fractions, detected, interior, spacing, sf, count, math.sqrt(var), truncated, noise)
+    return LineCount(
+        pos, cand, areas, fractions, detected, interior, spacing, sf, count, math.sqrt(var), truncated, noise
+    )
 
 
 @dataclass
@@ -405,8 +407,9 @@ class LineCalibration:
         }
 
 
-def calibrate_lines_per_second(data, *, exposure_us=None, rows_per_line=None, dark=None, flat=None,
-                               timing_jitter_us=None, complete=None) -> LineCalibration:
+def calibrate_lines_per_second(
+    data, *, exposure_us=None, rows_per_line=None, dark=None, flat=None, timing_jitter_us=None, complete=None
+) -> LineCalibration:
     """Projector scanline velocity ``v_p = n_v / t_e`` from global-shutter line images (Sec. 6).
 
     Parameters

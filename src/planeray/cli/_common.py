@@ -53,7 +53,12 @@ def _join_pixel_args(argv: list[str]) -> list[str]:
     """Let ``--pixel ROW COL`` (two words) through typer, which takes one value per option."""
     joined, i = [], 0
     while i < len(argv):
-        if argv[i] == "--pixel" and i + 2 < len(argv) and argv[i + 1].lstrip("-").isdigit() and argv[i + 2].lstrip("-").isdigit():
+        if (
+            argv[i] == "--pixel"
+            and i + 2 < len(argv)
+            and argv[i + 1].lstrip("-").isdigit()
+            and argv[i + 2].lstrip("-").isdigit()
+        ):
             joined += ["--pixel", f"{argv[i + 1]},{argv[i + 2]}"]
             i += 3
         else:

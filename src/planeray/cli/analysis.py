@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -19,7 +19,7 @@ def contact_sheet(
     stack_path: StackArg,
     out_png: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")],
     gamma: Annotated[float, typer.Option(help="Display gamma.")] = 0.5,
-    max_delays: Annotated[Optional[int], typer.Option(help="Show at most this many delays.")] = None,
+    max_delays: Annotated[int | None, typer.Option(help="Show at most this many delays.")] = None,
 ):
     """Write the delay x exposure grid of a stack (the paper's Fig. 8)."""
     from ..figures import contact_sheet_figure
@@ -34,11 +34,19 @@ def contact_sheet(
 def profiles(
     stack_path: StackArg,
     out_png: Annotated[Path, typer.Option("--out", "-o", help="PNG to write.")],
-    pixel: Annotated[Optional[list[str]], typer.Option(help="Pixel as ROW COL or ROW,COL (repeat for more pixels).")] = None,
-    exposure_us: Annotated[Optional[float], typer.Option("--exposure-us", "--exposure", help="Plot only this exposure (us).")] = None,
-    csv: Annotated[Optional[Path], typer.Option(help="Also write the profiles as CSV.")] = None,
-    transport: Annotated[Optional[Path], typer.Option(help="Transport store: also draw its continuous delay profiles.")] = None,
-    classify: Annotated[Optional[Path], typer.Option(help="With --transport: write the per-pixel effect label map PNG.")] = None,
+    pixel: Annotated[
+        list[str] | None, typer.Option(help="Pixel as ROW COL or ROW,COL (repeat for more pixels).")
+    ] = None,
+    exposure_us: Annotated[
+        float | None, typer.Option("--exposure-us", "--exposure", help="Plot only this exposure (us).")
+    ] = None,
+    csv: Annotated[Path | None, typer.Option(help="Also write the profiles as CSV.")] = None,
+    transport: Annotated[
+        Path | None, typer.Option(help="Transport store: also draw its continuous delay profiles.")
+    ] = None,
+    classify: Annotated[
+        Path | None, typer.Option(help="With --transport: write the per-pixel effect label map PNG.")
+    ] = None,
 ):
     """Plot area-normalized delay profiles of pixels (the paper's Fig. 9); classify effects from a transport."""
     from ..classify import classify_transport
@@ -66,7 +74,9 @@ def profiles(
         continuous = None
         if T is not None:
             e = exposure_us if exposure_us is not None else float(prof.exposure_us.min())
-            continuous = transport_delay_profiles(T, pixels=prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second)
+            continuous = transport_delay_profiles(
+                T, pixels=prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second
+            )
         delay_profiles_figure(st, prof, out=out_png, exposure_us=exposure_us, continuous=continuous)
         if csv is not None:
             write_profiles_csv(prof, csv)
@@ -89,20 +99,43 @@ def synth(
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Image to write (.png preview, .tif 16-bit values).")],
     epipolar: Annotated[bool, typer.Option("--epipolar", help="Epipolar image (Eq. 5).")] = False,
     non_epipolar: Annotated[bool, typer.Option("--non-epipolar", help="Non-epipolar image (Eq. 6).")] = False,
-    sharpen: Annotated[Optional[float], typer.Option(help="Sharpened epipolar image with a band of ROWS projector rows.")] = None,
-    relight: Annotated[Optional[str], typer.Option(help="Relight: a projector row number, or a pattern file (.npy/.csv/image).")] = None,
-    band: Annotated[Optional[tuple[float, float]], typer.Option(help="Banded image for DELAY_US EXPOSURE_US (any pair, us).")] = None,
-    short_range: Annotated[Optional[float], typer.Option(help="Short-range indirect light up to MAX_ROWS offsets (projector rows).")] = None,
-    long_range: Annotated[Optional[float], typer.Option(help="Long-range indirect light beyond MAX_ROWS offsets (projector rows).")] = None,
+    sharpen: Annotated[
+        float | None, typer.Option(help="Sharpened epipolar image with a band of ROWS projector rows.")
+    ] = None,
+    relight: Annotated[
+        str | None, typer.Option(help="Relight: a projector row number, or a pattern file (.npy/.csv/image).")
+    ] = None,
+    band: Annotated[
+        tuple[float, float] | None, typer.Option(help="Banded image for DELAY_US EXPOSURE_US (any pair, us).")
+    ] = None,
+    short_range: Annotated[
+        float | None, typer.Option(help="Short-range indirect light up to MAX_ROWS offsets (projector rows).")
+    ] = None,
+    long_range: Annotated[
+        float | None, typer.Option(help="Long-range indirect light beyond MAX_ROWS offsets (projector rows).")
+    ] = None,
 ):
     """Synthesize an image from a transport: epipolar, non-epipolar, sharpened, relit, banded, short/long range."""
     from .. import synthesis as syn
     from ..io import read_transport
 
-    chosen = [x for x in (epipolar, non_epipolar, sharpen is not None, relight is not None, band is not None,
-                          short_range is not None, long_range is not None) if x]
+    chosen = [
+        x
+        for x in (
+            epipolar,
+            non_epipolar,
+            sharpen is not None,
+            relight is not None,
+            band is not None,
+            short_range is not None,
+            long_range is not None,
+        )
+        if x
+    ]
     if len(chosen) != 1:
-        raise ValueError("choose exactly one of --epipolar, --non-epipolar, --sharpen, --relight, --band, --short-range, --long-range")
+        raise ValueError(
+            "choose exactly one of --epipolar, --non-epipolar, --sharpen, --relight, --band, --short-range, --long-range"
+        )
     T, attrs = read_transport(transport_path)
     lps = attrs.get("lines_per_second") or PAPER_LINES_PER_SECOND
     if epipolar:
@@ -113,8 +146,10 @@ def synth(
         image, what = syn.sharpened_epipolar(T, width_rows=sharpen), f"sharpened epipolar image ({sharpen:g} rows)"
         res = attrs.get("epipolar_resolution_rows")
         if res and sharpen < 2 * res:
-            console.print(f"[yellow]note:[/] the sweep cannot split light within +-{res:.2f} rows of the epipolar plane; "
-                          f"a {sharpen:g}-row band shows the regularizer's spread there")
+            console.print(
+                f"[yellow]note:[/] the sweep cannot split light within +-{res:.2f} rows of the epipolar plane; "
+                f"a {sharpen:g}-row band shows the regularizer's spread there"
+            )
     elif relight is not None:
         P = T.geometry.projector_rows
         if relight.lstrip("-").isdigit():
@@ -127,7 +162,9 @@ def synth(
         what = f"band image (t_d {band[0]:g} us, t_e {band[1]:g} us)"
     else:
         short, long = syn.short_long_range(T, max_rows=short_range if short_range is not None else long_range)
-        image, what = (short, "short-range indirect image") if short_range is not None else (long, "long-range indirect image")
+        image, what = (
+            (short, "short-range indirect image") if short_range is not None else (long, "long-range indirect image")
+        )
     path = _save_image(image, out_path)
     out.print(f"{what}: {path}  (min {image.min():.3g}, max {image.max():.3g})")
 
@@ -135,7 +172,9 @@ def synth(
 @_friendly_errors
 def figure(
     name: Annotated[str, typer.Argument(help="fig8 | fig9 | fig11 | fig12 | effects | all")],
-    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the PNGs and their numbers (JSON).")] = Path("out/figures"),
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the PNGs and their numbers (JSON).")] = Path(
+        "out/figures"
+    ),
     size: Annotated[int, typer.Option(help="Image size (square, camera pixels).")] = 128,
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
 ):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -20,15 +20,26 @@ from ._common import _friendly_errors, _save_image
 separate_app = typer.Typer(help="Conventional projector-camera baselines (Nayar et al. 2006).", no_args_is_help=True)
 
 
-def _sim_device(scene: str, size, projector_rows, seed: int, ambient_e_per_us: float, noise: bool,
-                lines_per_second: float = PAPER_LINES_PER_SECOND):
+def _sim_device(
+    scene: str,
+    size,
+    projector_rows,
+    seed: int,
+    ambient_e_per_us: float,
+    noise: bool,
+    lines_per_second: float = PAPER_LINES_PER_SECOND,
+):
     from ..camera import CameraModel
     from ..devices import SimulatedEpiscan
     from ..scenes import make_scene
 
-    return SimulatedEpiscan(make_scene(scene, size, projector_rows=projector_rows, seed=seed),
-                            camera=CameraModel(ambient_e_per_us=ambient_e_per_us),
-                            lines_per_second=lines_per_second, seed=seed, noise=noise)
+    return SimulatedEpiscan(
+        make_scene(scene, size, projector_rows=projector_rows, seed=seed),
+        camera=CameraModel(ambient_e_per_us=ambient_e_per_us),
+        lines_per_second=lines_per_second,
+        seed=seed,
+        noise=noise,
+    )
 
 
 def _write_results(out_dir: Path, images: dict, numbers: dict, name: str):
@@ -56,17 +67,35 @@ def _write_results(out_dir: Path, images: dict, numbers: dict, name: str):
 @_friendly_errors
 def separate_direct_global(
     scene: Annotated[str, typer.Argument(help="Built-in scene (simulated conventional projector-camera).")],
-    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for images (.png previews, .tif values) and numbers.")],
+    out_dir: Annotated[
+        Path, typer.Option("--out", "-o", help="Folder for images (.png previews, .tif values) and numbers.")
+    ],
     size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
-    projector_rows: Annotated[Optional[int], typer.Option(help="Projector rows spanned by the image.")] = PAPER_PROJECTOR_ROWS,
+    projector_rows: Annotated[
+        int | None, typer.Option(help="Projector rows spanned by the image.")
+    ] = PAPER_PROJECTOR_ROWS,
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
-    period_rows: Annotated[Optional[int], typer.Option("--period-rows", "--period",
-                                                       help="Stripe period in projector rows (default: resolvable by the camera).")] = None,
-    shifts: Annotated[Optional[int], typer.Option(help="Shifted patterns (default: one per row of the period).")] = None,
-    contrast_b: Annotated[float, typer.Option(help="Projector black level b of the patterns, a fraction of white (Nayar's correction).")] = 0.0,
-    epipolar_exposure_us: Annotated[float, typer.Option(help="Exposure of the synchronized epipolar image (us).")] = 600.0,
-    ambient_e_per_us: Annotated[float, typer.Option("--ambient-e-per-us", "--ambient",
-                                                    help="Room light, electrons per microsecond (conventional frames integrate 16.7 ms).")] = 0.01,
+    period_rows: Annotated[
+        int | None,
+        typer.Option(
+            "--period-rows", "--period", help="Stripe period in projector rows (default: resolvable by the camera)."
+        ),
+    ] = None,
+    shifts: Annotated[int | None, typer.Option(help="Shifted patterns (default: one per row of the period).")] = None,
+    contrast_b: Annotated[
+        float, typer.Option(help="Projector black level b of the patterns, a fraction of white (Nayar's correction).")
+    ] = 0.0,
+    epipolar_exposure_us: Annotated[
+        float, typer.Option(help="Exposure of the synchronized epipolar image (us).")
+    ] = 600.0,
+    ambient_e_per_us: Annotated[
+        float,
+        typer.Option(
+            "--ambient-e-per-us",
+            "--ambient",
+            help="Room light, electrons per microsecond (conventional frames integrate 16.7 ms).",
+        ),
+    ] = 0.01,
     noise: Annotated[bool, typer.Option(help="Simulate noise.")] = True,
 ):
     """Direct/global separation with shifted stripes vs synchronized epipolar imaging, against ground truth."""
@@ -74,10 +103,20 @@ def separate_direct_global(
 
     dev = _sim_device(scene, size, projector_rows, seed, ambient_e_per_us, noise)
     with console.status("capturing stripe patterns and the epipolar image"):
-        res = compare_direct_global(dev, epipolar_exposure_us=epipolar_exposure_us, period_rows=period_rows,
-                                    n_shifts=shifts, pattern_contrast_b=contrast_b)
-    images = {"nayar_direct": res["nayar"].direct, "nayar_global": res["nayar"].global_, "epipolar": res["epipolar"],
-              "truth_direct": res["truth_direct"], "truth_global": res["truth_global"]}
+        res = compare_direct_global(
+            dev,
+            epipolar_exposure_us=epipolar_exposure_us,
+            period_rows=period_rows,
+            n_shifts=shifts,
+            pattern_contrast_b=contrast_b,
+        )
+    images = {
+        "nayar_direct": res["nayar"].direct,
+        "nayar_global": res["nayar"].global_,
+        "epipolar": res["epipolar"],
+        "truth_direct": res["truth_direct"],
+        "truth_global": res["truth_global"],
+    }
     _write_results(out_dir, images, res["numbers"], "direct_global")
 
 
@@ -88,11 +127,16 @@ def emulate(
     delay_us: Annotated[float, typer.Option(help="Delay of the emulated image (us).")] = 0.0,
     exposure_us: Annotated[float, typer.Option(help="Exposure (band width) of the emulated image (us).")] = 600.0,
     size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
-    projector_rows: Annotated[Optional[int], typer.Option(help="Projector rows spanned by the image.")] = PAPER_PROJECTOR_ROWS,
+    projector_rows: Annotated[
+        int | None, typer.Option(help="Projector rows spanned by the image.")
+    ] = PAPER_PROJECTOR_ROWS,
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
-    spacing_rows: Annotated[Optional[int], typer.Option(help="Camera rows between bands sharing one capture (fewer captures).")] = None,
-    ambient_e_per_us: Annotated[float, typer.Option("--ambient-e-per-us", "--ambient",
-                                                    help="Room light, electrons per microsecond.")] = 0.01,
+    spacing_rows: Annotated[
+        int | None, typer.Option(help="Camera rows between bands sharing one capture (fewer captures).")
+    ] = None,
+    ambient_e_per_us: Annotated[
+        float, typer.Option("--ambient-e-per-us", "--ambient", help="Room light, electrons per microsecond.")
+    ] = 0.01,
     noise: Annotated[bool, typer.Option(help="Simulate noise.")] = True,
 ):
     """Digital epipolar emulation (Sec. 5.1, Fig. 4): one band per capture vs one synchronized capture."""

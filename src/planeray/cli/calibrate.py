@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -16,7 +16,7 @@ from ._common import _friendly_errors, _load_stack
 calibrate_app = typer.Typer(help="Calibration (Sec. 6): line velocity v_p and delay zero.", no_args_is_help=True)
 
 
-def _report_calibration(result, write: Optional[Path], as_json: bool, key: str):
+def _report_calibration(result, write: Path | None, as_json: bool, key: str):
     from ..calibration import write_calibration
 
     info = result.to_dict()
@@ -31,10 +31,16 @@ def _report_calibration(result, write: Optional[Path], as_json: bool, key: str):
 @calibrate_app.command("lines")
 @_friendly_errors
 def calibrate_lines(
-    path: Annotated[Path, typer.Argument(help="Line-sweep capture: .npz (from simulate-lines) or grayscale .tif/.png.")],
-    exposure_us: Annotated[Optional[float], typer.Option(help="Global-shutter exposure of the capture (default 500 us).")] = None,
-    rows_per_line: Annotated[Optional[int], typer.Option(help="Projector rows between lit lines of the comb.")] = None,
-    write: Annotated[Optional[Path], typer.Option(help="Write lines_per_second into this acquisition.json (or folder).")] = None,
+    path: Annotated[
+        Path, typer.Argument(help="Line-sweep capture: .npz (from simulate-lines) or grayscale .tif/.png.")
+    ],
+    exposure_us: Annotated[
+        float | None, typer.Option(help="Global-shutter exposure of the capture (default 500 us).")
+    ] = None,
+    rows_per_line: Annotated[int | None, typer.Option(help="Projector rows between lit lines of the comb.")] = None,
+    write: Annotated[
+        Path | None, typer.Option(help="Write lines_per_second into this acquisition.json (or folder).")
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
 ):
     """Projector scanline velocity v_p = n_lines / t_e from a line-sweep capture, with its uncertainty."""
@@ -43,17 +49,23 @@ def calibrate_lines(
     result = calibrate_lines_per_second(read_line_sweep(path, exposure_us=exposure_us, rows_per_line=rows_per_line))
     _report_calibration(result, write, as_json, "lines")
     if not as_json:
-        out.print(f"lines_per_second = {result.lines_per_second:,.0f} +- {result.uncertainty:,.0f} (1 sigma, "
-                  f"{result.relative_uncertainty * 100:.2f} %) from {result.n_lines:.2f} lines in {result.exposure_us:g} us"
-                  + (f"; written to {write}" if write else ""))
+        out.print(
+            f"lines_per_second = {result.lines_per_second:,.0f} +- {result.uncertainty:,.0f} (1 sigma, "
+            f"{result.relative_uncertainty * 100:.2f} %) from {result.n_lines:.2f} lines in {result.exposure_us:g} us"
+            + (f"; written to {write}" if write else "")
+        )
 
 
 @calibrate_app.command("simulate-lines")
 @_friendly_errors
 def calibrate_simulate_lines(
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Line-sweep capture to write (.npz).")],
-    lines_per_second: Annotated[float, typer.Option(help="True v_p of the simulated projector (lines/s).")] = PAPER_LINES_PER_SECOND,
-    size: Annotated[tuple[int, int], typer.Option(help="Calibration camera H W (pixels; must resolve projector rows).")] = (288, 64),
+    lines_per_second: Annotated[
+        float, typer.Option(help="True v_p of the simulated projector (lines/s).")
+    ] = PAPER_LINES_PER_SECOND,
+    size: Annotated[
+        tuple[int, int], typer.Option(help="Calibration camera H W (pixels; must resolve projector rows).")
+    ] = (288, 64),
     projector_rows: Annotated[int, typer.Option(help="Projector rows spanned by the image.")] = 96,
     exposure_us: Annotated[float, typer.Option(help="Global-shutter exposure (us).")] = 500.0,
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
@@ -72,12 +84,16 @@ def calibrate_simulate_lines(
 @calibrate_app.command("delay-zero")
 @_friendly_errors
 def calibrate_delay_zero_cmd(
-    stack_path: Annotated[Optional[Path], typer.Argument(help="A fine delay sweep around 0 at one exposure (stack or folder).")] = None,
+    stack_path: Annotated[
+        Path | None, typer.Argument(help="A fine delay sweep around 0 at one exposure (stack or folder).")
+    ] = None,
     exposure_us: Annotated[float, typer.Option(help="Exposure of the sweep's images to use (us).")] = 600.0,
     simulate: Annotated[bool, typer.Option(help="Sweep the simulated device instead of reading a stack.")] = False,
     delay_error_us: Annotated[float, typer.Option(help="--simulate: hidden sync error to recover (us).")] = 0.0,
     seed: Annotated[int, typer.Option(help="--simulate: seed.")] = 0,
-    write: Annotated[Optional[Path], typer.Option(help="Write delay_zero_us into this acquisition.json (or folder).")] = None,
+    write: Annotated[
+        Path | None, typer.Option(help="Write delay_zero_us into this acquisition.json (or folder).")
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
 ):
     """The commanded delay at which the epipolar (direct) response is centred, so t'_o is measured (Eq. 1)."""
@@ -90,7 +106,9 @@ def calibrate_delay_zero_cmd(
         dev = SimulatedEpiscan(make_scene("diffuse_plane", (64, 64), projector_rows=360, seed=seed), seed=seed)
         sweep = delay_zero_sweep(exposure_us=exposure_us)
         capture = device_capture(dev, exposure_us=exposure_us, delay_error_us=delay_error_us)
-        result = calibrate_delay_zero(capture, sweep.delay_us, exposure_us=exposure_us, lines_per_second=dev.lines_per_second)
+        result = calibrate_delay_zero(
+            capture, sweep.delay_us, exposure_us=exposure_us, lines_per_second=dev.lines_per_second
+        )
     else:
         if stack_path is None:
             raise ValueError("give a STACK (a delay sweep around 0) or --simulate")
@@ -99,8 +117,13 @@ def calibrate_delay_zero_cmd(
         if idx.size < 5:
             raise ValueError(f"{stack_path}: needs at least 5 images at exposure {exposure_us:g} us, found {idx.size}")
         images = np.stack([st.image(int(i)) for i in idx])
-        result = calibrate_delay_zero(images, st.delay_us[idx], exposure_us=exposure_us, lines_per_second=st.lines_per_second)
+        result = calibrate_delay_zero(
+            images, st.delay_us[idx], exposure_us=exposure_us, lines_per_second=st.lines_per_second
+        )
     _report_calibration(result, write, as_json, "delay_zero")
     if not as_json:
-        out.print(f"delay zero = {result.delay_zero_us:+.2f} +- {result.uncertainty_us:.2f} us (commanded delay of the true "
-                  f"epipolar centre); sync offset t'_o = {result.sync_offset_us:.2f} us" + (f"; written to {write}" if write else ""))
+        out.print(
+            f"delay zero = {result.delay_zero_us:+.2f} +- {result.uncertainty_us:.2f} us (commanded delay of the true "
+            f"epipolar centre); sync offset t'_o = {result.sync_offset_us:.2f} us"
+            + (f"; written to {write}" if write else "")
+        )

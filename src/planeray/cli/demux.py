@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -19,10 +19,12 @@ def demux(
     alpha: Annotated[float, typer.Option(help="Smoothness weight (paper: 0.01).")] = 0.01,
     beta: Annotated[float, typer.Option(help="Sparsity weight (paper: 0.01).")] = 0.01,
     method: Annotated[str, typer.Option(help="fast | pinv | nnls | cvxpy.")] = "fast",
-    workers: Annotated[Optional[int], typer.Option(help="Run on a Dask LocalCluster with N workers.")] = None,
-    scheduler: Annotated[Optional[str], typer.Option(help="Address of an existing Dask scheduler.")] = None,
-    chunk_rows: Annotated[int, typer.Option("--chunk-rows", "--chunk", help="Camera rows per chunk (bounds memory).")] = 16,
-    tol: Annotated[Optional[float], typer.Option(help="Solver tolerance (relative objective gap for fast).")] = None,
+    workers: Annotated[int | None, typer.Option(help="Run on a Dask LocalCluster with N workers.")] = None,
+    scheduler: Annotated[str | None, typer.Option(help="Address of an existing Dask scheduler.")] = None,
+    chunk_rows: Annotated[
+        int, typer.Option("--chunk-rows", "--chunk", help="Camera rows per chunk (bounds memory).")
+    ] = 16,
+    tol: Annotated[float | None, typer.Option(help="Solver tolerance (relative objective gap for fast).")] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing finished output.")] = False,
     restart: Annotated[bool, typer.Option(help="Discard an unfinished run instead of resuming it.")] = False,
 ):
@@ -39,9 +41,19 @@ def demux(
     with progress_bar() as bar:
         task = bar.add_task(f"demultiplexing ({method})", total=st.shape[0])
         path = demultiplex_to_store(
-            st, out_path, alpha=alpha, beta=beta, method=method, chunk_rows=chunk_rows, tol=tol,
-            workers=workers, scheduler=scheduler, overwrite=overwrite, restart=restart,
-            progress=lambda rows: bar.advance(task, rows), source=str(stack_path),
+            st,
+            out_path,
+            alpha=alpha,
+            beta=beta,
+            method=method,
+            chunk_rows=chunk_rows,
+            tol=tol,
+            workers=workers,
+            scheduler=scheduler,
+            overwrite=overwrite,
+            restart=restart,
+            progress=lambda rows: bar.advance(task, rows),
+            source=str(stack_path),
         )
     elapsed = time.perf_counter() - t0
     maps = read_transport_maps(path)

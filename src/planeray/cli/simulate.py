@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
@@ -29,22 +29,38 @@ def simulate(
     scene: Annotated[str, typer.Argument(help="Built-in scene (see `planeray scenes`).")],
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Stack to write (Zarr directory).")],
     size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
-    projector_rows: Annotated[Optional[int], typer.Option(help="Projector rows spanned by the image (default: H).")] = None,
+    projector_rows: Annotated[
+        int | None, typer.Option(help="Projector rows spanned by the image (default: H).")
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the scene textures and the camera noise.")] = 0,
     sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep: paper (85 images) or quick.")] = "paper",
-    lines_per_second: Annotated[float, typer.Option(help="Projector scanline velocity v_p (lines/s).")] = PAPER_LINES_PER_SECOND,
+    lines_per_second: Annotated[
+        float, typer.Option(help="Projector scanline velocity v_p (lines/s).")
+    ] = PAPER_LINES_PER_SECOND,
     frames: Annotated[int, typer.Option(help="Frames averaged per image.")] = 8,
     bit_depth: Annotated[int, typer.Option(help="ADC bits.")] = 12,
     black_level: Annotated[int, typer.Option(help="ADC black level (codes).")] = 64,
-    full_well_e: Annotated[float, typer.Option("--full-well-e", "--full-well", help="Full-well capacity (electrons).")] = 10_000.0,
-    read_noise_e: Annotated[float, typer.Option("--read-noise-e", "--read-noise", help="Read noise (electrons RMS).")] = 7.0,
+    full_well_e: Annotated[
+        float, typer.Option("--full-well-e", "--full-well", help="Full-well capacity (electrons).")
+    ] = 10_000.0,
+    read_noise_e: Annotated[
+        float, typer.Option("--read-noise-e", "--read-noise", help="Read noise (electrons RMS).")
+    ] = 7.0,
     laser_electrons: Annotated[float, typer.Option(help="Electrons from a white surface under its own row.")] = 6_000.0,
-    ambient_e_per_us: Annotated[float, typer.Option("--ambient-e-per-us", "--ambient",
-                                                    help="Ambient light, electrons per microsecond of exposure (albedo 1).")] = 0.5,
+    ambient_e_per_us: Annotated[
+        float,
+        typer.Option(
+            "--ambient-e-per-us", "--ambient", help="Ambient light, electrons per microsecond of exposure (albedo 1)."
+        ),
+    ] = 0.5,
     jitter_us: Annotated[float, typer.Option(help="Laser-shutter timing jitter sigma (us; blurs band edges).")] = 5.0,
-    row_jitter_us: Annotated[float, typer.Option(help="Per-row trigger jitter sigma (us; row artifacts at the boundary).")] = 10.0,
+    row_jitter_us: Annotated[
+        float, typer.Option(help="Per-row trigger jitter sigma (us; row artifacts at the boundary).")
+    ] = 10.0,
     noise: Annotated[bool, typer.Option(help="Simulate noise (--no-noise: expected images).")] = True,
-    truth: Annotated[Optional[Path], typer.Option(help="Also write the scene's ground-truth transport store here.")] = None,
+    truth: Annotated[
+        Path | None, typer.Option(help="Also write the scene's ground-truth transport store here.")
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
 ):
     """Simulate a delay-exposure sweep of a built-in scene on the simulated Episcan."""
@@ -56,9 +72,15 @@ def simulate(
     from ..timing import make_sweep
 
     camera = CameraModel(
-        bit_depth=bit_depth, black_level=black_level, full_well_e=full_well_e, read_noise_e=read_noise_e,
-        laser_electrons=laser_electrons, ambient_e_per_us=ambient_e_per_us, frames_averaged=frames,
-        jitter_us=jitter_us, row_jitter_us=row_jitter_us,
+        bit_depth=bit_depth,
+        black_level=black_level,
+        full_well_e=full_well_e,
+        read_noise_e=read_noise_e,
+        laser_electrons=laser_electrons,
+        ambient_e_per_us=ambient_e_per_us,
+        frames_averaged=frames,
+        jitter_us=jitter_us,
+        row_jitter_us=row_jitter_us,
     )
     sw = make_sweep(sweep)
     with console.status(f"building scene {scene} {size[0]}x{size[1]}"):
@@ -73,4 +95,6 @@ def simulate(
         attrs = {"lines_per_second": lines_per_second, "method": "ground_truth", "scene": sc.params}
         write_transport(sc.transport, truth, attrs=attrs, overwrite=overwrite)
         out.print(f"ground-truth transport: {truth}")
-    out.print(f"stack: {out_path}  ({len(stack)} images, {size[0]}x{size[1]}, {int((~stack.excluded).sum())} used for demultiplexing)")
+    out.print(
+        f"stack: {out_path}  ({len(stack)} images, {size[0]}x{size[1]}, {int((~stack.excluded).sum())} used for demultiplexing)"
+    )

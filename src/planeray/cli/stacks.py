@@ -48,7 +48,9 @@ def info(
 @_friendly_errors
 def export(
     stack_path: StackArg,
-    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (manifest.csv + images + acquisition.json).")],
+    out_dir: Annotated[
+        Path, typer.Option("--out", "-o", help="Folder to write (manifest.csv + images + acquisition.json).")
+    ],
     fmt: Annotated[str, typer.Option("--format", help="tiff or png (16-bit grayscale).")] = "tiff",
     bit_depth: Annotated[int, typer.Option(help="Bits of the written codes.")] = 16,
     black_level: Annotated[int, typer.Option(help="Code of black (keeps small negative values).")] = 256,

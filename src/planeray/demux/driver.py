@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -32,7 +32,15 @@ from ..transport import Transport
 from .problem import DemuxProblem, RowGroup
 from .solvers import get_solver
 
-__all__ = ["DEFAULT_CHUNK_ROWS", "DemuxResult", "ChunkResult", "solve_chunk", "demultiplex", "demultiplex_to_store", "MAP_NAMES"]
+__all__ = [
+    "DEFAULT_CHUNK_ROWS",
+    "DemuxResult",
+    "ChunkResult",
+    "solve_chunk",
+    "demultiplex",
+    "demultiplex_to_store",
+    "MAP_NAMES",
+]
 
 DEFAULT_CHUNK_ROWS = 16
 #: Per-pixel diagnostic maps stored beside ``T``.
@@ -71,7 +79,9 @@ def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, *, sourc
     if bad.any():
         n, r, c = np.argwhere(bad)[0]
         where = f"{source}: " if source else ""
-        raise InputError(f"{where}image {int(problem.image_index[n])} has a non-finite value at pixel ({rows.start + r}, {c})")
+        raise InputError(
+            f"{where}image {int(problem.image_index[n])} has a non-finite value at pixel ({rows.start + r}, {c})"
+        )
     sat = None
     if stack.saturated is not None:
         sat = np.asarray(stack.saturated[:, rows, :], dtype=bool)[problem.image_index]
@@ -80,7 +90,9 @@ def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, *, sourc
     return imgs, sat
 
 
-def solve_chunk(problem: DemuxProblem, observations, saturated, rows: slice, *, method: str = "fast", tol: float | None = None) -> ChunkResult:
+def solve_chunk(
+    problem: DemuxProblem, observations, saturated, rows: slice, *, method: str = "fast", tol: float | None = None
+) -> ChunkResult:
     """Solve every pixel of camera rows ``rows``.
 
     Parameters
@@ -163,8 +175,16 @@ def _attrs(problem: DemuxProblem, method: str, tol) -> dict:
     }
 
 
-def demultiplex(stack: Stack, *, alpha: float = 0.01, beta: float = 0.01, method: str = "fast", chunk_rows: int = DEFAULT_CHUNK_ROWS,
-                tol: float | None = None, progress: Callable[[int], None] | None = None) -> DemuxResult:
+def demultiplex(
+    stack: Stack,
+    *,
+    alpha: float = 0.01,
+    beta: float = 0.01,
+    method: str = "fast",
+    chunk_rows: int = DEFAULT_CHUNK_ROWS,
+    tol: float | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> DemuxResult:
     """Demultiplex a stack in memory (Sec. 4).
 
     Parameters
@@ -237,8 +257,6 @@ def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_ro
 def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
     import zarr
 
-
-
     H, W = shape
     U = problem.n_offsets
     group = zarr.open_group(str(directory), mode="w", zarr_format=3)
@@ -256,11 +274,23 @@ def _write_chunk(group, res: ChunkResult, index: int) -> None:
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 
-def demultiplex_to_store(stack: Stack, out, *, alpha: float = 0.01, beta: float = 0.01, method: str = "fast",
-                         chunk_rows: int = DEFAULT_CHUNK_ROWS, tol: float | None = None, workers: int | None = None,
-                         scheduler: str | None = None, overwrite: bool = False, restart: bool = False,
-                         progress: Callable[[int], None] | None = None, source=None,
-                         _stop_after: int | None = None) -> Path:
+def demultiplex_to_store(
+    stack: Stack,
+    out,
+    *,
+    alpha: float = 0.01,
+    beta: float = 0.01,
+    method: str = "fast",
+    chunk_rows: int = DEFAULT_CHUNK_ROWS,
+    tol: float | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    overwrite: bool = False,
+    restart: bool = False,
+    progress: Callable[[int], None] | None = None,
+    source=None,
+    _stop_after: int | None = None,
+) -> Path:
     """Demultiplex a stack chunk by chunk into a transport store (resumable).
 
     Parameters
@@ -297,7 +327,9 @@ def demultiplex_to_store(stack: Stack, out, *, alpha: float = 0.01, beta: float 
     chunks = _chunks(H, chunk_rows)
     fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows)
     attrs = _attrs(problem, method, tol)
-    group = resumable.open_partial(out, fingerprint, len(chunks), lambda d: _create_store(d, (H, W), problem, attrs), restart=restart)
+    group = resumable.open_partial(
+        out, fingerprint, len(chunks), lambda d: _create_store(d, (H, W), problem, attrs), restart=restart
+    )
     done = resumable.done_units(group)
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():

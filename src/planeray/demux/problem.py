@@ -93,7 +93,9 @@ class DemuxProblem:
         Group of each camera row.
     """
 
-    def __init__(self, offsets_rows, image_index, groups, row_group, alpha, beta, shape, lines_per_second, projector_rows):
+    def __init__(
+        self, offsets_rows, image_index, groups, row_group, alpha, beta, shape, lines_per_second, projector_rows
+    ):
         self.offsets_rows = np.asarray(offsets_rows, dtype=np.int64)
         self.image_index = np.asarray(image_index, dtype=np.int64)
         self.groups = list(groups)
@@ -126,7 +128,9 @@ class DemuxProblem:
         return self.image_index.size
 
     @classmethod
-    def from_stack(cls, stack: Stack, *, alpha: float = 0.01, beta: float = 0.01, support_rows: int | None = None) -> "DemuxProblem":
+    def from_stack(
+        cls, stack: Stack, *, alpha: float = 0.01, beta: float = 0.01, support_rows: int | None = None
+    ) -> DemuxProblem:
         """Assemble the problem from a stack's metadata.
 
         Parameters
@@ -181,13 +185,15 @@ class DemuxProblem:
         index: dict[bytes, int] = {}
         row_group = np.array([index.setdefault(coverage[t].tobytes(), len(index)) for t in rows])
         groups = []
-        for key, g in index.items():
+        for g in index.values():
             members = np.flatnonzero(row_group == g)
             t0 = members[0]
             nz = np.flatnonzero(lit[t0])
             valid = slice(int(nz[0]), int(nz[-1]) + 1) if nz.size else slice(0, 0)
             groups.append(RowGroup(members, (profile * coverage[t0])[:, valid].astype(np.float64), valid))
-        problem = cls(offsets, used, groups, row_group, alpha, beta, stack.shape, stack.lines_per_second, stack.projector_rows)
+        problem = cls(
+            offsets, used, groups, row_group, alpha, beta, stack.shape, stack.lines_per_second, stack.projector_rows
+        )
         edges = np.concatenate([[b.centre_rows - b.width_rows / 2, b.centre_rows + b.width_rows / 2] for b in bands])
         problem._epipolar_resolution = float(np.abs(edges).min())
         return problem

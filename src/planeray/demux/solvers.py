@@ -12,7 +12,7 @@ signature ``solve(group, B, alpha, beta, tol) -> SolveResult``.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from ..errors import InputError
 from .fast import solve_fast

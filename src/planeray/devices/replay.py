@@ -46,7 +46,8 @@ class ReplayDevice:
         i = self.stack.index_of(self.delay_us, self.exposure_us)
         if i is None:
             raise InputError(
-                f"the recording has no image at delay {self.delay_us:g} us, exposure {self.exposure_us:g} us", self.source
+                f"the recording has no image at delay {self.delay_us:g} us, exposure {self.exposure_us:g} us",
+                self.source,
             )
         sat = self.stack.saturated
         mask = np.zeros(self.stack.shape, bool) if sat is None else np.asarray(sat[i], bool)

@@ -37,7 +37,15 @@ class SimulatedEpiscan:
 
     kind = "simulated"
 
-    def __init__(self, scene: Scene, camera: CameraModel | None = None, *, lines_per_second=PAPER_LINES_PER_SECOND, seed=0, noise=True):
+    def __init__(
+        self,
+        scene: Scene,
+        camera: CameraModel | None = None,
+        *,
+        lines_per_second=PAPER_LINES_PER_SECOND,
+        seed=0,
+        noise=True,
+    ):
         self.scene = scene
         self.camera = camera or CameraModel()
         self.lines_per_second = float(lines_per_second)
@@ -67,13 +75,17 @@ class SimulatedEpiscan:
         cam = self.camera
         shifts = None
         if rng is not None and self.noise:
-            shifts = row_shifts_rows(rng, cam.frames_averaged, self.scene.shape[0], cam.row_jitter_us, self.lines_per_second)
+            shifts = row_shifts_rows(
+                rng, cam.frames_averaged, self.scene.shape[0], cam.row_jitter_us, self.lines_per_second
+            )
         return Band(self.delay_us, self.exposure_us, self.lines_per_second, cam.jitter_us, 0.0, shifts)
 
     def grab(self):
         rng = self._rng()
         signal = self.scene.transport.render(self.band(rng))
-        return self.camera.expose(signal, self.exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise)
+        return self.camera.expose(
+            signal, self.exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise
+        )
 
     def capture_pattern(self, pattern, exposure_us: float, *, frame_period_us: float = 1e6 / 60.0):
         """Conventional (unsynchronized) capture: project a row pattern, one full-frame exposure.
@@ -94,8 +106,17 @@ class SimulatedEpiscan:
         signal = passes * self.scene.transport.render(RowPattern(np.asarray(pattern, float)))
         return self.camera.expose(signal, exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise)
 
-    def capture_line_sweep(self, exposure_us: float = 500.0, *, line_step_rows: int | None = None, start_row: float | None = None,
-                           phases=None, references: bool = True, falloff: float = 0.0, blur_rows: float = 0.0):
+    def capture_line_sweep(
+        self,
+        exposure_us: float = 500.0,
+        *,
+        line_step_rows: int | None = None,
+        start_row: float | None = None,
+        phases=None,
+        references: bool = True,
+        falloff: float = 0.0,
+        blur_rows: float = 0.0,
+    ):
         """Global-shutter images of a swept line comb: the line-velocity calibration (Sec. 6).
 
         The paper projects a single-pixel horizontal line, sweeps it down the
@@ -220,7 +241,14 @@ class SimulatedEpiscan:
             flat_exposure = 2.0 * float(exposure_us)
             flat = shoot(exposed(start_row - 0.5 * n_v, 2.0 * n_v), flat_exposure)[0]
         return LineSweep(
-            np.stack(images), float(exposure_us), k, phases, dark, flat, flat_exposure, np.stack(saturated),
+            np.stack(images),
+            float(exposure_us),
+            k,
+            phases,
+            dark,
+            flat,
+            flat_exposure,
+            np.stack(saturated),
             timing_jitter_us=cam.jitter_us / np.sqrt(cam.frames_averaged) if self.noise else 0.0,
             metadata={
                 "truth": {"lines_per_second": v_p, "start_row": start_row, "window_rows": n_v},
@@ -242,7 +270,11 @@ class SimulatedEpiscan:
             "lines_per_second": self.lines_per_second,
             "camera": self.camera.to_dict(),
             "signal_scale": self.camera.signal_scale,
-            "sync": {"jitter_us": self.camera.jitter_us, "row_jitter_us": self.camera.row_jitter_us, "line_width_us": 0.0},
+            "sync": {
+                "jitter_us": self.camera.jitter_us,
+                "row_jitter_us": self.camera.row_jitter_us,
+                "line_width_us": 0.0,
+            },
             "scene": self.scene.params,
             "seed": self.seed,
             "noise": self.noise,

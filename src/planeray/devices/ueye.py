@@ -58,8 +58,16 @@ class UEyeEpiscan:
 
     kind = "ueye"
 
-    def __init__(self, camera_id: int = 0, *, lines_per_second: float = PAPER_LINES_PER_SECOND, base_trigger_delay_us: float = 0.0,
-                 frames_averaged: int = 8, bit_depth: int = 12, black_level: int = 0):
+    def __init__(
+        self,
+        camera_id: int = 0,
+        *,
+        lines_per_second: float = PAPER_LINES_PER_SECOND,
+        base_trigger_delay_us: float = 0.0,
+        frames_averaged: int = 8,
+        bit_depth: int = 12,
+        black_level: int = 0,
+    ):
         try:
             from pyueye import ueye
         except Exception as exc:
@@ -94,7 +102,9 @@ class UEyeEpiscan:
         self._check(ueye.is_AOI(self._h, ueye.IS_AOI_IMAGE_GET_AOI, rect, ueye.sizeof(rect)), "is_AOI")
         self.width, self.height = int(rect.s32Width), int(rect.s32Height)
         self._mem, self._mem_id = ueye.c_mem_p(), ueye.int()
-        self._check(ueye.is_AllocImageMem(self._h, self.width, self.height, 16, self._mem, self._mem_id), "is_AllocImageMem")
+        self._check(
+            ueye.is_AllocImageMem(self._h, self.width, self.height, 16, self._mem, self._mem_id), "is_AllocImageMem"
+        )
         self._check(ueye.is_SetImageMem(self._h, self._mem, self._mem_id), "is_SetImageMem")
 
     # --------------------------------------------------------- protocol
@@ -112,15 +122,19 @@ class UEyeEpiscan:
             raise DeviceError(f"exposure must be positive, got {exposure_us}")
         ueye = self._ueye
         value = ueye.double(float(exposure_us) / 1000.0)  # ms
-        self._check(ueye.is_Exposure(self._h, ueye.IS_EXPOSURE_CMD_SET_EXPOSURE, value, ueye.sizeof(value)), "is_Exposure")
+        self._check(
+            ueye.is_Exposure(self._h, ueye.IS_EXPOSURE_CMD_SET_EXPOSURE, value, ueye.sizeof(value)), "is_Exposure"
+        )
         self.exposure_us = float(value.value) * 1000.0  # the camera rounds to its line period
         self._apply_timing()
 
     def _apply_timing(self):
         delay = self.trigger_delay_us()
         if delay < 0:
-            raise DeviceError(f"delay {self.delay_us:g} us at exposure {self.exposure_us:g} us needs a negative trigger delay; "
-                              "raise base_trigger_delay_us by one projector frame")
+            raise DeviceError(
+                f"delay {self.delay_us:g} us at exposure {self.exposure_us:g} us needs a negative trigger delay; "
+                "raise base_trigger_delay_us by one projector frame"
+            )
         self._check(self._ueye.is_SetTriggerDelay(self._h, int(round(delay))), "is_SetTriggerDelay")
 
     def grab(self):
@@ -143,7 +157,11 @@ class UEyeEpiscan:
             "image_shape": [self.height, self.width],
             "lines_per_second": self.lines_per_second,
             "base_trigger_delay_us": self.base_trigger_delay_us,
-            "camera": {"bit_depth": self.bit_depth, "black_level": self.black_level, "frames_averaged": self.frames_averaged},
+            "camera": {
+                "bit_depth": self.bit_depth,
+                "black_level": self.black_level,
+                "frames_averaged": self.frames_averaged,
+            },
         }
 
     def close(self):

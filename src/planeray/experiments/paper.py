@@ -131,8 +131,12 @@ def fig11(out_dir, size: int = 128, seed: int = 0, scan_row: int | None = None) 
     for name, img in images.items():
         line = img[row, cols]
         m = numbers["images"][name]
-        ax.plot(cols, line / line.mean(), lw=1.6,
-                label=f"{name}: Michelson {m['michelson_scan_line']:.2f}, error vs direct {m['relative_error_vs_direct']:.2f}")
+        ax.plot(
+            cols,
+            line / line.mean(),
+            lw=1.6,
+            label=f"{name}: Michelson {m['michelson_scan_line']:.2f}, error vs direct {m['relative_error_vs_direct']:.2f}",
+        )
     ax.set_xlabel(f"column (scan line at row {row}, wax only)")
     ax.set_ylabel("pixel value / its mean")
     ax.set_title("(e) Scan line: the sharpened epipolar image has larger contrast (cf. paper Fig. 11d)", fontsize=10)
@@ -163,7 +167,9 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
     pattern = single_line_pattern(PROJECTOR_ROWS, v)
     truth = relight(scene.transport, pattern)
     images = {"ground truth": truth, "synthesized from the stack": relight(T, pattern) / scale}
-    single = SimulatedEpiscan(scene, CameraModel(laser_electrons=1500.0, ambient_e_per_us=0.01, frames_averaged=1), seed=seed)
+    single = SimulatedEpiscan(
+        scene, CameraModel(laser_electrons=1500.0, ambient_e_per_us=0.01, frames_averaged=1), seed=seed
+    )
     frame_us = 1e6 / 60.0
     for exposure_ms in (16.0, 800.0):
         lit, _ = single.capture_pattern(pattern, exposure_ms * 1000.0, frame_period_us=frame_us)
@@ -191,7 +197,9 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
         ax.set_title(title, fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.suptitle(f"Relighting with a single projector row (v = {v}); all brightened equally (cf. paper Fig. 12)", fontsize=10)
+    fig.suptitle(
+        f"Relighting with a single projector row (v = {v}); all brightened equally (cf. paper Fig. 12)", fontsize=10
+    )
     fig.tight_layout(rect=(0, 0, 1, 0.92))
     numbers["png"] = str(save_png(fig, out_dir / "fig12_relighting.png"))
     return _write_numbers(out_dir, "fig12", numbers)
@@ -222,8 +230,12 @@ def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
             "recall_all_labelled": {EFFECTS[k]: float(v) for k, v in agree_all["recall"].items()},
             "overall_visible": float(agree["overall"]),
         }
-        label_map_figure(labels, out=out_dir / f"effects_{name}.png", reference=stack.image(stack.index_of(0.0, 600.0)),
-                         title=f"{name}: effect from demultiplexed delay profiles")
+        label_map_figure(
+            labels,
+            out=out_dir / f"effects_{name}.png",
+            reference=stack.image(stack.index_of(0.0, 600.0)),
+            title=f"{name}: effect from demultiplexed delay profiles",
+        )
     return _write_numbers(out_dir, "effects", numbers)
 
 

@@ -11,8 +11,9 @@ from ._common import display_scale, finish, new_figure
 __all__ = ["contact_sheet_figure"]
 
 
-def contact_sheet_figure(stack: Stack, *, out=None, gamma: float = 0.5, tile_inches: float = 0.9,
-                         max_delays: int | None = None):
+def contact_sheet_figure(
+    stack: Stack, *, out=None, gamma: float = 0.5, tile_inches: float = 0.9, max_delays: int | None = None
+):
     """Draw the grid of images over delay (x) and exposure (y), like Fig. 8.
 
     All tiles share one brightening factor (and a display gamma) so that their

@@ -65,10 +65,16 @@ def label_map_figure(labels, *, out=None, reference=None, title: str = "Light-tr
         axes[0, 0].imshow(np.clip(ref / top, 0, 1) ** 0.5, cmap="gray", vmin=0, vmax=1)
         axes[0, 0].set_title("reference", fontsize=10)
     ax = axes[0, -1]
-    ax.imshow(labels, cmap=ListedColormap(EFFECT_COLORS), vmin=-0.5, vmax=len(EFFECT_COLORS) - 0.5, interpolation="nearest")
+    ax.imshow(
+        labels, cmap=ListedColormap(EFFECT_COLORS), vmin=-0.5, vmax=len(EFFECT_COLORS) - 0.5, interpolation="nearest"
+    )
     ax.set_title(title, fontsize=10)
     counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
-    handles = [Patch(color=EFFECT_COLORS[k], label=f"{EFFECTS[k].replace('_', ' ')} ({counts[k]})") for k in EFFECTS if counts[k]]
+    handles = [
+        Patch(color=EFFECT_COLORS[k], label=f"{EFFECTS[k].replace('_', ' ')} ({counts[k]})")
+        for k in EFFECTS
+        if counts[k]
+    ]
     ax.legend(handles=handles, fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
     for a in axes.ravel():
         a.set_xticks([])

@@ -48,8 +48,15 @@ def mc_profile_figure(prof, *, out=None, compare_dipole: bool = True):
     fig = new_figure((11, 4.2))
     ax, ax2 = fig.subplots(1, 2)
     ok = prof.values > 0
-    ax.errorbar(x[ok], (prof.values / measure)[ok], yerr=(prof.stderr / measure)[ok], fmt=".", ms=3,
-                lw=0.8, label="Monte Carlo exitance")
+    ax.errorbar(
+        x[ok],
+        (prof.values / measure)[ok],
+        yerr=(prof.stderr / measure)[ok],
+        fmt=".",
+        ms=3,
+        lw=0.8,
+        label="Monte Carlo exitance",
+    )
     medium = prof.medium
     if compare_dipole and medium.semi_infinite:
         if point:
@@ -59,19 +66,24 @@ def mc_profile_figure(prof, *, out=None, compare_dipole: bool = True):
         ax.plot(x, ref, "-", lw=1, label="diffusion dipole (Jensen 2001)")
     ax.set_yscale("log")
     ax.set_xlabel("distance from the entry point r (mm)" if point else "distance from the lit line x (mm)")
-    ax.set_ylabel("exiting power per mm^2 (per unit power)" if point
-                  else "exiting power per mm (per unit line power)")
+    ax.set_ylabel("exiting power per mm^2 (per unit power)" if point else "exiting power per mm (per unit line power)")
     ax.set_title(f"sigma_s={medium.sigma_s:g}, sigma_a={medium.sigma_a:g} /mm, g={medium.g:g}, n={medium.n:g}")
     ax.legend(fontsize=8)
     okr = prof.radiance > 0
-    ax2.errorbar(x[okr], prof.radiance[okr], yerr=prof.radiance_stderr[okr], fmt=".", ms=3, lw=0.8,
-                 color="C2", label="normal-view radiance")
+    ax2.errorbar(
+        x[okr],
+        prof.radiance[okr],
+        yerr=prof.radiance_stderr[okr],
+        fmt=".",
+        ms=3,
+        lw=0.8,
+        color="C2",
+        label="normal-view radiance",
+    )
     ax2.set_yscale("log")
     ax2.set_xlabel("r (mm)" if point else "x (mm)")
-    ax2.set_ylabel("radiance (mm^-2 sr^-1 per unit power)" if point
-                   else "radiance (mm^-1 sr^-1 per unit line power)")
-    ax2.set_title(f"{prof.n_photons:.0e} photons; R={prof.total_reflectance:.4f}, "
-                  f"truncated {prof.truncated:.3f}")
+    ax2.set_ylabel("radiance (mm^-2 sr^-1 per unit power)" if point else "radiance (mm^-1 sr^-1 per unit line power)")
+    ax2.set_title(f"{prof.n_photons:.0e} photons; R={prof.total_reflectance:.4f}, truncated {prof.truncated:.3f}")
     ax2.legend(fontsize=8)
     fig.tight_layout()
     return finish(fig, out)

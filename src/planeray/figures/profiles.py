@@ -13,8 +13,9 @@ __all__ = ["delay_profiles_figure"]
 _COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive"]
 
 
-def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, *, out=None, exposure_us: float | None = None, names=None,
-                          continuous=None):
+def delay_profiles_figure(
+    stack: Stack, profiles: DelayProfiles, *, out=None, exposure_us: float | None = None, names=None, continuous=None
+):
     """Draw Fig. 9: the scene with the pixels marked, and each pixel's delay profile.
 
     Parameters
@@ -78,12 +79,20 @@ def delay_profiles_figure(stack: Stack, profiles: DelayProfiles, *, out=None, ex
                 label=label if solid else None,
             )
         if continuous is not None:
-            ax_prof.plot(continuous.delay_us, continuous.values[p], "--", color=color, lw=1.2,
-                         label=f"{label}, from transport" if p == 0 else None)
+            ax_prof.plot(
+                continuous.delay_us,
+                continuous.values[p],
+                "--",
+                color=color,
+                lw=1.2,
+                label=f"{label}, from transport" if p == 0 else None,
+            )
     ax_prof.axvline(0, color="0.7", lw=0.8)
     ax_prof.set_xlabel("delay $t_d$ (µs)")
     ax_prof.set_ylabel("area-normalized intensity (1/ms)")
-    title = "Delay profiles" + ("" if exposure_us is not None else f" (solid: $t_e$ = {e0:g} µs, faint: longer exposures)")
+    title = "Delay profiles" + (
+        "" if exposure_us is not None else f" (solid: $t_e$ = {e0:g} µs, faint: longer exposures)"
+    )
     ax_prof.set_title(title, fontsize=10)
     ax_prof.legend(fontsize=8)
     ax_prof.grid(alpha=0.3)

@@ -150,8 +150,10 @@ def plot_parameter_sweeps(sweeps: dict, *, noise, out=None):
     >>> setup = study.study_setup()
     >>> provider = study.dipole_provider(setup.offsets)
     >>> grid = {"sigma_s": [0.5, 2.0], "sigma_a": [0.0, 0.1], "g": [0.0, 0.9]}
-    >>> sweeps = {name: study.parameter_sweep(setup, provider, name, values, seeds=1, noise=0.05)
-    ...           for name, values in grid.items()}
+    >>> sweeps = {
+    ...     name: study.parameter_sweep(setup, provider, name, values, seeds=1, noise=0.05)
+    ...     for name, values in grid.items()
+    ... }
     >>> fig = plot_parameter_sweeps(sweeps, noise=0.05)
     >>> type(fig).__name__, len(fig.axes)
     ('Figure', 3)
@@ -215,14 +217,17 @@ def plot_regularization(rs: dict, *, noise, out=None):
         ax.set_yticks(range(len(a)), [f"{x:.0e}" for x in a], fontsize=7)
         ax.set_xlabel(r"$\beta$ (L1)")
         ax.set_ylabel(r"$\alpha$ (smoothness)")
-        for p in (range(len(a)) if len(a) * len(b) <= 81 else ()):
+        for p in range(len(a)) if len(a) * len(b) <= 81 else ():
             for q in range(len(b)):
                 ax.text(q, p, f"{rs[key][p, q]:.1e}", ha="center", va="center", fontsize=5.5, color="w")
         ia, ib = int(np.argmin(np.abs(np.log(a / 0.01)))), int(np.argmin(np.abs(np.log(b / 0.01))))
         ax.plot(ib, ia, "s", mfc="none", mec="r", ms=16, mew=1.5, label="paper 0.01 / 0.01")
         ax.plot(j, i, "x", color="w", ms=12, mew=2, label="min MSE")
-        ax.set_title(f"log10 {title} of the full method, eta = {noise}\n"
-                     "red square: the paper's 0.01 / 0.01, white x: lowest MSE", fontsize=10)
+        ax.set_title(
+            f"log10 {title} of the full method, eta = {noise}\n"
+            "red square: the paper's 0.01 / 0.01, white x: lowest MSE",
+            fontsize=10,
+        )
         fig.colorbar(im, ax=ax)
     fig.tight_layout()
     return finish(fig, out)

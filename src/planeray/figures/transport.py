@@ -12,9 +12,18 @@ __all__ = ["transport_profiles_figure"]
 _COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown"]
 
 
-def transport_profiles_figure(estimate: Transport, pixels, *, out=None, truth: Transport | None = None,
-                              truth_scale: float = 1.0, names=None, title: str | None = None,
-                              resolution_rows: float | None = None, ax=None):
+def transport_profiles_figure(
+    estimate: Transport,
+    pixels,
+    *,
+    out=None,
+    truth: Transport | None = None,
+    truth_scale: float = 1.0,
+    names=None,
+    title: str | None = None,
+    resolution_rows: float | None = None,
+    ax=None,
+):
     """Plot ``T(u)`` of a few pixels: the estimate (solid) and, if given, the truth (dashed).
 
     Parameters
@@ -73,7 +82,14 @@ def transport_profiles_figure(estimate: Transport, pixels, *, out=None, truth: T
             ax.axvspan(-resolution_rows, resolution_rows, color="0.9", lw=0)
         if truth is not None:
             keep = (truth.offsets_rows >= u[0]) & (truth.offsets_rows <= u[-1])
-            ax.plot(truth.offsets_rows[keep], truth.dense[r, c, keep] * truth_scale, "--", color="0.3", lw=1, label="ground truth")
+            ax.plot(
+                truth.offsets_rows[keep],
+                truth.dense[r, c, keep] * truth_scale,
+                "--",
+                color="0.3",
+                lw=1,
+                label="ground truth",
+            )
         ax.plot(u, estimate.dense[r, c], "-", color=color, lw=1.6, label="demultiplexed")
         label = names[p] if names else ""
         ax.set_ylabel(f"({r}, {c})\n{label}", fontsize=8)

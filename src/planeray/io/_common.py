@@ -153,4 +153,3 @@ class LazyArray:
 
     def __repr__(self) -> str:
         return f"LazyArray(shape={self.shape}, dtype={self.dtype}, store={self.array.store_path})"
-

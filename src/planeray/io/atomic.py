@@ -105,4 +105,3 @@ def atomic_file(path, *, overwrite: bool = True, error=InputError):
     except BaseException:
         _remove(tmp)
         raise
-

@@ -90,9 +90,7 @@ def _read_manifest(folder: Path):
                     header = [cell.strip() for cell in row]
                     for column in ("file", "delay_us", "exposure_us"):
                         if column not in header:
-                            raise StackError(
-                                f"missing column '{column}' (header has: {', '.join(header)})", path
-                            )
+                            raise StackError(f"missing column '{column}' (header has: {', '.join(header)})", path)
                     col = {name: header.index(name) for name in header[::-1]}  # first occurrence wins
                     has_excluded = "excluded" in col
                     continue
@@ -189,9 +187,7 @@ def import_folder(path) -> Stack:
         if raw.size:
             top = raw.max()
             if top > max_code:
-                raise StackError(
-                    f"raw value {top} above the largest code {max_code} of bit_depth {bit_depth}", file
-                )
+                raise StackError(f"raw value {top} above the largest code {max_code} of bit_depth {bit_depth}", file)
             if raw.dtype.kind == "i" and raw.min() < 0:
                 raise StackError(f"negative raw value {raw.min()}", file)
         images[i] = ((raw.astype(np.float64) - black) * scale).astype(np.float32)
@@ -215,8 +211,9 @@ def import_folder(path) -> Stack:
         raise StackError(exc.problem, folder) from exc
 
 
-def export_folder(stack: Stack, folder, *, fmt: str = "tiff", bit_depth: int = 16, black_level: float = 256,
-                  overwrite: bool = False) -> Path:
+def export_folder(
+    stack: Stack, folder, *, fmt: str = "tiff", bit_depth: int = 16, black_level: float = 256, overwrite: bool = False
+) -> Path:
     """Export a stack as an import folder of 16-bit grayscale images, atomically.
 
     Writes ``img_0000.tif`` (or ``.png``) per image, ``manifest.csv``
@@ -275,8 +272,9 @@ def export_folder(stack: Stack, folder, *, fmt: str = "tiff", bit_depth: int = 1
                 raise StackError(f"image {i} contains NaN or infinite values", folder)
             name = f"img_{i:0{digits}d}{suffix}"
             write_raw(tmp / name, quantize(image, max_code, black_level), kind)
-            rows.append([name, repr(float(stack.delay_us[i])), repr(float(stack.exposure_us[i])),
-                         int(bool(stack.excluded[i]))])
+            rows.append(
+                [name, repr(float(stack.delay_us[i])), repr(float(stack.exposure_us[i])), int(bool(stack.excluded[i]))]
+            )
         with open(tmp / "manifest.csv", "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh)
             writer.writerow(["file", "delay_us", "exposure_us", "excluded"])

@@ -10,7 +10,19 @@ import zarr
 
 from ..errors import StackError
 from ..stack import Stack
-from ._common import FORMAT_VERSION, STACK_ARRAYS, STACK_FORMAT, LazyArray, get_array, is_integer, is_number, jsonable, open_group, planeray_version, read_vector
+from ._common import (
+    FORMAT_VERSION,
+    STACK_ARRAYS,
+    STACK_FORMAT,
+    LazyArray,
+    get_array,
+    is_integer,
+    is_number,
+    jsonable,
+    open_group,
+    planeray_version,
+    read_vector,
+)
 from .atomic import atomic_directory
 from .folder import import_folder
 
@@ -46,8 +58,17 @@ def write_stack(stack: Stack, path, *, overwrite: bool = False, progress=None) -
         raise StackError(f"expected a Stack, got {type(stack).__name__}", path)
     n, h, w = (int(x) for x in stack.images.shape)
     with atomic_directory(path, overwrite=overwrite, error=StackError) as tmp:
-        group = create_stack_group(tmp, (n, h, w), stack.delay_us, stack.exposure_us, stack.excluded,
-                                   stack.lines_per_second, stack.projector_rows, stack.metadata, path=path)
+        group = create_stack_group(
+            tmp,
+            (n, h, w),
+            stack.delay_us,
+            stack.exposure_us,
+            stack.excluded,
+            stack.lines_per_second,
+            stack.projector_rows,
+            stack.metadata,
+            path=path,
+        )
         images, saturated = group["images"], group["saturated"]
         for i in range(n):
             image = np.asarray(stack.images[i], dtype=np.float32)
@@ -65,7 +86,9 @@ def write_stack(stack: Stack, path, *, overwrite: bool = False, progress=None) -
     return path
 
 
-def create_stack_group(directory, shape, delay_us, exposure_us, excluded, lines_per_second, projector_rows, metadata, *, path=None):
+def create_stack_group(
+    directory, shape, delay_us, exposure_us, excluded, lines_per_second, projector_rows, metadata, *, path=None
+):
     """Create the layout of a native stack store in ``directory`` (images left at 0).
 
     Shared by :func:`write_stack` and writers that fill a store image by image
@@ -168,9 +191,7 @@ def read_stack(path, *, lazy: bool = True) -> Stack:
     exposure = read_vector(arrays["exposure_us"], "exposure_us", n, path, StackError)
     excluded = read_vector(arrays["excluded"], "excluded", n, path, StackError)
     if saturated is not None and tuple(saturated.shape) != tuple(images.shape):
-        raise StackError(
-            f"array 'saturated' has shape {tuple(saturated.shape)}, images {tuple(images.shape)}", path
-        )
+        raise StackError(f"array 'saturated' has shape {tuple(saturated.shape)}, images {tuple(images.shape)}", path)
 
     if lazy:
         image_data = LazyArray(images)

@@ -11,7 +11,18 @@ import zarr
 from ..errors import TransportError
 from ..timing import RowGeometry
 from ..transport import SparseEntries, Transport
-from ._common import FORMAT_VERSION, SPARSE_ARRAYS, TRANSPORT_FORMAT, get_array, is_integer, is_number, jsonable, open_group, planeray_version, read_vector
+from ._common import (
+    FORMAT_VERSION,
+    SPARSE_ARRAYS,
+    TRANSPORT_FORMAT,
+    get_array,
+    is_integer,
+    is_number,
+    jsonable,
+    open_group,
+    planeray_version,
+    read_vector,
+)
 from .atomic import atomic_directory
 
 
@@ -121,7 +132,9 @@ def read_transport(path) -> tuple[Transport, dict]:
         raise TransportError(f"not a planeray transport (format is {fmt!r})", path)
     version = attrs.get("format_version", FORMAT_VERSION)
     if not is_integer(version) or int(version) > FORMAT_VERSION:
-        raise TransportError(f"unsupported format_version {version!r} (this planeray reads up to {FORMAT_VERSION})", path)
+        raise TransportError(
+            f"unsupported format_version {version!r} (this planeray reads up to {FORMAT_VERSION})", path
+        )
     array = get_array(group, "T", path, TransportError)
     if len(array.shape) != 3:
         raise TransportError(f"array 'T' must be (H, W, U), got shape {tuple(array.shape)}", path)

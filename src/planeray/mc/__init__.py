@@ -6,7 +6,15 @@ profile with Mitsuba 3 as an independent check (optional extra ``mitsuba``).
 """
 
 from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
-from .engine import ROULETTE_CHANCE, ROULETTE_THRESHOLD, MCProfile, cache_dir, default_cutoff_mm, mc_line_profile, mc_point_profile
+from .engine import (
+    ROULETTE_CHANCE,
+    ROULETTE_THRESHOLD,
+    MCProfile,
+    cache_dir,
+    default_cutoff_mm,
+    mc_line_profile,
+    mc_point_profile,
+)
 from .physics import fresnel_unpolarized, hg_phase, sample_hg_cos
 
 __all__ = [

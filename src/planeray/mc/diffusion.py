@@ -53,8 +53,7 @@ def _dipole_medium(medium) -> tuple[float, float, float]:
     """``(sigma_a, sigma_s', n)`` of a semi-infinite medium (the dipole knows nothing else)."""
     medium = as_medium(medium)
     if not medium.semi_infinite:
-        raise InputError(f"the diffusion dipole models a semi-infinite medium, got thickness_mm "
-                         f"{medium.thickness_mm}")
+        raise InputError(f"the diffusion dipole models a semi-infinite medium, got thickness_mm {medium.thickness_mm}")
     return medium.sigma_a, medium.sigma_s_prime, medium.n
 
 
@@ -73,9 +72,13 @@ def _reflectance(r_mm, sigma_a, sigma_s_prime, eta):
     r2 = np.asarray(r_mm, dtype=float) ** 2
     d_r = np.sqrt(r2 + z_r**2)
     d_v = np.sqrt(r2 + z_v**2)
-    return albedo / (4 * np.pi) * (
-        z_r * (sigma_tr * d_r + 1) * np.exp(-sigma_tr * d_r) / d_r**3
-        + z_v * (sigma_tr * d_v + 1) * np.exp(-sigma_tr * d_v) / d_v**3
+    return (
+        albedo
+        / (4 * np.pi)
+        * (
+            z_r * (sigma_tr * d_r + 1) * np.exp(-sigma_tr * d_r) / d_r**3
+            + z_v * (sigma_tr * d_v + 1) * np.exp(-sigma_tr * d_v) / d_v**3
+        )
     )
 
 

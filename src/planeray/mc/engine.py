@@ -188,14 +188,18 @@ class MCProfile:
         """The :class:`~planeray.medium.Medium` of the run, rebuilt from :attr:`params`."""
         p = self.params
         thickness = p.get("thickness")
-        return Medium(sigma_s=p["sigma_s"], sigma_a=p["sigma_a"], g=p["g"], n=p["n"],
-                      thickness_mm=math.inf if thickness is None else thickness)
+        return Medium(
+            sigma_s=p["sigma_s"],
+            sigma_a=p["sigma_a"],
+            g=p["g"],
+            n=p["n"],
+            thickness_mm=math.inf if thickness is None else thickness,
+        )
 
     @property
     def energy_balance(self) -> float:
         """``diffuse + specular + transmitted + absorbed + truncated`` (1 up to round-off)."""
-        return (self.total_reflectance + self.specular_reflectance
-                + self.transmittance + self.absorbed + self.truncated)
+        return self.total_reflectance + self.specular_reflectance + self.transmittance + self.absorbed + self.truncated
 
 
 # ---------------------------------------------------------------- random numbers
@@ -236,8 +240,25 @@ def _bin(x, y, inv_bin, radial):
 
 
 @numba.njit(cache=True, parallel=True, error_model="numpy")
-def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
-           source_width_mm, cutoff_mm, z_cont, hmin, nh, radial):
+def _trace(
+    states,
+    counts,
+    sigma_s,
+    sigma_a,
+    g,
+    n,
+    d,
+    kmin,
+    nk,
+    mm_per_row,
+    w0,
+    source_width_mm,
+    cutoff_mm,
+    z_cont,
+    hmin,
+    nh,
+    radial,
+):
     """Trace ``counts[b]`` photons for each batch ``b``; per-batch tallies.
 
     A photon whose step crosses depth ``z_cont`` stops there; its weight is
@@ -320,8 +341,7 @@ def _trace(states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, w0,
                     if tau < 40.0:
                         k = _bin(x, y, inv_bin, radial) - kmin
                         if 0 <= k < nk:
-                            rad_bins[b, int(k)] += (w * albedo * hg_pdf_jit(-uz, g)
-                                                    * math.exp(-tau) * up_gain)
+                            rad_bins[b, int(k)] += w * albedo * hg_pdf_jit(-uz, g) * math.exp(-tau) * up_gain
                     abs_b += w * (1.0 - albedo)
                     w *= albedo
                     # New direction: HG polar angle, uniform azimuth, rotated into the frame.
@@ -387,18 +407,30 @@ def cache_key(params: dict, offsets: np.ndarray) -> str:
 
 
 _ARRAYS = ("offsets_rows", "values", "stderr", "radiance", "radiance_stderr")
-_SCALARS = ("mm_per_row", "total_reflectance", "total_reflectance_stderr",
-            "specular_reflectance", "transmittance", "transmittance_stderr", "absorbed", "truncated")
+_SCALARS = (
+    "mm_per_row",
+    "total_reflectance",
+    "total_reflectance_stderr",
+    "specular_reflectance",
+    "transmittance",
+    "transmittance_stderr",
+    "absorbed",
+    "truncated",
+)
 
 
 def _save(path: Path, prof: MCProfile) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + f".{os.getpid()}.tmp.npz")
     try:
-        np.savez(tmp, **{k: getattr(prof, k) for k in _ARRAYS},
-                 n_photons=np.int64(prof.n_photons), n_interactions=np.int64(prof.n_interactions),
-                 params=np.array(json.dumps(prof.params, sort_keys=True)),
-                 **{k: np.float64(getattr(prof, k)) for k in _SCALARS})
+        np.savez(
+            tmp,
+            **{k: getattr(prof, k) for k in _ARRAYS},
+            n_photons=np.int64(prof.n_photons),
+            n_interactions=np.int64(prof.n_interactions),
+            params=np.array(json.dumps(prof.params, sort_keys=True)),
+            **{k: np.float64(getattr(prof, k)) for k in _SCALARS},
+        )
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -408,9 +440,11 @@ def _load(path: Path) -> MCProfile:
     with np.load(path, allow_pickle=False) as z:
         return MCProfile(
             **{k: z[k] for k in _ARRAYS},
-            n_photons=int(z["n_photons"]), n_interactions=int(z["n_interactions"]),
+            n_photons=int(z["n_photons"]),
+            n_interactions=int(z["n_interactions"]),
             params=json.loads(str(z["params"])),
-            **{k: float(z[k]) for k in _SCALARS})
+            **{k: float(z[k]) for k in _SCALARS},
+        )
 
 
 # ---------------------------------------------------------------- public entry point
@@ -457,9 +491,18 @@ def default_cutoff_mm(medium: Medium, offsets_rows, *, mm_per_row) -> float:
     return float(min(max(scales), 1e6))
 
 
-def mc_line_profile(medium: Medium, *, n_photons=10**6, offsets_rows=None, mm_per_row=1.0,
-                    source_width_mm=0.0, diffusion_depth_mfp=DIFFUSION_DEPTH_MFP, cutoff_mm=None,
-                    seed=0, cache=False) -> MCProfile:
+def mc_line_profile(
+    medium: Medium,
+    *,
+    n_photons=10**6,
+    offsets_rows=None,
+    mm_per_row=1.0,
+    source_width_mm=0.0,
+    diffusion_depth_mfp=DIFFUSION_DEPTH_MFP,
+    cutoff_mm=None,
+    seed=0,
+    cache=False,
+) -> MCProfile:
     """Monte Carlo line-source reflectance profile of a homogeneous slab.
 
     Parameters
@@ -513,12 +556,23 @@ def mc_line_profile(medium: Medium, *, n_photons=10**6, offsets_rows=None, mm_pe
     """
     if offsets_rows is None:
         offsets_rows = np.arange(-50, 51)
-    return _profile("line", as_medium(medium), n_photons, offsets_rows, mm_per_row,
-                    seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp)
+    return _profile(
+        "line",
+        as_medium(medium),
+        n_photons,
+        offsets_rows,
+        mm_per_row,
+        seed,
+        cache,
+        source_width_mm,
+        cutoff_mm,
+        diffusion_depth_mfp,
+    )
 
 
-def mc_point_profile(medium: Medium, *, n_photons=10**6, radius_bins=None, mm_per_bin=1.0,
-                     cutoff_mm=None, seed=0, cache=False) -> MCProfile:
+def mc_point_profile(
+    medium: Medium, *, n_photons=10**6, radius_bins=None, mm_per_bin=1.0, cutoff_mm=None, seed=0, cache=False
+) -> MCProfile:
     """Monte Carlo radial reflectance of a *point* (pencil-beam) source: MCML's ``R_d(r)``.
 
     Same engine and checks as :func:`mc_line_profile`, with the exit points binned
@@ -552,12 +606,12 @@ def mc_point_profile(medium: Medium, *, n_photons=10**6, radius_bins=None, mm_pe
         radius_bins = np.arange(0, 51)
     if np.any(np.asarray(radius_bins) < 0):
         raise ValueError("radius_bins must be non-negative")
-    return _profile("point", medium, n_photons, radius_bins, mm_per_bin,
-                    seed, cache, 0.0, cutoff_mm, None)
+    return _profile("point", medium, n_photons, radius_bins, mm_per_bin, seed, cache, 0.0, cutoff_mm, None)
 
 
-def _profile(source, medium, n_photons, offsets_rows, mm_per_row,
-             seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp):
+def _profile(
+    source, medium, n_photons, offsets_rows, mm_per_row, seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp
+):
     """Validate, look up the caches, trace (:func:`_run`), store."""
     n_photons = int(n_photons)
     mm_per_row = float(mm_per_row)
@@ -583,11 +637,19 @@ def _profile(source, medium, n_photons, offsets_rows, mm_per_row,
         raise ValueError(f"diffusion_depth_mfp must be positive or None, got {diffusion_depth_mfp}")
     # The cache key (and MCProfile.params): these keys, values and order are what the
     # shipped tables were hashed with -- keep them as they are.
-    params = dict(sigma_s=medium.sigma_s, sigma_a=medium.sigma_a, g=medium.g, n=medium.n,
-                  thickness=None if medium.semi_infinite else medium.thickness_mm,
-                  n_photons=n_photons, mm_per_row=mm_per_row, seed=int(seed),
-                  source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
-                  diffusion_depth_mfp=depth_mfp)
+    params = dict(
+        sigma_s=medium.sigma_s,
+        sigma_a=medium.sigma_a,
+        g=medium.g,
+        n=medium.n,
+        thickness=None if medium.semi_infinite else medium.thickness_mm,
+        n_photons=n_photons,
+        mm_per_row=mm_per_row,
+        seed=int(seed),
+        source_width_mm=source_width_mm,
+        cutoff_mm=cutoff_mm,
+        diffusion_depth_mfp=depth_mfp,
+    )
     if source == "point":
         params["source"] = "point"  # line-source keys stay as they were: shipped tables remain valid
     path = None
@@ -601,14 +663,18 @@ def _profile(source, medium, n_photons, offsets_rows, mm_per_row,
                 except (OSError, ValueError, KeyError):
                     pass  # unreadable entry: recompute (and overwrite the user cache)
 
-    prof = _run(medium, n_photons, offsets, mm_per_row, int(seed),
-                source_width_mm, cutoff_mm, params, radial=source == "point")
+    prof = _run(
+        medium, n_photons, offsets, mm_per_row, int(seed), source_width_mm, cutoff_mm, params, radial=source == "point"
+    )
     if path is not None:
         try:
             _save(path, prof)
         except OSError as exc:  # a read-only home must not cost the result
-            warnings.warn(f"{path}: could not write the Monte Carlo cache ({exc}); "
-                          "set PLANERAY_CACHE to a writable folder", RuntimeWarning, stacklevel=2)
+            warnings.warn(
+                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
+                RuntimeWarning,
+                stacklevel=2,
+            )
     return prof
 
 
@@ -623,8 +689,7 @@ def _batch_stats(per_batch, counts):
     return mean, means.std(axis=0, ddof=1) / np.sqrt(used.sum())
 
 
-def _run(medium, n_photons, offsets, mm_per_row, seed,
-         source_width_mm, cutoff_mm, params, radial=False):
+def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_mm, params, radial=False):
     sigma_s, sigma_a, g, n, d = medium.sigma_s, medium.sigma_a, medium.g, medium.n, medium.thickness_mm
     B = _N_BATCHES
     counts = np.full(B, n_photons // B, dtype=np.int64)
@@ -643,13 +708,30 @@ def _run(medium, n_photons, offsets, mm_per_row, seed,
     reach = int(np.ceil(min(cutoff_mm, half + 20.0 * z_cont) / mm_per_row)) if np.isfinite(z_cont) else 0
     hmin, nh = -reach, 2 * reach + 1
     refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont, far = _trace(
-        states, counts, sigma_s, sigma_a, g, n, d, kmin, nk, mm_per_row, 1.0 - r_sp,
-        source_width_mm, cutoff_mm, z_cont, hmin, nh, radial)
+        states,
+        counts,
+        sigma_s,
+        sigma_a,
+        g,
+        n,
+        d,
+        kmin,
+        nk,
+        mm_per_row,
+        1.0 - r_sp,
+        source_width_mm,
+        cutoff_mm,
+        z_cont,
+        hmin,
+        nh,
+        radial,
+    )
     # Radiance is tallied per unit area: divide by the bin's width (line) or annulus area (point).
     rad_bins /= bin_measure(np.arange(kmin, kmin + nk), mm_per_row, radial)
     if np.isfinite(z_cont) and (cont.any() or far.any()):
-        exit_bins, exit_total = diffusion_exit(cont, hmin, np.arange(kmin, kmin + nk), mm_per_row,
-                                               z_cont, sigma_a, sigma_tp, n)
+        exit_bins, exit_total = diffusion_exit(
+            cont, hmin, np.arange(kmin, kmin + nk), mm_per_row, z_cont, sigma_a, sigma_tp, n
+        )
         w_cont = cont.sum(axis=1) + far
         refl_bins += exit_bins
         rad_bins += exit_bins * (diffusion_normal_radiance_ratio(n) / mm_per_row)
@@ -661,9 +743,20 @@ def _run(medium, n_photons, offsets, mm_per_row, seed,
     R_tot, r_err = _batch_stats(refl, counts)
     T_tot, t_err = _batch_stats(trans, counts)
     return MCProfile(
-        offsets_rows=offsets.copy(), mm_per_row=mm_per_row, values=values, stderr=stderr,
-        radiance=radiance, radiance_stderr=rad_err,
-        total_reflectance=float(R_tot), total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(r_sp), transmittance=float(T_tot), transmittance_stderr=float(t_err),
-        absorbed=float(absorbed.sum() / n_photons), truncated=float(truncated.sum() / n_photons),
-        n_photons=n_photons, n_interactions=int(events.sum()), params=params)
+        offsets_rows=offsets.copy(),
+        mm_per_row=mm_per_row,
+        values=values,
+        stderr=stderr,
+        radiance=radiance,
+        radiance_stderr=rad_err,
+        total_reflectance=float(R_tot),
+        total_reflectance_stderr=float(r_err),
+        specular_reflectance=float(r_sp),
+        transmittance=float(T_tot),
+        transmittance_stderr=float(t_err),
+        absorbed=float(absorbed.sum() / n_photons),
+        truncated=float(truncated.sum() / n_photons),
+        n_photons=n_photons,
+        n_interactions=int(events.sum()),
+        params=params,
+    )

@@ -129,8 +129,10 @@ def _index_matched_half_space(medium, what) -> Medium:
     """``medium`` if it is what the Mitsuba scene models: ``n = 1``, semi-infinite."""
     medium = as_medium(medium)
     if medium.n != 1.0 or not medium.semi_infinite:
-        raise InputError(f"{what} models an index-matched (n = 1) semi-infinite medium, got n {medium.n}, "
-                         f"thickness_mm {medium.thickness_mm}")
+        raise InputError(
+            f"{what} models an index-matched (n = 1) semi-infinite medium, got n {medium.n}, "
+            f"thickness_mm {medium.thickness_mm}"
+        )
     return medium
 
 
@@ -167,9 +169,7 @@ def _mitsuba(variant):
     try:
         import mitsuba as mi
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            "planeray.mc.mitsuba_ref needs Mitsuba 3: pip install \"planeray[mitsuba]\""
-        ) from exc
+        raise ImportError('planeray.mc.mitsuba_ref needs Mitsuba 3: pip install "planeray[mitsuba]"') from exc
     if mi.variant() != variant:
         mi.set_variant(variant)
     return mi
@@ -187,8 +187,9 @@ def _default_medium_size_mm(medium, extent_mm):
     return float(min(max(length, 100.0, 10.0 * extent_mm), 1.0e4))
 
 
-def _scene(mi, *, medium, x_left_mm, ncols, pixel_mm, source_width_mm, along_pixels,
-           spp, seed, max_depth, rr_depth, size_mm):
+def _scene(
+    mi, *, medium, x_left_mm, ncols, pixel_mm, source_width_mm, along_pixels, spp, seed, max_depth, rr_depth, size_mm
+):
     """Scene dict: masked directional light over either the medium or a white plane.
 
     Film column ``i`` covers ``x`` in ``[x_left_mm + i * pixel_mm, x_left_mm + (i + 1) * pixel_mm)``.
@@ -204,37 +205,50 @@ def _scene(mi, *, medium, x_left_mm, ncols, pixel_mm, source_width_mm, along_pix
     # along y), so the medium needs no extra room for them.  look_at with up = +y puts
     # film columns along +x (checked by the single-scattering test's asymmetric window).
     scale_y = 0.5 * pixel_mm * ncols / along_pixels
-    sensor_to_world = (T.look_at(origin=[x_center, 0.0, _CAMERA_Z_MM],
-                                 target=[x_center, 0.0, 0.0], up=[0.0, 1.0, 0.0])
-                       @ T.scale([half_w, scale_y, 1.0]))
+    sensor_to_world = T.look_at(
+        origin=[x_center, 0.0, _CAMERA_Z_MM], target=[x_center, 0.0, 0.0], up=[0.0, 1.0, 0.0]
+    ) @ T.scale([half_w, scale_y, 1.0])
     scene = {
         "type": "scene",
-        "integrator": {"type": "volpath", "max_depth": int(max_depth),
-                       "rr_depth": int(rr_depth), "block_size": _BLOCK_SIZE},
+        "integrator": {
+            "type": "volpath",
+            "max_depth": int(max_depth),
+            "rr_depth": int(rr_depth),
+            "block_size": _BLOCK_SIZE,
+        },
         "sensor": {
             "type": "orthographic",
             "to_world": sensor_to_world,
-            "film": {"type": "hdrfilm", "width": int(ncols), "height": int(along_pixels),
-                     "rfilter": {"type": "box"}, "pixel_format": "rgb",
-                     "sample_border": False},
+            "film": {
+                "type": "hdrfilm",
+                "width": int(ncols),
+                "height": int(along_pixels),
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "sample_border": False,
+            },
             "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)},
         },
         # Irradiance 1/w on a surface normal to the beam: unit power per unit line length.
-        "light": {"type": "directional", "direction": [0.0, 0.0, -1.0],
-                  "irradiance": 1.0 / w},
+        "light": {"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": 1.0 / w},
         "black": {"type": "diffuse", "id": "black", "reflectance": 0.0},
-        "mask_left": {"type": "rectangle",
-                      "to_world": T.translate([-0.5 * w - big, 0.0, _MASK_Z_MM])
-                      @ T.scale([big, big, 1.0]),
-                      "bsdf": {"type": "ref", "id": "black"}},
-        "mask_right": {"type": "rectangle",
-                       "to_world": T.translate([0.5 * w + big, 0.0, _MASK_Z_MM])
-                       @ T.scale([big, big, 1.0]),
-                       "bsdf": {"type": "ref", "id": "black"}},
+        "mask_left": {
+            "type": "rectangle",
+            "to_world": T.translate([-0.5 * w - big, 0.0, _MASK_Z_MM]) @ T.scale([big, big, 1.0]),
+            "bsdf": {"type": "ref", "id": "black"},
+        },
+        "mask_right": {
+            "type": "rectangle",
+            "to_world": T.translate([0.5 * w + big, 0.0, _MASK_Z_MM]) @ T.scale([big, big, 1.0]),
+            "bsdf": {"type": "ref", "id": "black"},
+        },
     }
     if medium is None:
-        scene["white"] = {"type": "rectangle", "to_world": T.scale([big, big, 1.0]),
-                          "bsdf": {"type": "diffuse", "reflectance": 1.0}}
+        scene["white"] = {
+            "type": "rectangle",
+            "to_world": T.scale([big, big, 1.0]),
+            "bsdf": {"type": "diffuse", "reflectance": 1.0},
+        }
     else:
         sigma_s, g = medium.sigma_s, medium.g
         sigma_t = sigma_s + medium.sigma_a
@@ -242,8 +256,12 @@ def _scene(mi, *, medium, x_left_mm, ncols, pixel_mm, source_width_mm, along_pix
             "type": "cube",
             "to_world": T.translate([0.0, 0.0, -size_mm]) @ T.scale([size_mm] * 3),
             "bsdf": {"type": "null"},
-            "interior": {"type": "homogeneous", "sigma_t": sigma_t,
-                         "albedo": sigma_s / sigma_t, "phase": {"type": "hg", "g": g}},
+            "interior": {
+                "type": "homogeneous",
+                "sigma_t": sigma_t,
+                "albedo": sigma_s / sigma_t,
+                "phase": {"type": "hg", "g": g},
+            },
         }
     return scene
 
@@ -263,17 +281,39 @@ def _line_power(mi, source_width_mm, size_mm):
     """
     sub = 4
     pixel_mm = source_width_mm / sub
-    d = _scene(mi, medium=None, x_left_mm=-0.5 * source_width_mm - pixel_mm, ncols=sub + 2,
-               pixel_mm=pixel_mm, source_width_mm=source_width_mm, along_pixels=2, spp=4,
-               seed=0, max_depth=2, rr_depth=5, size_mm=size_mm)
+    d = _scene(
+        mi,
+        medium=None,
+        x_left_mm=-0.5 * source_width_mm - pixel_mm,
+        ncols=sub + 2,
+        pixel_mm=pixel_mm,
+        source_width_mm=source_width_mm,
+        along_pixels=2,
+        spp=4,
+        seed=0,
+        max_depth=2,
+        rr_depth=5,
+        size_mm=size_mm,
+    )
     img = _render(mi, d)
     return float(math.pi * img.mean(axis=0).sum() * pixel_mm)
 
 
-def mitsuba_line_profile(medium: Medium, offsets_rows, *, mm_per_row,
-                         source_width_mm=None, spp=64, passes=1, seed=0,
-                         along_pixels=1024, variant="scalar_rgb", max_depth=-1,
-                         rr_depth=5, medium_size_mm=None):
+def mitsuba_line_profile(
+    medium: Medium,
+    offsets_rows,
+    *,
+    mm_per_row,
+    source_width_mm=None,
+    spp=64,
+    passes=1,
+    seed=0,
+    along_pixels=1024,
+    variant="scalar_rgb",
+    max_depth=-1,
+    rr_depth=5,
+    medium_size_mm=None,
+):
     """Normal-view radiance profile next to a line light, rendered with Mitsuba 3.
 
     Parameters
@@ -331,8 +371,7 @@ def mitsuba_line_profile(medium: Medium, offsets_rows, *, mm_per_row,
     --------
     >>> from planeray.medium import Medium
     >>> m = Medium(sigma_s=0.02, sigma_a=0.98, g=0.0)
-    >>> p = mitsuba_line_profile(m, [-1, 0, 1], mm_per_row=0.5,
-    ...                          spp=64, max_depth=2)  # doctest: +SKIP
+    >>> p = mitsuba_line_profile(m, [-1, 0, 1], mm_per_row=0.5, spp=64, max_depth=2)  # doctest: +SKIP
     >>> p.radiance[1] / single_scattering_radiance(m, source_width_mm=0.5)  # doctest: +SKIP
     1.0...
     """
@@ -350,15 +389,13 @@ def mitsuba_line_profile(medium: Medium, offsets_rows, *, mm_per_row,
     offsets = offsets.astype(np.int64)
     spp, passes, along_pixels = int(spp), int(passes), int(along_pixels)
     if spp < 1 or passes < 1 or along_pixels < 1 or passes * along_pixels < 2:
-        raise ValueError("need spp >= 1, passes >= 1, along_pixels >= 1 and "
-                         "passes * along_pixels >= 2")
+        raise ValueError("need spp >= 1, passes >= 1, along_pixels >= 1 and passes * along_pixels >= 2")
 
     mi = _mitsuba(variant)
     kmin, kmax = int(offsets.min()), int(offsets.max())
     ncols = kmax - kmin + 1
     extent_mm = (max(abs(kmin), abs(kmax)) + 0.5) * mm_per_row
-    size_mm = (_default_medium_size_mm(medium, extent_mm)
-               if medium_size_mm is None else float(medium_size_mm))
+    size_mm = _default_medium_size_mm(medium, extent_mm) if medium_size_mm is None else float(medium_size_mm)
 
     t0 = time.perf_counter()
     line_power = _line_power(mi, width, size_mm)
@@ -366,11 +403,23 @@ def mitsuba_line_profile(medium: Medium, offsets_rows, *, mm_per_row,
     # Keep seeds in int32 range: the plugin property is a signed integer.
     seeds = (seeds >> np.uint32(1)).astype(np.int64)
     images = [
-        _render(mi, _scene(mi, medium=medium,
-                           x_left_mm=(kmin - 0.5) * mm_per_row, ncols=ncols,
-                           pixel_mm=mm_per_row, source_width_mm=width,
-                           along_pixels=along_pixels, spp=spp, seed=int(s),
-                           max_depth=max_depth, rr_depth=rr_depth, size_mm=size_mm))
+        _render(
+            mi,
+            _scene(
+                mi,
+                medium=medium,
+                x_left_mm=(kmin - 0.5) * mm_per_row,
+                ncols=ncols,
+                pixel_mm=mm_per_row,
+                source_width_mm=width,
+                along_pixels=along_pixels,
+                spp=spp,
+                seed=int(s),
+                max_depth=max_depth,
+                rr_depth=rr_depth,
+                size_mm=size_mm,
+            ),
+        )
         for s in seeds
     ]
     seconds = time.perf_counter() - t0
@@ -381,13 +430,29 @@ def mitsuba_line_profile(medium: Medium, offsets_rows, *, mm_per_row,
     stderr = rows.std(axis=0, ddof=1)[cols] / math.sqrt(rows.shape[0])
 
     params = {
-        "sigma_s": sigma_s, "sigma_a": sigma_a, "g": g, "n": 1.0,
-        "mm_per_row": mm_per_row, "source_width_mm": width, "spp": spp,
-        "passes": passes, "seed": int(seed), "along_pixels": along_pixels,
-        "variant": variant, "integrator": "volpath", "max_depth": int(max_depth),
-        "rr_depth": int(rr_depth), "medium_size_mm": size_mm,
-        "calibrated_line_power": line_power, "mitsuba_version": mi.__version__,
+        "sigma_s": sigma_s,
+        "sigma_a": sigma_a,
+        "g": g,
+        "n": 1.0,
+        "mm_per_row": mm_per_row,
+        "source_width_mm": width,
+        "spp": spp,
+        "passes": passes,
+        "seed": int(seed),
+        "along_pixels": along_pixels,
+        "variant": variant,
+        "integrator": "volpath",
+        "max_depth": int(max_depth),
+        "rr_depth": int(rr_depth),
+        "medium_size_mm": size_mm,
+        "calibrated_line_power": line_power,
+        "mitsuba_version": mi.__version__,
         "samples_per_bin": spp * along_pixels * passes,
     }
-    return MitsubaProfile(offsets_rows=offsets, radiance=radiance.astype(np.float64),
-                          stderr=stderr.astype(np.float64), params=params, seconds=seconds)
+    return MitsubaProfile(
+        offsets_rows=offsets,
+        radiance=radiance.astype(np.float64),
+        stderr=stderr.astype(np.float64),
+        params=params,
+        seconds=seconds,
+    )

@@ -1,5 +1,23 @@
 """Built-in scenes with exact ground-truth light transport (one module per scene)."""
 
-from .base import EFFECTS, Scene, footprint_kernel, list_scenes, make_scene, register_scene, representative_pixels, scene_offsets
+from .base import (
+    EFFECTS,
+    Scene,
+    footprint_kernel,
+    list_scenes,
+    make_scene,
+    register_scene,
+    representative_pixels,
+    scene_offsets,
+)
 
-__all__ = ["EFFECTS", "Scene", "footprint_kernel", "list_scenes", "make_scene", "register_scene", "representative_pixels", "scene_offsets"]
+__all__ = [
+    "EFFECTS",
+    "Scene",
+    "footprint_kernel",
+    "list_scenes",
+    "make_scene",
+    "register_scene",
+    "representative_pixels",
+    "scene_offsets",
+]

@@ -41,7 +41,9 @@ def printed_page(shape, rng: np.random.Generator, paper=0.85, ink=0.08, line_px=
     return albedo
 
 
-def floor_tiles(shape, rng: np.random.Generator, tiles=6, mean=0.6, spread=0.12, grout=0.25, grout_frac=0.08) -> np.ndarray:
+def floor_tiles(
+    shape, rng: np.random.Generator, tiles=6, mean=0.6, spread=0.12, grout=0.25, grout_frac=0.08
+) -> np.ndarray:
     """Square tiles of random albedo ``mean +- spread`` separated by dark grout lines.
 
     ``tiles`` is the number of tiles across the image width; tiles are square in

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -155,7 +155,13 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
     if H < 8 or W < 8:
         raise ValueError(f"scene size must be at least 8x8, got {H}x{W}")
     scene = _REGISTRY[name].build((H, W), projector_rows, int(seed), **params)
-    scene.params = {"name": name, "shape": [H, W], "projector_rows": scene.geometry.projector_rows, "seed": int(seed), **scene.params}
+    scene.params = {
+        "name": name,
+        "shape": [H, W],
+        "projector_rows": scene.geometry.projector_rows,
+        "seed": int(seed),
+        **scene.params,
+    }
     return scene
 
 
@@ -174,7 +180,9 @@ def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
     return (k / k.sum()).astype(np.float64)
 
 
-def representative_pixels(scene: Scene, support_rows: int, *, per_label: int = 1, exposure_us: float = 600.0) -> tuple[np.ndarray, list[str]]:
+def representative_pixels(
+    scene: Scene, support_rows: int, *, per_label: int = 1, exposure_us: float = 600.0
+) -> tuple[np.ndarray, list[str]]:
     """Pick pixels that show each ground-truth effect of a scene most clearly.
 
     Direct/diffuse pixels: the brightest whose in-sweep indirect light is below 1 %

@@ -166,7 +166,7 @@ def _strip_kernel_stack(albedo, scales_px):
         if c < 0.2:
             out[i] = albedo
             continue
-        cdf = lambda z: np.arctan(z / c) + c * z / (z * z + c * c)  # noqa: E731  (x pi, minus pi/2)
+        cdf = lambda z, c=c: np.arctan(z / c) + c * z / (z * z + c * c)  # noqa: E731  (x pi, minus pi/2)
         k = cdf(x + 0.5) - cdf(x - 0.5)
         k /= k.sum()
         full = np.fft.irfft(spec * np.fft.rfft(k, n=n), n=n, axis=1)
@@ -291,7 +291,9 @@ def build(
             offs_l.append(np.repeat(centre, W))
             vals_l.append(val.ravel())
         if rows_l:
-            sparse = SparseEntries(np.concatenate(rows_l), np.concatenate(cols_l), np.concatenate(offs_l), np.concatenate(vals_l))
+            sparse = SparseEntries(
+                np.concatenate(rows_l), np.concatenate(cols_l), np.concatenate(offs_l), np.concatenate(vals_l)
+            )
 
     transport = Transport(dense, offsets, geometry, sparse)
     support = np.abs(offsets) <= label_support_rows

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transport import Transport
 from ..timing import RowGeometry
+from ..transport import Transport
 from ._textures import printed_page, smooth_noise
 from .base import Scene, footprint_kernel, register_scene, scene_offsets
 
@@ -35,4 +35,6 @@ def build(shape, projector_rows, seed, band_rows: int = 16, shading: float = 1.0
     dense = albedo[:, :, None] * kernel[None, None, :]
     transport = Transport(dense, offsets, geometry)
     labels = np.ones(shape, np.uint8)
-    return Scene("diffuse_plane", transport, albedo, albedo.copy(), labels, {"band_rows": band_rows, "shading": shading})
+    return Scene(
+        "diffuse_plane", transport, albedo, albedo.copy(), labels, {"band_rows": band_rows, "shading": shading}
+    )

@@ -163,7 +163,19 @@ def build(
         return np.where(mirror, facet_diffuse, grout_albedo)
 
     trace = trace_sphere(
-        shape, geometry, mm_per_row, albedo, centre, R, distance * R, facets, mirror_reflectance, diffuse, n_cam, n_splat, rng
+        shape,
+        geometry,
+        mm_per_row,
+        albedo,
+        centre,
+        R,
+        distance * R,
+        facets,
+        mirror_reflectance,
+        diffuse,
+        n_cam,
+        n_splat,
+        rng,
     )
     transport, direct = sphere_scene_transport(shape, geometry, albedo, trace, band_rows)
     ball = trace.coverage > 0.5

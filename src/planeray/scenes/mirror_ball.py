@@ -247,7 +247,9 @@ def _reflection_radius(beta, R):
     return rq, drq
 
 
-def gather_resting_sphere(shape, geometry, mm_per_row, albedo, centre_xy_mm, radius_mm, mirror_reflectance, n_gather, coverage):
+def gather_resting_sphere(
+    shape, geometry, mm_per_row, albedo, centre_xy_mm, radius_mm, mirror_reflectance, n_gather, coverage
+):
     """Specular light a smooth mirror sphere resting on the page throws onto each page pixel.
 
     The noise-free counterpart of the forward splat: the page point at radius
@@ -306,7 +308,9 @@ def sphere_scene_transport(shape, geometry, albedo, trace: SphereTrace, band_row
     direct = ((1.0 - trace.coverage) * albedo + trace.ball_direct).astype(np.float32)
     foot = footprint_kernel(offsets, rpc).astype(np.float32)
     dense = direct[:, :, None] * foot[None, None, :]
-    transport = Transport.from_entries(shape, offsets, trace.row, trace.col, trace.offset, trace.value, geometry=geometry, dense=dense)
+    transport = Transport.from_entries(
+        shape, offsets, trace.row, trace.col, trace.offset, trace.value, geometry=geometry, dense=dense
+    )
     return transport, direct
 
 
@@ -355,18 +359,36 @@ def build(
     R = radius * H * pix
     centre = (0.5 * W * pix, 0.5 * H * pix)
     trace = trace_sphere(
-        shape, geometry, mm_per_row, albedo, centre, R, R, smooth_normals, mirror_reflectance, ball_diffuse, n_cam, n_splat, rng
+        shape,
+        geometry,
+        mm_per_row,
+        albedo,
+        centre,
+        R,
+        R,
+        smooth_normals,
+        mirror_reflectance,
+        ball_diffuse,
+        n_cam,
+        n_splat,
+        rng,
     )
     if n_splat == 0:  # exact gather instead of the forward splat
         n_gather = max(4, int(np.ceil(geometry.rows_per_camera_row)))
-        trace.add(*gather_resting_sphere(shape, geometry, mm_per_row, albedo, centre, R, mirror_reflectance, n_gather, trace.coverage))
+        trace.add(
+            *gather_resting_sphere(
+                shape, geometry, mm_per_row, albedo, centre, R, mirror_reflectance, n_gather, trace.coverage
+            )
+        )
     transport, direct = sphere_scene_transport(shape, geometry, albedo, trace, band_rows)
     ball = trace.coverage > 0.5
     page_direct = (1.0 - trace.coverage) * albedo
     labels = np.ones(shape, np.uint8)
     labels[(trace.splat + trace.seen > label_fraction * page_direct) & ~ball] = 4
     labels[ball] = np.where(trace.seen[ball] > 0, 4, 0)
-    ambient = ((1.0 - trace.coverage) * albedo + trace.coverage * (mirror_reflectance * 0.5 + ball_diffuse)).astype(np.float32)
+    ambient = ((1.0 - trace.coverage) * albedo + trace.coverage * (mirror_reflectance * 0.5 + ball_diffuse)).astype(
+        np.float32
+    )
     params = {
         "mm_per_row": float(mm_per_row),
         "radius": float(radius),

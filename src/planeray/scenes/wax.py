@@ -116,7 +116,8 @@ def _scene_medium(medium, sigma_a, sigma_s_prime, eta, g) -> Medium:
         medium.sigma_a if sigma_a is None else sigma_a,
         g=medium.g if g is None else g,
         n=medium.n if eta is None else eta,
-        thickness_mm=medium.thickness_mm)
+        thickness_mm=medium.thickness_mm,
+    )
 
 
 def rose_pattern(shape, centre, radii, rng: np.random.Generator, petals=5, turns=3.0):
@@ -139,7 +140,7 @@ def rose_pattern(shape, centre, radii, rng: np.random.Generator, petals=5, turns
     f = phase - np.floor(phase)
     groove_w = 0.06
     pattern = np.ones(shape)
-    rim = np.exp(-((f - 1.0 + 1.5 * groove_w) / (1.2 * groove_w)) ** 2)
+    rim = np.exp(-(((f - 1.0 + 1.5 * groove_w) / (1.2 * groove_w)) ** 2))
     pattern += 2.0 * rim * (r > 0.08)
     pattern = np.where((f < groove_w) | (f > 1.0 - groove_w * 0.5), 0.25, pattern)
     return np.clip(pattern, 0.25, 3.0)
