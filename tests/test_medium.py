@@ -182,7 +182,8 @@ def test_mc_line_profile_of_a_medium_is_the_cached_result_of_the_same_parameters
 
 def test_the_default_wax_medium_keys_the_shipped_table():
     from planeray.kernels import MC_KERNEL_REACH_ROWS
-    from planeray.mc.engine import TABLES_DIR, cache_key, default_cutoff_mm
+    from planeray.mc.cache import TABLES_DIR, cache_key
+    from planeray.mc.engine import default_cutoff_mm
     from planeray.scenes.wax import WAX_MEDIUM
 
     assert WAX_MEDIUM == Medium.from_reduced(0.3, 0.003, g=0.8, n=1.4)

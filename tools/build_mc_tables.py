@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from planeray.mc.engine import TABLES_DIR
+from planeray.mc.cache import TABLES_DIR
 from planeray.scenes import list_scenes, make_scene
 
 

@@ -60,7 +60,7 @@ def mc_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, n_photons=MC_KER
     The profile is traced once over a canonical symmetric range (at least
     ``MC_KERNEL_REACH_ROWS``, more in steps of 64 for wider offsets) and cached
     on disk, so scenes of any size with the same medium reuse it; the default
-    wax medium ships precomputed (:data:`planeray.mc.engine.TABLES_DIR`).
+    wax medium ships precomputed (:data:`planeray.mc.cache.TABLES_DIR`).
 
     Parameters
     ----------

@@ -1,21 +1,20 @@
 """Monte Carlo photon transport in homogeneous slabs (compiled MCML-style engine).
 
-See :mod:`planeray.mc.engine` (photon transport), :mod:`planeray.mc.physics` (Fresnel, HG),
-:mod:`planeray.mc.diffusion` (the dipole and the diffusion hand-off); :mod:`planeray.mc.mitsuba_ref` renders the same
-profile with Mitsuba 3 as an independent check (optional extra ``mitsuba``).
+* :mod:`planeray.mc.engine`: photon transport (the compiled kernel and the entry points);
+* :mod:`planeray.mc.result`: :class:`MCProfile`, what a run returns;
+* :mod:`planeray.mc.cache`: the disk cache and the tables shipped with the package;
+* :mod:`planeray.mc.physics`: Fresnel reflectance and the Henyey-Greenstein phase function;
+* :mod:`planeray.mc.diffusion`: the diffusion dipole and the hybrid hand-off to diffusion;
+* :mod:`planeray.mc.report`: CSV/JSON output of a profile;
+* :mod:`planeray.mc.mitsuba_ref`: the same profile rendered by Mitsuba 3, the independent
+  check (optional extra ``mitsuba``).
 """
 
+from .cache import cache_dir
 from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
-from .engine import (
-    ROULETTE_CHANCE,
-    ROULETTE_THRESHOLD,
-    MCProfile,
-    cache_dir,
-    default_cutoff_mm,
-    mc_line_profile,
-    mc_point_profile,
-)
+from .engine import ROULETTE_CHANCE, ROULETTE_THRESHOLD, default_cutoff_mm, mc_line_profile, mc_point_profile
 from .physics import fresnel_unpolarized, hg_phase, sample_hg_cos
+from .result import MCProfile
 
 __all__ = [
     "MCProfile",

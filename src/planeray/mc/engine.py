@@ -83,31 +83,24 @@ References
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-import os
 import warnings
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numba
 import numpy as np
 
 from ..medium import Medium, as_medium
+from .cache import TABLES_DIR, cache_dir, cache_key, load_profile, save_profile
 from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
 from .physics import fresnel_jit, hg_cos_jit, hg_pdf_jit
+from .result import MCProfile
 
 __all__ = [
-    "MCProfile",
     "mc_line_profile",
     "mc_point_profile",
     "default_cutoff_mm",
     "bin_measure",
     "DIFFUSION_DEPTH_MFP",
-    "cache_dir",
-    "cache_key",
-    "TABLES_DIR",
     "ROULETTE_THRESHOLD",
     "ROULETTE_CHANCE",
 ]
@@ -117,89 +110,7 @@ __all__ = [
 DIFFUSION_DEPTH_MFP = 10.0
 ROULETTE_THRESHOLD = 1e-4
 ROULETTE_CHANCE = 10.0
-_ENGINE_VERSION = 4
 _N_BATCHES = 32
-
-
-@dataclass(frozen=True)
-class MCProfile:
-    """Result of :func:`mc_line_profile` (and :func:`mc_point_profile`, whose bins are
-    radial: see there). Power quantities are fractions of the incident power.
-
-    Attributes
-    ----------
-    offsets_rows : ndarray of int64
-        Offset bins ``k``; bin ``k`` covers exit ``x`` in ``[k - 1/2, k + 1/2) * mm_per_row``.
-    mm_per_row : float
-        Bin width in mm.
-    values : ndarray of float64
-        Diffusely reflected power exiting the top face in each bin (line-source
-        profile); sums to ``total_reflectance`` when the bins cover the profile.
-    stderr : ndarray of float64
-        Standard error of ``values`` from the spread of 32 independent photon batches.
-    radiance : ndarray of float64
-        Radiance leaving the top face along the outward normal, averaged over
-        each bin, per unit incident line power (mm^-1 sr^-1).
-    radiance_stderr : ndarray of float64
-        Its batch standard error.
-    total_reflectance : float
-        Diffuse reflectance (all exit positions, binned or not; excludes specular).
-    total_reflectance_stderr : float
-        Its batch standard error.
-    specular_reflectance : float
-        Fresnel reflection at entry, ``((n - 1) / (n + 1))^2``.
-    transmittance : float
-        Power leaving through the bottom face (0 for a semi-infinite medium),
-        unscattered light included.
-    transmittance_stderr : float
-        Its batch standard error.
-    absorbed : float
-        Absorbed power (including the zero-mean net weight of Russian roulette).
-    truncated : float
-        Power of photons stopped beyond ``cutoff_mm`` (see the module docstring).
-    n_photons : int
-        Number of photon packets traced.
-    n_interactions : int
-        Number of collisions traced (a measure of the run's cost).
-    params : dict
-        The parameters of the run (the cache key's content; the medium's
-        thickness is under ``thickness``, ``None`` for a semi-infinite one).
-    """
-
-    offsets_rows: np.ndarray
-    mm_per_row: float
-    values: np.ndarray
-    stderr: np.ndarray
-    radiance: np.ndarray
-    radiance_stderr: np.ndarray
-    total_reflectance: float
-    total_reflectance_stderr: float
-    specular_reflectance: float
-    transmittance: float
-    transmittance_stderr: float
-    absorbed: float
-    truncated: float
-    n_photons: int
-    n_interactions: int = 0
-    params: dict = field(default_factory=dict)
-
-    @property
-    def medium(self) -> Medium:
-        """The :class:`~planeray.medium.Medium` of the run, rebuilt from :attr:`params`."""
-        p = self.params
-        thickness = p.get("thickness")
-        return Medium(
-            sigma_s=p["sigma_s"],
-            sigma_a=p["sigma_a"],
-            g=p["g"],
-            n=p["n"],
-            thickness_mm=math.inf if thickness is None else thickness,
-        )
-
-    @property
-    def energy_balance(self) -> float:
-        """``diffuse + specular + transmitted + absorbed + truncated`` (1 up to round-off)."""
-        return self.total_reflectance + self.specular_reflectance + self.transmittance + self.absorbed + self.truncated
 
 
 # ---------------------------------------------------------------- random numbers
@@ -383,68 +294,6 @@ def _trace(
         cont_far[b] = far_b
         events[b] = events_b
     return refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont_hist, cont_far
-
-
-# ---------------------------------------------------------------- cache
-#: Read-only results shipped with the package (the built-in scenes' media), looked up
-#: before :func:`cache_dir`; regenerate with ``python tools/build_mc_tables.py``.
-TABLES_DIR = Path(__file__).with_name("tables")
-
-
-def cache_dir() -> Path:
-    """Cache folder: ``$PLANERAY_CACHE/mc`` if set, else ``~/.cache/planeray/mc``."""
-    root = os.environ.get("PLANERAY_CACHE")
-    base = Path(root) if root else Path.home() / ".cache" / "planeray"
-    return base / "mc"
-
-
-def cache_key(params: dict, offsets: np.ndarray) -> str:
-    """File stem of a run's cache entry: a hash of the engine version, parameters and bins."""
-    blob = json.dumps({"v": _ENGINE_VERSION, **params}, sort_keys=True)
-    h = hashlib.sha256(blob.encode())
-    h.update(np.ascontiguousarray(offsets, dtype=np.int64).tobytes())
-    return h.hexdigest()[:32]
-
-
-_ARRAYS = ("offsets_rows", "values", "stderr", "radiance", "radiance_stderr")
-_SCALARS = (
-    "mm_per_row",
-    "total_reflectance",
-    "total_reflectance_stderr",
-    "specular_reflectance",
-    "transmittance",
-    "transmittance_stderr",
-    "absorbed",
-    "truncated",
-)
-
-
-def _save(path: Path, prof: MCProfile) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + f".{os.getpid()}.tmp.npz")
-    try:
-        np.savez(
-            tmp,
-            **{k: getattr(prof, k) for k in _ARRAYS},
-            n_photons=np.int64(prof.n_photons),
-            n_interactions=np.int64(prof.n_interactions),
-            params=np.array(json.dumps(prof.params, sort_keys=True)),
-            **{k: np.float64(getattr(prof, k)) for k in _SCALARS},
-        )
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def _load(path: Path) -> MCProfile:
-    with np.load(path, allow_pickle=False) as z:
-        return MCProfile(
-            **{k: z[k] for k in _ARRAYS},
-            n_photons=int(z["n_photons"]),
-            n_interactions=int(z["n_interactions"]),
-            params=json.loads(str(z["params"])),
-            **{k: float(z[k]) for k in _SCALARS},
-        )
 
 
 # ---------------------------------------------------------------- public entry point
@@ -659,7 +508,7 @@ def _profile(
         for hit in (TABLES_DIR / name, path):
             if hit.exists():
                 try:
-                    return _load(hit)
+                    return load_profile(hit)
                 except (OSError, ValueError, KeyError):
                     pass  # unreadable entry: recompute (and overwrite the user cache)
 
@@ -668,7 +517,7 @@ def _profile(
     )
     if path is not None:
         try:
-            _save(path, prof)
+            save_profile(path, prof)
         except OSError as exc:  # a read-only home must not cost the result
             warnings.warn(
                 f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import atomic_file
-from .engine import MCProfile
+from .result import MCProfile
 
 __all__ = ["profile_columns", "write_profile", "profile_summary"]
 
