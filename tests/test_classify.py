@@ -278,6 +278,7 @@ def scenes():
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SCENES)
 def test_labels_agree_on_demultiplexed_scenes(scenes, name):
     scene, result = scenes[name]

@@ -252,6 +252,7 @@ def test_saturated_observations_are_dropped():
     assert res.maps["converged"].all()
 
 
+@pytest.mark.slow
 def test_lazy_stack_and_dask_equal_the_local_path(wax_stack, tmp_path):
     pytest.importorskip("dask.distributed")
     _, stack = wax_stack
@@ -299,6 +300,7 @@ def test_memory_is_bounded_by_the_chunk(wax_stack, tmp_path):
     np.testing.assert_allclose(read_transport(out)[0].dense, ref, rtol=1e-5, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_existing_dask_cluster_by_address(wax_stack, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     _, stack = wax_stack

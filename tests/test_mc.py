@@ -223,6 +223,7 @@ def test_default_wax_scene_uses_the_shipped_kernel(tmp_path, monkeypatch):
     assert not any(tmp_path.rglob("*.npz"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "medium",
     [

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mitsuba")
+pytestmark = pytest.mark.slow  # renders with Mitsuba 3
 
 from planeray.mc import mc_line_profile
 from planeray.mc.mitsuba_ref import (
