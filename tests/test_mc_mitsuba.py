@@ -9,8 +9,6 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mitsuba")
-pytestmark = pytest.mark.slow  # renders with Mitsuba 3
-
 from planeray.mc import mc_line_profile
 from planeray.mc.mitsuba_ref import (
     _mitsuba,
@@ -18,6 +16,8 @@ from planeray.mc.mitsuba_ref import (
     single_scattering_radiance,
 )
 from planeray.medium import Medium
+
+pytestmark = pytest.mark.slow  # renders with Mitsuba 3
 
 # Multiple-scattering comparison medium (mm^-1): albedo 0.95, moderately forward
 # scattering.  At g = 0.9 Mitsuba's estimate is heavy-tailed (the HG peak is reached
