@@ -729,6 +729,8 @@ def test_atomic_directory_names_and_cleanup(tmp_path):
     with io.atomic_directory(target, overwrite=False) as tmp:
         assert tmp.parent == tmp_path and tmp.name.startswith(".d.tmp-") and tmp.is_dir()
         (tmp / "x").write_text("1")
+        # a planeray result (format attributes): only such a folder may be replaced
+        (tmp / "zarr.json").write_text(json.dumps({"attributes": {"format": "planeray-stack"}}))
         assert not target.exists()
     assert (target / "x").read_text() == "1"
     with pytest.raises(Boom):

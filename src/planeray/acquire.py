@@ -120,10 +120,10 @@ def acquire_to_store(
     from . import resumable
     from .errors import StackError
     from .io import create_stack_group
+    from .io.atomic import check_replaceable
 
     out = Path(out)
-    if out.exists() and not overwrite:
-        raise StackError("already exists (pass --overwrite to replace it)", out)
+    check_replaceable(out, overwrite=overwrite, kind="stack", error=StackError)
     meta = _capture_metadata(device, sweep)
     fingerprint = hashlib.sha256(json.dumps(meta, sort_keys=True, default=str).encode()).hexdigest()
     first = None
@@ -178,4 +178,4 @@ def acquire_to_store(
         taken += 1
         if progress is not None:
             progress(i)
-    return resumable.promote(out, overwrite=overwrite, error=StackError)
+    return resumable.promote(out, overwrite=overwrite, kind="stack", error=StackError)

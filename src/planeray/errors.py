@@ -6,7 +6,7 @@ as a single line and exit non-zero instead of showing a traceback.
 
 from __future__ import annotations
 
-__all__ = ["PlanerayError", "InputError", "StackError", "TransportError", "DeviceError"]
+__all__ = ["PlanerayError", "InputError", "StackError", "TransportError", "DeviceError", "StorageError"]
 
 
 class PlanerayError(Exception):
@@ -40,3 +40,23 @@ class TransportError(InputError):
 
 class DeviceError(PlanerayError, RuntimeError):
     """A device cannot be opened or refused a setting (missing SDK, no camera, bad timing)."""
+
+
+class StorageError(PlanerayError, OSError):
+    """The file system refused a write or a read (read-only folder, disk full, unreadable data).
+
+    An ``OSError``, so code that handles file-system failures keeps working; the
+    message names the path and the cause on one line.
+
+    Parameters
+    ----------
+    problem : str
+        What failed and why.
+    path : str or os.PathLike, optional
+        The output (or input) concerned; prefixed to the message.
+    """
+
+    def __init__(self, problem: str, path=None):
+        self.path = None if path is None else str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}" if self.path else problem)

@@ -49,7 +49,8 @@ def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], o
         group = zarr.open_group(str(partial), mode="r+")
         if group.attrs.get(_FINGERPRINT) != fingerprint or _DONE not in group:
             raise InputError(
-                "an unfinished run with different inputs or parameters is in the way; remove it or run with --restart",
+                "an unfinished run with different inputs or parameters is in the way; run with --restart "
+                "(restart=True) to discard it, or name another output",
                 partial,
             )
         return group
@@ -78,25 +79,53 @@ def done_units(group) -> np.ndarray:
     return np.asarray(group[_DONE][:], dtype=bool)
 
 
-def promote(out, *, overwrite: bool, error=InputError) -> Path:
-    """Turn a finished partial store into ``out`` (atomic rename; replaces ``out`` if allowed)."""
+def promote(out, *, overwrite: bool, kind: str | None = None, error=InputError) -> Path:
+    """Turn a finished partial store into ``out`` (atomic rename).
+
+    An existing ``out`` is replaced only with ``overwrite`` and only if it is a planeray
+    result of the same ``kind`` (:func:`planeray.io.atomic.check_replaceable`).  When
+    ``out`` may not be replaced (for instance it appeared while the run was going),
+    the finished partial store is kept as it is: a re-run with the same inputs
+    finds every unit done and finishes without recomputing.
+    """
     import zarr
+
+    from .io.atomic import check_replaceable, storage_error
 
     out = Path(out)
     partial = partial_path(out)
     group = zarr.open_group(str(partial), mode="r+")
     if not done_units(group).all():
         raise error("internal error: finishing a run with unfinished units", partial)
+    try:
+        check_replaceable(out, overwrite=overwrite, kind=kind, error=error)
+    except InputError as exc:
+        raise error(
+            f"{exc.problem} -- the finished result is kept in {partial.name}; run again with the same inputs "
+            "(and --overwrite if the output is a planeray result) to move it into place without recomputing",
+            out,
+        ) from None
+    n_units = int(group[_DONE].shape[0])
+    fingerprint = group.attrs.get(_FINGERPRINT)
     del group[_DONE]
     group.attrs.pop(_FINGERPRINT, None)
-    if out.exists():
-        if not overwrite:
-            raise error("already exists (pass overwrite=True to replace it)", out)
-        backup = out.parent / f".{out.name}.old"
-        shutil.rmtree(backup, ignore_errors=True)
-        os.rename(out, backup)
-        os.rename(partial, out)
-        shutil.rmtree(backup, ignore_errors=True)
-    else:
-        os.rename(partial, out)
+    try:
+        if out.exists() or out.is_symlink():
+            backup = out.parent / f".{out.name}.old"
+            shutil.rmtree(backup, ignore_errors=True)
+            os.rename(out, backup)
+            try:
+                os.rename(partial, out)
+            except BaseException:
+                os.rename(backup, out)
+                raise
+            shutil.rmtree(backup, ignore_errors=True)
+        else:
+            os.rename(partial, out)
+    except OSError as exc:
+        # keep the partial store resumable: put its done marker back
+        group.create_array(_DONE, shape=(n_units,), chunks=(max(n_units, 1),), dtype="bool", fill_value=True)
+        group[_DONE][:] = True
+        group.attrs[_FINGERPRINT] = fingerprint
+        raise storage_error(exc, out) from None
     return out

@@ -26,6 +26,7 @@ import numpy as np
 from .. import resumable
 from ..errors import InputError, TransportError
 from ..io import transport_attrs
+from ..io.atomic import check_replaceable
 from ..stack import Stack
 from ..timing import RowGeometry
 from ..transport import Transport
@@ -319,8 +320,7 @@ def demultiplex_to_store(
         The finished store.
     """
     out = Path(out)
-    if out.exists() and not overwrite:
-        raise TransportError("already exists (pass --overwrite to replace it)", out)
+    check_replaceable(out, overwrite=overwrite, kind="transport", error=TransportError)
     problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
     get_solver(method)
     H, W = stack.shape
@@ -346,7 +346,7 @@ def demultiplex_to_store(
                 progress(chunks[i].stop - chunks[i].start)
     if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
         return resumable.partial_path(out)
-    return resumable.promote(out, overwrite=overwrite, error=TransportError)
+    return resumable.promote(out, overwrite=overwrite, kind="transport", error=TransportError)
 
 
 def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source):

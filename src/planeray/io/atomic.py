@@ -1,31 +1,185 @@
-"""Atomic writes: a temporary sibling renamed into place, so no half-written result is ever seen."""
+"""Atomic writes, and the rule for replacing outputs: planeray replaces only what planeray wrote.
+
+Every result is written into a temporary sibling (``.{name}.tmp-{pid}-{uuid}``) and
+renamed into place, so no half-written result is ever seen at the output path.  An
+existing output is replaced only when asked (``overwrite``) *and* when it is a result
+planeray itself wrote, of the same kind (recognized by its format attributes, see
+:func:`planeray_output_kind`): a folder holding anything else -- a user's notes, the
+current folder, a symbolic link -- is refused by name, never deleted.  Temporaries
+left by a process that died (``kill -9``, power loss) carry its process id and are
+cleaned by the next write to the same output; file-system failures (read-only folder,
+disk full) become one :class:`~planeray.errors.StorageError` naming the output.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import json
 import os
 import shutil
 import uuid
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import InputError, StorageError
+
+__all__ = [
+    "ALREADY_EXISTS",
+    "atomic_directory",
+    "atomic_file",
+    "check_replaceable",
+    "planeray_output_kind",
+    "storage_error",
+]
+
+#: Message of an output that exists and may not be replaced without asking.
+ALREADY_EXISTS = "already exists (pass --overwrite, or overwrite=True, to replace it)"
+
+_KINDS = {"planeray-stack": "stack", "planeray-transport": "transport"}
+
+
+def planeray_output_kind(path) -> str | None:
+    """The kind of planeray result at ``path``, or None when planeray did not write it.
+
+    ``"stack"`` / ``"transport"``: a Zarr group whose ``format`` attribute is
+    ``planeray-stack`` / ``planeray-transport``; ``"export folder"``: an import folder
+    written by :func:`planeray.io.export_folder` (its ``acquisition.json`` carries
+    ``planeray_version``).  Symbolic links and plain files are never recognized.
+    """
+    p = Path(path)
+    if p.is_symlink() or not p.is_dir():
+        return None
+    try:
+        zarr_json = p / "zarr.json"
+        if zarr_json.is_file():
+            attrs = json.loads(zarr_json.read_text(encoding="utf-8")).get("attributes") or {}
+            return _KINDS.get(attrs.get("format"))
+        acquisition = p / "acquisition.json"
+        if acquisition.is_file() and (p / "manifest.csv").is_file():
+            meta = json.loads(acquisition.read_text(encoding="utf-8"))
+            return "export folder" if isinstance(meta, dict) and "planeray_version" in meta else None
+    except (OSError, ValueError, AttributeError):
+        return None
+    return None
+
+
+def _is_protected(path: Path) -> bool:
+    """The current folder, one of its parents, the home folder or a file-system root."""
+    try:
+        resolved = path.resolve()
+        cwd = Path.cwd().resolve()
+    except OSError:
+        return False
+    return (
+        resolved == cwd or resolved in cwd.parents or resolved == Path.home().resolve() or resolved.parent == resolved
+    )
+
+
+def check_replaceable(path, *, overwrite: bool, kind: str | None = None, error=InputError) -> None:
+    """Raise unless ``path`` may be written: it does not exist, or it may be replaced.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output.
+    overwrite : bool
+        Whether the caller asked to replace an existing output.
+    kind : str, optional
+        The kind of result about to be written (see :func:`planeray_output_kind`); an
+        existing output is replaced only if it is a planeray result of the same kind
+        (so a demultiplexed transport never replaces a captured stack).  None: any
+        planeray result.
+    error : type
+        The :class:`~planeray.errors.InputError` subclass to raise.
+    """
+    path = Path(path)
+    if not (path.exists() or path.is_symlink()):
+        return
+    if not overwrite:
+        raise error(ALREADY_EXISTS, path)
+    if _is_protected(path):
+        raise error("is the current folder, one of its parents or the home folder; name a new output inside it", path)
+    if path.is_symlink():
+        raise error("is a symbolic link; planeray replaces only results it wrote itself", path)
+    found = planeray_output_kind(path)
+    if found is None:
+        what = "a file" if path.is_file() else "a folder"
+        raise error(
+            f"is {what} planeray did not write (no planeray format attributes); planeray never deletes what it "
+            "did not write: choose another output or remove it yourself",
+            path,
+        )
+    if kind is not None and found != kind:
+        raise error(
+            f"is a planeray {found}, not a {kind}; planeray will not replace one kind of result with another", path
+        )
+
+
+def storage_error(exc: BaseException, path) -> StorageError:
+    """A one-line :class:`~planeray.errors.StorageError` for a file-system failure while writing ``path``."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        name = errno.errorcode.get(exc.errno, str(exc.errno))
+        cause = f"{exc.strerror or os.strerror(exc.errno)} [{name}]"
+        where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(path) else ""
+        return StorageError(f"cannot write: {cause}{where}", path)
+    return StorageError(f"cannot write: {type(exc).__name__}: {exc}", path)
 
 
 # ----------------------------------------------------------------------------
 def _temp_sibling(path: Path, kind: str, suffix: str = "") -> Path:
-    return path.parent / f".{path.name}.{kind}-{uuid.uuid4().hex}{suffix}"
+    return path.parent / f".{path.name}.{kind}-{os.getpid()}-{uuid.uuid4().hex}{suffix}"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, owned by someone else
+        return True
+    except OSError:
+        return True
+    return True
+
+
+def remove_stale_temporaries(path) -> list[Path]:
+    """Remove temporaries of ``path`` left by planeray processes that are no longer running.
+
+    Only names planeray gives its temporaries (``.{name}.tmp-{pid}-{uuid}...`` and
+    ``.{name}.bak-{pid}-{uuid}``) with the id of a dead process are touched.
+    """
+    path = Path(path)
+    removed = []
+    with contextlib.suppress(OSError):
+        for kind in ("tmp", "bak"):
+            for sib in path.parent.glob(f".{path.name}.{kind}-*"):
+                pid = sib.name[len(f".{path.name}.{kind}-") :].split("-", 1)[0]
+                if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+                    _remove(sib)
+                    removed.append(sib)
+    return removed
 
 
 def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        with contextlib.suppress(FileNotFoundError):
-            path.unlink()
+    """Best-effort removal of one of our temporaries (never raises: it must not mask the real error)."""
+    with contextlib.suppress(OSError):
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+
+
+def _make_parent(path: Path, error) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise error("cannot be created: its parent is a file", path) from None
+    except OSError as exc:
+        raise storage_error(exc, path) from None
 
 
 @contextlib.contextmanager
-def atomic_directory(path, *, overwrite: bool = False, error=InputError):
+def atomic_directory(path, *, overwrite: bool = False, kind: str | None = None, error=InputError):
     """Write a directory atomically: yield a temporary sibling, rename it into place.
 
     Parameters
@@ -33,40 +187,58 @@ def atomic_directory(path, *, overwrite: bool = False, error=InputError):
     path : str or os.PathLike
         Final location of the directory.  Its parent is created if needed.
     overwrite : bool
-        Replace an existing ``path``.  The old content is first renamed to a
-        temporary backup, the new directory renamed into place, then the backup
-        deleted, so ``path`` never holds a half-written result.
+        Replace an existing ``path`` -- only if planeray wrote it (see
+        :func:`check_replaceable`).  The old content is first renamed to a temporary
+        backup, the new directory renamed into place, then the backup deleted, so
+        ``path`` never holds a half-written result.
+    kind : str, optional
+        What is written (``"stack"``, ``"transport"``, ``"export folder"``): an
+        existing output must be a planeray result of this kind to be replaced.
     error : type
         Exception class (an :class:`~planeray.errors.InputError`) raised when
-        ``path`` exists and ``overwrite`` is False.
+        ``path`` may not be written.
 
     Yields
     ------
     tmp : pathlib.Path
-        Empty temporary directory ``.{name}.tmp-{uuid}`` next to ``path``; write
+        Empty temporary directory ``.{name}.tmp-{pid}-{uuid}`` next to ``path``; write
         everything there.  It is removed if the block raises.
+
+    Raises
+    ------
+    StorageError
+        The file system refused (read-only folder, disk full...): one line naming
+        ``path`` and the cause; nothing is left behind.
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise error("already exists (pass overwrite=True to replace it)", path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    check_replaceable(path, overwrite=overwrite, kind=kind, error=error)
+    _make_parent(path, error)
+    remove_stale_temporaries(path)
     tmp = _temp_sibling(path, "tmp")
-    tmp.mkdir()
     try:
-        yield tmp
-        if path.exists() or path.is_symlink():
-            if not overwrite:
-                raise error("already exists (pass overwrite=True to replace it)", path)
-            backup = _temp_sibling(path, "bak")
-            os.rename(path, backup)
-            try:
+        tmp.mkdir()
+    except OSError as exc:
+        raise storage_error(exc, path) from None
+    try:
+        try:
+            yield tmp
+        except OSError as exc:
+            raise storage_error(exc, path) from None
+        check_replaceable(path, overwrite=overwrite, kind=kind, error=error)  # it may have appeared meanwhile
+        try:
+            if path.exists() or path.is_symlink():
+                backup = _temp_sibling(path, "bak")
+                os.rename(path, backup)
+                try:
+                    os.rename(tmp, path)
+                except BaseException:
+                    os.rename(backup, path)
+                    raise
+                _remove(backup)
+            else:
                 os.rename(tmp, path)
-            except BaseException:
-                os.rename(backup, path)
-                raise
-            _remove(backup)
-        else:
-            os.rename(tmp, path)
+        except OSError as exc:
+            raise storage_error(exc, path) from None
     except BaseException:
         _remove(tmp)
         raise
@@ -81,27 +253,40 @@ def atomic_file(path, *, overwrite: bool = True, error=InputError):
     path : str or os.PathLike
         Final file path.  Its parent is created if needed.
     overwrite : bool
-        Replace an existing file (default True).
+        Replace an existing *file* (default True: figures, CSVs and reports are
+        rewritten by each run).  A directory, symbolic link or special file at
+        ``path`` is never replaced.
     error : type
-        Exception class raised when ``path`` exists and ``overwrite`` is False.
+        Exception class raised when ``path`` may not be written.
 
     Yields
     ------
     tmp : pathlib.Path
-        Temporary path ``.{name}.tmp-{uuid}{suffix}`` in the same folder (same
+        Temporary path ``.{name}.tmp-{pid}-{uuid}{suffix}`` in the same folder (same
         suffix, so writers that pick a format by extension work); removed if the
         block raises.
+
+    Raises
+    ------
+    StorageError
+        The file system refused (read-only folder, disk full...).
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise error("already exists (pass overwrite=True to replace it)", path)
     if path.is_dir():
         raise error("is a directory, expected a file path", path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.exists() and not overwrite:
+        raise error(ALREADY_EXISTS, path)
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        raise error("is a symbolic link or a special file; planeray replaces only plain files", path)
+    _make_parent(path, error)
+    remove_stale_temporaries(path)
     tmp = _temp_sibling(path, "tmp", path.suffix)
     try:
-        yield tmp
-        os.replace(tmp, path)
+        try:
+            yield tmp
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise storage_error(exc, path) from None
     except BaseException:
         _remove(tmp)
         raise

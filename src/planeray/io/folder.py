@@ -264,7 +264,7 @@ def export_folder(
         "planeray_version": planeray_version(),
         "planeray_metadata": jsonable(stack.metadata, "metadata", StackError),
     }
-    with atomic_directory(folder, overwrite=overwrite, error=StackError) as tmp:
+    with atomic_directory(folder, overwrite=overwrite, kind="export folder", error=StackError) as tmp:
         rows = []
         for i in range(n):
             image = np.asarray(stack.images[i], dtype=np.float32)

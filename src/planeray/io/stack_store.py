@@ -57,7 +57,7 @@ def write_stack(stack: Stack, path, *, overwrite: bool = False, progress=None) -
     if not isinstance(stack, Stack):
         raise StackError(f"expected a Stack, got {type(stack).__name__}", path)
     n, h, w = (int(x) for x in stack.images.shape)
-    with atomic_directory(path, overwrite=overwrite, error=StackError) as tmp:
+    with atomic_directory(path, overwrite=overwrite, kind="stack", error=StackError) as tmp:
         group = create_stack_group(
             tmp,
             (n, h, w),

@@ -90,7 +90,7 @@ def write_transport(transport: Transport, path, *, attrs: dict | None = None, ov
     out = transport_attrs(transport.offsets_rows, transport.geometry.projector_rows, attrs=attrs, path=path)
     dense = np.asarray(transport.dense, dtype=np.float32)
     h, w, u = dense.shape
-    with atomic_directory(path, overwrite=overwrite, error=TransportError) as tmp:
+    with atomic_directory(path, overwrite=overwrite, kind="transport", error=TransportError) as tmp:
         group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
         chunks = (max(min(h, 64), 1), max(min(w, 64), 1), max(u, 1))
         array = group.create_array("T", shape=dense.shape, chunks=chunks, dtype="float32", fill_value=0.0)
