@@ -90,6 +90,7 @@ def acquire_to_store(
     overwrite: bool = False,
     restart: bool = False,
     progress: Callable[[int], None] | None = None,
+    on_resume: Callable[[int, int], None] | None = None,
     _stop_after: int | None = None,
 ) -> Path:
     """Capture a sweep straight into a native stack store; resumable.
@@ -112,6 +113,9 @@ def acquire_to_store(
         Discard an unfinished capture of the same output instead of resuming it.
     progress : callable, optional
         Called with the index of each image captured (or found captured).
+    on_resume : callable, optional
+        Called as ``on_resume(done, total)`` (images) when an unfinished capture of
+        the same output, device description and sweep is continued.
 
     Returns
     -------
@@ -154,6 +158,8 @@ def acquire_to_store(
 
     group = resumable.open_partial(out, fingerprint, len(sweep), create, restart=restart)
     done = resumable.done_units(group)
+    if on_resume is not None and done.any():
+        on_resume(int(done.sum()), len(sweep))
     taken = 0
     for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
         if done[i]:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._validate import check_number, check_positive
 from .errors import InputError
 from .timing import PAPER_LINES_PER_SECOND, Band, RowPattern, band_bin_weights
 from .transport import Transport
@@ -58,8 +59,8 @@ def offset_window(centre_rows: float, width_rows: float) -> Band:
     The same illumination as a (delay, exposure) band, parameterized in rows:
     exact fractional bin weights, no jitter.
     """
-    if width_rows <= 0:
-        raise InputError(f"band width must be positive, got {width_rows} rows")
+    check_number(centre_rows, "band centre (rows)")
+    check_positive(width_rows, "band width (rows)")
     return Band(float(centre_rows), float(width_rows), _ROWS_PER_US)
 
 

@@ -35,6 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import ndtr
 
+from ._validate import check_integer, check_nonnegative, check_number, check_positive
+from .errors import InputError
+
 __all__ = [
     "PAPER_LINES_PER_SECOND",
     "PAPER_PROJECTOR_ROWS",
@@ -247,8 +250,13 @@ class RowGeometry:
     def __post_init__(self):
         if self.projector_rows is None:
             object.__setattr__(self, "projector_rows", int(self.camera_rows))
-        if self.camera_rows < 1 or self.projector_rows < 1:
-            raise ValueError("camera_rows and projector_rows must be positive")
+        check_integer(self.camera_rows, "camera_rows", minimum=1)
+        check_integer(self.projector_rows, "projector_rows", minimum=1)
+        if self.projector_rows < self.camera_rows:
+            raise InputError(
+                f"projector_rows ({self.projector_rows}) must be at least the image height ({self.camera_rows}): "
+                "each camera row sees at least one projector row"
+            )
 
     @property
     def rows_per_camera_row(self) -> float:
@@ -290,6 +298,13 @@ class Band:
     jitter_us: float = 0.0
     line_width_us: float = 0.0
     row_shifts_rows: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self):
+        check_number(self.delay_us, "delay_us")
+        check_positive(self.exposure_us, "exposure_us")
+        check_positive(self.lines_per_second, "lines_per_second")
+        check_nonnegative(self.jitter_us, "jitter_us")
+        check_nonnegative(self.line_width_us, "line_width_us")
 
     @property
     def centre_rows(self) -> float:

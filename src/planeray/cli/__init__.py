@@ -38,7 +38,7 @@ from . import (
     stacks,
     study,
 )
-from ._common import _join_pixel_args
+from ._common import DEBUG, _join_pixel_args
 
 __all__ = ["app", "main"]
 
@@ -48,6 +48,15 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+
+@app.callback()
+def _options(
+    debug: bool = typer.Option(False, "--debug", help="Show the traceback of an error instead of one line."),
+):
+    """planeray: programmable plane-to-ray light transport (simulate, capture, analyse delay-exposure stacks)."""
+    DEBUG["enabled"] = debug
+
 
 # Commands, in the order `planeray --help` lists them.
 app.command()(simulate.scenes)

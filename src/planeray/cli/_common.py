@@ -6,12 +6,15 @@ the progress bar live in :mod:`planeray._console`, shared with the demo.
 
 from __future__ import annotations
 
+import errno
 import functools
+import os
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 import typer
+from rich.text import Text
 
 from .._console import console
 from ..errors import PlanerayError
@@ -20,18 +23,68 @@ from ..errors import PlanerayError
 StackArg = Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")]
 
 
+#: ``planeray --debug ...``: show the traceback of an error instead of one line.
+DEBUG = {"enabled": False}
+
+
+def error_line(exc: BaseException) -> str:
+    """One line for any failure: planeray's own errors as they are, file-system and other errors named."""
+    if isinstance(exc, PlanerayError):
+        text = str(exc)
+    elif isinstance(exc, OSError) and exc.errno is not None:
+        name = errno.errorcode.get(exc.errno, str(exc.errno))
+        where = f"{exc.filename}: " if exc.filename else ""
+        text = f"{where}{exc.strerror or os.strerror(exc.errno)} [{name}]"
+    elif isinstance(exc, (ValueError, FileNotFoundError)):
+        text = str(exc)
+    else:
+        text = f"{type(exc).__name__}: {exc} (unexpected; run `planeray --debug ...` for the traceback)"
+    return " ".join(text.split())  # one line, whatever the cause put in it
+
+
+def print_error(exc: BaseException) -> None:
+    """Print ``error: <one line>`` on stderr, verbatim (file names with [brackets] are not markup)."""
+    console.print(Text("error: ", style="bold red") + Text(error_line(exc)), highlight=False, soft_wrap=True)
+
+
 def _friendly_errors(fn):
-    """Turn planeray's own errors into one red line and exit status 1."""
+    """Turn every failure into one red line and exit status 1 (``--debug``: the traceback)."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
             return fn(*args, **kwargs)
-        except (PlanerayError, ValueError, FileNotFoundError) as exc:
-            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        except (typer.Exit, typer.Abort, SystemExit):
+            raise
+        except KeyboardInterrupt:
+            console.print(Text("interrupted", style="bold red"))
+            raise typer.Exit(130) from None
+        except Exception as exc:
+            if DEBUG["enabled"]:
+                raise
+            print_error(exc)
             raise typer.Exit(1) from None
 
     return wrapper
+
+
+def _check_outputs(*outputs, overwrite: bool) -> None:
+    """Refuse, before any work, outputs that exist (without ``--overwrite``) or may not be replaced.
+
+    ``outputs``: ``(path, kind)`` pairs, ``kind`` as in :func:`planeray.io.atomic.planeray_output_kind`;
+    a None path is skipped.  Two outputs may not be the same path.
+    """
+    from ..io.atomic import check_replaceable
+
+    seen = set()
+    for path, kind in outputs:
+        if path is None:
+            continue
+        key = Path(path).resolve()
+        if key in seen:
+            raise ValueError(f"{path}: named twice as an output")
+        seen.add(key)
+        check_replaceable(path, overwrite=overwrite, kind=kind)
 
 
 def _load_stack(path: Path):

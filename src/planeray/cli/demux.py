@@ -8,7 +8,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from .._console import out, progress_bar
+from .._console import console, out, progress_bar
 from ._common import StackArg, _friendly_errors, _load_stack
 
 
@@ -36,6 +36,8 @@ def demux(
 
     if workers is not None and scheduler is not None:
         raise ValueError("give --workers or --scheduler, not both")
+    if Path(out_path).resolve() == Path(stack_path).resolve():
+        raise ValueError(f"{out_path}: is the input stack; name another output")
     st = _load_stack(stack_path)
     t0 = time.perf_counter()
     with progress_bar() as bar:
@@ -53,6 +55,12 @@ def demux(
             overwrite=overwrite,
             restart=restart,
             progress=lambda rows: bar.advance(task, rows),
+            on_resume=lambda done, total: console.print(
+                f"resuming an unfinished run of {out_path}: {done} of {total} chunks already done "
+                "(same stack content and parameters)",
+                markup=False,
+                highlight=False,
+            ),
             source=str(stack_path),
         )
     elapsed = time.perf_counter() - t0
@@ -60,5 +68,16 @@ def demux(
     conv = maps["converged"]
     out.print(
         f"transport: {path}  ({st.shape[0]}x{st.shape[1]} pixels in {elapsed:.1f} s; "
-        f"converged {conv.mean() * 100:.2f} %, median residual RMS {np.median(maps['residual_rms']):.2e})"
+        f"converged {conv.mean() * 100:.2f} %, median residual RMS {np.median(maps['residual_rms']):.2e})",
+        markup=False,
+        highlight=False,
     )
+    empty = int((maps["n_observations"] == 0).sum())
+    if empty:
+        console.print(
+            f"warning: {empty} pixels ({empty / conv.size * 100:.1f} %) have no usable observation (every image "
+            "saturated): their T is 0 and they are flagged not converged (map n_observations)",
+            style="yellow",
+            markup=False,
+            highlight=False,
+        )

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from .._console import console, out, progress_bar
 from ..timing import PAPER_LINES_PER_SECOND
-from ._common import _friendly_errors
+from ._common import _check_outputs, _friendly_errors
 
 
 @_friendly_errors
@@ -71,6 +71,7 @@ def simulate(
     from ..scenes import make_scene
     from ..timing import make_sweep
 
+    _check_outputs((out_path, "stack"), (truth, "transport"), overwrite=overwrite)
     camera = CameraModel(
         bit_depth=bit_depth,
         black_level=black_level,

@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from .._console import console, out, progress_bar
-from ._common import StackArg, _friendly_errors, _load_stack
+from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack
 
 
 @_friendly_errors
@@ -74,6 +74,7 @@ def import_(
     """Import a captured stack folder into a native Zarr stack."""
     from ..io import import_folder, write_stack
 
+    _check_outputs((out_path, "stack"), overwrite=overwrite)
     st = import_folder(folder)
     with progress_bar() as bar:
         task = bar.add_task("writing stack", total=len(st))

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import resumable
+from .._validate import check_integer, check_number
 from ..errors import InputError, TransportError
 from ..io import transport_attrs
 from ..io.atomic import check_replaceable
@@ -44,14 +45,16 @@ __all__ = [
 ]
 
 DEFAULT_CHUNK_ROWS = 16
+#: Seconds to wait for an existing Dask scheduler before giving up with one line.
+SCHEDULER_TIMEOUT_S = 5.0
 #: Per-pixel diagnostic maps stored beside ``T``.
 MAP_NAMES = {
     "residual_rms": "float32",  # RMS of (A x - b) over the observations used
     "kkt_residual": "float32",  # scaled KKT violation (0 at the exact optimum)
     "objective": "float32",  # value of the paper's objective
     "iterations": "int32",
-    "converged": "bool",
-    "n_observations": "int16",  # observations used (saturated ones dropped)
+    "converged": "bool",  # certified to the tolerance; False where no observation was usable
+    "n_observations": "int16",  # observations used (saturated ones dropped); 0: T is 0, not an estimate
 }
 
 
@@ -128,6 +131,8 @@ def solve_chunk(
             X[full], iters[full], conv[full] = res.X, res.iterations, res.converged
         for p in np.flatnonzero(~full):  # rare: pixels with saturated observations
             keep = mask[p]
+            if not keep.any():  # nothing usable: T stays 0, flagged (never "converged")
+                continue
             sub = RowGroup(group.rows, group.A[keep], group.valid)
             res = solve(sub, B[p : p + 1, keep], problem.alpha, problem.beta, tol)
             X[p], iters[p], conv[p] = res.X[0], res.iterations[0], res.converged[0]
@@ -135,6 +140,7 @@ def solve_chunk(
         if mask is not None:
             resid = np.where(mask, resid, 0.0)
         n_obs = np.full(B.shape[0], N) if mask is None else mask.sum(axis=1)
+        conv = conv & (n_obs > 0)
         pix_maps = {
             "residual_rms": np.sqrt((resid**2).sum(axis=1) / np.maximum(n_obs, 1)),
             "kkt_residual": problem.kkt_residual(group, X, np.where(mask, B, 0.0) if mask is not None else B),
@@ -147,6 +153,9 @@ def solve_chunk(
             # The KKT test above used the full matrix; redo masked pixels exactly.
             for p in np.flatnonzero(~full):
                 keep = mask[p]
+                if not keep.any():
+                    pix_maps["kkt_residual"][p] = np.nan
+                    continue
                 sub = RowGroup(group.rows, group.A[keep], group.valid)
                 pix_maps["kkt_residual"][p] = problem.kkt_residual(sub, X[p : p + 1], B[p : p + 1, keep])[0]
         Tg = np.zeros((B.shape[0], U), np.float32)
@@ -155,6 +164,16 @@ def solve_chunk(
         for name, value in pix_maps.items():
             maps[name][local] = np.asarray(value).reshape(local.size, W)
     return ChunkResult(rows, T, maps)
+
+
+def _check_run_options(method, chunk_rows, tol, workers=None) -> None:
+    """Options of a run, checked before any work (one line naming the option)."""
+    get_solver(method)
+    check_integer(chunk_rows, "chunk_rows", minimum=1)
+    if tol is not None:
+        check_number(tol, "tol", minimum=0.0, min_inclusive=False, maximum=1.0, max_inclusive=False)
+    if workers is not None:
+        check_integer(workers, "workers", minimum=1)
 
 
 def _chunks(H: int, chunk_rows: int) -> list[slice]:
@@ -216,6 +235,7 @@ def demultiplex(
     >>> result.transport.dense.shape, bool(result.maps["converged"].all())
     ((8, 8, 229), True)
     """
+    _check_run_options(method, chunk_rows, tol)
     problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
     H, W = stack.shape
     T = np.zeros((H, W, problem.n_offsets), np.float32)
@@ -236,14 +256,8 @@ def demultiplex(
 def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_rows: int) -> str:
     """Identity of a run: a resumed run must match it exactly."""
     h = hashlib.sha256()
-    for arr in (stack.delay_us, stack.exposure_us, stack.excluded.astype(np.uint8)):
-        h.update(np.ascontiguousarray(arr).tobytes())
-    for i in (0, len(stack) - 1):  # cheap content check: first and last image
-        h.update(np.ascontiguousarray(np.asarray(stack.images[i], np.float32)).tobytes())
     meta = {
-        "shape": list(stack.shape),
-        "lps": stack.lines_per_second,
-        "projector_rows": stack.projector_rows,
+        "stack": stack.content_digest(),  # every image and the saturation mask, not a sample of them
         "alpha": problem.alpha,
         "beta": problem.beta,
         "method": method,
@@ -289,6 +303,7 @@ def demultiplex_to_store(
     overwrite: bool = False,
     restart: bool = False,
     progress: Callable[[int], None] | None = None,
+    on_resume: Callable[[int, int], None] | None = None,
     source=None,
     _stop_after: int | None = None,
 ) -> Path:
@@ -311,6 +326,12 @@ def demultiplex_to_store(
         Discard an unfinished run of the same output instead of resuming it.
     progress : callable, optional
         Called with the number of rows finished after each chunk.
+    on_resume : callable, optional
+        Called as ``on_resume(done, total)`` (chunks) when an unfinished run of the
+        same output is continued.  A run is continued only when its inputs are
+        provably the same: the content digest of every image and of the
+        saturation mask (:meth:`planeray.stack.Stack.content_digest`) and every
+        parameter; otherwise it is refused (see ``restart``).
     source : str, optional
         Name of the stack for error messages.
 
@@ -321,8 +342,8 @@ def demultiplex_to_store(
     """
     out = Path(out)
     check_replaceable(out, overwrite=overwrite, kind="transport", error=TransportError)
+    _check_run_options(method, chunk_rows, tol, workers)
     problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
-    get_solver(method)
     H, W = stack.shape
     chunks = _chunks(H, chunk_rows)
     fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows)
@@ -331,6 +352,8 @@ def demultiplex_to_store(
         out, fingerprint, len(chunks), lambda d: _create_store(d, (H, W), problem, attrs), restart=restart
     )
     done = resumable.done_units(group)
+    if on_resume is not None and done.any():
+        on_resume(int(done.sum()), len(chunks))
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():
         progress(sum(chunks[i].stop - chunks[i].start for i in range(len(chunks)) if done[i]))
@@ -356,7 +379,13 @@ def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, schedul
         raise InputError("--workers/--scheduler need dask[distributed]: pip install 'dask[distributed]'") from exc
     cluster = None
     if scheduler:
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(
+                f"cannot reach the Dask scheduler at {scheduler!r} within {SCHEDULER_TIMEOUT_S:g} s "
+                f"({type(exc).__name__}: {' '.join(str(exc).split())})"
+            ) from None
     else:
         cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
@@ -377,7 +406,12 @@ def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, schedul
         for _ in range(min(in_flight, len(pending))):
             submit_next()
         for fut in futures:
-            res = fut.result()
+            try:
+                res = fut.result()
+            except (OSError, TimeoutError) as exc:  # a worker or the scheduler went away
+                raise InputError(
+                    f"the Dask cluster failed ({type(exc).__name__}: {' '.join(str(exc).split())})"
+                ) from None
             i = index_of.pop(fut.key)
             _write_chunk(group, res, i)
             if progress is not None:
