@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._validate import check_number, check_positive
+from ._validate import check_nonnegative, check_number, check_positive
 from .errors import InputError
 from .timing import PAPER_LINES_PER_SECOND, Band, RowPattern, band_bin_weights
 from .transport import Transport
@@ -186,8 +186,9 @@ def short_long_range(transport: Transport, max_rows: float, *, epipolar_rows: fl
     short, long : ndarray (H, W) float32
         ``epipolar + short + long`` is the full image.
     """
-    if max_rows <= 0:
-        raise InputError(f"short-range threshold must be positive, got {max_rows}")
+    check_positive(max_rows, "short-range threshold (rows)")
+    if epipolar_rows is not None:
+        check_nonnegative(epipolar_rows, "epipolar half-width (rows)")
     u = transport.offsets_rows.astype(np.float64)
     if epipolar_rows is None:
         epi = band_bin_weights(u, 0.0, transport.geometry.rows_per_camera_row) > 0

@@ -36,7 +36,6 @@ import numpy as np
 from scipy.special import ndtr
 
 from ._validate import check_integer, check_nonnegative, check_number, check_positive
-from .errors import InputError
 
 __all__ = [
     "PAPER_LINES_PER_SECOND",
@@ -252,11 +251,6 @@ class RowGeometry:
             object.__setattr__(self, "projector_rows", int(self.camera_rows))
         check_integer(self.camera_rows, "camera_rows", minimum=1)
         check_integer(self.projector_rows, "projector_rows", minimum=1)
-        if self.projector_rows < self.camera_rows:
-            raise InputError(
-                f"projector_rows ({self.projector_rows}) must be at least the image height ({self.camera_rows}): "
-                "each camera row sees at least one projector row"
-            )
 
     @property
     def rows_per_camera_row(self) -> float:

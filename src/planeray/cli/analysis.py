@@ -62,6 +62,9 @@ def profiles(
     if not pixel and classify is None:
         raise ValueError("give at least one --pixel ROW COL (or --classify with --transport)")
     st = _load_stack(stack_path)
+    if exposure_us is not None and not np.any(np.isclose(st.exposures(), exposure_us, rtol=0, atol=1e-6)):
+        have = ", ".join(f"{e:g}" for e in st.exposures())
+        raise ValueError(f"--exposure-us {exposure_us:g}: the stack has exposures {have} us")
     T = attrs = None
     if transport is not None:
         from ..io import read_transport
