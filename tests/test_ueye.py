@@ -424,6 +424,8 @@ def test_cli_calibrates_writes_and_acquires_through_the_fake_camera(rig, tmp_pat
     st = read_stack(tmp_path / "s.zarr")
     assert len(st) == len(quick_sweep()) and st.metadata["base_trigger_delay_us"] == written["base_trigger_delay_us"]
     assert cam.opened == cam.exited == 2  # the CLI released the camera both times
+    res = runner.invoke(app, ["demux", str(tmp_path / "s.zarr"), "--out", str(tmp_path / "T.zarr")])
+    assert res.exit_code == 0, res.output  # and the capture demultiplexes
     # a failure mid-capture releases the camera too, and is one line
     cam.vsync = False
     res = runner.invoke(
