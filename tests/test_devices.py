@@ -1,5 +1,7 @@
 """The device registry: adding a camera is one module (or one plug-in entry point), and the CLI needs no change."""
 
+import inspect
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -58,7 +60,7 @@ class ToyCamera(DeviceBase):
 
 def test_built_in_devices_are_registered():
     assert {"sim", "replay", "ueye"} <= set(list_devices())
-    assert device_options("replay") == {"replay": __import__("inspect").Parameter.empty}
+    assert device_options("replay") == {"replay": inspect.Parameter.empty}
 
 
 def test_a_registered_camera_is_usable_from_the_cli_without_touching_it(registry, tmp_path):

@@ -7,6 +7,7 @@ hidden base trigger delay that the calibration has to find.
 """
 
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -162,8 +163,7 @@ def test_setup_interrupted_by_the_user_releases_the_camera(camera):
     def interrupt(*args):
         raise KeyboardInterrupt
 
-    camera_module = __import__("sys").modules["pyueye"].ueye
-    camera_module.is_AllocImageMem = interrupt
+    sys.modules["pyueye"].ueye.is_AllocImageMem = interrupt
     with pytest.raises(KeyboardInterrupt):
         UEyeEpiscan()
     assert camera.exited == 1 and not camera.open
