@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .devices.base import Device
+from .devices.base import Device, apply_timing
 from .stack import Stack
 from .timing import Sweep
 
@@ -41,8 +41,7 @@ def acquire_sweep(device: Device, sweep: Sweep, *, progress: Callable[[int], Non
     """
     images, saturated = [], []
     for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
-        device.set_delay(float(d))
-        device.set_exposure(float(e))
+        apply_timing(device, d, e)  # one call per point: a camera realizes delay and exposure together
         img, sat = device.grab()
         images.append(np.asarray(img, np.float32))
         saturated.append(np.asarray(sat, bool))
@@ -135,8 +134,7 @@ def acquire_to_store(
     partial = resumable.partial_path(out)
     if shape is None and not partial.exists():
         # the device does not say its image size: take the first image now
-        device.set_delay(float(sweep.delay_us[0]))
-        device.set_exposure(float(sweep.exposure_us[0]))
+        apply_timing(device, sweep.delay_us[0], sweep.exposure_us[0])
         first = device.grab()
         shape = first[0].shape
     projector_rows = (
@@ -171,8 +169,7 @@ def acquire_to_store(
         if i == 0 and first is not None:
             img, sat = first
         else:
-            device.set_delay(float(d))
-            device.set_exposure(float(e))
+            apply_timing(device, d, e)
             img, sat = device.grab()
         img = np.asarray(img, np.float32)
         if img.shape != tuple(group["images"].shape[1:]) or not np.all(np.isfinite(img)):

@@ -16,9 +16,17 @@ Two quantities make the imaging model of Eqs. 1-3 true to a device:
   Eq. 1 measured instead of assumed.  :func:`calibrate_delay_zero` sweeps the delay
   finely on a diffuse target and finds the centre of the epipolar response.
 
+For a camera triggered by the projector's VSYNC the delay zero fixes the
+camera's **base trigger delay** (the trigger delay at ``t'_o = 0``, defined up
+to whole projector frames): :func:`calibrate_base_trigger_delay` finds it on the
+device (a coarse search over one frame, then the fine delay zero) and
+:func:`with_base_trigger_delay` converts a delay zero measured with a known base
+(:mod:`planeray.calibration.trigger`).
+
 :func:`write_calibration` stores the results in a capture folder's
 ``acquisition.json`` (the field ``lines_per_second`` that the stack import
-requires, plus the uncertainties and the delay zero), keeping every other field.
+requires, plus the uncertainties, the delay zero and the base trigger delay
+that ``planeray acquire --calibration`` reads), keeping every other field.
 
 The line-sweep design
 ---------------------
@@ -59,6 +67,13 @@ from .delay_zero import (
 )
 from .files import read_line_sweep, write_calibration, write_line_sweep
 from .lines import LineCalibration, LineCount, calibrate_lines_per_second, count_lines
+from .trigger import (
+    PROJECTOR_FRAME_PERIOD_US,
+    calibrate_base_trigger_delay,
+    required_base_trigger_delay_us,
+    search_delay_zero,
+    with_base_trigger_delay,
+)
 
 __all__ = [
     "PAPER_CALIBRATION_EXPOSURE_US",
@@ -71,6 +86,11 @@ __all__ = [
     "calibrate_delay_zero",
     "delay_zero_sweep",
     "device_capture",
+    "PROJECTOR_FRAME_PERIOD_US",
+    "calibrate_base_trigger_delay",
+    "required_base_trigger_delay_us",
+    "search_delay_zero",
+    "with_base_trigger_delay",
     "read_line_sweep",
     "write_line_sweep",
     "write_calibration",

@@ -36,6 +36,12 @@ class DelayZeroCalibration:
     exposure_us : float
     details : dict
         Delays, responses, levels and crossings (JSON-serializable).
+    base_trigger_delay_us : float or None
+        For a camera triggered by the projector's VSYNC: the trigger delay at
+        which ``t'_o = 0``, i.e. the base used for the sweep plus
+        ``delay_zero_us`` -- what the camera driver needs
+        (:func:`planeray.calibration.calibrate_base_trigger_delay`).  None when
+        the sweep's base is unknown (a simulated device, a stack without it).
     """
 
     delay_zero_us: float
@@ -45,11 +51,14 @@ class DelayZeroCalibration:
     width_us: float
     exposure_us: float
     details: dict = field(default_factory=dict)
+    base_trigger_delay_us: float | None = None
 
     def to_dict(self) -> dict:
+        base = {} if self.base_trigger_delay_us is None else {"base_trigger_delay_us": self.base_trigger_delay_us}
         return {
             "delay_zero_us": self.delay_zero_us,
             "delay_zero_uncertainty_us": self.uncertainty_us,
+            **base,
             "sync_offset_us": self.sync_offset_us,
             "nominal_sync_offset_us": self.nominal_sync_offset_us,
             "width_us": self.width_us,

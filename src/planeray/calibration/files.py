@@ -109,8 +109,12 @@ def write_calibration(
 
     Writes ``lines_per_second`` (the field the stack import requires),
     ``lines_per_second_uncertainty``, ``delay_zero_us``,
-    ``delay_zero_uncertainty_us`` and ``sync_offset_us`` as given, and the full
-    results under ``calibration.lines`` / ``calibration.delay_zero``.  The file
+    ``delay_zero_uncertainty_us`` and ``sync_offset_us`` as given,
+    ``base_trigger_delay_us`` (the camera's trigger delay at ``t'_o = 0``, read by
+    ``planeray acquire --calibration``) when the delay-zero result has one --
+    and removes a previous one when it has not, so the file never pairs a new
+    delay zero with an old base -- and the full results under
+    ``calibration.lines`` / ``calibration.delay_zero``.  The file
     (or ``path/acquisition.json`` when ``path`` is a folder) is created if missing
     and replaced atomically.
 
@@ -149,6 +153,10 @@ def write_calibration(
         acq["delay_zero_us"] = float(delay_zero.delay_zero_us)
         acq["delay_zero_uncertainty_us"] = float(delay_zero.uncertainty_us)
         acq["sync_offset_us"] = float(delay_zero.sync_offset_us)
+        if delay_zero.base_trigger_delay_us is not None:
+            acq["base_trigger_delay_us"] = float(delay_zero.base_trigger_delay_us)
+        else:
+            acq.pop("base_trigger_delay_us", None)
         cal["delay_zero"] = delay_zero.to_dict()
     acq["calibration"] = cal
     acq = jsonable(acq, "acquisition.json", InputError)

@@ -9,7 +9,7 @@ order) and holds the entry point:
 
 * ``simulate.py``   scenes, simulate (built-in scenes on the simulated Episcan)
 * ``stacks.py``     info, export, import (describe a stack; the import folder format)
-* ``acquire.py``    acquire (a sweep from a device into a resumable native stack)
+* ``acquire.py``    acquire (a sweep from a device into a resumable native stack), devices (the registry)
 * ``demux.py``      demux (stack -> 3D light transport, Sec. 4)
 * ``analysis.py``   contact-sheet, profiles, synth, figure (look at stacks and transports)
 * ``baselines.py``  emulate, separate direct-global (conventional projector-camera)
@@ -17,6 +17,7 @@ order) and holds the entry point:
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
 * ``demo.py``       demo (``make demo``)
+* ``_devices.py``   opening a registered device from options (--device-option, --calibration)
 * ``_common.py``    shared helpers: one-line errors, stack loading, ``--pixel`` parsing, image saving
 
 The consoles and the progress bar are in :mod:`planeray._console` (shared with the demo).
@@ -65,6 +66,7 @@ app.command()(stacks.info)
 app.command("contact-sheet")(analysis.contact_sheet)
 app.command()(analysis.profiles)
 app.command()(acquire.acquire)
+app.command()(acquire.devices)
 app.command()(baselines.emulate)
 app.command()(demux.demux)
 app.command()(analysis.synth)

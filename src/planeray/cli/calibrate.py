@@ -12,6 +12,7 @@ import typer
 from .._console import out
 from ..timing import PAPER_LINES_PER_SECOND
 from ._common import _friendly_errors, _load_stack
+from ._devices import CalibrationArg, DeviceOptionArg, close_device, device_options_from_cli
 
 calibrate_app = typer.Typer(help="Calibration (Sec. 6): line velocity v_p and delay zero.", no_args_is_help=True)
 
@@ -88,30 +89,87 @@ def calibrate_delay_zero_cmd(
         Path | None, typer.Argument(help="A fine delay sweep around 0 at one exposure (stack or folder).")
     ] = None,
     exposure_us: Annotated[float, typer.Option(help="Exposure of the sweep's images to use (us).")] = 600.0,
+    device: Annotated[
+        str | None,
+        typer.Option(help="Calibrate live on this device (e.g. ueye): finds the camera's base trigger delay."),
+    ] = None,
+    device_option: DeviceOptionArg = None,
+    calibration: CalibrationArg = None,
+    base_trigger_delay_us: Annotated[
+        float | None,
+        typer.Option(help="--device: a known base trigger delay (us) to refine; skips the search over one frame."),
+    ] = None,
+    sweep: Annotated[
+        str, typer.Option(help="--device: the sweep the base must serve (the base exceeds its largest t'_o).")
+    ] = "paper",
+    frame_period_us: Annotated[
+        float, typer.Option(help="--device: projector frame period (us), the range of the search.")
+    ] = 1e6 / 60.0,  # a 60 Hz projector (planeray.calibration.PROJECTOR_FRAME_PERIOD_US)
     simulate: Annotated[bool, typer.Option(help="Sweep the simulated device instead of reading a stack.")] = False,
     delay_error_us: Annotated[float, typer.Option(help="--simulate: hidden sync error to recover (us).")] = 0.0,
     seed: Annotated[int, typer.Option(help="--simulate: seed.")] = 0,
     write: Annotated[
-        Path | None, typer.Option(help="Write delay_zero_us into this acquisition.json (or folder).")
+        Path | None,
+        typer.Option(help="Write delay_zero_us (and base_trigger_delay_us) into this acquisition.json (or folder)."),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
 ):
-    """The commanded delay at which the epipolar (direct) response is centred, so t'_o is measured (Eq. 1)."""
-    from ..calibration import calibrate_delay_zero, delay_zero_sweep, device_capture
+    """The commanded delay at which the epipolar (direct) response is centred, so t'_o is measured (Eq. 1).
 
-    if simulate:
+    With ``--device ueye`` (a diffuse target in front of the rig) it is captured
+    live and turned into the camera's base trigger delay, the trigger delay at
+    t'_o = 0, which ``--write`` stores for ``planeray acquire --calibration``.  A
+    stack captured by the uEye driver gives it too (its metadata holds the base
+    it was captured with).
+    """
+    from ..calibration import (
+        calibrate_base_trigger_delay,
+        calibrate_delay_zero,
+        delay_zero_sweep,
+        device_capture,
+        with_base_trigger_delay,
+    )
+
+    if sum((stack_path is not None, simulate, device is not None)) > 1:
+        raise ValueError("give one of STACK, --device or --simulate")
+    if device is not None:
+        from ..devices import open_device
+        from ..timing import make_sweep
+
+        options = device_options_from_cli(device, {}, device_option, calibration)
+        dev = open_device(device, **options)
+        try:
+            if hasattr(dev, "base_trigger_delay_us"):  # a camera triggered by VSYNC: find its base
+                result = calibrate_base_trigger_delay(
+                    dev,
+                    exposure_us=exposure_us,
+                    sweeps=[make_sweep(sweep)],
+                    base_trigger_delay_us=base_trigger_delay_us,
+                    frame_period_us=frame_period_us,
+                )
+            else:
+                sw = delay_zero_sweep(exposure_us=exposure_us)
+                result = calibrate_delay_zero(
+                    device_capture(dev, exposure_us=exposure_us),
+                    sw.delay_us,
+                    exposure_us=exposure_us,
+                    lines_per_second=dev.lines_per_second,
+                )
+        finally:
+            close_device(dev)
+    elif simulate:
         from ..devices import SimulatedEpiscan
         from ..scenes import make_scene
 
         dev = SimulatedEpiscan(make_scene("diffuse_plane", (64, 64), projector_rows=360, seed=seed), seed=seed)
-        sweep = delay_zero_sweep(exposure_us=exposure_us)
+        sweep_ = delay_zero_sweep(exposure_us=exposure_us)
         capture = device_capture(dev, exposure_us=exposure_us, delay_error_us=delay_error_us)
         result = calibrate_delay_zero(
-            capture, sweep.delay_us, exposure_us=exposure_us, lines_per_second=dev.lines_per_second
+            capture, sweep_.delay_us, exposure_us=exposure_us, lines_per_second=dev.lines_per_second
         )
     else:
         if stack_path is None:
-            raise ValueError("give a STACK (a delay sweep around 0) or --simulate")
+            raise ValueError("give a STACK (a delay sweep around 0), --device DEVICE or --simulate")
         st = _load_stack(stack_path)
         idx = np.flatnonzero(np.isclose(st.exposure_us, exposure_us))
         if idx.size < 5:
@@ -120,10 +178,21 @@ def calibrate_delay_zero_cmd(
         result = calibrate_delay_zero(
             images, st.delay_us[idx], exposure_us=exposure_us, lines_per_second=st.lines_per_second
         )
+        base_used = st.metadata.get("base_trigger_delay_us")
+        if isinstance(base_used, (int, float)) and not isinstance(base_used, bool):
+            result = with_base_trigger_delay(result, float(base_used))
     _report_calibration(result, write, as_json, "delay_zero")
     if not as_json:
+        base = result.base_trigger_delay_us
         out.print(
             f"delay zero = {result.delay_zero_us:+.2f} +- {result.uncertainty_us:.2f} us (commanded delay of the true "
             f"epipolar centre); sync offset t'_o = {result.sync_offset_us:.2f} us"
+            + (f"; base trigger delay = {base:.2f} us" if base is not None else "")
             + (f"; written to {write}" if write else "")
         )
+        if base is not None and result.details.get("fits_sweeps") is False:
+            out.print(
+                f"note: the base is below {result.details['required_base_us']:.1f} us, the least the {sweep!r} sweep "
+                "needs: its earliest points will be refused. Calibrate again without --base-trigger-delay-us "
+                "(the search picks a base that fits)."
+            )

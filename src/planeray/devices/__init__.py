@@ -1,11 +1,39 @@
-"""Devices: the protocol, the simulated Episcan, a replay device and the IDS uEye driver."""
+"""Devices: the protocol, the registry, the simulated Episcan, a replay device and the IDS uEye driver.
 
-from .base import Device
+Adding a camera is adding one module to this package (or an entry point in the
+group ``planeray.devices`` of another package) that registers a factory with
+:func:`register_device`; see the README, "Capturing with a real camera".
+"""
+
+from .base import (
+    Device,
+    DeviceBase,
+    apply_timing,
+    device_options,
+    is_hardware,
+    list_devices,
+    open_device,
+    register_device,
+)
 from .replay import ReplayDevice
 from .simulated import SimulatedEpiscan
 from .ueye import UEyeEpiscan, pyueye_available
 
-#: Devices chosen by name on the command line.
+#: The built-in devices by name (every registered one: :func:`list_devices`).
 DEVICES = {"sim": SimulatedEpiscan, "replay": ReplayDevice, "ueye": UEyeEpiscan}
 
-__all__ = ["DEVICES", "Device", "ReplayDevice", "SimulatedEpiscan", "UEyeEpiscan", "pyueye_available"]
+__all__ = [
+    "DEVICES",
+    "Device",
+    "DeviceBase",
+    "ReplayDevice",
+    "SimulatedEpiscan",
+    "UEyeEpiscan",
+    "apply_timing",
+    "device_options",
+    "is_hardware",
+    "list_devices",
+    "open_device",
+    "pyueye_available",
+    "register_device",
+]

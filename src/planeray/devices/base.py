@@ -1,22 +1,57 @@
-"""The device protocol: what a synchronized projector-camera must offer.
+"""The device protocol and the device registry.
 
 Every device -- the simulated Episcan, a replay of a recorded stack, a real
-camera driver -- implements these few calls, and the sweep runner
-(:mod:`planeray.acquire`) needs nothing else.
+camera driver -- implements the few calls of :class:`Device`, and the sweep
+runner (:mod:`planeray.acquire`), the calibration and the command line need
+nothing else.
+
+Devices are chosen by name (``planeray acquire --device NAME``).  Each lives in
+its own module of this package and registers a factory with
+:func:`register_device`; modules are discovered automatically, so adding a
+camera is adding one module (or, from another package, one entry point in the
+group ``planeray.devices``).  The factory's keyword options are the device's
+options on the command line (``--device-option KEY=VALUE``).
 """
 
 from __future__ import annotations
 
+import importlib
+import inspect
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Device"]
+from ..errors import InputError
+
+__all__ = [
+    "Device",
+    "DeviceBase",
+    "apply_timing",
+    "register_device",
+    "list_devices",
+    "device_options",
+    "open_device",
+    "is_hardware",
+    "ENTRY_POINT_GROUP",
+]
+
+#: Entry-point group through which other packages register devices.
+ENTRY_POINT_GROUP = "planeray.devices"
 
 
 @runtime_checkable
 class Device(Protocol):
-    """A synchronized rolling-shutter projector-camera."""
+    """A synchronized rolling-shutter projector-camera.
+
+    The timing knobs are the paper's: the delay ``t_d`` between the centre of a
+    row's exposure and the centre of its illumination, and the row exposure
+    ``t_e`` (Eq. 1).  A device may apply them when they are set or only at the
+    next :meth:`grab` (a camera realizes the pair together: its trigger delay
+    depends on both), so :meth:`set_timing` is the call that checks a pair.
+    """
 
     #: Projector scanline velocity ``v_p`` (Eq. 2), from calibration.
     lines_per_second: float
@@ -27,6 +62,9 @@ class Device(Protocol):
     def set_exposure(self, exposure_us: float) -> None:
         """Set the row exposure ``t_e``."""
 
+    def set_timing(self, delay_us: float, exposure_us: float) -> None:
+        """Set delay and exposure together (one sweep point), refusing a pair the device cannot realize."""
+
     def grab(self) -> tuple[np.ndarray, np.ndarray]:
         """Capture one averaged image at the current settings.
 
@@ -34,4 +72,154 @@ class Device(Protocol):
         """
 
     def describe(self) -> dict:
-        """JSON-serializable description (device kind, camera, sync, scene, seed...)."""
+        """JSON-serializable description (device kind, camera, sync, scene, seed...).
+
+        It must not change while the device is open: it is the fingerprint
+        against which an interrupted capture is resumed.
+        """
+
+    def close(self) -> None:
+        """Release the hardware; safe to call twice."""
+
+
+class DeviceBase:
+    """Defaults for a device: ``set_timing`` from the two setters, a no-op ``close``, a context manager.
+
+    Subclass it (or write the calls yourself) so that ``with open_device(...) as dev:``
+    always releases the hardware.
+    """
+
+    def set_timing(self, delay_us: float, exposure_us: float) -> None:
+        self.set_exposure(exposure_us)
+        self.set_delay(delay_us)
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def apply_timing(device, delay_us: float, exposure_us: float) -> None:
+    """Set one sweep point on any device (``set_timing``, or the two setters of an older device)."""
+    set_timing = getattr(device, "set_timing", None)
+    if set_timing is not None:
+        set_timing(float(delay_us), float(exposure_us))
+    else:
+        device.set_exposure(float(exposure_us))
+        device.set_delay(float(delay_us))
+
+
+# ---------------------------------------------------------------------------- registry
+@dataclass(frozen=True)
+class _Entry:
+    open: Callable[..., Device]
+    description: str
+    hardware: bool
+
+
+_REGISTRY: dict[str, _Entry] = {}
+_BROKEN: dict[str, str] = {}  # plug-ins (entry points) that failed to import, and why
+_DISCOVERED = False
+
+
+def register_device(name: str, description: str, *, hardware: bool = False):
+    """Decorator registering a device factory (a class or a function) under ``name``.
+
+    The factory takes keyword options only; those without a default are
+    required.  ``hardware`` marks devices that talk to a camera (the command line
+    then asks for their calibration).  See ``devices/simulated.py`` for a
+    factory function and ``devices/ueye.py`` for a registered class.
+    """
+
+    def deco(factory):
+        if name in _REGISTRY and _REGISTRY[name].open is not factory:
+            raise ValueError(f"device {name!r} registered twice")
+        _REGISTRY[name] = _Entry(factory, description, bool(hardware))
+        return factory
+
+    return deco
+
+
+def _discover() -> None:
+    global _DISCOVERED
+    if _DISCOVERED:
+        return
+    _DISCOVERED = True
+    package = __name__.rsplit(".", 1)[0]
+    for mod in pkgutil.iter_modules(importlib.import_module(package).__path__):
+        if mod.name != "base" and not mod.name.startswith("_"):
+            importlib.import_module(f"{package}.{mod.name}")
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            ep.load()  # the module registers its devices on import
+        except Exception as exc:  # a broken plug-in must not take the built-in devices down
+            _BROKEN[ep.name] = f"{type(exc).__name__}: {exc}"
+
+
+def list_devices() -> dict[str, str]:
+    """Names and one-line descriptions of all registered devices."""
+    _discover()
+    return {k: v.description for k, v in sorted(_REGISTRY.items())}
+
+
+def _entry(name: str) -> _Entry:
+    _discover()
+    if name not in _REGISTRY:
+        hint = f" (its plug-in failed to load: {_BROKEN[name]})" if name in _BROKEN else ""
+        raise InputError(f"unknown device {name!r}{hint}; choose one of {', '.join(sorted(_REGISTRY))}")
+    return _REGISTRY[name]
+
+
+def device_options(name: str) -> dict[str, object]:
+    """The options of device ``name`` and their defaults (``inspect.Parameter.empty`` when required)."""
+    sig = inspect.signature(_entry(name).open)
+    return {
+        p.name: p.default
+        for p in sig.parameters.values()
+        if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD) and p.name != "self"
+    }
+
+
+def is_hardware(name: str) -> bool:
+    """Whether device ``name`` talks to a camera."""
+    return _entry(name).hardware
+
+
+def open_device(name: str, **options) -> Device:
+    """Open a registered device by name with its keyword options.
+
+    Raises
+    ------
+    InputError
+        Unknown device, an option the device does not take, or a required option missing.
+
+    Examples
+    --------
+    >>> dev = open_device("sim", scene="diffuse_plane", size=(16, 16), seed=1)
+    >>> dev.set_timing(0.0, 600.0)
+    >>> dev.grab()[0].shape
+    (16, 16)
+    >>> open_device("sim", camera_id=0)
+    Traceback (most recent call last):
+    ...
+    planeray.errors.InputError: device 'sim' has no option 'camera_id'; its options: lines_per_second, noise, projector_rows, scene, seed, size
+    """
+    entry = _entry(name)
+    accepted = device_options(name)
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        plural = "s" if len(unknown) > 1 else ""
+        raise InputError(
+            f"device {name!r} has no option{plural} {', '.join(repr(u) for u in unknown)}; "
+            f"its options: {', '.join(sorted(accepted)) or 'none'}"
+        )
+    missing = sorted(k for k, v in accepted.items() if v is inspect.Parameter.empty and k not in options)
+    if missing:
+        raise InputError(f"device {name!r} needs the option{'s' if len(missing) > 1 else ''} {', '.join(missing)}")
+    return entry.open(**options)

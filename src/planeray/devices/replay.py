@@ -10,11 +10,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..stack import Stack
+from .base import DeviceBase, register_device
 
-__all__ = ["ReplayDevice"]
+__all__ = ["ReplayDevice", "open_replay"]
 
 
-class ReplayDevice:
+class ReplayDevice(DeviceBase):
     """Answers ``grab()`` with the recorded image of the current (delay, exposure).
 
     Parameters
@@ -62,3 +63,11 @@ class ReplayDevice:
             "lines_per_second": self.lines_per_second,
             "recording": self.stack.metadata,
         }
+
+
+@register_device("replay", "replay of a recorded stack (native store or import folder), served image by image")
+def open_replay(*, replay) -> ReplayDevice:
+    """A :class:`ReplayDevice` serving the stack at path ``replay`` (``planeray acquire --device replay``)."""
+    from ..io import read_stack
+
+    return ReplayDevice(read_stack(replay), source=str(replay))

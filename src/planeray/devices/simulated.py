@@ -15,11 +15,12 @@ import numpy as np
 from ..camera import CameraModel, row_shifts_rows
 from ..scenes import Scene
 from ..timing import PAPER_LINES_PER_SECOND, Band
+from .base import DeviceBase, register_device
 
-__all__ = ["SimulatedEpiscan"]
+__all__ = ["SimulatedEpiscan", "open_simulated"]
 
 
-class SimulatedEpiscan:
+class SimulatedEpiscan(DeviceBase):
     """A simulated synchronized laser-projector / rolling-shutter camera.
 
     Parameters
@@ -279,3 +280,36 @@ class SimulatedEpiscan:
             "seed": self.seed,
             "noise": self.noise,
         }
+
+
+@register_device("sim", "simulated Episcan: a built-in scene seen through the camera model")
+def open_simulated(
+    *,
+    scene: str = "wax",
+    size=(128, 128),
+    projector_rows: int | None = None,
+    seed: int = 0,
+    lines_per_second: float = PAPER_LINES_PER_SECOND,
+    noise: bool = True,
+) -> SimulatedEpiscan:
+    """A :class:`SimulatedEpiscan` of a built-in scene (``planeray acquire --device sim``).
+
+    Parameters
+    ----------
+    scene : str
+        Built-in scene (:func:`planeray.scenes.list_scenes`).
+    size : (int, int)
+        Image ``(H, W)`` in camera pixels.
+    projector_rows : int, optional
+        Projector rows spanned by the image (default ``H``).
+    seed : int
+        Seed of the scene and of the noise.
+    lines_per_second : float
+        Projector scanline velocity ``v_p``.
+    noise : bool
+        False renders expected images.
+    """
+    from ..scenes import make_scene
+
+    built = make_scene(scene, tuple(int(n) for n in size), projector_rows=projector_rows, seed=seed)
+    return SimulatedEpiscan(built, lines_per_second=lines_per_second, seed=seed, noise=noise)
