@@ -15,9 +15,9 @@ from rich.progress import (
 __all__ = ["console", "out", "progress_bar"]
 
 #: Messages, progress and errors (stderr).
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)
 #: Results (stdout).
-out = Console()
+out = Console(soft_wrap=True)
 
 
 def progress_bar() -> Progress:

@@ -158,27 +158,31 @@ def acquire_to_store(
     done = resumable.done_units(group)
     if on_resume is not None and done.any():
         on_resume(int(done.sum()), len(sweep))
-    taken = 0
-    for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
-        if done[i]:
+    try:
+        taken = 0
+        for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
+            if done[i]:
+                if progress is not None:
+                    progress(i)
+                continue
+            if _stop_after is not None and taken >= _stop_after:  # testing hook: a capture killed midway
+                return partial
+            if i == 0 and first is not None:
+                img, sat = first
+            else:
+                apply_timing(device, d, e)
+                img, sat = device.grab()
+            img = np.asarray(img, np.float32)
+            if img.shape != tuple(group["images"].shape[1:]) or not np.all(np.isfinite(img)):
+                raise StackError(f"image {i} from the device has shape {img.shape} or non-finite values", out)
+            group["images"][i] = img
+            if np.any(sat):
+                group["saturated"][i] = np.asarray(sat, bool)
+            resumable.mark_done(group, i)
+            taken += 1
             if progress is not None:
                 progress(i)
-            continue
-        if _stop_after is not None and taken >= _stop_after:  # testing hook: a capture killed midway
-            return partial
-        if i == 0 and first is not None:
-            img, sat = first
-        else:
-            apply_timing(device, d, e)
-            img, sat = device.grab()
-        img = np.asarray(img, np.float32)
-        if img.shape != tuple(group["images"].shape[1:]) or not np.all(np.isfinite(img)):
-            raise StackError(f"image {i} from the device has shape {img.shape} or non-finite values", out)
-        group["images"][i] = img
-        if np.any(sat):
-            group["saturated"][i] = np.asarray(sat, bool)
-        resumable.mark_done(group, i)
-        taken += 1
-        if progress is not None:
-            progress(i)
+    except BaseException:
+        resumable.discard_if_empty(out)  # a capture that took nothing leaves nothing behind
+        raise
     return resumable.promote(out, overwrite=overwrite, kind="stack", error=StackError)

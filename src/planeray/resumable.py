@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["partial_path", "open_partial", "mark_done", "done_units", "promote"]
+__all__ = ["partial_path", "open_partial", "mark_done", "done_units", "discard_if_empty", "promote"]
 
 _DONE = "done_units"
 _FINGERPRINT = "run_fingerprint"
@@ -67,6 +67,25 @@ def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], o
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return zarr.open_group(str(partial), mode="r+")
+
+
+def discard_if_empty(out) -> bool:
+    """Remove the partial store of ``out`` if none of its units is done; True if removed.
+
+    Called when a run fails: a partial store with finished units is kept (the next run
+    resumes it), one without any holds nothing worth keeping and is not left behind.
+    """
+    import zarr
+
+    partial = partial_path(out)
+    try:
+        group = zarr.open_group(str(partial), mode="r")
+        if _DONE in group and done_units(group).any():
+            return False
+    except Exception:  # unreadable: not ours to judge, leave it
+        return False
+    shutil.rmtree(partial, ignore_errors=True)
+    return not partial.exists()
 
 
 def mark_done(group, index: int) -> None:

@@ -149,14 +149,17 @@ class Stack:
         meta = {
             "shape": [len(self), *self.shape],
             "lines_per_second": float(self.lines_per_second),
-            "projector_rows": self.projector_rows,
+            "projector_rows": int(self.geometry.projector_rows),
         }
         h.update(json.dumps(meta, sort_keys=True).encode())
         for arr in (self.delay_us, self.exposure_us, np.asarray(self.excluded, np.uint8)):
             h.update(np.ascontiguousarray(arr).tobytes())
+        unsaturated = np.packbits(np.zeros(self.shape, bool)).tobytes()  # no mask = nothing saturated
         for i in range(len(self)):
             h.update(np.ascontiguousarray(np.asarray(self.images[i], np.float32)).tobytes())
-            if self.saturated is not None:
+            if self.saturated is None:
+                h.update(unsaturated)
+            else:
                 h.update(np.packbits(np.asarray(self.saturated[i], bool)).tobytes())
             if progress is not None:
                 progress(1)

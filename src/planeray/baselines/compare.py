@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._validate import check_number, check_positive
 from ..timing import band_bin_weights
 from ._device import DEFAULT_FRAME_PERIOD_US, capture, device_geometry, signal_scale
 from .emulation import emulate_delay_image
@@ -25,6 +26,8 @@ def synchronized_delay_image(device, delay_us: float, exposure_us: float, *, sub
     n_captures : int
         1, or 2 with the dark frame.
     """
+    check_number(delay_us, "delay_us")
+    check_positive(exposure_us, "exposure_us")
     previous = (getattr(device, "delay_us", None), getattr(device, "exposure_us", None))
     device.set_delay(float(delay_us))
     device.set_exposure(float(exposure_us))

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._validate import check_number, check_positive
 from ..timing import RowGeometry, band_bin_weights, band_centre_rows, band_width_rows
 from ._device import (
     DEFAULT_FRAME_PERIOD_US,
@@ -130,6 +131,8 @@ def emulate_delay_image(
     .. [1] Kubo et al., "Programmable Non-Epipolar Indirect Light Transport",
        TVCG 2019, Sec. 5.1 and Fig. 4.
     """
+    check_number(delay_us, "delay_us")
+    check_positive(exposure_us, "exposure_us")
     if exposure_us <= 0 or capture_exposure_us <= 0:
         raise ValueError("exposures must be positive")
     geometry = device_geometry(device, projector_rows)

@@ -357,18 +357,22 @@ def demultiplex_to_store(
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():
         progress(sum(chunks[i].stop - chunks[i].start for i in range(len(chunks)) if done[i]))
-    if _stop_after is not None:  # testing hook: simulate a run killed after k chunks
-        todo = todo[:_stop_after]
-    if workers or scheduler:
-        _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source)
-    else:
-        for i in todo:
-            obs, sat = read_observations(stack, problem, chunks[i], source=source)
-            _write_chunk(group, solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol), i)
-            if progress is not None:
-                progress(chunks[i].stop - chunks[i].start)
-    if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
-        return resumable.partial_path(out)
+    try:
+        if _stop_after is not None:  # testing hook: simulate a run killed after k chunks
+            todo = todo[:_stop_after]
+        if workers or scheduler:
+            _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source)
+        else:
+            for i in todo:
+                obs, sat = read_observations(stack, problem, chunks[i], source=source)
+                _write_chunk(group, solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol), i)
+                if progress is not None:
+                    progress(chunks[i].stop - chunks[i].start)
+        if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
+            return resumable.partial_path(out)
+    except BaseException:
+        resumable.discard_if_empty(out)  # a run that finished nothing leaves nothing behind
+        raise
     return resumable.promote(out, overwrite=overwrite, kind="transport", error=TransportError)
 
 
