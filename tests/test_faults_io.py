@@ -164,6 +164,14 @@ def test_corrupt_image_chunk_is_named_lazily_and_eagerly(tmp_path):
         assert "\n" not in str(info.value)
 
 
+def test_a_bad_selection_is_not_reported_as_a_damaged_store(tmp_path):
+    lazy = io.read_stack(io.write_stack(small_stack(), tmp_path / "s.zarr"))
+    with pytest.raises(IndexError):
+        lazy.images[10]
+    with pytest.raises(IndexError):
+        lazy.images[0, 0, 0, 0]
+
+
 @pytest.mark.parametrize("damage", ["truncate", "garbage", "empty"])
 def test_damaged_chunk_files_of_any_kind(tmp_path, damage):
     out = io.write_stack(small_stack(), tmp_path / "s.zarr")

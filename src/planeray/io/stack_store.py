@@ -157,7 +157,7 @@ def read_stack(path, *, lazy: bool = True) -> Stack:
     -----
     Stores written by this version of planeray store every chunk and carry the
     attribute ``all_chunks_stored = true``; an absent chunk file then means lost
-    data and is refused (one ``stat`` per chunk, about 60 ms for the images and
+    data and is refused (one ``stat`` per chunk, about 20 ms for the images and
     mask of a 512x512x85 stack).  Older stores, which skipped chunks equal to the
     fill value, are read as before: an absent chunk reads as 0 (``False`` in the
     mask).
