@@ -374,7 +374,8 @@ def test_import_options(tmp_path):
 
 def test_import_float_tiff(tmp_path):
     raw = np.array([[64.0, 4095.0], [1000.5, 70.0]], np.float32)
-    stack = io.import_folder(write_capture(tmp_path / "c", [raw]))
+    acq = {"lines_per_second": 54000.0, "bit_depth": 12, "black_level": 64, "float_images": "raw"}
+    stack = io.import_folder(write_capture(tmp_path / "c", [raw], acq=acq))
     np.testing.assert_allclose(stack.images[0], (raw - 64) / (4095 - 64), atol=1e-7)
     assert stack.saturated[0].tolist() == [[False, True], [False, False]]
 

@@ -122,7 +122,7 @@ def acquire_to_store(
     """
     from . import resumable
     from .errors import StackError
-    from .io import create_stack_group
+    from .io import create_stack_group, writable
     from .io.atomic import check_replaceable
 
     out = Path(out)
@@ -175,9 +175,8 @@ def acquire_to_store(
             img = np.asarray(img, np.float32)
             if img.shape != tuple(group["images"].shape[1:]) or not np.all(np.isfinite(img)):
                 raise StackError(f"image {i} from the device has shape {img.shape} or non-finite values", out)
-            group["images"][i] = img
-            if np.any(sat):
-                group["saturated"][i] = np.asarray(sat, bool)
+            writable(group, "images")[i] = img  # every chunk stored, all-False masks too (all_chunks_stored)
+            writable(group, "saturated")[i] = np.asarray(sat, bool)
             resumable.mark_done(group, i)
             taken += 1
             if progress is not None:

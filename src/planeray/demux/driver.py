@@ -26,7 +26,7 @@ import numpy as np
 from .. import resumable
 from .._validate import check_integer, check_number
 from ..errors import InputError, TransportError
-from ..io import transport_attrs
+from ..io import create_array, transport_attrs, writable
 from ..io.atomic import check_replaceable
 from ..stack import Stack
 from ..timing import RowGeometry
@@ -275,17 +275,17 @@ def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
     H, W = shape
     U = problem.n_offsets
     group = zarr.open_group(str(directory), mode="w", zarr_format=3)
-    group.create_array("T", shape=(H, W, U), chunks=(DEFAULT_CHUNK_ROWS, W, U), dtype="float32", fill_value=0.0)
+    create_array(group, "T", shape=(H, W, U), chunks=(DEFAULT_CHUNK_ROWS, W, U), dtype="float32", fill_value=0.0)
     for name, dtype in MAP_NAMES.items():
-        group.create_array(name, shape=(H, W), chunks=(DEFAULT_CHUNK_ROWS, W), dtype=dtype, fill_value=0)
+        create_array(group, name, shape=(H, W), chunks=(DEFAULT_CHUNK_ROWS, W), dtype=dtype, fill_value=0)
     group.attrs.update(transport_attrs(problem.offsets_rows, problem.projector_rows, attrs=attrs))
     return group
 
 
 def _write_chunk(group, res: ChunkResult, index: int) -> None:
-    group["T"][res.rows] = res.T
+    writable(group, "T")[res.rows] = res.T  # every chunk stored: the store is marked all_chunks_stored
     for name in MAP_NAMES:
-        group[name][res.rows] = res.maps[name]
+        writable(group, name)[res.rows] = res.maps[name]
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 

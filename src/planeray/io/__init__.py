@@ -24,7 +24,8 @@ array              shape       dtype    content
 
 Group attributes: ``format = "planeray-stack"``, ``format_version = 1``,
 ``lines_per_second`` (float), ``projector_rows`` (int), ``metadata`` (the
-:attr:`planeray.stack.Stack.metadata` dict, JSON) and ``planeray_version``.
+:attr:`planeray.stack.Stack.metadata` dict, JSON), ``planeray_version`` and
+optional ``all_chunks_stored`` (see *Complete chunks* below).
 
 Captured-stack import folder (public format)
 --------------------------------------------
@@ -45,13 +46,20 @@ holds a ``manifest.csv``), written by :func:`export_folder`::
     (``0``/``1``/``true``/``false``, case-insensitive) marks images left out of
     demultiplexing; without it the paper's boundary rule
     ``||t_d| - t_e/2| <= 75 us`` is applied
-    (:func:`planeray.timing.boundary_images`).  Other columns are ignored.
+    (:func:`planeray.timing.boundary_images`).  Other columns are ignored.  An
+    image, or a (``delay_us``, ``exposure_us``) setting, listed on two lines is
+    refused, naming both line numbers (planeray does not average repeated
+    captures).
 
 images
-    Single-channel (grayscale) 2-D images, all of the same size: 8- or 16-bit
-    integer TIFF (``.tif``/``.tiff``) or PNG (``.png``), or float32/float64 TIFF
-    holding raw codes.  Values are raw ADC codes and must not exceed
-    ``2**bit_depth - 1``; float images must not contain NaN.
+    Single-channel (grayscale) 2-D images, all of the same size and pixel type
+    (dtype; the first image that differs from the first one is named, with both
+    types): 8- or 16-bit integer TIFF (``.tif``/``.tiff``) or PNG (``.png``), or
+    float32/float64 TIFF.  Integer values are raw ADC codes and must not exceed
+    ``2**bit_depth - 1``; an integer type that cannot hold ``bit_depth`` is
+    refused (8-bit images need ``"bit_depth": 8``, also when ``bit_depth`` is
+    absent).  Float images are refused unless ``float_images`` says what they
+    hold, and must not contain NaN.
 
 ``acquisition.json``
     A JSON object with
@@ -65,6 +73,12 @@ images
       height (default: the image height);
     * ``saturation_level`` (number, optional): raw code at or above which a pixel
       counts as saturated (default ``2**bit_depth - 1``);
+    * ``float_images`` (``"raw"`` or ``"normalized"``, only with float TIFFs):
+      ``"raw"``: the values are raw ADC codes, normalized like integer codes;
+      ``"normalized"``: they are already ``(raw - black_level) / (2**bit_depth -
+      1 - black_level)`` and are taken as they are (``bit_depth`` and
+      ``black_level`` are not applied; ``saturation_level`` is then in the same
+      units, in (0, 1], default 1);
     * ``planeray_metadata`` (object, optional): written by :func:`export_folder`;
       restored as the stack's metadata on import;
     * any other field, kept verbatim.
@@ -86,9 +100,21 @@ consecutive integer offsets ``u = v - t``, in projector rows), ``lines_per_secon
 ``method``...).  Sparse long-range entries, when there are any, are stored as the
 1-D arrays ``sparse_row``, ``sparse_col``, ``sparse_offset`` (int32) and
 ``sparse_value`` (float32) of equal length.
+
+Complete chunks (both stores)
+-----------------------------
+Writers store every chunk, also those equal to the fill value, and mark the
+group ``all_chunks_stored = true``; readers then refuse a store with an absent
+chunk file, naming the array and the chunk (zarr would read it as zeros).
+Stores without the attribute (earlier planeray versions skipped chunks equal to
+the fill value) are read as before.  New arrays use zstd with its content
+checksum; a chunk that cannot be read or decoded raises one
+:class:`~planeray.errors.StackError` / :class:`~planeray.errors.TransportError`
+naming the store, the array, the chunk and the cause.  Writers that fill a
+store of their own use :func:`create_array` and :func:`writable`.
 """
 
-from ._common import FORMAT_VERSION, STACK_FORMAT, TRANSPORT_FORMAT, LazyArray, jsonable
+from ._common import FORMAT_VERSION, STACK_FORMAT, TRANSPORT_FORMAT, LazyArray, create_array, jsonable, writable
 from .atomic import atomic_directory, atomic_file
 from .folder import export_folder, import_folder
 from .images import write_image
@@ -101,6 +127,8 @@ __all__ = [
     "FORMAT_VERSION",
     "LazyArray",
     "jsonable",
+    "create_array",
+    "writable",
     "atomic_directory",
     "atomic_file",
     "write_stack",

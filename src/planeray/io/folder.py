@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -14,10 +15,15 @@ from ..stack import Stack
 from ..timing import boundary_images
 from ._common import is_integer, is_number, jsonable, planeray_version
 from .atomic import atomic_directory
-from .images import check_levels, quantize, read_raw_image, write_raw
-
+from .images import check_levels, code_bits, quantize, read_raw_image, write_raw
 
 # ----------------------------------------------------------------------------
+#: ``bit_depth`` of an ``acquisition.json`` that gives none (refused for 8-bit images).
+DEFAULT_BIT_DEPTH = 12
+#: Values of the optional ``float_images`` field: what float TIFFs hold.
+FLOAT_IMAGES = ("raw", "normalized")
+
+
 def _read_acquisition(folder: Path) -> dict:
     path = folder / "acquisition.json"
     if not path.is_file():
@@ -38,7 +44,7 @@ def _read_acquisition(folder: Path) -> dict:
     lps = acq["lines_per_second"]
     if not is_number(lps) or not math.isfinite(lps) or lps <= 0:
         raise StackError(f"field 'lines_per_second' must be a positive number, got {lps!r}", path)
-    bit_depth = acq.get("bit_depth", 12)
+    bit_depth = acq.get("bit_depth", DEFAULT_BIT_DEPTH)
     if not is_integer(bit_depth) or not 1 <= bit_depth <= 16:
         raise StackError(f"field 'bit_depth' must be an integer in 1..16, got {bit_depth!r}", path)
     bit_depth = int(bit_depth)
@@ -53,21 +59,65 @@ def _read_acquisition(folder: Path) -> dict:
     projector_rows = acq.get("projector_rows")
     if projector_rows is not None and (not is_integer(projector_rows) or projector_rows < 1):
         raise StackError(f"field 'projector_rows' must be a positive integer, got {projector_rows!r}", path)
-    saturation = acq.get("saturation_level", max_code)
+    float_images = acq.get("float_images")
+    if float_images is not None and float_images not in FLOAT_IMAGES:
+        raise StackError(f'field \'float_images\' must be "raw" or "normalized", got {float_images!r}', path)
+    default_saturation = 1.0 if float_images == "normalized" else max_code
+    saturation = acq.get("saturation_level", default_saturation)
     if not is_number(saturation) or not math.isfinite(saturation):
         raise StackError(f"field 'saturation_level' must be a number, got {saturation!r}", path)
+    if float_images == "normalized" and not 0 < saturation <= 1:
+        raise StackError(
+            f'field \'saturation_level\' must be in (0, 1] with "float_images": "normalized" '
+            f"(normalized units, not raw codes), got {saturation!r}",
+            path,
+        )
     planeray_metadata = acq.get("planeray_metadata", {})
     if not isinstance(planeray_metadata, dict):
         raise StackError(f"field 'planeray_metadata' must be a JSON object, got {planeray_metadata!r}", path)
     return {
         "raw": acq,
+        "path": path,
         "lines_per_second": float(lps),
         "bit_depth": bit_depth,
+        "bit_depth_given": "bit_depth" in acq,
         "black_level": float(black),
         "projector_rows": None if projector_rows is None else int(projector_rows),
         "saturation_level": float(saturation),
+        "float_images": float_images,
         "planeray_metadata": planeray_metadata,
     }
+
+
+def _check_pixel_type(acq: dict, file: Path, pixel_type: str, description: str) -> None:
+    """Refuse a pixel type that ``acquisition.json`` does not describe (checked on the first image)."""
+    bits = code_bits(pixel_type)
+    if bits is None:  # floating point
+        if acq["float_images"] is None:
+            raise StackError(
+                f"{description} image holds floating-point values: say what they are with "
+                f'"float_images": "raw" (raw ADC codes) or "normalized" (already '
+                f"(raw - black_level) / (2**bit_depth - 1 - black_level)) in acquisition.json",
+                file,
+            )
+        return
+    if acq["float_images"] is not None:
+        raise StackError(
+            f"field 'float_images' is set but the images are {description} (integer images are raw codes); "
+            f"remove the field",
+            acq["path"],
+        )
+    if acq["bit_depth"] > bits:
+        given = (
+            f"bit_depth is {acq['bit_depth']}"
+            if acq["bit_depth_given"]
+            else f"acquisition.json gives no bit_depth (default {DEFAULT_BIT_DEPTH})"
+        )
+        raise StackError(
+            f"{description} image holds at most {bits}-bit codes but {given}; "
+            f'set "bit_depth": {bits} (or the camera\'s smaller ADC depth) in acquisition.json',
+            file,
+        )
 
 
 _TRUE = {"1", "true"}
@@ -130,10 +180,30 @@ def _read_manifest(folder: Path):
         raise StackError("empty manifest (no header line)", path)
     if not files:
         raise StackError("empty manifest (no image lines)", path)
+    _refuse_duplicates(files, delays, exposures, lines, path)
     delays = np.asarray(delays, dtype=np.float64)
     exposures = np.asarray(exposures, dtype=np.float64)
     excluded = np.asarray(excluded, dtype=bool) if has_excluded else boundary_images(delays, exposures)
     return files, delays, exposures, excluded, lines
+
+
+def _refuse_duplicates(files, delays, exposures, lines, path) -> None:
+    """One line per image and per (delay, exposure) setting: no silent choice between two captures."""
+    seen_files, seen_settings = {}, {}
+    for name, delay, exposure, line in zip(files, delays, exposures, lines):
+        key = os.path.normcase(os.path.normpath(name))
+        if key in seen_files:
+            raise StackError(f"lines {seen_files[key]} and {line} both list the image {name!r}", path)
+        seen_files[key] = line
+        setting = (delay, exposure)
+        if setting in seen_settings:
+            raise StackError(
+                f"lines {seen_settings[setting]} and {line} have the same delay_us {delay!r} and exposure_us "
+                f"{exposure!r} (each setting may appear once; planeray does not average repeated captures: "
+                f"average them before importing or remove one)",
+                path,
+            )
+        seen_settings[setting] = line
 
 
 def import_folder(path) -> Stack:
@@ -151,14 +221,20 @@ def import_folder(path) -> Stack:
     -------
     stack : Stack
         In-memory stack: float32 images normalized as ``(raw - black_level) /
-        (2**bit_depth - 1 - black_level)`` and the mask ``raw >= saturation_level``.
+        (2**bit_depth - 1 - black_level)`` (float images with ``"float_images":
+        "normalized"`` as they are) and the mask ``raw >= saturation_level``.
 
     Raises
     ------
     StackError
-        Naming the file and the problem (missing or malformed manifest, acquisition
-        record or image; inconsistent image sizes; raw values above the bit depth).
-        Nothing is written to disk.
+        Naming the file and the problem, in one line: missing or malformed
+        manifest, acquisition record or image; the same image or the same
+        (delay_us, exposure_us) setting on two manifest lines (both line numbers
+        named); images of different sizes or pixel types (the first image that
+        differs, with both types); integer images that cannot hold ``bit_depth``
+        (8-bit images need ``"bit_depth": 8``, also when acquisition.json gives
+        none); float images without ``float_images``; raw values above the bit
+        depth.  Nothing is written to disk.
     """
     folder = Path(path)
     if not folder.exists():
@@ -171,19 +247,33 @@ def import_folder(path) -> Stack:
     bit_depth, black = acq["bit_depth"], acq["black_level"]
     max_code = 2**bit_depth - 1
     scale = 1.0 / (max_code - black)
+    normalized = acq["float_images"] == "normalized"
     images = saturated = None
     first = None
     for i, (name, line) in enumerate(zip(files, lines)):
         file = folder / name
-        raw = read_raw_image(file, line)
+        raw, pixel_type, description = read_raw_image(file, line)
         if raw.dtype.kind == "f" and not np.all(np.isfinite(raw)):
             raise StackError("image contains NaN or infinite values", file)
         if images is None:
-            first = (name, raw.shape)
+            first = (name, raw.shape, pixel_type, description, line)
             images = np.empty((len(files), *raw.shape), dtype=np.float32)
             saturated = np.empty((len(files), *raw.shape), dtype=bool)
+        elif pixel_type != first[2]:
+            raise StackError(
+                f"pixel type {description} differs from {first[3]} of the first image {first[0]!r} "
+                f"(manifest.csv line {first[4]}); all images must have the same pixel type",
+                file,
+            )
         elif raw.shape != first[1]:
             raise StackError(f"image size {raw.shape} differs from the first image {first[0]!r} {first[1]}", file)
+        if i == min(1, len(files) - 1):
+            # once the first two images agree (or there is one): is the pixel type described by acquisition.json?
+            _check_pixel_type(acq, folder / first[0], first[2], first[3])
+        if normalized:
+            images[i] = raw.astype(np.float32)
+            saturated[i] = raw >= acq["saturation_level"]
+            continue
         if raw.size:
             top = raw.max()
             if top > max_code:

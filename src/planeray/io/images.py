@@ -36,20 +36,33 @@ def write_raw(path: Path, raw: np.ndarray, kind: str) -> None:
         Image.fromarray(raw.astype(np.uint16)).save(path, format="PNG")
 
 
-def read_raw_image(path: Path, manifest_line: int) -> np.ndarray:
-    """Read one grayscale image as raw codes (integer or float array, 2-D)."""
+def read_raw_image(path: Path, manifest_line: int) -> tuple[np.ndarray, str, str]:
+    """Read one grayscale image as stored (integer or float array, 2-D).
+
+    Returns
+    -------
+    data : numpy.ndarray
+        The pixel values in native byte order; 1-bit images as uint8 0/1.
+    pixel_type : str
+        The dtype as stored (``"uint16"``, ``"uint8"``, ``"bool"``, ``"float32"``...):
+        all the images of a folder must share it.
+    description : str
+        The pixel type in words for messages: ``"uint16 TIFF"``, ``"uint8 PNG (mode 'L')"``.
+    """
     where = f"manifest.csv line {manifest_line}"
     if not path.is_file():
         raise StackError(f"image not found ({where})", path)
     kind = IMAGE_SUFFIXES.get(path.suffix.lower())
     if kind is None:
         raise StackError(f"unsupported image format {path.suffix!r} (use .tif, .tiff or .png)", path)
+    mode = None
     try:
         if kind == "tiff":
             data = np.asarray(tifffile.imread(path))
         else:
             with Image.open(path) as im:
                 im.load()
+                mode = im.mode
                 if im.mode in ("P", "PA", "CMYK", "YCbCr", "LAB", "HSV"):
                     raise StackError(f"expected a grayscale image, got PNG mode {im.mode!r}", path)
                 data = np.asarray(im)
@@ -59,11 +72,25 @@ def read_raw_image(path: Path, manifest_line: int) -> np.ndarray:
         raise StackError(f"cannot read image ({type(exc).__name__}: {exc})", path) from exc
     if data.ndim != 2:
         raise StackError(f"expected a grayscale image, got shape {data.shape}", path)
+    if data.dtype.kind not in "buif":
+        raise StackError(f"unsupported pixel type {data.dtype}", path)
+    if not data.dtype.isnative:
+        data = data.astype(data.dtype.newbyteorder("="))
+    pixel_type = data.dtype.name
+    description = f"{pixel_type} TIFF" if kind == "tiff" else f"{pixel_type} PNG (mode {mode!r})"
     if data.dtype.kind == "b":
         data = data.astype(np.uint8)
-    if data.dtype.kind not in "uif":
-        raise StackError(f"unsupported pixel type {data.dtype}", path)
-    return data
+    return data, pixel_type, description
+
+
+def code_bits(pixel_type: str) -> int | None:
+    """Largest bit depth an integer pixel type holds (``bool`` 1, ``uint8`` 8, ``int16`` 15); None for floats."""
+    dtype = np.dtype(pixel_type)
+    if dtype.kind == "b":
+        return 1
+    if dtype.kind in "ui":
+        return int(np.iinfo(dtype).max).bit_length()
+    return None
 
 
 def write_image(path, image, *, bit_depth: int = 16, black_level: float = 0) -> Path:

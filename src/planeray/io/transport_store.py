@@ -12,15 +12,19 @@ from ..errors import TransportError
 from ..timing import RowGeometry
 from ..transport import SparseEntries, Transport
 from ._common import (
+    ALL_CHUNKS_ATTR,
     FORMAT_VERSION,
     SPARSE_ARRAYS,
     TRANSPORT_FORMAT,
+    check_chunks,
+    create_array,
     get_array,
     is_integer,
     is_number,
     jsonable,
     open_group,
     planeray_version,
+    read_array,
     read_vector,
 )
 from .atomic import atomic_directory
@@ -32,6 +36,10 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
 
     Used by :func:`write_transport` and by writers that fill a store chunk by chunk
     (:func:`planeray.demux.demultiplex_to_store`), so both produce the same format.
+    The attributes mark the store ``all_chunks_stored``: such a writer must store
+    every chunk of every array, also those equal to the fill value (create them
+    with :func:`planeray.io.create_array`, write through
+    :func:`planeray.io.writable`), or :func:`read_transport` refuses the store.
     """
     out = jsonable(dict(attrs or {}), "attrs", TransportError)
     out.update(
@@ -41,6 +49,7 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
             "offsets_rows": [int(u) for u in offsets_rows],
             "projector_rows": int(projector_rows),
             "lines_per_second": out.get("lines_per_second"),
+            ALL_CHUNKS_ATTR: True,
         }
     )
     out.setdefault("planeray_version", planeray_version())
@@ -48,13 +57,25 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
 
 
 def read_transport_maps(path) -> dict:
-    """Per-pixel 2-D arrays stored beside ``T`` (e.g. demultiplexing diagnostics), by name."""
+    """Per-pixel 2-D arrays stored beside ``T`` (e.g. demultiplexing diagnostics), by name.
+
+    Raises
+    ------
+    TransportError
+        The store cannot be opened, a chunk of a map is absent from a store marked
+        ``all_chunks_stored`` or cannot be decoded (naming the map and the rows).
+    """
     path = Path(path)
     group = open_group(path, TransportError)
+    try:
+        members = sorted(group.members())
+    except Exception as exc:
+        raise TransportError(f"cannot list the arrays ({type(exc).__name__}: {exc})", path) from exc
     maps = {}
-    for name, member in group.members():
-        if name != "T" and name not in SPARSE_ARRAYS and hasattr(member, "shape") and len(member.shape) == 2:
-            maps[name] = np.asarray(member[...])
+    for name, member in members:
+        if name != "T" and name not in SPARSE_ARRAYS and isinstance(member, zarr.Array) and len(member.shape) == 2:
+            check_chunks(group, member, name, path, TransportError)
+            maps[name] = read_array(member, ..., path=path, error=TransportError, name=name)
     return maps
 
 
@@ -93,14 +114,15 @@ def write_transport(transport: Transport, path, *, attrs: dict | None = None, ov
     with atomic_directory(path, overwrite=overwrite, kind="transport", error=TransportError) as tmp:
         group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
         chunks = (max(min(h, 64), 1), max(min(w, 64), 1), max(u, 1))
-        array = group.create_array("T", shape=dense.shape, chunks=chunks, dtype="float32", fill_value=0.0)
+        # every chunk is stored, zero blocks too (the store is marked all_chunks_stored)
+        array = create_array(group, "T", shape=dense.shape, chunks=chunks, dtype="float32", fill_value=0.0)
         array[...] = dense
         sparse = transport.sparse
         if sparse is not None and len(sparse):
-            group.create_array("sparse_row", data=np.asarray(sparse.row, dtype=np.int32))
-            group.create_array("sparse_col", data=np.asarray(sparse.col, dtype=np.int32))
-            group.create_array("sparse_offset", data=np.asarray(sparse.offset, dtype=np.int32))
-            group.create_array("sparse_value", data=np.asarray(sparse.value, dtype=np.float32))
+            create_array(group, "sparse_row", data=np.asarray(sparse.row, dtype=np.int32))
+            create_array(group, "sparse_col", data=np.asarray(sparse.col, dtype=np.int32))
+            create_array(group, "sparse_offset", data=np.asarray(sparse.offset, dtype=np.int32))
+            create_array(group, "sparse_value", data=np.asarray(sparse.value, dtype=np.float32))
         group.attrs.update(out)
     return path
 
@@ -122,7 +144,16 @@ def read_transport(path) -> tuple[Transport, dict]:
     ------
     TransportError
         Naming the path and the problem (missing ``T``, wrong shape, offsets that
-        do not match ``T``, non-finite values, malformed sparse entries...).
+        do not match ``T``, non-finite values, malformed sparse entries, a chunk
+        absent from a store marked ``all_chunks_stored`` -- e.g. ``T: chunk (1, 0,
+        0) is missing (rows 64-127) -- the store is incomplete`` -- or a chunk that
+        cannot be decoded).
+
+    Notes
+    -----
+    Stores written by this version of planeray store every chunk and carry the
+    attribute ``all_chunks_stored = true``; older stores, which skipped chunks
+    equal to the fill value, are read with absent chunks as 0.
     """
     path = Path(path)
     group = open_group(path, TransportError)
@@ -152,10 +183,8 @@ def read_transport(path) -> tuple[Transport, dict]:
     lps = attrs.get("lines_per_second")
     if lps is not None and (not is_number(lps) or not math.isfinite(lps) or lps <= 0):
         raise TransportError(f"attribute 'lines_per_second' must be a positive number or null, got {lps!r}", path)
-    try:
-        dense = np.asarray(array[...], dtype=np.float32)
-    except Exception as exc:
-        raise TransportError(f"cannot read array 'T' ({type(exc).__name__}: {exc})", path) from exc
+    check_chunks(group, array, "T", path, TransportError)
+    dense = read_array(array, ..., path=path, error=TransportError, name="T").astype(np.float32, copy=False)
     if not np.all(np.isfinite(dense)):
         raise TransportError("array 'T' contains NaN or infinite values", path)
 
@@ -169,6 +198,8 @@ def read_transport(path) -> tuple[Transport, dict]:
         if len(members[0].shape) != 1:
             raise TransportError(f"array 'sparse_row' must be 1-D, got shape {tuple(members[0].shape)}", path)
         m = int(members[0].shape[0])
+        for member, name in zip(members, SPARSE_ARRAYS):
+            check_chunks(group, member, name, path, TransportError)
         data = [read_vector(a, name, m, path, TransportError) for a, name in zip(members, SPARSE_ARRAYS)]
         row, col, offset, value = data
         if not np.all(np.isfinite(value)):
