@@ -16,6 +16,7 @@ order) and holds the entry point:
 * ``calibrate.py``  calibrate lines | simulate-lines | delay-zero (Sec. 6)
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
+* ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
 * ``_common.py``    shared helpers: one-line errors, stack loading, ``--pixel`` parsing, image saving
@@ -34,6 +35,7 @@ from . import (
     calibrate,
     demo,
     demux,
+    materials,
     mc,
     simulate,
     stacks,
@@ -79,6 +81,7 @@ app.add_typer(baselines.separate_app, name="separate")
 app.add_typer(calibrate.calibrate_app, name="calibrate")
 app.add_typer(mc.mc_app, name="mc")
 app.add_typer(study.study_app, name="study")
+app.add_typer(materials.materials_app, name="materials")
 
 
 def main(argv: list[str] | None = None):

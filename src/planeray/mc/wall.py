@@ -73,6 +73,7 @@ References
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -114,7 +115,7 @@ __all__ = [
 #: Wall models: a clear wall with air behind it (Fresnel), or a black one.
 WALL_MODELS = ("fresnel", "absorbing")
 #: Bumped whenever the wall runs' results change (part of every wall cache key).
-WALL_VERSION = 1
+WALL_VERSION = 2
 #: Distance bins of the crossing points to the wall (the continuation's exit law).
 _N_WALL_BINS = 48
 
@@ -343,6 +344,25 @@ class _QuarterSpace:
         self.z_bw = 2.0 * boundary_mismatch_A(n_wall) * D
         self.depths = np.array([self.z_c, self.z_c + 2.0 * self.z_b])
         self.e0 = 0.5 * float(np.sum(np.exp(-self.sigma_tr * self.depths)))  # exits without a wall
+        # Distances to the wall of the tabulated hand-off (beyond: as without a wall).
+        self.delta_max = 4.0 * self.z_c + (8.0 / self.sigma_tr if self.sigma_tr > 0 else 400.0 * self.z_c)
+        self._grid = None
+        self._memo = {}
+
+    def fractions(self, delta):
+        """``(E, W)`` at distances ``delta`` (interpolated from a grid computed once; far: ``(e0, 0)``)."""
+        if self._grid is None:
+            g = self.delta_max * np.linspace(0.0, 1.0, 241) ** 2  # dense near the wall
+            self._grid = (g, self.exit_fraction(g), self.wall_fraction(g))
+        g, E, W = self._grid
+        delta = np.asarray(delta, dtype=np.float64)
+        return np.interp(delta, g, E, right=self.e0), np.interp(delta, g, W, right=0.0)
+
+    def memo(self, key, compute):
+        """A value computed once per hand-off geometry (the exit laws do not depend on the wall's distance)."""
+        if key not in self._memo:
+            self._memo[key] = compute()
+        return self._memo[key]
 
     # Exit flux through the top face of one source pair (no wall) ...
     def line_law(self, xi):
@@ -413,6 +433,12 @@ class _QuarterSpace:
         return res
 
 
+@functools.lru_cache(maxsize=8)
+def _quarter_space(z_c, sigma_a, sigma_tp, n, n_wall) -> _QuarterSpace:
+    """The hand-off geometry of a medium and wall, shared by every run (its exit laws are cached)."""
+    return _QuarterSpace(z_c, sigma_a, sigma_tp, n, n_wall)
+
+
 def wall_exit_fractions(delta_mm, *, medium: Medium, wall: str = "fresnel", diffusion_depth_mfp=DIFFUSION_DEPTH_MFP):
     """Diffusion hand-off beside a wall: fractions leaving through the top face and through the wall.
 
@@ -432,7 +458,7 @@ def wall_exit_fractions(delta_mm, *, medium: Medium, wall: str = "fresnel", diff
     medium = as_medium(medium)
     _check_wall(wall)
     sigma_tp = medium.sigma_a + medium.sigma_s_prime
-    q = _QuarterSpace(
+    q = _quarter_space(
         float(diffusion_depth_mfp) / sigma_tp, medium.sigma_a, sigma_tp, medium.n, _wall_index(wall, medium)
     )
     delta = np.atleast_1d(np.asarray(delta_mm, dtype=np.float64))
@@ -459,7 +485,10 @@ def _exits_parallel(cont, hmin, out_bins, mm, q: _QuarterSpace, wall_a):
     tq, tw = _tri_points()
     # Source uniform in its bin, exit integrated over another: triangle weights in x - x_c and x + x_c.
     m1 = np.arange(int(k.min()) - int(h.max()), int(k.max()) - int(h.min()) + 1)
-    T1 = (q.line_law((m1[:, None] + tq[None, :]) * mm) * tw).sum(axis=1) * mm
+    T1 = q.memo(
+        ("tri", int(m1[0]), int(m1[-1]), mm),
+        lambda: (q.line_law((m1[:, None] + tq[None, :]) * mm) * tw).sum(axis=1) * mm,
+    )
     m2 = np.arange(int(k.min()) + int(h.min()), int(k.max()) + int(h.max()) + 1)
     T2 = (q.line_law((m2[:, None] + tq[None, :]) * mm - 2.0 * (wall_a + q.z_bw)) * tw).sum(axis=1) * mm
     P = T1[k[None, :] - h[:, None] - m1[0]] - T2[k[None, :] + h[:, None] - m2[0]]
@@ -486,11 +515,9 @@ def _exits_parallel(cont, hmin, out_bins, mm, q: _QuarterSpace, wall_a):
         P[i, cols] = np.einsum("cs,cst,t->c", wx, f, wc)
     # Exiting and wall-lost fractions per crossing bin (delta averaged over the bin's inside).
     xs = 0.5 * (lo_h + hi_h)[:, None] + 0.5 * np.maximum(hi_h - lo_h, 0.0)[:, None] * g8[None, :]
-    deltas = np.maximum(wall_a - xs, 0.0)
-    grid = np.linspace(0.0, max(float(deltas.max()), 1e-9), 200)
-    E_grid, W_grid = q.exit_fraction(grid), q.wall_fraction(grid)
-    E = (np.interp(deltas, grid, E_grid) * 0.5 * w8).sum(axis=1)
-    W = (np.interp(deltas, grid, W_grid) * 0.5 * w8).sum(axis=1)
+    E_d, W_d = q.fractions(np.maximum(wall_a - xs, 0.0))
+    E = (E_d * 0.5 * w8).sum(axis=1)
+    W = (W_d * 0.5 * w8).sum(axis=1)
     return cont @ P, cont @ E, cont @ W
 
 
@@ -546,31 +573,43 @@ def _exits_oblique(cont, hmin, out_bins, mm, q: _QuarterSpace, phi, dbin):
     k = np.asarray(out_bins)
     m = np.arange(int(k.min()) - (hmin + nh - 1), int(k.max()) - hmin + 1)
     idx = k[None, :] - (hmin + np.arange(nh))[:, None] - m[0]
+    deltas = (np.arange(nd - 1) + 0.5) * dbin
+    laws = q.memo(
+        ("oblique", float(phi), float(dbin), nd, int(m[0]), int(m[-1]), mm),
+        lambda: _oblique_laws(q, m, mm, phi, deltas),
+    )
+    exits = np.zeros((B, k.size))
+    for j in range(nd - 1):
+        exits += cont[:, :, j] @ laws[j][idx]
+    far = cont[:, :, nd - 1]
+    far_bins, _ = diffusion_exit(far, hmin, k, mm, q.z_c, q.sigma_a, q.sigma_tp, q.n)
+    exits += far_bins
+    E, W = q.fractions(deltas)
+    E, W = np.append(E, q.e0), np.append(W, 0.0)
+    return exits, cont.sum(axis=1) @ E, cont.sum(axis=1) @ W
+
+
+def _oblique_laws(q: _QuarterSpace, m, mm, phi, deltas):
+    """Exit laws ``(len(deltas), len(m))``: weight leaving through the bin ``m`` bins from the crossing's."""
     tq, tw = _tri_points()
     u = (m[:, None] + tq[None, :]) * mm  # x - x_c
     cphi, sphi = math.cos(phi), math.sin(phi)
-    deltas = (np.arange(nd - 1) + 0.5) * dbin
     table = _HalfLineTable(
         q,
         np.abs(u).max() + 2.0 * (deltas.max() + q.z_bw) + 1.0,
         (np.abs(u).max() + 3 * deltas.max()) / sphi + 50 * q.z_c,
     )
     L_u = q.line_law(u)
-    exits = np.zeros((B, k.size))
+    laws = np.empty((deltas.size, m.size))
     for j, dl in enumerate(deltas):
         off = 2.0 * (dl + q.z_bw)
         s1 = (dl - u * cphi) / sphi  # y-limit of the inside, from the crossing
         u2 = u - off * cphi  # from the image
         s2 = s1 - off * sphi
-        J = (0.5 * L_u + np.sign(s1) * table(u, s1)) - (0.5 * q.line_law(u2) + np.sign(s2) * table(u2, s2))
-        P = (J * tw).sum(axis=1) * mm
-        exits += cont[:, :, j] @ P[idx]
-    far = cont[:, :, nd - 1]
-    far_bins, _ = diffusion_exit(far, hmin, k, mm, q.z_c, q.sigma_a, q.sigma_tp, q.n)
-    exits += far_bins
-    E = np.append(q.exit_fraction(deltas), q.e0)
-    W = np.append(q.wall_fraction(deltas), 0.0)
-    return exits, cont.sum(axis=1) @ E, cont.sum(axis=1) @ W
+        L2 = L_u if cphi == 0.0 else q.line_law(u2)
+        J = (0.5 * L_u + np.sign(s1) * table(u, s1)) - (0.5 * L2 + np.sign(s2) * table(u2, s2))
+        laws[j] = (J * tw).sum(axis=1) * mm
+    return laws
 
 
 # ---------------------------------------------------------------- runs
@@ -776,12 +815,12 @@ def _run_wall(medium, offsets, params):
     dbin, nd = 0.0, 1
     hmin, nh = 0, 1
     if np.isfinite(z_cont):
-        q = _QuarterSpace(z_cont, sigma_a, sigma_tp, n, n_wall)
+        q = _quarter_space(z_cont, sigma_a, sigma_tp, n, n_wall)
         half = max(abs(kmin), abs(kmin + nk - 1)) * mm
         reach = int(np.ceil(min(cutoff_mm, half + 20.0 * z_cont) / mm))
         hmin, nh = -reach, 2 * reach + 1
         if wcy > 0.0 and math.isfinite(a):  # distance to the wall is not a function of x: histogram it
-            delta_max = min(cutoff_mm, 4.0 * z_cont + (6.0 / q.sigma_tr if q.sigma_tr > 0 else 20.0 * z_cont))
+            delta_max = 4.0 * z_cont + (6.0 / q.sigma_tr if q.sigma_tr > 0 else 20.0 * z_cont)
             nd = _N_WALL_BINS + 1
             dbin = delta_max / _N_WALL_BINS
     refl_bins, rad_bins, refl, trans, absorbed, truncated, wall, events, cont, far = _trace_wall(
