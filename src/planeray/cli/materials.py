@@ -129,6 +129,9 @@ def train(
     class_name: Annotated[
         list[str] | None, typer.Option("--class-name", help="ID=NAME for classes beyond the documented list.")
     ] = None,
+    ignore_class: Annotated[
+        list[int] | None, typer.Option("--ignore-class", help="Class id to leave out (e.g. 6, the background).")
+    ] = None,
     max_per_class: Annotated[int, typer.Option(help="Training pixels per class and capture.")] = 400,
     cv_folds: Annotated[int, typer.Option(help="Cross-validation folds (grouped by capture).")] = 4,
     seed: Annotated[int, typer.Option(help="Seed of the pixel sampling.")] = 0,
@@ -155,6 +158,7 @@ def train(
                 kind=features,
                 floor=floor,
                 class_names=names,
+                ignore_classes=tuple(ignore_class or ()),
                 max_per_class=max_per_class,
                 cv_folds=cv_folds,
                 seed=seed,
@@ -243,7 +247,7 @@ def report(
         numbers = run_materials_report(
             out_dir, size=size, quick=quick, overwrite=overwrite, progress=lambda msg: status.update(msg)
         )
-    main = numbers["stack_profiles"]["floor_min"]["test"]
+    main = numbers["stack_profiles"]["floor_edge"]["test"]
     out.print(f"report: {out_dir}  ({numbers['seconds']:g} s)")
     for name, acc in main["accuracy"].items():
         out.print(

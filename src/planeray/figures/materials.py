@@ -78,63 +78,81 @@ def materials_photo_figure(photo, labels, *, names=None, out=None, ax=None):
     return finish(fig, out)
 
 
-def material_profiles_figure(delay_us, profiles, *, exposure_us, out=None, ax=None):
+def material_profiles_figure(delay_us, profiles, *, exposure_us, floor="edge", out=None):
     """Average area-normalized delay profile of each material, away from walls and near them (Fig. 10b).
+
+    Two panels, linear and logarithmic (the tails tell the materials apart).
 
     Parameters
     ----------
     delay_us : array_like (D,)
     profiles : dict
-        ``{name: {"interior": {"mean", "std"}, "near_wall": {...}}}`` (from the report).
+        ``{name: {"interior": {"mean", "std"}, "near_wall": {...}, "all": {...}}}`` (from the report).
     exposure_us : float
         The exposure of the curves (title).
+    floor : {"edge", "min", "none"}
+        The features' floor removal (title).
     """
-    fig, ax, own = figure_for(ax, (6.4, 4.2))
+    fig = new_figure((11.5, 4.2))
+    axes = fig.subplots(1, 2)
     ids = {v: k for k, v in CLASS_NAMES.items()}
     d = np.asarray(delay_us)
-    for name, entry in profiles.items():
-        colour = _rgb(ids.get(name, 0))
-        if "interior" in entry:
-            m, s = np.asarray(entry["interior"]["mean"]), np.asarray(entry["interior"]["std"])
-            ax.plot(d, m, "-o", color=colour, ms=3, lw=1.6, label=f"{name}")
+    for ax in axes:
+        for name, entry in profiles.items():
+            colour = _rgb(ids.get(name, 0))
+            main = entry.get("interior") or entry.get("all")
+            label = name if "interior" in entry else f"{name} (every pixel near a wall)"
+            m, s = np.asarray(main["mean"]), np.asarray(main["std"])
+            ax.plot(d, m, "-o", color=colour, ms=3, lw=1.6, label=label)
             ax.fill_between(d, m - s, m + s, color=colour, alpha=0.2, lw=0)
-        if "near_wall" in entry:
-            ax.plot(d, entry["near_wall"]["mean"], "--", color=colour, lw=1.0)
-    ax.plot([], [], "k--", lw=1.0, label="near a wall")
-    ax.set_xlabel("delay t_d (us)")
-    ax.set_ylabel("area-normalized intensity (1/ms)")
-    ax.set_title(f"average delay profiles at t_e = {exposure_us:g} us (band: +-1 std)", fontsize=9)
-    ax.legend(fontsize=7, frameon=False)
-    if own:
-        fig.tight_layout()
+            if "near_wall" in entry and "interior" in entry:
+                ax.plot(d, entry["near_wall"]["mean"], "--", color=colour, lw=1.0)
+        ax.set_xlabel("delay t_d (us)")
+    axes[0].plot([], [], "k--", lw=1.0, label="near a wall")
+    axes[0].set_ylabel("area-normalized intensity (1/ms)")
+    axes[0].legend(fontsize=7, frameon=False)
+    axes[1].set_yscale("log")
+    axes[1].set_ylim(1e-3, None)
+    fig.suptitle(
+        f"average delay profiles at t_e = {exposure_us:g} us, "
+        f"{ {'edge': 'edge floor subtracted, ', 'min': 'minimum subtracted, '}.get(floor, '') }"
+        "area-normalized (band: +-1 std over the pixels)",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
     return finish(fig, out)
 
 
-def segmentation_figure(truth, pred, *, near_wall=None, names=None, title=None, out=None):
-    """Ground truth, per-pixel prediction, and the errors with the near-wall zone (Fig. 10c)."""
+def segmentation_figure(truth, pred, *, near_wall=None, scored=None, names=None, title=None, out=None):
+    """Ground truth, per-pixel prediction, and the errors with the near-wall zone (Fig. 10c).
+
+    ``scored``: the pixels that are classified and judged (default: every labelled
+    pixel); the prediction is shown there only.
+    """
     names = names or CLASS_NAMES
     truth, pred = np.asarray(truth), np.asarray(pred)
+    scored = (truth > 0) if scored is None else np.asarray(scored, bool)
+    shown = np.where(scored, pred, 0)
     max_id = int(max(truth.max(), pred.max(), max(names)))
-    fig = new_figure((11.5, 4.2))
+    fig = new_figure((11.5, 4.4))
     axes = fig.subplots(1, 3)
     _label_image(axes[0], truth, max_id)
     axes[0].set_title("ground truth", fontsize=9)
-    _label_image(axes[1], pred, max_id)
+    _label_image(axes[1], shown, max_id)
     axes[1].set_title(f"prediction ({title})" if title else "prediction", fontsize=9)
-    wrong = (truth > 0) & (pred != truth)
-    err = np.zeros((*truth.shape, 3))
-    err[truth > 0] = 0.85
-    err[np.isin(truth, list(MATERIAL_CLASSES))] = 0.6
+    wrong = scored & (pred != truth)
+    err = np.ones((*truth.shape, 3))
+    err[scored] = 0.7
     err[wrong] = (0.85, 0.1, 0.1)
     axes[2].imshow(err, interpolation="nearest")
     if near_wall is not None and near_wall.any():
         axes[2].contour(near_wall.astype(float), levels=[0.5], colors=["#1f77b4"], linewidths=0.8)
-    axes[2].set_title(f"errors (red): {wrong.sum()} of {(truth > 0).sum()} px; blue: near-wall zone", fontsize=9)
+    axes[2].set_title(f"errors (red): {wrong.sum()} of {scored.sum()} px; blue: near-wall zone", fontsize=9)
     axes[2].set_xticks([])
     axes[2].set_yticks([])
     handles = [Patch(color=_rgb(c), label=names[c]) for c in sorted(names) if c > 0]
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.tight_layout(rect=(0, 0.07, 1, 0.97))
     return finish(fig, out)
 
 

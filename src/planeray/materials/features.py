@@ -8,10 +8,15 @@ trained model:
 ``"stack"``
     The measured profiles of a delay-exposure stack: at each exposure, the pixel's
     values over the sweep's delays, each exposure's curve divided by its area over delay
-    (ms), the exposures' curves concatenated.  With ``floor="min"`` each curve's minimum
-    is subtracted first: ambient light adds the same ``ambient x t_e x albedo`` to every
-    delay of an exposure (:class:`planeray.camera.CameraModel`), a floor that the
-    minimum removes and the paper's plain normalization (``floor="none"``) keeps.
+    (ms), the exposures' curves concatenated.  Ambient light adds the same
+    ``ambient x t_e x albedo`` to every delay of an exposure
+    (:class:`planeray.camera.CameraModel`), a floor that the paper's plain normalization
+    (``floor="none"``) keeps; ``floor="edge"`` (default) subtracts from each curve the
+    mean of its :data:`EDGE_SAMPLES` outermost samples on each side (the largest |delay|;
+    four samples, so the floor's noise is half that of one), ``floor="min"`` its minimum
+    (noisier: the minimum of 17 noisy samples).  A broad profile keeps some light at the
+    edges, which the edge floor removes too -- the same in every capture, so the
+    features stay comparable.
 ``"transport"``
     The profile of a demultiplexed transport (Sec. 4, :func:`planeray.demux.demultiplex`):
     ``T(u)`` over the transport's offsets, area-normalized over the delays ``u / v_p``
@@ -46,7 +51,9 @@ __all__ = [
 #: Kinds of profile a model can be trained on.
 FEATURE_KINDS = ("stack", "transport")
 #: Floor removal before the area normalization.
-FLOORS = ("min", "none")
+FLOORS = ("edge", "min", "none")
+#: Samples averaged at each end of a curve by the ``"edge"`` floor.
+EDGE_SAMPLES = 2
 _TOL_US = 1e-6
 
 
@@ -63,8 +70,9 @@ class FeatureDefinition:
         Exposure of every sample (a transport: empty).
     lines_per_second : float
         Projector line velocity of the sweep (it ties delays to offsets).
-    floor : {"min", "none"}
-        Per-curve minimum subtracted before normalizing, or not.
+    floor : {"edge", "min", "none"}
+        Per-curve floor subtracted before normalizing (mean of the outermost samples,
+        minimum), or none.
     normalization : str
         ``"area"``: each curve divided by its area over delay in ms (the paper's).
     offsets_rows : tuple of int
@@ -77,7 +85,7 @@ class FeatureDefinition:
     delay_us: tuple
     exposure_us: tuple
     lines_per_second: float
-    floor: str = "min"
+    floor: str = "edge"
     normalization: str = "area"
     offsets_rows: tuple = ()
     demux: dict | None = None
@@ -180,18 +188,24 @@ class FeatureDefinition:
             refuse(f"these features use floor {other.floor}")
 
 
-def normalize_profiles(values, delay_us, *, floor="min"):
-    """Area-normalize profiles over delay (last axis): optionally subtract each one's minimum first.
+def normalize_profiles(values, delay_us, *, floor="edge"):
+    """Area-normalize profiles over delay (last axis, sorted delays), after removing a floor.
 
     Vectorized :func:`planeray.profiles.area_normalize` (same result for ``floor="none"``
     and NaN-free profiles): each profile divided by the trapezoidal area of its positive
-    part over delay in ms; a profile with no positive area becomes 0.
+    part over delay in ms; a profile with no positive area becomes 0.  ``floor``:
+    ``"edge"`` subtracts the mean of the :data:`EDGE_SAMPLES` outermost samples at each
+    end, ``"min"`` the minimum, ``"none"`` nothing.
     """
     if floor not in FLOORS:
         raise InputError(f"unknown floor {floor!r}; choose one of {', '.join(FLOORS)}")
     v = np.asarray(values, dtype=np.float64)
     if floor == "min":
         v = v - v.min(axis=-1, keepdims=True)
+    elif floor == "edge":
+        k = min(EDGE_SAMPLES, v.shape[-1] // 2)
+        if k > 0:
+            v = v - 0.5 * (v[..., :k].mean(axis=-1, keepdims=True) + v[..., -k:].mean(axis=-1, keepdims=True))
     x = np.asarray(delay_us, dtype=np.float64) * 1e-3
     area = np.trapezoid(np.clip(v, 0.0, None), x, axis=-1) if x.size > 1 else np.zeros(v.shape[:-1])
     safe = np.where(area > 0, area, 1.0)[..., None]
@@ -206,7 +220,7 @@ def _stack_layout(stack: Stack):
     return order, groups
 
 
-def stack_definition(stack: Stack, *, floor="min") -> FeatureDefinition:
+def stack_definition(stack: Stack, *, floor="edge") -> FeatureDefinition:
     """The feature definition of a stack's measured delay profiles (every image, by exposure then delay)."""
     order, _ = _stack_layout(stack)
     return FeatureDefinition(
@@ -218,13 +232,13 @@ def stack_definition(stack: Stack, *, floor="min") -> FeatureDefinition:
     )
 
 
-def stack_features(stack: Stack, *, floor="min", definition: FeatureDefinition | None = None, source=None):
+def stack_features(stack: Stack, *, floor="edge", definition: FeatureDefinition | None = None, source=None):
     """Area-normalized measured delay profiles of every pixel of a stack.
 
     Parameters
     ----------
     stack : Stack
-    floor : {"min", "none"}
+    floor : {"edge", "min", "none"}
         Floor removal (module docstring); ignored when ``definition`` is given.
     definition : FeatureDefinition, optional
         A model's definition: the stack must match it (:meth:`FeatureDefinition.check`).
@@ -263,7 +277,7 @@ def stack_features(stack: Stack, *, floor="min", definition: FeatureDefinition |
     return np.concatenate(feats, axis=1), areas.reshape(H, W), mine
 
 
-def transport_definition(transport, *, lines_per_second, floor="min", demux=None) -> FeatureDefinition:
+def transport_definition(transport, *, lines_per_second, floor="edge", demux=None) -> FeatureDefinition:
     """The feature definition of a transport's profiles ``T(u)`` (``demux``: how it was demultiplexed)."""
     offsets = np.asarray(transport.offsets_rows)
     return FeatureDefinition(
@@ -278,7 +292,7 @@ def transport_definition(transport, *, lines_per_second, floor="min", demux=None
 
 
 def transport_features(
-    transport, *, lines_per_second, floor="min", demux=None, definition: FeatureDefinition | None = None, source=None
+    transport, *, lines_per_second, floor="edge", demux=None, definition: FeatureDefinition | None = None, source=None
 ):
     """Area-normalized profiles ``T(u)`` of every pixel of a (demultiplexed) transport.
 

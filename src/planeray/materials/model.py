@@ -271,7 +271,7 @@ def capture_features(
     stack: Stack,
     *,
     kind: str = "stack",
-    floor: str = "min",
+    floor: str = "edge",
     definition: FeatureDefinition | None = None,
     transport=None,
     demux: dict | None = None,
@@ -331,9 +331,10 @@ def train_model(
     labels,
     *,
     kind: str = "stack",
-    floor: str = "min",
+    floor: str = "edge",
     demux: dict | None = None,
     class_names: dict | None = None,
+    ignore_classes=(),
     max_per_class: int = 400,
     cv_folds: int = 4,
     param_grid: dict | None = None,
@@ -353,13 +354,17 @@ def train_model(
     kind : {"stack", "transport"}
         Measured profiles or demultiplexed transport profiles
         (:mod:`planeray.materials.features`).
-    floor : {"min", "none"}
-        Floor removal before the area normalization.
+    floor : {"edge", "min", "none"}
+        Floor removal before the area normalization (:mod:`planeray.materials.features`).
     demux : dict, optional
         Demultiplexing options of a transport model.
     class_names : dict, optional
         Names of class ids; default the documented list
         (:data:`planeray.optical_data.CLASS_NAMES`), ``"class N"`` for others.
+    ignore_classes : sequence of int
+        Class ids treated as unlabelled (e.g. the background, 6: the paper recognizes the
+        five materials only, and a nearly opaque paste and a matte table have nearly the
+        same profile).
     max_per_class : int
         Training pixels per class and capture (drawn at random): the SVM's cost grows
         with the square of the pixel count.
@@ -407,6 +412,7 @@ def train_model(
         definition = definition or d
         y = lab.ravel().astype(np.int64)
         y = np.where(signal.ravel() > 0, y, UNLABELLED)  # no profile, nothing to learn
+        y = np.where(np.isin(y, list(ignore_classes)), UNLABELLED, y)
         if len(stacks) > 1:
             groups = np.full(y.size, i)
         else:  # one capture: blocks of the image (4 x 4), so no fold validates beside its training pixels
@@ -454,5 +460,6 @@ def train_model(
         ],
         "seed": int(seed),
         "max_per_class": int(max_per_class),
+        "ignored_classes": sorted(int(c) for c in ignore_classes),
     }
     return MaterialModel(search.best_estimator_, definition, classes, training)

@@ -299,7 +299,7 @@ def build(
             )
             lo, hi = cx - hx, cx + hx
         else:
-            ddx, ddy = dx[rows, cols], dy[rows, cols]
+            ddx, ddy = x_mm[rows] - cx, y_mm[cols] - cy
             r = np.hypot(ddx, ddy)
             dist_mm = hx - r
             phi = np.degrees(np.arctan2(np.abs(ddy), np.abs(ddx)))
