@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.table import Table
 
 from .._console import console, out, progress_bar
 from ._common import _friendly_errors, _load_stack
@@ -27,29 +26,22 @@ def classes(
     """The documented class ids of label images and the simulated media."""
     from ..optical_data import BACKGROUND_CLASS, CLASS_NAMES, UNLABELLED, optical_table
 
-    table = Table(
-        "id", "class", "sigma_s (1/mm)", "sigma_a (1/mm)", "g", "n", "sigma_s' (1/mm)", "diffusion length (mm)"
-    )
     rows = {r["class_id"]: r for r in optical_table(source=source, channel=channel)}
-    table.add_row(str(UNLABELLED), "unlabelled (not trained on, not scored)", "", "", "", "", "", "")
+    out.print(f"class ids of label images (media: {source}, {channel} laser line):")
+    out.print(f"  {UNLABELLED}  unlabelled: not trained on, not scored")
     for cid, name in CLASS_NAMES.items():
         r = rows.get(cid)
         if r is None:
-            table.add_row(
-                str(cid), name + (" (table, anything else)" if cid == BACKGROUND_CLASS else ""), "", "", "", "", "", ""
-            )
+            what = "the table, anything outside the containers" if cid == BACKGROUND_CLASS else ""
+            out.print(f"  {cid}  {name}: {what}")
             continue
-        table.add_row(
-            str(cid),
-            name,
-            f"{r['sigma_s']:.4g}",
-            f"{r['sigma_a']:.4g}",
-            f"{r['g']:.3g}",
-            f"{r['n']:.3g}",
-            f"{r['sigma_s_prime']:.3g}",
-            f"{r['diffusion_length_mm']:.3g}",
+        depth = "semi-infinite" if r["thickness_mm"] is None else f"{r['thickness_mm']:g} mm deep"
+        out.print(
+            f"  {cid}  {name}: sigma_s {r['sigma_s']:.4g}/mm, sigma_a {r['sigma_a']:.4g}/mm, g {r['g']:.3g}, "
+            f"n {r['n']:.3g}, sigma_s' {r['sigma_s_prime']:.3g}/mm, diffusion length {r['diffusion_length_mm']:.3g} mm, "
+            f"{depth}"
         )
-    out.print(table)
+    out.print("other ids (7-255) for your own materials: planeray materials train --class-name ID=NAME")
 
 
 @materials_app.command("simulate")

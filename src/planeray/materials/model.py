@@ -144,7 +144,7 @@ class MaterialModel:
         import skops
         import skops.io as sio
 
-        from .. import __version__
+        from ..io._common import planeray_version
 
         path = Path(path)
         if path.exists() or path.is_symlink():
@@ -164,7 +164,7 @@ class MaterialModel:
             "classes": {str(k): v for k, v in self.classes.items()},
             "training": self.training,
             "estimator_sha256": hashlib.sha256(blob).hexdigest(),
-            "planeray_version": __version__,
+            "planeray_version": planeray_version(),
             "sklearn_version": sklearn.__version__,
             "skops_version": skops.__version__,
         }
@@ -312,17 +312,16 @@ def capture_features(
 
 
 # ---------------------------------------------------------------- training
-def _sample(y, groups, max_per_class, rng):
-    """Indices of labelled pixels: at most ``max_per_class`` per class and group (capture or block)."""
+def _sample(y, max_per_class, rng):
+    """Indices of labelled pixels of one capture: at most ``max_per_class`` per class, drawn at random."""
     keep = []
-    for g in np.unique(groups):
-        for c in np.unique(y):
-            if c == UNLABELLED:
-                continue
-            idx = np.flatnonzero((y == c) & (groups == g))
-            if idx.size > max_per_class:
-                idx = rng.choice(idx, max_per_class, replace=False)
-            keep.append(idx)
+    for c in np.unique(y):
+        if c == UNLABELLED:
+            continue
+        idx = np.flatnonzero(y == c)
+        if idx.size > max_per_class:
+            idx = rng.choice(idx, max_per_class, replace=False)
+        keep.append(idx)
     return np.sort(np.concatenate(keep)) if keep else np.zeros(0, np.int64)
 
 
@@ -419,7 +418,7 @@ def train_model(
             H, W = st.shape
             r, c = np.divmod(np.arange(y.size), W)
             groups = (r * 4 // H) * 4 + (c * 4 // W)
-        keep = _sample(y, groups, max_per_class, rng)
+        keep = _sample(y, max_per_class, rng)
         X_all.append(X[keep])
         y_all.append(y[keep])
         g_all.append(groups[keep])
