@@ -389,3 +389,35 @@ def test_cli_simulate_train_predict(tmp_path):
     assert res.exit_code == 1 and "not a planeray materials model" in res.output
     res = invoke("materials", "train", a / "stack.zarr", "--labels", a / "labels.png", "--out", model)
     assert res.exit_code == 1 and "already exists" in res.output
+
+
+@pytest.mark.slow
+def test_report_writes_the_figures_and_numbers(tmp_path):
+    from planeray.experiments.materials import run_materials_report
+
+    out = tmp_path / "report"
+    n = run_materials_report(out, size=48, quick=True, param_grid=GRID)
+    for name in (
+        "fig10a_photo",
+        "fig10b_profiles",
+        "fig10c_segmentation",
+        "fig10d_confusion",
+        "accuracy_vs_noise_ambient",
+        "accuracy_vs_wall_distance",
+        "wall_kernels",
+    ):
+        assert (out / f"{name}.png").stat().st_size > 10_000, name
+    saved = json.loads((out / "materials.json").read_text())
+    assert (
+        saved["stack_profiles"]["floor_edge"]["test"]["accuracy"]
+        == n["stack_profiles"]["floor_edge"]["test"]["accuracy"]
+    )
+    main = saved["stack_profiles"]["floor_edge"]["test"]
+    assert set(main["accuracy_near_wall"]) == set(MATERIAL_CLASSES.values())
+    assert {"noise", "ambient_e_per_us"} <= set(saved["curves"])
+    # The paper's plain normalization does not survive a change of ambient light; the edge floor does.
+    assert saved["stack_profiles"]["floor_none"]["test"]["min_material_accuracy"] < 0.5
+    assert main["min_material_accuracy"] > 0.8
+    assert load_model(out / "materials_model.zip").definition.floor == "edge"
+    with pytest.raises(InputError, match="already exists"):
+        run_materials_report(out, size=48, quick=True)

@@ -182,3 +182,24 @@ def test_wall_table_correlated_control_variate(tmp_path, monkeypatch):
     assert np.allclose(back.kernel, tab.kernel, rtol=1e-6) and back.medium == MED and back.wall == "fresnel"
     again = mc_wall_table(MED, **kw)
     assert np.array_equal(again.kernel, back.kernel)
+
+
+def test_materials_scene_uses_the_shipped_tables(tmp_path, monkeypatch):
+    # The default media (and the Jensen et al. milks of the report) ship precomputed
+    # (src/planeray/mc/tables, tools/build_mc_tables.py); a stale table would make every
+    # fresh machine trace ~10^7 photons per medium when it builds the scene.
+    import planeray.mc.engine as engine
+    import planeray.mc.wall as wall
+    from planeray.scenes import make_scene
+
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path))
+
+    def no_tracing(*a, **k):
+        raise AssertionError("a wall-kernel table of the materials scene was not found in the shipped tables")
+
+    monkeypatch.setattr(engine, "_run", no_tracing)
+    monkeypatch.setattr(wall, "_run_wall", no_tracing)
+    for kw in ({}, {"source": "jensen"}, {"container": "cup", "placement": 2}):
+        s = make_scene("materials", (64, 64), projector_rows=720, seed=0, **kw)
+        assert s.maps["near_wall"].any()
+    assert not any(tmp_path.rglob("*.npz"))

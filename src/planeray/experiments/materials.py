@@ -31,6 +31,7 @@ from ..materials import (
     CLASS_NAMES,
     MATERIAL_CLASSES,
     capture_features,
+    capture_transport,
     optical_table,
     train_model,
     write_label_image,
@@ -455,14 +456,16 @@ def run_materials_report(
         }
 
         # --- transport profiles -------------------------------------------------------------
-        step("demultiplexing both captures (transport profiles)")
-        from ..demux import demultiplex
-
-        T_train = demultiplex(train.stack).transport
-        T_test = demultiplex(test.stack).transport
+        step("demultiplexing the captures (transport profiles)")
+        T_train = capture_transport(train.stack)
+        T_test = capture_transport(test.stack)
         model_t = fit([train.stack], [train.labels], kind="transport", transports=[T_train])
         pred_t, trans = evaluate(model_t, test, transport=T_test)
-        numbers["transport_profiles"] = {"training": model_t.training, "test": trans}
+        numbers["transport_profiles"] = {
+            "training": model_t.training,
+            "test": trans,
+            "test_at_training_noise": evaluate(model_t, same, transport=capture_transport(same.stack))[1],
+        }
 
         # --- noise and ambient light --------------------------------------------------------
         step("accuracy as noise and ambient light grow")

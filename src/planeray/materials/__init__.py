@@ -19,9 +19,9 @@ from ..optical_data import (
     material_medium,
     optical_table,
 )
-from .features import FeatureDefinition, normalize_profiles, stack_features, transport_features
+from .features import FeatureDefinition, normalize_profiles, remove_floor, stack_features, transport_features
 from .labels import read_label_image, write_label_image
-from .model import ALLOWED_TYPES, MaterialModel, capture_features, load_model, train_model
+from .model import ALLOWED_TYPES, MaterialModel, capture_features, capture_transport, load_model, train_model
 
 __all__ = [
     "ALLOWED_TYPES",
@@ -32,12 +32,14 @@ __all__ = [
     "MaterialModel",
     "UNLABELLED",
     "capture_features",
+    "capture_transport",
     "load_model",
     "material_media",
     "material_medium",
     "normalize_profiles",
     "optical_table",
     "read_label_image",
+    "remove_floor",
     "stack_features",
     "train_model",
     "transport_features",

@@ -20,7 +20,9 @@ trained model:
 ``"transport"``
     The profile of a demultiplexed transport (Sec. 4, :func:`planeray.demux.demultiplex`):
     ``T(u)`` over the transport's offsets, area-normalized over the delays ``u / v_p``
-    (:func:`planeray.profiles.transport_delay_profiles`), optionally floor-removed.
+    (:func:`planeray.profiles.transport_delay_profiles`).  The floor is removed from the
+    *stack* before demultiplexing (:func:`remove_floor`): the regularized demultiplexing
+    turns an ambient offset into a broad pedestal of ``T`` that no floor of ``T`` removes.
 
 A definition records what makes two profiles comparable -- the (delay, exposure) pairs
 or the offsets, ``lines_per_second``, the normalization and floor, and the
@@ -46,6 +48,7 @@ __all__ = [
     "transport_definition",
     "transport_features",
     "normalize_profiles",
+    "remove_floor",
 ]
 
 #: Kinds of profile a model can be trained on.
@@ -297,8 +300,9 @@ def transport_features(
     """Area-normalized profiles ``T(u)`` of every pixel of a (demultiplexed) transport.
 
     Returns ``(features (H * W, U) float32, signal (H, W), definition)`` like
-    :func:`stack_features`; ``demux`` records the demultiplexing options (a model
-    compares them).
+    :func:`stack_features`; ``demux`` records the demultiplexing options and ``floor``
+    the floor removed from the stack before demultiplexing (:func:`remove_floor`), both
+    compared by a model.
     """
     mine = transport_definition(
         transport,
@@ -310,5 +314,40 @@ def transport_features(
         definition.check(mine, source=source)
     H, W = transport.shape
     dense = np.asarray(transport.dense, dtype=np.float32).reshape(H * W, -1)
-    f, area = normalize_profiles(dense, np.asarray(mine.delay_us), floor=mine.floor)
+    f, area = normalize_profiles(dense, np.asarray(mine.delay_us), floor="none")  # the floor left with the stack
     return f, area.reshape(H, W), mine
+
+
+def remove_floor(stack: Stack, *, floor="edge") -> Stack:
+    """The stack with each pixel's floor subtracted, per exposure (before demultiplexing).
+
+    The same floor as :func:`stack_features` (``"edge"``: the mean of the outermost
+    delays at each end; ``"min"``: the minimum; ``"none"``: the stack itself), taken
+    per pixel over the delays of each exposure and subtracted from all its images: what
+    the ambient light adds (``ambient x t_e x albedo``) goes, exactly.
+    """
+    if floor not in FLOORS:
+        raise InputError(f"unknown floor {floor!r}; choose one of {', '.join(FLOORS)}")
+    if floor == "none":
+        return stack
+    images = np.stack([stack.image(i) for i in range(len(stack))]).astype(np.float64)
+    out = images.copy()
+    _, groups = _stack_layout(stack)
+    for idx in groups:  # by exposure, delays increasing
+        curves = images[idx]
+        if floor == "min":
+            level = curves.min(axis=0)
+        else:
+            k = min(EDGE_SAMPLES, len(idx) // 2)
+            level = 0.5 * (curves[:k].mean(axis=0) + curves[-k:].mean(axis=0)) if k else np.zeros(stack.shape)
+        out[idx] -= level
+    return Stack(
+        out.astype(np.float32),
+        stack.delay_us,
+        stack.exposure_us,
+        stack.lines_per_second,
+        excluded=stack.excluded,
+        saturated=None if stack.saturated is None else np.asarray(stack.saturated),
+        projector_rows=stack.projector_rows,
+        metadata={**stack.metadata, "floor_removed": floor},
+    )

@@ -44,6 +44,7 @@ __all__ = [
     "train_model",
     "load_model",
     "capture_features",
+    "capture_transport",
     "DEFAULT_PARAM_GRID",
 ]
 
@@ -117,8 +118,8 @@ class MaterialModel:
         stack : Stack
             Captured with the sweep the model was trained on (else :class:`InputError`).
         transport : Transport, optional
-            For a transport model: the stack's demultiplexed transport, if already
-            computed with the model's options; otherwise it is demultiplexed here.
+            For a transport model: the stack's transport if already demultiplexed with
+            the model's options (:func:`capture_transport`); otherwise it is demultiplexed here.
         source : str, optional
             Name of the stack in error messages.
         progress : callable, optional
@@ -282,7 +283,8 @@ def capture_features(
 
     ``definition`` (a model's) fixes the kind, floor and demultiplexing; otherwise
     ``kind``, ``floor`` and ``demux`` (``alpha``, ``beta``, ``method``; default the
-    paper's 0.01, 0.01, ``"fast"``) do.  Returns ``(features, signal, definition)``.
+    paper's 0.01, 0.01, ``"fast"``) do.  A transport, if not given, is
+    :func:`capture_transport` of the stack.  Returns ``(features, signal, definition)``.
     """
     if definition is not None:
         kind = definition.kind
@@ -309,6 +311,29 @@ def capture_features(
         definition=definition,
         source=source,
     )
+
+
+#: Demultiplexing options of transport features (the paper's weights, the fast solver).
+DEFAULT_DEMUX = {"alpha": 0.01, "beta": 0.01, "method": "fast"}
+
+
+def capture_transport(stack: Stack, *, floor: str = "edge", demux: dict | None = None, progress=None):
+    """The transport of a capture as transport features see it: floor removed, then demultiplexed.
+
+    :func:`~planeray.materials.features.remove_floor` then :func:`planeray.demux.demultiplex`
+    with ``demux`` (default :data:`DEFAULT_DEMUX`).
+    """
+    from ..demux import demultiplex
+    from .features import remove_floor
+
+    opts = {**DEFAULT_DEMUX, **(demux or {})}
+    return demultiplex(
+        remove_floor(stack, floor=floor),
+        alpha=opts["alpha"],
+        beta=opts["beta"],
+        method=opts["method"],
+        progress=progress,
+    ).transport
 
 
 # ---------------------------------------------------------------- training
@@ -377,7 +402,8 @@ def train_model(
     sources : sequence of str, optional
         Names of the stacks (error messages, training record).
     transports : sequence of Transport, optional
-        Already demultiplexed transports of the stacks (transport models).
+        The stacks' transports, if already computed by :func:`capture_transport` with
+        the same floor and options (transport models).
     progress : callable, optional
         Called with 1 after each capture's features.
 
