@@ -112,11 +112,8 @@ def test_reciprocity_justifies_the_pencil_beam_at_the_pixel():
     mm = 0.5
     kw = dict(wall_angle_deg=0.0, n_photons=200_000, offsets_rows=OFF, mm_per_row=mm)
     runs = {a: mc_wall_profile(MED, wall_distance_mm=a, seed=int(10 * a), **kw) for a in (1.5, 3.0, 5.0)}
-    for u, a in ((-4, 3.0), (3, 3.0), (-4, 1.5)):
-        a2 = a - u * mm
-        if a2 not in runs:
-            continue
-        p, q = runs[a], runs[a2]
+    for u, a in ((-4, 3.0), (3, 3.0), (-3, 1.5)):
+        p, q = runs[a], runs[a - u * mm]
         i, j = np.flatnonzero(OFF == u)[0], np.flatnonzero(OFF == -u)[0]
         z = (p.radiance[i] - q.radiance[j]) / np.hypot(p.radiance_stderr[i], q.radiance_stderr[j])
         assert abs(z) < 4.0, (u, a, z)

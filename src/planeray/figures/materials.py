@@ -251,18 +251,18 @@ def wall_kernels_figure(tables, *, distances_rows=(0.0, 5.0, 17.0, 45.0), angle_
         Wall angle of the kernels (0: parallel to the lines, the wall at positive offsets).
     """
     n = len(tables)
-    fig = new_figure((3.0 * n, 6.4))
+    fig = new_figure((3.2 * n, 7.0))
     axes = fig.subplots(2, n, squeeze=False)
-    shades = np.linspace(0.85, 0.25, len(distances_rows))
+    from matplotlib import colormaps
+
+    colours = colormaps["plasma"](np.linspace(0.0, 0.8, len(distances_rows)))
     for k, (cid, tab) in enumerate(tables.items()):
         ax = axes[0, k]
         u = tab.offsets_rows * tab.mm_per_row
         ax.semilogy(u, np.maximum(tab.slab, 1e-9), "k-", lw=1.4, label="no wall")
-        for d, s in zip(distances_rows, shades):
+        for d, colour in zip(distances_rows, colours):
             kern = tab.kernels(d, angle_deg)
-            ax.semilogy(
-                u, np.maximum(kern, 1e-9), color=(s, s * 0.5, 0.1), lw=1.0, label=f"wall at {d * tab.mm_per_row:g} mm"
-            )
+            ax.semilogy(u, np.maximum(kern, 1e-9), color=colour, lw=1.0, label=f"wall {d * tab.mm_per_row:g} mm away")
         peak = tab.slab.max()
         ax.set_ylim(peak * 1e-4, peak * 2)
         ax.set_xlim(-30, 30)
@@ -270,7 +270,7 @@ def wall_kernels_figure(tables, *, distances_rows=(0.0, 5.0, 17.0, 45.0), angle_
         ax.set_xlabel("offset (mm)", fontsize=8)
         if k == 0:
             ax.set_ylabel("kernel (per projector row)", fontsize=8)
-            ax.legend(fontsize=6, frameon=False)
+            ax.legend(fontsize=7, frameon=True, loc="upper left")
         ax2 = axes[1, k]
         dist_mm = tab.distances_rows * tab.mm_per_row
         for i, a in enumerate(tab.angles_deg):
@@ -279,10 +279,11 @@ def wall_kernels_figure(tables, *, distances_rows=(0.0, 5.0, 17.0, 45.0), angle_
             ax2.plot(dist_mm, tab.wall_loss[i], "--", lw=1, label=f"lost through the wall, {a:g} deg")
         ax2.set_xscale("symlog", linthresh=1.0)
         ax2.set_ylim(0, 1.05)
+        ax2.grid(alpha=0.3)
         ax2.set_xlabel("pixel-to-wall distance (mm)", fontsize=8)
         if k == 0:
             ax2.set_ylabel("relative reflectance / wall loss", fontsize=8)
-            ax2.legend(fontsize=5.5, frameon=False)
+            ax2.legend(fontsize=6.5, frameon=True, loc="center right")
     fig.suptitle(
         f"Monte Carlo kernels beside a {next(iter(tables.values())).wall} wall (top: wall parallel to the lines, "
         "on the right); bottom: the pixel's total relative to the slab and the power lost through the wall",

@@ -918,6 +918,18 @@ _TABLE_ARRAYS = (
 )
 
 
+def _physical(kernel, angles_deg, distances_rows, offsets_rows):
+    """Kernels with what cannot be: no negative light (the control variate's noise), and nothing from
+    behind a wall parallel to the lines (angle 0: bins wholly beyond the wall, where the run with the
+    wall has no exits and the difference is the reference's noise alone)."""
+    k = np.clip(kernel, 0.0, None)
+    for i, ang in enumerate(angles_deg):
+        if ang == 0.0:
+            beyond = np.asarray(offsets_rows)[None, :] - 0.5 >= np.asarray(distances_rows)[:, None]
+            k[i][beyond] = 0.0
+    return k
+
+
 @dataclass(frozen=True)
 class WallKernelTable:
     """Line kernels of a medium for pixels at several distances and angles from a wall.
@@ -1013,6 +1025,9 @@ class WallKernelTable:
             meta = json.loads(str(z["meta"]))
             arrays = {k: z[k] for k in _TABLE_ARRAYS}
         arrays = {k: (v.astype(np.float64) if v.dtype.kind == "f" else v) for k, v in arrays.items()}
+        arrays["kernel"] = _physical(
+            arrays["kernel"], arrays["angles_deg"], arrays["distances_rows"], arrays["offsets_rows"]
+        )
         return cls(
             medium=Medium.from_dict(meta["medium"]),
             wall=meta["wall"],
@@ -1163,7 +1178,7 @@ def mc_wall_table(
         offsets_rows=offsets.copy(),
         angles_deg=angles,
         distances_rows=dists,
-        kernel=kernel,
+        kernel=_physical(kernel, angles, dists, offsets),
         kernel_stderr=kernel_err,
         wall_loss=wall_loss,
         slab=to_lambert * slab.radiance,
