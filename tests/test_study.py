@@ -1,10 +1,12 @@
 """The Sec. 5.2 demultiplexing study (quick grid, dipole provider)."""
 
+import json
+
 import numpy as np
 import pytest
 
 from planeray import study
-from planeray.experiments.study import run_study
+from planeray.experiments.study import run_study, study_report, study_work
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +53,9 @@ def test_mse_increases_with_noise(setup, provider):
 
 
 def test_run_study_quick_writes_files(tmp_path, provider):
-    r = run_study(tmp_path, provider=provider, seeds=2, quick=True)
+    calls = []
+    r = run_study(tmp_path, provider=provider, seeds=2, quick=True, progress=calls.append)
+    assert sum(calls) == study_work(quick=True) == len(calls)
     names = {p.name for p in tmp_path.iterdir()}
     for stem in ("fig5_reconstruction", "fig5c_mse_vs_noise", "regularization_sweep"):
         assert f"{stem}.png" in names and f"{stem}.csv" in names
@@ -60,7 +64,13 @@ def test_run_study_quick_writes_files(tmp_path, provider):
         "fig6a_mse_vs_sigma_s.csv",
         "fig6b_mse_vs_sigma_a.csv",
         "fig6c_mse_vs_g.csv",
+        "study.json",
     } <= names
+    assert json.loads((tmp_path / "study.json").read_text()) == r
+    assert r["files"][-1] == str(tmp_path / "study.json") and len(r["files"]) == 11
+    report = study_report(r)
+    first = {m: r["noise_sweep"][m]["mean"][0] for m in study.METHODS}  # eta 0.005
+    assert report[4].split() == ["0.005", *(f"{v:.1e}" for v in first.values()), min(first, key=first.get)]
     assert not any(n.startswith(".") for n in names)  # no temporaries left
     header = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()[0]
     assert header == "noise,seed,pinv,nnls,full"
