@@ -92,8 +92,8 @@ def test_custom_provider_and_errors(setup):
 def test_back_scattering_degrades_the_full_method_with_monte_carlo_profiles(setup):
     # Fig. 6c with real HG profiles (the dipole only sees sigma_s (1 - g)): the full
     # method's MSE grows as g turns negative and its lead over pinv shrinks.
-    # Full-study measurement (2e5 photons, 5 seeds): full 1.1e-4 at g = 0.9, 6.5e-4 at
-    # g = -0.45, 1.6e-3 at g = -0.9; pinv/full 8.8x -> 1.6x.
+    # Full-study measurement (`planeray study demux`, 2e5 photons, 5 seeds): full 1.2e-4 at
+    # g = 0.9, 6.5e-4 at g = -0.45, 1.5e-3 at g = -0.9; pinv/full 8.6x -> 1.6x.
     mc = study.mc_provider(setup.offsets, n_photons=20_000, cache=False)
     ps = study.parameter_sweep(setup, mc, "g", [-0.6, 0.9], seeds=3)
     full = ps["mse"]["full"].mean(axis=1)

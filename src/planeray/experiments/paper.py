@@ -84,7 +84,25 @@ def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
 
 
 def fig8(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
-    """Fig. 8: delay x exposure contact sheet of the disco-ball scene."""
+    """Fig. 8: delay x exposure contact sheet of the disco-ball scene.
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig8.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig8", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig8.json``).
+    """
     out_dir = Path(out_dir)
     scene = make_scene("disco_ball", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
     stack = simulate_stack(scene, paper_sweep(), seed=seed, progress=_per_image(progress))
@@ -96,7 +114,25 @@ def fig8(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
 
 def fig9(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     """Fig. 9: delay profiles of direct reflection, subsurface scattering, diffuse and
-    specular interreflection, one pixel per effect picked from the scenes' ground truth."""
+    specular interreflection, one pixel per effect picked from the scenes' ground truth.
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig9.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig9", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig9.json``).
+    """
     out_dir = Path(out_dir)
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
     curves = []
@@ -137,6 +173,25 @@ def fig11(out_dir, *, size: int = 128, seed: int = 0, scan_row: int | None = Non
     resolve (12.15 rows) and a 1-row band.  Measured: Michelson contrast along a
     scan line and the error against the ground-truth direct image (each image
     scaled to it by least squares, since they integrate different amounts of light).
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig11.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    scan_row : int, optional
+        Camera row of the scan line (default: the row with the most wax).
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig11", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig11.json``).
     """
     out_dir = Path(out_dir)
     scene = make_scene("wax", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
@@ -201,6 +256,25 @@ def fig12(out_dir, *, size: int = 128, seed: int = 0, line_row: int | None = Non
     against the ground truth.  The laser is dimmed (1500 electrons for a white
     surface per pass) so the 800 ms capture does not saturate, and the room is
     dark (ambient 0.01 e-/us).
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig12.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    line_row : int, optional
+        Projector row of the virtual line (default: through the middle of the wax).
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig12", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig12.json``).
     """
     out_dir = Path(out_dir)
     scene = make_scene("wax", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
@@ -255,7 +329,25 @@ def fig12(out_dir, *, size: int = 128, seed: int = 0, line_row: int | None = Non
 
 def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     """Effect classification from demultiplexed delay profiles on every built-in scene,
-    with its agreement with the scenes' ground-truth labels (Sec. 8)."""
+    with its agreement with the scenes' ground-truth labels (Sec. 8).
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``effects.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("effects", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``effects.json``).
+    """
     from ..classify import classify_transport, label_agreement, visible_effect_mask
     from ..figures.labels import label_map_figure
 
