@@ -157,3 +157,17 @@ def test_mc_profile_shows_photons_traced(tmp_path, bars, monkeypatch):
     res = runner.invoke(app, args)  # from the cache: the bar still completes
     assert res.exit_code == 0, res.output
     _finished(bars)
+
+
+def test_paths_are_printed_as_they_are(tmp_path):
+    # Rich markup would read "[a]" as a tag and drop it; a narrow table would cut a long value.
+    path = tmp_path / "[a]" / ("stack_" + "z" * 120 + ".zarr")
+    res = runner.invoke(app, ["simulate", "diffuse_plane", "--out", str(path), "--size", "8", "8", "--sweep", "quick"])
+    assert res.exit_code == 0, res.output
+    assert f"stack: {path}  (" in res.stdout
+    res = runner.invoke(app, ["info", str(path)])
+    assert res.exit_code == 0, res.output
+    rows = [line.split("│")[1:3] for line in res.stdout.splitlines() if line.startswith("│")]
+    start = next(i for i, (key, _) in enumerate(rows) if key.strip() == "path")
+    end = next(i for i, (key, _) in enumerate(rows) if key.strip() == "images")
+    assert "".join(value.strip() for _, value in rows[start:end]) == str(path)

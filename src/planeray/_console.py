@@ -27,8 +27,9 @@ __all__ = ["console", "out", "progress_bar", "print_json", "print_verbatim"]
 
 #: Messages, progress and errors (stderr).
 console = Console(stderr=True)
-#: Results (stdout); long lines are left to the terminal (soft wrap), never cut.
-out = Console(soft_wrap=True)
+#: Results (stdout): long lines are left to the terminal (soft wrap), never cut, and text is
+#: printed as it is (no markup: a path such as ``runs/[a]/x.zarr`` keeps its brackets; no emoji codes).
+out = Console(soft_wrap=True, markup=False, emoji=False)
 
 
 def progress_bar() -> Progress:
