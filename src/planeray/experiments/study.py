@@ -14,8 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validate import check_integer, check_nonnegative
 from ..figures import study as figs
 from ..io import atomic_file
+from ..io.atomic import storage_error
 from ..study import (
     DEFAULT_NOISE,
     METHODS,
@@ -130,10 +132,15 @@ def run_study(
         if progress is not None:
             progress(n)
 
+    check_integer(seeds, "seeds", minimum=1)
+    check_nonnegative(noise, "noise")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     setup = study_setup()
     provider = cached_provider(resolve_provider(provider, setup.offsets))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise storage_error(exc, out) from None
     G = grids(quick)
     result = {
         "provider": provider.name,
