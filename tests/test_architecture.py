@@ -44,6 +44,7 @@ LAYERS = [
     "study",
     "figures",
     "experiments",
+    "viewer",
     "_console",
     "demo",
     "cli",
