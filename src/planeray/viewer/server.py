@@ -26,6 +26,8 @@ or binary frames):
   answered by ``{"type": "pixel", "panel": P, "id": N, "data": {...}}`` (the plot data of
   :meth:`~planeray.viewer.session.ViewSource.pixel`);
 * ``{"type": "ping", "id": N}`` by ``{"type": "pong", "id": N, "server_ms": ...}``;
+* ``{"type": "report", "stats": {...}}`` (a page opened with ``?bench=SECONDS``: its measured frame
+  rate and timings) is kept in memory for the benchmark (the last 20), not answered;
 * anything wrong (not JSON, an unknown type, a bad setting, a pixel outside the image)
   by ``{"type": "error", "id": N, "panel": P, "message": "..."}``; the connection stays
   open and the server never stops on a bad request.
@@ -115,8 +117,8 @@ def _check_request(msg) -> tuple[str, int | None, int]:
     if not isinstance(msg, dict):
         raise InputError("a message must be a JSON object")
     kind = msg.get("type")
-    if kind not in ("render", "pixel", "ping"):
-        raise InputError(f"unknown message type {kind!r} (known: render, pixel, ping)")
+    if kind not in ("render", "pixel", "ping", "report"):
+        raise InputError(f"unknown message type {kind!r} (known: render, pixel, ping, report)")
     mid = msg.get("id")
     if mid is not None and (isinstance(mid, bool) or not isinstance(mid, int)):
         raise InputError(f"message id must be an integer, got {mid!r}")
@@ -129,9 +131,10 @@ def _check_request(msg) -> tuple[str, int | None, int]:
 class _Connection:
     """One page: a receiver that keeps the newest request per panel and a worker that answers."""
 
-    def __init__(self, websocket, source: ViewSource):
+    def __init__(self, websocket, source: ViewSource, reports: list):
         self.ws = websocket
         self.source = source
+        self.reports = reports
         self.latest: dict[int, dict] = {}
         self.others: list[dict] = []
         self.wake = asyncio.Event()
@@ -162,6 +165,11 @@ class _Connection:
                 await self.send_error(f"bad request: {exc}", mid=mid if isinstance(mid, int) else None)
                 continue
             req["_received"] = time.perf_counter()
+            if kind == "report":
+                if isinstance(req.get("stats"), dict):
+                    self.reports.append(req["stats"])
+                    del self.reports[:-20]
+                continue
             if kind == "render":
                 self.latest[panel] = req  # the newest request of a panel wins
             else:
@@ -218,7 +226,7 @@ class _Connection:
             await self.send_error(f"internal error ({type(exc).__name__}: {exc})", mid=mid, panel=panel)
 
 
-def make_app(source: ViewSource, *, token: str, loopback_only: bool = True):
+def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, reports: list | None = None):
     """The ASGI application showing ``source``.
 
     Parameters
@@ -228,6 +236,8 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True):
         Access token every data route and the WebSocket need (``?token=``).
     loopback_only : bool
         Accept only loopback ``Host`` headers (the server is bound to a loopback address).
+    reports : list, optional
+        Receives the frame-rate reports of pages opened with ``?bench=SECONDS`` (the last 20).
     """
     from starlette.applications import Starlette
     from starlette.exceptions import HTTPException
@@ -286,7 +296,7 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True):
             await websocket.close(code=1008, reason="cross-origin connection refused")
             return
         await websocket.accept()
-        conn = _Connection(websocket, source)
+        conn = _Connection(websocket, source, reports if reports is not None else [])
         try:
             await websocket.send_text(json.dumps(hello, separators=(",", ":")))
             worker = asyncio.create_task(conn.work_loop())
@@ -370,7 +380,9 @@ class ViewerServer:
         self.port_fallback = False
         self.sock = self._bind(host, port)
         self.port = self.sock.getsockname()[1]
-        self.app = make_app(source, token=self.token, loopback_only=self.loopback)
+        #: Frame-rate reports of pages opened with ``?bench=SECONDS`` (benchmarks).
+        self.reports: list[dict] = []
+        self.app = make_app(source, token=self.token, loopback_only=self.loopback, reports=self.reports)
         self._server = None
         self._thread = None
 

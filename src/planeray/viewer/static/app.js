@@ -3,7 +3,12 @@
 // does the same mapping in Python), draws the pixel plots (plot.js).  No library, no network but the server.
 "use strict";
 
-const TOKEN = new URLSearchParams(location.search).get("token") || "";
+const QUERY = new URLSearchParams(location.search);
+const TOKEN = QUERY.get("token") || "";
+// ?bench=SECONDS[&size=...]: sweep the delay of panel 0 for that long, then report the measured frame rates
+// and timings to the server ({"type": "report"}); benchmarks/bench_viewer.py reads them without any
+// debugging protocol attached to the browser (which would copy every frame).
+const BENCH_S = Number(QUERY.get("bench") || 0);
 const MAX_INFLIGHT = 2;       // render requests in flight per panel (pipelining render, transfer and paint)
 const LEVELS = 4095;          // quantization of value / white before the gamma and colour tables
 const PALETTE = ["#f0a030", "#6fc3ff", "#9be38f", "#ff7fa8", "#c9a6ff", "#ffe066", "#5fd3c7"];
@@ -94,6 +99,7 @@ function onFrame(buf) {
   p.pending = { header, data };
   $(".error", p.el).textContent = "";
   pump(p);
+  schedulePaint();
 }
 
 // ------------------------------------------------------------------ rendering requests
@@ -164,12 +170,16 @@ function paint(p, fresh) {
   if (app.plotState && app.plotState.panel === p.index) { drawPlot(); }
 }
 
+// Painting happens in animation frames, and only when there is something new: an idle page asks for none.
+let paintScheduled = false;
+function schedulePaint() {
+  if (!paintScheduled) { paintScheduled = true; requestAnimationFrame(tick); }
+}
 function tick() {
+  paintScheduled = false;
   for (const p of app.panels) {
     if (p.pending) { paint(p, true); } else if (p.remap) { paint(p, false); }
-    if (p.animation) { p.animation(); }
   }
-  requestAnimationFrame(tick);
 }
 
 function fpsOf(log, now) {
@@ -243,17 +253,23 @@ function makeSlider(p, item) {
   return div;
 }
 
+// The sweep button moves the slider as a hand dragging it would: one input event per displayed frame
+// (Chromium delivers pointer moves once per frame), back and forth over the slider's range in 6 s.
 function toggleSweep(p, item, range, button) {
   if (p.animation) { p.animation = null; button.textContent = "sweep"; return; }
   button.textContent = "stop";
   const lo = Number(range.min), hi = Number(range.max), period = 6000, t0 = performance.now();
-  p.animation = () => {
+  const step = () => {
+    if (p.animation !== step) { return; }
     const phase = ((performance.now() - t0) % period) / period;
     const f = phase < 0.5 ? phase * 2 : 2 - phase * 2;
     const v = lo + f * (hi - lo);
     range.value = item.spec.grid ? Math.round(v) : v;
     range.dispatchEvent(new Event("input"));
+    requestAnimationFrame(step);
   };
+  p.animation = step;
+  requestAnimationFrame(step);
 }
 
 function updateVisibility(p) {
@@ -299,17 +315,17 @@ function makePanel(index, settings) {
     box.addEventListener("change", () => { p.settings[key] = box.checked; requestRender(p); });
   }
   const stops = $(".stops", node), gamma = $(".gamma", node), cmap = $(".colormap", node);
-  stops.addEventListener("input", () => { p.display.stops = Number(stops.value); p.remap = true; });
+  stops.addEventListener("input", () => { p.display.stops = Number(stops.value); p.remap = true; schedulePaint(); });
   gamma.addEventListener("input", () => {
     p.display.gamma = Number(gamma.value); $(".gamma-value", node).textContent = p.display.gamma.toFixed(2);
-    buildLut(p); p.remap = true;
+    buildLut(p); p.remap = true; schedulePaint();
   });
   for (const name of Object.keys(app.colormaps)) { const o = el("option", null, name); o.value = name; cmap.appendChild(o); }
   cmap.value = p.display.colormap;
-  cmap.addEventListener("change", () => { p.display.colormap = cmap.value; buildLut(p); p.remap = true; });
+  cmap.addEventListener("change", () => { p.display.colormap = cmap.value; buildLut(p); p.remap = true; schedulePaint(); });
   $(".auto", node).addEventListener("click", () => {
     if (p.image) { p.refWhite = p.image.header.auto_white; }
-    p.display.stops = 0; stops.value = 0; p.remap = true;
+    p.display.stops = 0; stops.value = 0; p.remap = true; schedulePaint();
   });
   p.canvas.addEventListener("mousemove", (ev) => hover(p, ev));
   p.canvas.addEventListener("mouseleave", () => { $(".hover", node).textContent = ""; });
@@ -506,7 +522,38 @@ function init() {
     if (!p.hidden) { requestRender(p); }
   });
   $("#snapshot").addEventListener("click", () => { snapshot(); });
-  requestAnimationFrame(tick);
+  if (BENCH_S > 0) { runBench(BENCH_S); }
+}
+
+function median(a) { const s = [...a].sort((x, y) => x - y); return s.length ? s[Math.floor(s.length / 2)] : null; }
+
+function runBench(seconds) {
+  const p = app.panels[0];
+  const c = p.controls.delay_us;
+  let displayHz = null;
+  const start = () => {
+    if (!p.image) { setTimeout(start, 100); return; }
+    if (displayHz === null) { // the display's refresh rate: animation frames in one idle second
+      let n = 0; const t = performance.now();
+      const count = () => { n += 1; if (performance.now() - t < 1000) { requestAnimationFrame(count); } else { displayHz = n / ((performance.now() - t) / 1000); start(); } };
+      requestAnimationFrame(count);
+      return;
+    }
+    toggleSweep(p, c.item, c.range, $("button.sweep", c.div));
+    setTimeout(() => {
+      app.resetStats();
+      const t0 = performance.now();
+      setTimeout(() => {
+        const secs = (performance.now() - t0) / 1000;
+        const stats = { frames: app.framesPainted, seconds: secs, fps: app.framesPainted / secs, display_hz: displayHz,
+          width: p.image.width, height: p.image.height };
+        for (const k of Object.keys(app.stats)) { stats[`${k}_ms`] = median(app.stats[k]); }
+        app.benchResult = stats;
+        send({ type: "report", stats });
+      }, seconds * 1000);
+    }, 1000);
+  };
+  start();
 }
 
 connect();
