@@ -721,6 +721,9 @@ def open_source(
 
     text = str(path)
     p = Path(path)
+    scenes = list_scenes()
+    if not p.exists() and text in scenes and truth is not None:
+        raise InputError("a scene is its own ground truth; --truth is for stacks and transport stores")
     truth_T = None
     if truth is not None:
         truth_T, _ = read_transport(truth)
@@ -743,13 +746,10 @@ def open_source(
         return TransportSource(
             T, name=text, lines_per_second=lps, truth=truth_T, truth_scale=truth_scale, patterns=pats, attrs=attrs
         )
-    scenes = list_scenes()
     if text not in scenes:
         raise InputError(
             f"no such file or folder, and not a scene name (scenes: {', '.join(scenes)})", text
         )
-    if truth is not None:
-        raise InputError("a scene is its own ground truth; --truth is for stacks and transport stores")
     scene = make_scene(text, (int(size), int(size)), projector_rows=projector_rows, seed=int(seed))
     pats = {Path(v).stem: syn.load_pattern(v, scene.geometry.projector_rows) for v in patterns}
     return TransportSource(

@@ -164,7 +164,7 @@ def write_sweep_video(
     H, W = source.shape
     if scale is None:
         scale = max(1, int(np.ceil(512 / H)))
-    scale = check_integer(scale, "--scale", minimum=1, maximum=16)
+    scale = check_integer(scale, "--scale", minimum=1, maximum=64)
     meta = {
         "planeray": "video",
         "source": {"kind": source.kind, "name": source.name},
