@@ -15,10 +15,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import shutil
-import signal
-import subprocess
-import tempfile
 import time
 from pathlib import Path
 
@@ -32,6 +28,7 @@ from planeray.profiles import measured_delay_profiles
 from planeray.scenes import make_scene
 from planeray.timing import PAPER_LINES_PER_SECOND, Band, quick_sweep
 from planeray.viewer import display
+from planeray.viewer.browser import chromium_args, find_chromium, measure_painted_fps
 from planeray.viewer.server import ViewerServer
 from planeray.viewer.session import ViewSettings, open_source
 
@@ -40,21 +37,13 @@ SCREENSHOTS = Path(__file__).resolve().parents[1] / "build" / "screenshots"
 
 
 def chromium_path() -> str | None:
-    """Debian's chromium (or another system Chromium named by PLANERAY_CHROMIUM)."""
-    for name in (os.environ.get("PLANERAY_CHROMIUM"), "chromium", "chromium-browser", "google-chrome"):
-        if name and shutil.which(name):
-            return shutil.which(name)
-    return None
+    return find_chromium()
 
 
 def _unavailable(reason: str):
     if os.environ.get("CI"):
         pytest.fail(f"{reason} (CI must run the browser tests: `make test` installs them)")
     pytest.skip(reason)
-
-
-def _chromium_args() -> list[str]:
-    return ["--no-sandbox"] if os.geteuid() == 0 else []  # chromium refuses to run as root in its sandbox
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +57,7 @@ def browser():
         _unavailable("playwright is not installed: pip install -e '.[test]'")
     pw = sync_playwright().start()
     try:
-        b = pw.chromium.launch(executable_path=path, args=_chromium_args())
+        b = pw.chromium.launch(executable_path=path, args=chromium_args())
         yield b
         b.close()
     finally:
@@ -346,35 +335,12 @@ def test_scene_page_with_camera_noise(browser):
         page.close()
 
 
-def measure_painted_fps(server, seconds: float = 3.0) -> dict:
-    """Frames painted per second while the delay slider moves (one input per displayed frame), measured by the
-    page itself in a chromium without any debugging protocol attached (which would copy every frame)."""
-    path = chromium_path()
-    with tempfile.TemporaryDirectory() as profile:
-        proc = subprocess.Popen(
-            [path, "--headless=new", *_chromium_args(), f"--user-data-dir={profile}", "--window-size=1500,1000",
-             "--no-first-run", "--mute-audio", f"{server.url}&bench={seconds:g}"],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            start_new_session=True,
-        )  # fmt: skip
-        try:
-            deadline = time.monotonic() + 60
-            while not server.reports and time.monotonic() < deadline:
-                time.sleep(0.05)
-        finally:
-            os.killpg(proc.pid, signal.SIGTERM)
-            proc.wait(timeout=20)
-    assert server.reports, "the page did not report its frame rate"
-    return server.reports[-1]
-
-
 def test_painted_frame_rate_while_dragging(browser):
     """The frame rate the page paints while a slider moves (128x128; benchmarks/bench_viewer.py measures 512)."""
     if chromium_path() is None:
         _unavailable("no chromium")
     with ViewerServer(open_source("wax", size=128)) as srv:
-        report = measure_painted_fps(srv)
+        report = measure_painted_fps(srv, seconds=3.0)
     print(f"\n128x128: {report['fps']:.1f} frames painted per second (display {report['display_hz']:.0f} Hz)")
     assert report["width"] == 128
     # CI shares two cores; the benchmark's numbers are in the README.  A floor that catches a broken pipeline:
