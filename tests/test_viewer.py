@@ -418,8 +418,12 @@ def _probe(path):
     n, _ = imageio_ffmpeg.count_frames_and_secs(str(path))
     info = subprocess.run([exe, "-hide_banner", "-i", str(path)], capture_output=True, text=True).stderr
     w, h = (int(x) for x in re.search(r"Video: .*?, (\d+)x(\d+)", info).groups())
-    meta = subprocess.run([exe, "-v", "error", "-i", str(path), "-f", "ffmetadata", "-"], capture_output=True, text=True)
-    comment = json.loads(re.search(r"^comment=(.*)$", meta.stdout, re.MULTILINE | re.IGNORECASE).group(1).replace("\\", ""))
+    meta = subprocess.run(
+        [exe, "-v", "error", "-i", str(path), "-f", "ffmetadata", "-"], capture_output=True, text=True
+    )
+    comment = json.loads(
+        re.search(r"^comment=(.*)$", meta.stdout, re.MULTILINE | re.IGNORECASE).group(1).replace("\\", "")
+    )
     raw = subprocess.run(
         [exe, "-v", "error", "-i", str(path), "-frames:v", "1", "-f", "rawvideo", "-pix_fmt", "rgb24", "-"],
         capture_output=True,
@@ -469,7 +473,10 @@ def test_cli_video_and_errors(tmp_path):
     for args, words in [
         (["video", "diffuse_plane", "--out", str(out)], "already exists"),
         (["video", "no_such_scene", "--out", str(tmp_path / "x.mp4")], "not a scene name"),
-        (["video", "diffuse_plane", "--size", "16", "--sweep", "gain", "--out", str(tmp_path / "y.mp4")], "delay or exposure"),
+        (
+            ["video", "diffuse_plane", "--size", "16", "--sweep", "gain", "--out", str(tmp_path / "y.mp4")],
+            "delay or exposure",
+        ),
         (["view", str(tmp_path / "missing.zarr"), "--no-browser"], "not a scene name"),
     ]:
         res = runner.invoke(app, args)

@@ -217,7 +217,10 @@ def test_bad_input_is_answered_and_the_page_goes_on(browser, transport_server, s
     page = open_page(browser, transport_server)
     page.fill(".panel[data-panel='0'] input.num-exposure_us", "0")
     page.press(".panel[data-panel='0'] input.num-exposure_us", "Enter")
-    wait_for(page, "document.querySelector(\".panel[data-panel='0'] .error\").textContent.includes('exposure_us must be positive')")
+    wait_for(
+        page,
+        "document.querySelector(\".panel[data-panel='0'] .error\").textContent.includes('exposure_us must be positive')",
+    )
     page.fill(".panel[data-panel='0'] input.num-exposure_us", "800")
     page.press(".panel[data-panel='0'] input.num-exposure_us", "Enter")
     wait_settled(page)
@@ -245,7 +248,9 @@ def test_clicking_a_pixel_plots_its_transport_with_the_ground_truth(browser, tra
     assert plot["spans"][0]["x0"] == pytest.approx(-300 * v) and plot["spans"][1]["x1"] == pytest.approx(6.075)
     # Hover shows the value of the nearest point.
     k = int(np.argmax(T.dense[r, c]))
-    xy = page.evaluate(f"(() => {{ const p = window.planeray.plot; return [p.sx({T.offsets_rows[k]}), p.sy({float(T.dense[r, c, k])})]; }})()")
+    xy = page.evaluate(
+        f"(() => {{ const p = window.planeray.plot; return [p.sx({T.offsets_rows[k]}), p.sy({float(T.dense[r, c, k])})]; }})()"
+    )
     box = page.locator("#plot").bounding_box()
     page.mouse.move(box["x"] + xy[0], box["y"] + xy[1])
     text = page.text_content("#plot-readout")

@@ -19,9 +19,7 @@ PathArg = Annotated[
 SizeOpt = Annotated[int, typer.Option(help="Scenes: image size (square, camera pixels).")]
 ProjectorRowsOpt = Annotated[int, typer.Option(help="Scenes: projector rows spanned by the image.")]
 SeedOpt = Annotated[int, typer.Option(help="Scenes: seed of the textures and the camera noise.")]
-TruthOpt = Annotated[
-    Path | None, typer.Option(help="Ground-truth transport store, overlaid in the pixel plots.")
-]
+TruthOpt = Annotated[Path | None, typer.Option(help="Ground-truth transport store, overlaid in the pixel plots.")]
 TruthScaleOpt = Annotated[
     float | None,
     typer.Option(
@@ -65,7 +63,9 @@ def view(
         str, typer.Option(help="Address to serve on. 127.0.0.1 (default): this machine only.")
     ] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="Port (0: any free port; a port in use falls back to a free one).")] = 8765,
-    browser: Annotated[bool, typer.Option(help="Open the page in the default browser (--no-browser: only print its URL).")] = True,
+    browser: Annotated[
+        bool, typer.Option(help="Open the page in the default browser (--no-browser: only print its URL).")
+    ] = True,
     size: SizeOpt = 128,
     projector_rows: ProjectorRowsOpt = 720,
     seed: SeedOpt = 0,

@@ -314,7 +314,9 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, repo
             pass  # the page went away mid-send
 
     async def not_found(request, exc):
-        return PlainTextResponse(f"planeray viewer: {exc.status_code} {exc.detail} ({request.url.path})\n", exc.status_code)
+        return PlainTextResponse(
+            f"planeray viewer: {exc.status_code} {exc.detail} ({request.url.path})\n", exc.status_code
+        )
 
     async def server_error(request, exc):
         log.exception("viewer: request failed")

@@ -569,7 +569,8 @@ class StackSource(ViewSource):
         n = self.nearest_index(s.delay_us, s.exposure_us)
         d, e = float(self.stack.delay_us[n]), float(self.stack.exposure_us[n])
         info = {
-            "label": f"image {n}  t_d {d:g} us  t_e {e:g} us" + ("  (boundary image)" if self.stack.excluded[n] else ""),
+            "label": f"image {n}  t_d {d:g} us  t_e {e:g} us"
+            + ("  (boundary image)" if self.stack.excluded[n] else ""),
             "index": n,
             "delay_us": d,
             "exposure_us": e,
@@ -604,7 +605,13 @@ class StackSource(ViewSource):
             curves = np.stack(
                 [
                     pixel_band_profile(
-                        self.truth, row, col, fine, e, lines_per_second=self.stack.lines_per_second, jitter_us=self.stack.jitter_us
+                        self.truth,
+                        row,
+                        col,
+                        fine,
+                        e,
+                        lines_per_second=self.stack.lines_per_second,
+                        jitter_us=self.stack.jitter_us,
                     )
                     for e in self.exposures
                 ]
@@ -747,9 +754,7 @@ def open_source(
             T, name=text, lines_per_second=lps, truth=truth_T, truth_scale=truth_scale, patterns=pats, attrs=attrs
         )
     if text not in scenes:
-        raise InputError(
-            f"no such file or folder, and not a scene name (scenes: {', '.join(scenes)})", text
-        )
+        raise InputError(f"no such file or folder, and not a scene name (scenes: {', '.join(scenes)})", text)
     scene = make_scene(text, (int(size), int(size)), projector_rows=projector_rows, seed=int(seed))
     pats = {Path(v).stem: syn.load_pattern(v, scene.geometry.projector_rows) for v in patterns}
     return TransportSource(
