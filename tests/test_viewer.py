@@ -506,3 +506,40 @@ def test_cli_view_serves_until_interrupted():
         _, err = proc.communicate(timeout=20)
     assert proc.returncode == 0, err
     assert "Traceback" not in err
+
+
+def test_a_failing_render_or_a_vanishing_page_never_stops_the_server(truth_store, scene):
+    import websockets
+
+    source = open_source(truth_store)
+    original = source._render
+
+    def flaky(settings):
+        if settings.delay_us == 13.0:
+            raise RuntimeError("the renderer broke")
+        return original(settings)
+
+    source._render = flaky
+    with ViewerServer(source) as srv:
+
+        async def vanish():  # ask for frames and leave before they come
+            async with websockets.connect(_ws_url(srv), max_size=None, compression=None) as ws:
+                await ws.recv()
+                for i in range(5):
+                    await ws.send(json.dumps({"type": "render", "panel": i % 2, "id": i}))
+
+        asyncio.run(vanish())
+        hello, answers = asyncio.run(
+            _session(
+                srv,
+                [
+                    {"type": "render", "panel": 0, "id": 1, "settings": {"delay_us": 13.0}},
+                    {"type": "render", "panel": 0, "id": 2, "settings": {"delay_us": 14.0}},
+                ],
+            )
+        )
+    error = json.loads(answers[0])
+    assert error["type"] == "error" and error["id"] == 1
+    assert error["message"] == "internal error (RuntimeError: the renderer broke)"
+    header, image = decode_frame(answers[1])
+    assert header["id"] == 2 and np.array_equal(image, scene.transport.render(Band(14.0, 600.0, LPS)))

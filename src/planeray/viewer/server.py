@@ -128,6 +128,16 @@ def _check_request(msg) -> tuple[str, int | None, int]:
     return kind, mid, panel
 
 
+def _gone_errors() -> tuple[type[BaseException], ...]:
+    """What a send to a page that went away raises (Starlette's disconnect, uvicorn's, the socket's)."""
+    from starlette.websockets import WebSocketDisconnect
+
+    return (WebSocketDisconnect, OSError)
+
+
+_GONE = _gone_errors()
+
+
 class _Connection:
     """One page: a receiver that keeps the newest request per panel and a worker that answers."""
 
@@ -142,8 +152,20 @@ class _Connection:
         self.closed = False
 
     async def send_text(self, obj) -> None:
-        async with self.send_lock:
-            await self.ws.send_text(json.dumps(obj, separators=(",", ":"), allow_nan=False))
+        await self._send(text=json.dumps(obj, separators=(",", ":"), allow_nan=False))
+
+    async def _send(self, *, text: str | None = None, data: bytes | None = None) -> None:
+        """Send, unless the page went away (then the connection is closed and nothing is raised)."""
+        if self.closed:
+            return
+        try:
+            async with self.send_lock:
+                if text is not None:
+                    await self.ws.send_text(text)
+                else:
+                    await self.ws.send_bytes(data)
+        except _GONE:
+            self.closed = True
 
     async def send_error(self, message: str, mid=None, panel=None) -> None:
         await self.send_text({"type": "error", "id": mid, "panel": panel, "message": message})
@@ -157,12 +179,15 @@ class _Connection:
             if text is None:
                 await self.send_error("binary messages are not understood; send JSON text")
                 continue
+            req = None
             try:
                 req = json.loads(text)
                 kind, mid, panel = _check_request(req)
             except (ValueError, InputError) as exc:
-                mid = req.get("id") if isinstance(locals().get("req"), dict) else None
-                await self.send_error(f"bad request: {exc}", mid=mid if isinstance(mid, int) else None)
+                mid = req.get("id") if isinstance(req, dict) else None
+                await self.send_error(
+                    f"bad request: {exc}", mid=mid if isinstance(mid, int) and not isinstance(mid, bool) else None
+                )
                 continue
             req["_received"] = time.perf_counter()
             if kind == "report":
@@ -216,9 +241,7 @@ class _Connection:
             pixels = np.ascontiguousarray(image, dtype="<f4").tobytes()
             header["encode_ms"] = (time.perf_counter() - t1) * 1e3
             header["sent_at_ms"] = time.time() * 1000
-            data = encode_frame(image, header, pixels=pixels)
-            async with self.send_lock:
-                await self.ws.send_bytes(data)
+            await self._send(data=encode_frame(image, header, pixels=pixels))
         except InputError as exc:
             await self.send_error(str(exc), mid=mid, panel=panel)
         except Exception as exc:  # never let one request take the server down
@@ -245,10 +268,15 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, repo
     from starlette.routing import Route, WebSocketRoute
     from starlette.websockets import WebSocketDisconnect
 
-    from .. import __version__
+    from ..io._common import planeray_version
 
     static = _load_static()
-    hello = {"type": "hello", "source": source.describe(), "colormaps": colormap_tables(), "version": __version__}
+    hello = {
+        "type": "hello",
+        "source": source.describe(),
+        "colormaps": colormap_tables(),
+        "version": planeray_version(),
+    }
 
     def token_ok(given) -> bool:
         return isinstance(given, str) and hmac.compare_digest(given.encode(), token.encode())
