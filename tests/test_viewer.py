@@ -223,6 +223,18 @@ def test_stack_source(stack_store, truth_store, scene):
     assert json.dumps(data)
 
 
+def test_import_folder_is_a_stack(tmp_path, stack_store):
+    from planeray.io import export_folder, read_stack
+
+    folder = export_folder(read_stack(stack_store), tmp_path / "captured")
+    src = open_source(folder)
+    assert src.kind == "stack" and src.describe()["n_images"] == 27
+    image, shown = src.render(ViewSettings(delay_us=-375.0, exposure_us=1200.0))
+    assert shown["label"].startswith("image ") and image.shape == (24, 24)
+    with pytest.raises(InputError, match="relighting patterns need a transport"):
+        open_source(folder, patterns=[tmp_path / "p.npy"])
+
+
 def test_pixel_band_profile_matches_render(scene):
     T = scene.transport
     d = np.array([-700.0, 0.0, 310.0])
@@ -298,6 +310,11 @@ def test_server_needs_the_token_and_serves_only_its_assets(server):
     ]:
         status, body, _ = _get(base + path)
         assert status == 404, path
+    req = urllib.request.Request(server.url, data=b"x", method="POST")
+    with pytest.raises(urllib.error.HTTPError) as err:
+        urllib.request.urlopen(req, timeout=10)
+    with err.value as e:
+        assert e.code == 405 and b"Method Not Allowed" in e.read()
     # DNS rebinding: a page of another name that resolves to 127.0.0.1 gets nothing.
     assert _get(server.url, {"Host": f"evil.example:{server.port}"})[0] == 403
     status, body, _ = _get(f"{base}/api/info?token={server.token}", {"Host": f"localhost:{server.port}"})

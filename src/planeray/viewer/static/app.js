@@ -160,7 +160,7 @@ function paint(p, fresh) {
   p.remap = false;
   if (!fresh) { return; }
   const h = p.image.header;
-  p.painted += 1; app.framesPainted += 1; app.paintLog.push(t1);
+  p.painted += 1; app.framesPainted += 1; app.paintLog.push(t1); p.paintLog.push(t1);
   record("paint", t1 - t0);
   record("render", h.render_ms); record("encode", h.encode_ms); record("queue", h.queue_ms);
   record("transfer", h.received_ms - h.sent_at_ms);
@@ -191,6 +191,10 @@ setInterval(() => {
   const fps = fpsOf(app.paintLog, now);
   app.fps = fps;
   $("#fps").textContent = `${fps} fps`;
+  for (const p of app.panels) {
+    const n = fpsOf(p.paintLog, now);
+    $(".panel-fps", p.el).textContent = n ? `${n} fps` : "";
+  }
 }, 250);
 
 // ------------------------------------------------------------------ panels and controls
@@ -289,7 +293,7 @@ function makePanel(index, settings) {
   const p = {
     index, el: node, settings: { ...settings }, controls: {}, inflight: [], dirty: false, pending: null,
     image: null, imageData: null, out32: null, lut: null, refWhite: null, remap: false, painted: 0,
-    hidden: index > 0, animation: null,
+    hidden: index > 0, animation: null, paintLog: [],
     display: { stops: 0, gamma: 1, colormap: "gray" },
   };
   p.canvas = $("canvas.image", node);
