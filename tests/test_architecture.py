@@ -25,6 +25,7 @@ LAYERS = [
     "timing",
     "medium",
     "linesweep",
+    "_bandsum",
     "transport",
     "stack",
     "camera",

@@ -36,7 +36,9 @@ def chromium_args() -> list[str]:
     return ["--no-sandbox"] if hasattr(os, "geteuid") and os.geteuid() == 0 else []
 
 
-def measure_painted_fps(server, *, seconds: float = 5.0, chromium: str | None = None, timeout_s: float = 90.0) -> dict:
+def measure_painted_fps(
+    server, *, seconds: float = 5.0, chromium: str | None = None, timeout_s: float = 90.0, uncapped: bool = False
+) -> dict:
     """Frames painted per second by the page of ``server`` (a started :class:`~planeray.viewer.server.ViewerServer`)
     while its delay slider moves, with the median milliseconds of each step.
 
@@ -45,6 +47,9 @@ def measure_painted_fps(server, *, seconds: float = 5.0, chromium: str | None = 
     ``render_ms``, ``encode_ms`` (server), ``queue_ms`` (waiting for the renderer), ``transfer_ms``
     (server send to page receive, same clock), ``decode_ms``, ``paint_ms`` (page) and
     ``latency_ms`` (request sent to frame painted).
+
+    ``uncapped``: Chromium without vsync and frame-rate limit, the slider moved 250 times a second
+    on a timer: what the whole pipeline delivers beyond a display's refresh rate.
     """
     path = chromium or find_chromium()
     if path is None:
@@ -60,7 +65,8 @@ def measure_painted_fps(server, *, seconds: float = 5.0, chromium: str | None = 
                 "--window-size=1500,1000",
                 "--no-first-run",
                 "--mute-audio",
-                f"{server.url}&bench={seconds:g}",
+                *(["--disable-frame-rate-limit", "--disable-gpu-vsync"] if uncapped else []),
+                f"{server.url}&bench={seconds:g}" + ("&input_hz=250" if uncapped else ""),
             ],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,

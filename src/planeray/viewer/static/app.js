@@ -9,6 +9,9 @@ const TOKEN = QUERY.get("token") || "";
 // and timings to the server ({"type": "report"}); benchmarks/bench_viewer.py reads them without any
 // debugging protocol attached to the browser (which would copy every frame).
 const BENCH_S = Number(QUERY.get("bench") || 0);
+// &input_hz=N: the sweep moves the slider N times a second on a timer instead of once per displayed frame
+// (to measure what the pipeline delivers beyond the display's refresh rate, with vsync off).
+const INPUT_HZ = Number(QUERY.get("input_hz") || 0);
 const MAX_INFLIGHT = 2;       // render requests in flight per panel (pipelining render, transfer and paint)
 const LEVELS = 4095;          // quantization of value / white before the gamma and colour tables
 const PALETTE = ["#f0a030", "#6fc3ff", "#9be38f", "#ff7fa8", "#c9a6ff", "#ffe066", "#5fd3c7"];
@@ -260,16 +263,23 @@ function makeSlider(p, item) {
 // The sweep button moves the slider as a hand dragging it would: one input event per displayed frame
 // (Chromium delivers pointer moves once per frame), back and forth over the slider's range in 6 s.
 function toggleSweep(p, item, range, button) {
-  if (p.animation) { p.animation = null; button.textContent = "sweep"; return; }
+  if (p.animation) {
+    if (p.animation.timer) { clearInterval(p.animation.timer); }
+    p.animation = null; button.textContent = "sweep"; return;
+  }
   button.textContent = "stop";
   const lo = Number(range.min), hi = Number(range.max), period = 6000, t0 = performance.now();
-  const step = () => {
-    if (p.animation !== step) { return; }
+  const move = () => {
     const phase = ((performance.now() - t0) % period) / period;
     const f = phase < 0.5 ? phase * 2 : 2 - phase * 2;
     const v = lo + f * (hi - lo);
     range.value = item.spec.grid ? Math.round(v) : v;
     range.dispatchEvent(new Event("input"));
+  };
+  if (INPUT_HZ > 0) { p.animation = { timer: setInterval(move, 1000 / INPUT_HZ) }; return; }
+  const step = () => {
+    if (p.animation !== step) { return; }
+    move();
     requestAnimationFrame(step);
   };
   p.animation = step;
