@@ -261,6 +261,20 @@ def test_display_mapping():
     assert display.auto_white(np.zeros((4, 4))) == 1.0
 
 
+def test_the_page_needs_no_internet():
+    """Every asset ships in the package and names no other host (no CDN, no font service)."""
+    from importlib import resources
+
+    from planeray.viewer.server import STATIC_FILES
+
+    root = resources.files("planeray.viewer") / "static"
+    shipped = sorted(p.name for p in root.iterdir())
+    assert shipped == sorted(STATIC_FILES)
+    for name in shipped:
+        text = (root / name).read_text(encoding="utf-8")
+        assert "http://" not in text and "https://" not in text and "//cdn" not in text, name
+
+
 def test_frame_encoding_round_trip():
     image = np.arange(12, dtype=np.float32).reshape(3, 4) / 7
     data = encode_frame(image, {"type": "frame", "label": "é"})

@@ -86,6 +86,12 @@ def open_page(browser, server, *, width=1500, height=1000):
     return page
 
 
+def done(page):
+    """Close a page that raised no JavaScript error."""
+    assert page.planeray_errors == []
+    page.close()
+
+
 def frame(page, panel=0):
     """The float32 frame a panel shows, its header and its canvas pixels (RGB)."""
     got = page.evaluate(
@@ -153,7 +159,7 @@ def test_page_paints_the_band_renderers_image(browser, transport_server, scene):
     assert page.text_content("#source-name").endswith("estimate.zarr")
     assert page.planeray_errors == []
     shot(page, "transport_first_frame")
-    page.close()
+    done(page)
 
 
 def test_dragging_the_delay_slider_paints_each_new_band(browser, transport_server, scene):
@@ -185,7 +191,7 @@ def test_dragging_the_delay_slider_paints_each_new_band(browser, transport_serve
     data, header, rgb, got = frame(page)
     assert header["settings"]["delay_us"] == -187.25
     assert np.array_equal(data, scene.transport.render(Band(-187.25, header["settings"]["exposure_us"], LPS)))
-    page.close()
+    done(page)
 
 
 def test_every_mode_paints_what_the_source_renders(browser, transport_server):
@@ -210,7 +216,7 @@ def test_every_mode_paints_what_the_source_renders(browser, transport_server):
     short, _ = syn.short_long_range(source.transport, 7.0)
     assert header["settings"]["max_rows"] == 7 and np.allclose(data, short, atol=1e-5)
     shot(page, "transport_short_range")
-    page.close()
+    done(page)
 
 
 def test_bad_input_is_answered_and_the_page_goes_on(browser, transport_server, scene):
@@ -227,7 +233,7 @@ def test_bad_input_is_answered_and_the_page_goes_on(browser, transport_server, s
     data, header, *_ = frame(page)
     assert np.array_equal(data, scene.transport.render(Band(header["settings"]["delay_us"], 800.0, LPS)))
     assert page.text_content(".panel[data-panel='0'] .error") == ""
-    page.close()
+    done(page)
 
 
 def test_clicking_a_pixel_plots_its_transport_with_the_ground_truth(browser, transport_server, scene):
@@ -258,7 +264,7 @@ def test_clicking_a_pixel_plots_its_transport_with_the_ground_truth(browser, tra
     shown = float(text.rsplit("T = ", 1)[1])
     assert shown == pytest.approx(float(T.dense[r, c, k]), rel=1e-3)
     shot(page, "transport_pixel_plot")
-    page.close()
+    done(page)
 
 
 def test_side_by_side_and_the_snapshot_with_its_settings(browser, transport_server, scene):
@@ -293,7 +299,7 @@ def test_side_by_side_and_the_snapshot_with_its_settings(browser, transport_serv
     assert [p["settings"]["mode"] for p in meta["panels"]] == ["band", "sharpened"]
     assert meta["panels"][1]["settings"]["width_rows"] == 3 and meta["panels"][1]["display"]["colormap"] == "magma"
     assert np.array_equal(snap[:, 56:], rgb)  # the right half is panel 1 as painted
-    page.close()
+    done(page)
 
 
 def test_stack_page_plots_measured_delay_profiles(browser, tmp_path, scene):
@@ -320,7 +326,7 @@ def test_stack_page_plots_measured_delay_profiles(browser, tmp_path, scene):
             assert np.allclose(y, prof.values[0, e], equal_nan=True, rtol=1e-6)
         assert plot["vlines"][0]["x"] == 375.0
         shot(page, "stack_profiles")
-        page.close()
+        done(page)
 
 
 def test_scene_page_with_camera_noise(browser):
@@ -337,7 +343,7 @@ def test_scene_page_with_camera_noise(browser):
         wait_for(page, "window.planeray.plotState !== null")
         assert page.evaluate("window.planeray.plot.data.series[0].name") == "ground truth T(u)"
         shot(page, "scene_disco_ball_noise")
-        page.close()
+        done(page)
 
 
 def test_painted_frame_rate_while_dragging(browser):
