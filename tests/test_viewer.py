@@ -424,6 +424,24 @@ def test_render_requests_of_a_panel_are_coalesced(server):
     assert ids == sorted(ids) and ids[-1] == 39 and len(ids) < 40
 
 
+def test_a_flood_of_requests_is_bounded(server):
+    import websockets
+
+    async def flood():
+        async with websockets.connect(_ws_url(server), max_size=None, compression=None) as ws:
+            await ws.recv()
+            for i in range(300):
+                await ws.send(json.dumps({"type": "pixel", "id": i, "row": 1, "col": 1}))
+            answers = [json.loads(await asyncio.wait_for(ws.recv(), 30)) for _ in range(300)]
+            return answers
+
+    answers = asyncio.run(flood())
+    kinds = {a["type"] for a in answers}
+    assert kinds <= {"pixel", "error"} and "pixel" in kinds
+    refused = [a for a in answers if a["type"] == "error"]
+    assert all("too many requests waiting" in a["message"] for a in refused)
+
+
 def test_server_binds_loopback_and_falls_back_from_a_busy_port(truth_store):
     src = open_source(truth_store)
     first = ViewerServer(src, port=0)

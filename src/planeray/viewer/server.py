@@ -75,6 +75,8 @@ STATIC_FILES = {
 #: Largest message the page may send (a render request is ~300 bytes).
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_PANELS = 4
+#: Pixel and ping requests that may wait for an answer (render requests replace each other instead).
+MAX_WAITING = 64
 
 _LOOPBACK_NAMES = {"127.0.0.1", "localhost", "::1", "[::1]"}
 _HEADERS = {
@@ -197,6 +199,11 @@ class _Connection:
                 continue
             if kind == "render":
                 self.latest[panel] = req  # the newest request of a panel wins
+            elif len(self.others) >= MAX_WAITING:
+                await self.send_error(
+                    f"too many requests waiting (at most {MAX_WAITING}); wait for answers", mid, panel
+                )
+                continue
             else:
                 self.others.append(req)
             self.wake.set()
