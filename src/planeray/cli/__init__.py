@@ -16,6 +16,7 @@ order) and holds the entry point:
 * ``calibrate.py``  calibrate lines | simulate-lines | delay-zero (Sec. 6)
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
+* ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
 * ``_common.py``    shared helpers: one-line errors, stack loading, ``--pixel`` parsing, image saving
@@ -38,6 +39,7 @@ from . import (
     simulate,
     stacks,
     study,
+    view,
 )
 from ._common import DEBUG, _join_pixel_args
 
@@ -73,6 +75,8 @@ app.command()(analysis.synth)
 app.command()(analysis.figure)
 app.command()(stacks.export)
 app.command("import")(stacks.import_)
+app.command()(view.view)
+app.command()(view.video)
 app.command()(demo.demo)
 # Command groups (sub-apps).
 app.add_typer(baselines.separate_app, name="separate")
