@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test lint format bench bench-demux bench-mc clean venv
+.PHONY: demo test lint format bench bench-demux bench-mc bench-viewer browser clean venv
 
 venv: $(VENV)/.installed
 
@@ -17,7 +17,18 @@ $(VENV)/.installed: pyproject.toml
 demo: venv
 	$(VENV)/bin/planeray demo --out $(OUT)
 
-test: venv
+# The browser tests (tests/test_viewer_browser.py) drive the system's chromium through Playwright;
+# nothing ever downloads a browser.  As root (CI) a missing chromium is installed with apt.
+browser:
+	@if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || [ -n "$$PLANERAY_CHROMIUM" ]; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing chromium for the browser tests (apt-get install chromium)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	else \
+		echo "note: no chromium, so the browser tests will be skipped; install it (Debian: sudo apt-get install chromium)"; \
+	fi
+
+test: venv browser
 	$(PY) -m pytest -q
 
 lint: venv
@@ -33,6 +44,9 @@ bench: venv
 
 bench-demux: venv
 	$(PY) benchmarks/bench_demux.py --pixels 384 --large 512
+
+bench-viewer: venv browser
+	$(PY) benchmarks/bench_viewer.py --sizes 128 512
 
 bench-mc: venv
 	$(PY) benchmarks/bench_mc.py --plot $(OUT)/mc_vs_mitsuba.png

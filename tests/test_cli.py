@@ -222,14 +222,6 @@ def test_mc_profile_writes_csv_json_and_png(tmp_path, monkeypatch):
     assert bad.exit_code != 0 and "g must lie in (-1, 1)" in bad.output
 
 
-def test_study_demux_quick(tmp_path):
-    r = invoke("study", "demux", "--out", tmp_path, "--quick", "--provider", "dipole", "--seeds", 1)
-    assert r.exit_code == 0, r.output
-    assert (tmp_path / "fig6_mse_vs_params.png").exists() and (tmp_path / "fig6c_mse_vs_g.csv").exists()
-    bad = invoke("study", "demux", "--out", tmp_path, "--provider", "bogus")
-    assert bad.exit_code != 0
-
-
 def test_mc_profile_point_source(tmp_path, monkeypatch):
     monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "r.csv"

@@ -440,3 +440,15 @@ def test_library_errors_name_the_output_and_say_how_to_replace_it(tmp_path):
     pr.write_transport(T, tmp_path / "T.zarr")
     with pytest.raises(TransportError, match=r"T\.zarr: already exists \(pass --overwrite, or overwrite=True"):
         pr.write_transport(T, tmp_path / "T.zarr")
+
+
+def test_a_stored_stack_is_digested_from_its_stored_bytes(tmp_path):
+    stack = pr.simulate_stack(pr.make_scene("diffuse_plane", (16, 8), seed=0), pr.quick_sweep(), seed=0)
+    path = write_stack(stack, tmp_path / "s.zarr")
+    first = read_stack(path).content_digest()
+    assert read_stack(path).content_digest() == first  # the same store, read again
+    chunk = sorted((path / "images" / "c").rglob("*"))[-1]
+    data = bytearray(chunk.read_bytes())
+    data[-1] ^= 0xFF  # one stored byte changes
+    chunk.write_bytes(bytes(data))
+    assert read_stack(path).content_digest() != first

@@ -191,6 +191,44 @@ def test_same_bytes_whatever_the_thread_count():
     assert a.radiance.tobytes() == b.radiance.tobytes()
 
 
+def _profile_bytes(p):
+    arrays = (p.values, p.stderr, p.radiance, p.radiance_stderr)
+    scalars = (p.total_reflectance, p.total_reflectance_stderr, p.transmittance, p.absorbed, p.truncated)
+    return [a.tobytes() for a in arrays] + [*scalars, p.n_interactions]
+
+
+@pytest.mark.parametrize("point", [False, True])
+def test_progress_adds_up_to_the_photons_and_changes_no_byte(point):
+    # With a callback the 32 batches are traced in groups of one per thread: the same
+    # streams and per-batch tallies, so the same bytes, whatever the thread count.
+    numba = pytest.importorskip("numba")
+    from planeray.mc import mc_point_profile
+
+    medium = Medium(sigma_s=1.0, sigma_a=0.05, g=0.9, n=1.3)
+    run = mc_point_profile if point else mc_line_profile
+    kw = dict(n_photons=20_001, seed=11)
+    plain = run(medium, **kw)
+    before = numba.get_num_threads()
+    for threads in sorted({1, before}):
+        calls = []
+        try:
+            numba.set_num_threads(threads)
+            p = run(medium, **kw, progress=calls.append)
+        finally:
+            numba.set_num_threads(before)
+        assert sum(calls) == 20_001 and len(calls) == -(-32 // threads)
+        assert _profile_bytes(p) == _profile_bytes(plain)
+
+
+def test_progress_on_a_cache_hit(tmp_path, monkeypatch):
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path))
+    kw = dict(n_photons=3_000, seed=2, cache=True)
+    mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.2, g=0.3), **kw)
+    calls = []
+    mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.2, g=0.3), **kw, progress=calls.append)
+    assert calls == [3_000]
+
+
 def test_non_absorbing_medium_finishes_and_reports_truncation():
     off = np.arange(-30, 31)
     p = mc_line_profile(Medium(1.0, 0.0, 0.9), n_photons=5_000, offsets_rows=off, seed=0)

@@ -1,10 +1,12 @@
 """The Sec. 5.2 demultiplexing study (quick grid, dipole provider)."""
 
+import json
+
 import numpy as np
 import pytest
 
 from planeray import study
-from planeray.experiments.study import run_study
+from planeray.experiments.study import run_study, study_report, study_work
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +53,9 @@ def test_mse_increases_with_noise(setup, provider):
 
 
 def test_run_study_quick_writes_files(tmp_path, provider):
-    r = run_study(tmp_path, provider=provider, seeds=2, quick=True)
+    calls = []
+    r = run_study(tmp_path, provider=provider, seeds=2, quick=True, progress=calls.append)
+    assert sum(calls) == study_work(quick=True) == len(calls)
     names = {p.name for p in tmp_path.iterdir()}
     for stem in ("fig5_reconstruction", "fig5c_mse_vs_noise", "regularization_sweep"):
         assert f"{stem}.png" in names and f"{stem}.csv" in names
@@ -60,7 +64,13 @@ def test_run_study_quick_writes_files(tmp_path, provider):
         "fig6a_mse_vs_sigma_s.csv",
         "fig6b_mse_vs_sigma_a.csv",
         "fig6c_mse_vs_g.csv",
+        "study.json",
     } <= names
+    assert json.loads((tmp_path / "study.json").read_text()) == r
+    assert r["files"][-1] == str(tmp_path / "study.json") and len(r["files"]) == 11
+    report = study_report(r)
+    first = {m: r["noise_sweep"][m]["mean"][0] for m in study.METHODS}  # eta 0.005
+    assert report[4].split() == ["0.005", *(f"{v:.1e}" for v in first.values()), min(first, key=first.get)]
     assert not any(n.startswith(".") for n in names)  # no temporaries left
     header = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()[0]
     assert header == "noise,seed,pinv,nnls,full"
@@ -82,8 +92,8 @@ def test_custom_provider_and_errors(setup):
 def test_back_scattering_degrades_the_full_method_with_monte_carlo_profiles(setup):
     # Fig. 6c with real HG profiles (the dipole only sees sigma_s (1 - g)): the full
     # method's MSE grows as g turns negative and its lead over pinv shrinks.
-    # Full-study measurement (2e5 photons, 5 seeds): full 1.1e-4 at g = 0.9, 6.5e-4 at
-    # g = -0.45, 1.6e-3 at g = -0.9; pinv/full 8.8x -> 1.6x.
+    # Full-study measurement (`planeray study demux`, 2e5 photons, 5 seeds): full 1.2e-4 at
+    # g = 0.9, 6.5e-4 at g = -0.45, 1.5e-3 at g = -0.9; pinv/full 8.6x -> 1.6x.
     mc = study.mc_provider(setup.offsets, n_photons=20_000, cache=False)
     ps = study.parameter_sweep(setup, mc, "g", [-0.6, 0.9], seeds=3)
     full = ps["mse"]["full"].mean(axis=1)

@@ -114,7 +114,7 @@ def test_sharpened_epipolar_removes_subsurface_glow():
     assert error(sharp) < 0.9 * error(captured)
     row = int(np.argmax(wax.sum(axis=1)))
     cols = np.flatnonzero(wax[row])
-    # 1.12x at 64x64 (1.32x at 128x128, see `planeray figure fig11`)
+    # 1.12x at 64x64 (1.42x at 128x128, see `planeray figure fig11`)
     assert michelson_contrast(sharp[row, cols]) > 1.08 * michelson_contrast(captured[row, cols])
 
 

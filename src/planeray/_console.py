@@ -1,6 +1,17 @@
-"""The terminal: rich consoles and the progress bar shared by the command line and the demo."""
+"""The terminal: rich consoles and the progress bar shared by the command line and the demo.
+
+Results that a script may read (JSON, paths) go to stdout verbatim through
+:func:`print_json` and :func:`print_verbatim`: never wrapped at the terminal's
+width, never read as rich markup.  Print them after a progress bar has stopped:
+while a bar is live on a terminal, rich routes ``sys.stdout`` through the bar's
+console (stderr).
+"""
 
 from __future__ import annotations
+
+import json
+import sys
+from pathlib import PurePath
 
 from rich.console import Console
 from rich.progress import (
@@ -12,12 +23,13 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-__all__ = ["console", "out", "progress_bar"]
+__all__ = ["console", "out", "progress_bar", "print_json", "print_verbatim"]
 
 #: Messages, progress and errors (stderr).
 console = Console(stderr=True, soft_wrap=True)
-#: Results (stdout).
-out = Console(soft_wrap=True)
+#: Results (stdout): long lines are left to the terminal (soft wrap), never cut, and text is
+#: printed as it is (no markup: a path such as ``runs/[a]/x.zarr`` keeps its brackets; no emoji codes).
+out = Console(soft_wrap=True, markup=False, emoji=False)
 
 
 def progress_bar() -> Progress:
@@ -31,3 +43,24 @@ def progress_bar() -> Progress:
         console=console,
         transient=False,
     )
+
+
+def _jsonable(value):
+    """``json.dumps`` fallback for NumPy scalars and arrays and paths."""
+    if isinstance(value, PurePath):
+        return str(value)
+    if hasattr(value, "tolist"):  # NumPy scalar or array
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serializable")
+
+
+def print_json(obj, *, indent: int | None = None) -> None:
+    """Write ``obj`` as JSON to stdout verbatim (one line unless ``indent``)."""
+    sys.stdout.write(json.dumps(obj, indent=indent, default=_jsonable) + "\n")
+    sys.stdout.flush()
+
+
+def print_verbatim(text: str) -> None:
+    """Write ``text`` and a newline to stdout as it is: no wrapping, no markup, no highlighting."""
+    sys.stdout.write(f"{text}\n")
+    sys.stdout.flush()

@@ -50,12 +50,18 @@ def _simulate(name, out_dir, size, seed, console, progress):
 def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=None):
     """Run the demo and return the paths it wrote."""
     from rich.console import Console
+    from rich.text import Text
 
     console = console or Console()
     progress = progress or progress_bar
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    console.print("[bold]planeray demo[/]: the paper's sweep (17 delays x 5 exposures) on the simulated Episcan")
+    # Styles as Text, not markup: the console may print verbatim (paths can hold "[...]").
+    console.print(
+        Text.assemble(
+            ("planeray demo", "bold"), ": the paper's sweep (17 delays x 5 exposures) on the simulated Episcan"
+        )
+    )
     written = {}
 
     disco, disco_stack = _simulate("disco_ball", out_dir, size=size, seed=seed, console=console, progress=progress)
@@ -98,7 +104,7 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
         title="Demultiplexed T(u) (solid) vs ground truth x signal scale (dashed); grey: cell the sweep cannot split",
     )
 
-    console.print("[bold green]done.[/] Results:")
+    console.print(Text.assemble(("done.", "bold green"), " Results:"))
     for key, path in written.items():
         console.print(f"  {key:22s} {path}")
     return written

@@ -25,6 +25,9 @@ no phase-function shape), so its g-sweep measures the profile's width alone.
 
 Every noise realization is shared by the three methods (paired comparison), and
 every realization is seeded from ``(seed, point)`` so results are reproducible.
+
+The sweeps take ``progress=``, called as ``progress(1)`` after each swept point
+(each ``alpha x beta`` cell of :func:`regularization_sweep`).
 """
 
 from __future__ import annotations
@@ -242,8 +245,8 @@ def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_
     }
 
 
-def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, **params) -> dict:
-    """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``."""
+def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, *, progress=None, **params) -> dict:
+    """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``; ``progress(1)`` after each noise level."""
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
     mse = {m: np.zeros((len(noises), seeds)) for m in METHODS}
@@ -251,14 +254,17 @@ def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, **params
         r = mse_trials(setup, T, float(eta), seeds, point=i)
         for m in METHODS:
             mse[m][i] = r[m]
+        if progress is not None:
+            progress(1)
     return {"noise": np.asarray(noises, float), "mse": mse}
 
 
 def parameter_sweep(
-    setup: StudySetup, provider: Provider, name: str, values, seeds=5, noise=DEFAULT_NOISE, **params
+    setup: StudySetup, provider: Provider, name: str, values, seeds=5, noise=DEFAULT_NOISE, *, progress=None, **params
 ) -> dict:
     """Fig. 6: ``mse[method]`` of shape ``(len(values), seeds)`` as ``name`` in
-    {'sigma_s', 'sigma_a', 'g'} varies, the others at their defaults."""
+    {'sigma_s', 'sigma_a', 'g'} varies, the others at their defaults; ``progress(1)``
+    after each value (its profile included: a Monte Carlo provider traces it then)."""
     if name not in DEFAULT_PARAMS:
         raise ValueError(f"unknown parameter {name!r}")
     mse = {m: np.zeros((len(values), seeds)) for m in METHODS}
@@ -270,17 +276,20 @@ def parameter_sweep(
         r = mse_trials(setup, T, noise, seeds, point=i)
         for m in METHODS:
             mse[m][i] = r[m]
+        if progress is not None:
+            progress(1)
     return {"name": name, "values": np.asarray(values, float), "mse": mse, "mean_abs_offset": width}
 
 
 def regularization_sweep(
-    setup: StudySetup, provider: Provider, alphas, betas, seeds=5, noise=DEFAULT_NOISE, **params
+    setup: StudySetup, provider: Provider, alphas, betas, seeds=5, noise=DEFAULT_NOISE, *, progress=None, **params
 ) -> dict:
     """MSE, squared bias and variance of the full method over an ``alpha x beta`` grid.
 
     Returns ``mse``, ``bias2`` (mean over offsets of the squared mean error over
     seeds) and ``variance`` (``mse - bias2``), each ``(len(alphas), len(betas))``;
-    the same noise realizations are used at every grid point.
+    the same noise realizations are used at every grid point.  ``progress(1)``
+    after each grid point.
     """
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
@@ -293,6 +302,8 @@ def regularization_sweep(
             err = X - T[None]
             mse[i, j] = (err**2).mean()
             bias2[i, j] = (err.mean(axis=0) ** 2).mean()
+            if progress is not None:
+                progress(1)
     return {
         "alphas": np.asarray(alphas, float),
         "betas": np.asarray(betas, float),

@@ -17,6 +17,7 @@ order) and holds the entry point:
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
 * ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
+* ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
 * ``_common.py``    shared helpers: one-line errors, stack loading, ``--pixel`` parsing, image saving
@@ -40,6 +41,7 @@ from . import (
     simulate,
     stacks,
     study,
+    view,
 )
 from ._common import DEBUG, _join_pixel_args
 
@@ -75,6 +77,8 @@ app.command()(analysis.synth)
 app.command()(analysis.figure)
 app.command()(stacks.export)
 app.command("import")(stacks.import_)
+app.command()(view.view)
+app.command()(view.video)
 app.command()(demo.demo)
 # Command groups (sub-apps).
 app.add_typer(baselines.separate_app, name="separate")

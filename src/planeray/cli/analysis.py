@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import json
+from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 import typer
 
-from .._console import console, out
+from .._console import console, out, print_json, progress_bar
 from ..timing import PAPER_LINES_PER_SECOND
 from ._common import StackArg, _friendly_errors, _load_stack, _parse_pixel, _save_image
 
@@ -181,14 +181,20 @@ def figure(
     size: Annotated[int, typer.Option(help="Image size (square, camera pixels).")] = 128,
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
 ):
-    """Reproduce a paper figure on the built-in scenes (writes PNG + JSON of the measured numbers)."""
-    from ..experiments.paper import FIGURES
+    """Reproduce a paper figure on the built-in scenes (writes PNG + JSON of the measured numbers).
+
+    Prints one JSON line per figure on stdout: its name ("figure"), the JSON file written ("json")
+    and the numbers measured ("numbers").
+    """
+    from ..experiments.paper import FIGURES, figure_work
 
     names = list(FIGURES) if name == "all" else [name]
+    unknown = [n for n in names if n not in FIGURES]
+    if unknown:
+        raise ValueError(f"unknown figure {unknown[0]!r}; choose one of {sorted(FIGURES)} or all")
     for n in names:
-        if n not in FIGURES:
-            raise ValueError(f"unknown figure {n!r}; choose one of {sorted(FIGURES)} or all")
-        with console.status(f"reproducing {n}"):
-            numbers = FIGURES[n](out_dir, size=size, seed=seed)
-        shown = numbers.get("images", numbers)
-        out.print(f"{n}: {out_dir / (n + '.json')}  {json.dumps(shown, default=float)[:400]}")
+        with progress_bar() as bar:
+            task = bar.add_task(n, total=figure_work(n, size=size))
+            numbers = FIGURES[n](out_dir, size=size, seed=seed, progress=partial(bar.advance, task))
+        # After the bar has stopped (a live bar re-routes stdout to its console), verbatim: never wrapped.
+        print_json({"figure": n, "json": str(out_dir / f"{n}.json"), "numbers": numbers})

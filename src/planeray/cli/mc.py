@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from .._console import console, out
+from .._console import print_verbatim, progress_bar
 from ._common import _friendly_errors
 
 mc_app = typer.Typer(help="Monte Carlo subsurface scattering (HG slab, line source).", no_args_is_help=True)
@@ -66,7 +67,9 @@ def mc_profile(
     t0 = time.perf_counter()
     thickness = np.inf if thickness_mm is None else thickness_mm
     medium = Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n, thickness_mm=thickness)
-    with console.status(f"tracing {photons:,} photons"):
+    with progress_bar() as bar:
+        task = bar.add_task("photons", total=photons)
+        advance = partial(bar.advance, task)
         if point:
             prof = mc_point_profile(
                 medium,
@@ -76,6 +79,7 @@ def mc_profile(
                 seed=seed,
                 cache=cache,
                 cutoff_mm=cutoff_mm,
+                progress=advance,
             )
         else:
             prof = mc_line_profile(
@@ -88,18 +92,19 @@ def mc_profile(
                 source_width_mm=source_width_mm,
                 cutoff_mm=cutoff_mm,
                 diffusion_depth_mfp=diffusion_depth_mfp or None,
+                progress=advance,
             )
     dt = time.perf_counter() - t0
     csv_path, json_path = write_profile(prof, out_path)
-    out.print(
+    print_verbatim(
         f"diffuse reflectance {prof.total_reflectance:.5f} +- {prof.total_reflectance_stderr:.5f}, "
         f"specular {prof.specular_reflectance:.5f}, transmitted {prof.transmittance:.5f}, "
         f"absorbed {prof.absorbed:.5f}, truncated {prof.truncated:.5f}"
     )
-    out.print(f"{prof.n_interactions / max(prof.n_photons, 1):.0f} collisions per photon, {dt:.1f} s")
-    out.print(f"  {csv_path}\n  {json_path}")
+    print_verbatim(f"{prof.n_interactions / max(prof.n_photons, 1):.0f} collisions per photon, {dt:.1f} s")
+    print_verbatim(f"  {csv_path}\n  {json_path}")
     if plot is not None:
         from ..figures.mc import mc_profile_figure
 
         mc_profile_figure(prof, out=plot)
-        out.print(f"  {plot}")
+        print_verbatim(f"  {plot}")

@@ -36,6 +36,8 @@ def info(
         print(json.dumps(summary, indent=2, default=str))
         return
     table = Table(show_header=False)
+    table.add_column(no_wrap=True)
+    table.add_column(overflow="fold")  # a narrow terminal folds long values (paths), never cuts them
     for key in ("path", "images", "shape", "projector_rows", "lines_per_second", "excluded", "used_for_demux"):
         table.add_row(key, str(summary[key]))
     table.add_row("delays_us", f"{len(summary['delays_us'])}: {st.delays().min():g} .. {st.delays().max():g}")

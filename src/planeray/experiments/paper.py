@@ -1,8 +1,15 @@
 """The paper's figures reproduced on built-in scenes, each returning its numbers.
 
-``planeray figure fig8|fig9|fig11|fig12 --out DIR`` calls these.  Each function
-simulates what it needs on the simulated Episcan (seeded), writes PNGs under
-``out_dir`` and returns a dict of the measured numbers (also written as JSON).
+``planeray figure fig8|fig9|fig11|fig12|effects --out DIR`` calls these.  Each
+function simulates what it needs on the simulated Episcan (seeded), writes PNGs
+under ``out_dir`` and returns a dict of the measured numbers (also written as
+JSON).  For a given ``size`` and ``seed`` the numbers are the same bytes in every
+run and process.
+
+Progress: each function takes ``progress=``, called as ``progress(n)`` with the
+units of work just done -- one per simulated image, per demultiplexed camera row,
+per single-line capture and per figure drawn; :func:`figure_work` gives their
+total, so a front end can size a progress bar.
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
 from ..io import atomic_file
 from ..profiles import measured_delay_profiles
-from ..scenes import EFFECTS, make_scene, representative_pixels
+from ..scenes import EFFECTS, list_scenes, make_scene, representative_pixels
 from ..synthesis import (
     michelson_contrast,
     relight,
@@ -30,9 +37,44 @@ from ..synthesis import (
 )
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, paper_sweep, sweep_support_rows
 
-__all__ = ["FIGURES", "fig8", "fig9", "fig11", "fig12"]
+__all__ = ["FIGURES", "figure_work", "fig8", "fig9", "fig11", "fig12", "effects"]
 
 PROJECTOR_ROWS = PAPER_PROJECTOR_ROWS  # the paper's PicoPro
+
+
+def figure_work(name: str, *, size: int = 128) -> int:
+    """Units of work figure ``name`` reports through its ``progress`` callback at ``size``.
+
+    One per simulated image of the paper sweep, per demultiplexed camera row
+    (``size`` per demultiplexed stack), per single-line capture (Fig. 12) and per
+    PNG drawn.
+
+    Examples
+    --------
+    >>> figure_work("fig11", size=128)  # 85 images, 128 rows, 1 figure
+    214
+    """
+    n = len(paper_sweep())
+    work = {
+        "fig8": n + 1,
+        "fig9": 3 * n + 2,
+        "fig11": n + size + 1,
+        "fig12": n + size + 4 + 1,
+        "effects": len(list_scenes()) * (n + size + 1),
+    }
+    if name not in work:
+        raise ValueError(f"unknown figure {name!r}; choose one of {sorted(work)}")
+    return work[name]
+
+
+def _done(progress, n: int = 1) -> None:
+    if progress is not None:
+        progress(n)
+
+
+def _per_image(progress):
+    """``acquire_sweep`` reports the index of each image; figures report one unit per image."""
+    return None if progress is None else (lambda i: progress(1))
 
 
 def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
@@ -41,29 +83,67 @@ def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
     return numbers
 
 
-def fig8(out_dir, size: int = 128, seed: int = 0) -> dict:
-    """Fig. 8: delay x exposure contact sheet of the disco-ball scene."""
+def fig8(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
+    """Fig. 8: delay x exposure contact sheet of the disco-ball scene.
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig8.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig8", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig8.json``).
+    """
     out_dir = Path(out_dir)
     scene = make_scene("disco_ball", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
-    stack = simulate_stack(scene, paper_sweep(), seed=seed)
+    stack = simulate_stack(scene, paper_sweep(), seed=seed, progress=_per_image(progress))
     png = out_dir / "fig8_contact_sheet.png"
     contact_sheet_figure(stack, out=png)
+    _done(progress)
     return _write_numbers(out_dir, "fig8", {"png": str(png), "images": len(stack)})
 
 
-def fig9(out_dir, size: int = 128, seed: int = 0) -> dict:
+def fig9(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     """Fig. 9: delay profiles of direct reflection, subsurface scattering, diffuse and
-    specular interreflection, one pixel per effect picked from the scenes' ground truth."""
+    specular interreflection, one pixel per effect picked from the scenes' ground truth.
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig9.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig9", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig9.json``).
+    """
     out_dir = Path(out_dir)
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
     curves = []
     for name in ("mirror_ball", "wax", "corner"):
         scene = make_scene(name, (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
-        stack = simulate_stack(scene, paper_sweep(), seed=seed)
+        stack = simulate_stack(scene, paper_sweep(), seed=seed, progress=_per_image(progress))
         pixels, names = representative_pixels(scene, support)
         prof = measured_delay_profiles(stack, pixels)
         if name == "mirror_ball":
             delay_profiles_figure(stack, prof, out=out_dir / "fig9_mirror_ball.png", names=names)
+            _done(progress)
         e0 = list(prof.exposure_us).index(prof.exposure_us.min())
         for p, label in enumerate(names):
             if name != "mirror_ball" and label == "diffuse":
@@ -81,10 +161,11 @@ def fig9(out_dir, size: int = 128, seed: int = 0) -> dict:
     ax.grid(alpha=0.3)
     fig.tight_layout()
     png = save_png(fig, out_dir / "fig9_delay_profiles.png")
+    _done(progress)
     return _write_numbers(out_dir, "fig9", {"png": str(png), "curves": [c[0] for c in curves]})
 
 
-def fig11(out_dir, size: int = 128, seed: int = 0, scan_row: int | None = None) -> dict:
+def fig11(out_dir, *, size: int = 128, seed: int = 0, scan_row: int | None = None, progress=None) -> dict:
     """Fig. 11: sharpened epipolar imaging of the wax candle.
 
     The captured epipolar image (t_e = 600 us, a 32.4-row band) keeps subsurface
@@ -92,11 +173,30 @@ def fig11(out_dir, size: int = 128, seed: int = 0, scan_row: int | None = None) 
     resolve (12.15 rows) and a 1-row band.  Measured: Michelson contrast along a
     scan line and the error against the ground-truth direct image (each image
     scaled to it by least squares, since they integrate different amounts of light).
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig11.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    scan_row : int, optional
+        Camera row of the scan line (default: the row with the most wax).
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig11", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig11.json``).
     """
     out_dir = Path(out_dir)
     scene = make_scene("wax", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
-    stack = simulate_stack(scene, paper_sweep(), seed=seed)
-    result = demultiplex(stack)
+    stack = simulate_stack(scene, paper_sweep(), seed=seed, progress=_per_image(progress))
+    result = demultiplex(stack, progress=progress)
     T = result.transport
     res = result.attrs["epipolar_resolution_rows"]
     scale = float(stack.metadata["signal_scale"])
@@ -144,10 +244,11 @@ def fig11(out_dir, size: int = 128, seed: int = 0, scan_row: int | None = None) 
     ax.grid(alpha=0.3)
     fig.tight_layout()
     numbers["png"] = str(save_png(fig, out_dir / "fig11_sharpened_epipolar.png"))
+    _done(progress)
     return _write_numbers(out_dir, "fig11", numbers)
 
 
-def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) -> dict:
+def fig12(out_dir, *, size: int = 128, seed: int = 0, line_row: int | None = None, progress=None) -> dict:
     """Fig. 12: relighting the wax candle with a single virtual projector line.
 
     Compared with conventional single-line captures at 16 ms and 800 ms exposure
@@ -155,12 +256,31 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
     against the ground truth.  The laser is dimmed (1500 electrons for a white
     surface per pass) so the 800 ms capture does not saturate, and the room is
     dark (ambient 0.01 e-/us).
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``fig12.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    line_row : int, optional
+        Projector row of the virtual line (default: through the middle of the wax).
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("fig12", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``fig12.json``).
     """
     out_dir = Path(out_dir)
     scene = make_scene("wax", (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
     camera = CameraModel(laser_electrons=1500.0, ambient_e_per_us=0.01)
-    stack = simulate_stack(scene, paper_sweep(), camera=camera, seed=seed)
-    T = demultiplex(stack).transport
+    stack = simulate_stack(scene, paper_sweep(), camera=camera, seed=seed, progress=_per_image(progress))
+    T = demultiplex(stack, progress=progress).transport
     scale = camera.signal_scale
     wax = scene.labels == 2
     v = line_row if line_row is not None else int(round(np.flatnonzero(wax.any(axis=1)).mean() * PROJECTOR_ROWS / size))
@@ -174,6 +294,7 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
     for exposure_ms in (16.0, 800.0):
         lit, _ = single.capture_pattern(pattern, exposure_ms * 1000.0, frame_period_us=frame_us)
         dark, _ = single.capture_pattern(np.zeros_like(pattern), exposure_ms * 1000.0, frame_period_us=frame_us)
+        _done(progress, 2)
         # the conventional practice: subtract a dark frame (projector off) of the same exposure
         images[f"single line, {exposure_ms:g} ms"] = (lit - dark) / (exposure_ms * 1000.0 / frame_us * scale)
     # judge where the line's light is (near the line, on the wax)
@@ -202,23 +323,41 @@ def fig12(out_dir, size: int = 128, seed: int = 0, line_row: int | None = None) 
     )
     fig.tight_layout(rect=(0, 0, 1, 0.92))
     numbers["png"] = str(save_png(fig, out_dir / "fig12_relighting.png"))
+    _done(progress)
     return _write_numbers(out_dir, "fig12", numbers)
 
 
-def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
+def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     """Effect classification from demultiplexed delay profiles on every built-in scene,
-    with its agreement with the scenes' ground-truth labels (Sec. 8)."""
+    with its agreement with the scenes' ground-truth labels (Sec. 8).
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the PNGs and ``effects.json``.
+    size : int
+        Image size (square, camera pixels).
+    seed : int
+        Scene and noise seed.
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`figure_work` ``("effects", size=size)``.
+
+    Returns
+    -------
+    dict
+        The measured numbers (also written as ``effects.json``).
+    """
     from ..classify import classify_transport, label_agreement, visible_effect_mask
     from ..figures.labels import label_map_figure
-    from ..scenes import list_scenes
 
     out_dir = Path(out_dir)
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
     numbers = {}
     for name in list_scenes():
         scene = make_scene(name, (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
-        stack = simulate_stack(scene, paper_sweep(), seed=seed)
-        result = demultiplex(stack)
+        stack = simulate_stack(scene, paper_sweep(), seed=seed, progress=_per_image(progress))
+        result = demultiplex(stack, progress=progress)
         res = result.attrs["epipolar_resolution_rows"]
         labels = classify_transport(result.transport, resolution_rows=res)
         visible = visible_effect_mask(scene, support_rows=support, resolution_rows=res)
@@ -236,6 +375,7 @@ def effects(out_dir, size: int = 128, seed: int = 0) -> dict:
             reference=stack.image(stack.index_of(0.0, 600.0)),
             title=f"{name}: effect from demultiplexed delay profiles",
         )
+        _done(progress)
     return _write_numbers(out_dir, "effects", numbers)
 
 

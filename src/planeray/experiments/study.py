@@ -1,17 +1,23 @@
 """The Sec. 5.2 demultiplexing study end to end (Figs. 5, 6): numbers, CSVs and PNGs in one folder.
 
 The computations are in :mod:`planeray.study`, the drawings in :mod:`planeray.figures.study`.
+:func:`run_study` reports progress as ``progress(n)`` units of work (one per
+swept point, per ``alpha x beta`` cell and per figure drawn; :func:`study_work`
+gives their total) and :func:`study_report` formats its numbers as text lines.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
 
+from .._validate import check_integer, check_nonnegative
 from ..figures import study as figs
 from ..io import atomic_file
+from ..io.atomic import storage_error
 from ..study import (
     DEFAULT_NOISE,
     METHODS,
@@ -26,7 +32,33 @@ from ..study import (
     study_setup,
 )
 
-__all__ = ["run_study"]
+__all__ = ["run_study", "study_work", "study_report"]
+
+#: The PNGs :func:`run_study` draws (one unit of work each).
+_N_FIGURES = 4
+#: The parameter sweeps of Fig. 6: (panel, parameter).
+_PARAMETERS = (("a", "sigma_s"), ("b", "sigma_a"), ("c", "g"))
+
+
+def study_work(*, quick: bool = False) -> int:
+    """Units of work :func:`run_study` reports through ``progress``.
+
+    The reconstruction example, each noise level, each value of the three
+    parameter sweeps, each ``alpha x beta`` cell and each figure drawn.
+
+    Examples
+    --------
+    >>> study_work(quick=True)  # 1 + 3 + (2 + 2 + 3) + 3 x 3 + 4
+    24
+    """
+    G = grids(quick)
+    return (
+        1
+        + len(G["noise"])
+        + sum(len(G[name]) for _, name in _PARAMETERS)
+        + len(G["alpha"]) * len(G["beta"])
+        + _N_FIGURES
+    )
 
 
 def _write_csv(path: Path, header, rows) -> Path:
@@ -56,22 +88,59 @@ def _summary(mse):
 
 
 def run_study(
-    out_dir, provider: Provider | str | None = None, seeds: int = 5, quick: bool = False, noise: float = DEFAULT_NOISE
+    out_dir,
+    provider: Provider | str | None = None,
+    seeds: int = 5,
+    quick: bool = False,
+    noise: float = DEFAULT_NOISE,
+    *,
+    progress=None,
 ) -> dict:
-    """Run the whole Sec. 5.2 study, write PNGs and CSVs into ``out_dir``, return the numbers.
+    """Run the whole Sec. 5.2 study, write PNGs, CSVs and its numbers into ``out_dir``, return the numbers.
 
-    ``provider``: a callable ``profile(sigma_s, sigma_a, g)`` over ``study_setup().offsets``,
-    ``'mc'`` / ``None`` (Monte Carlo, :func:`mc_provider`) or ``'dipole'``
-    (:func:`dipole_provider`).
+    Parameters
+    ----------
+    out_dir : path
+        Folder for the files (created).
+    provider : callable, {'mc', 'dipole'} or None
+        A callable ``profile(sigma_s, sigma_a, g)`` over ``study_setup().offsets``,
+        ``'mc'`` / ``None`` (Monte Carlo, :func:`planeray.study.mc_provider`) or
+        ``'dipole'`` (:func:`planeray.study.dipole_provider`).
+    seeds : int
+        Noise realizations per point.
+    quick : bool
+        Reduced grids (:func:`planeray.study.grids`).
+    noise : float
+        Noise level ``eta`` of the parameter and regularization sweeps.
+    progress : callable, optional
+        Called as ``progress(n)`` with the units of work just done; they add up
+        to :func:`study_work`.
 
+    Returns
+    -------
+    dict
+        The numbers (also written as ``study.json``), with ``files``.
+
+    Notes
+    -----
     Files: ``fig5_reconstruction.png/.csv``, ``fig5c_mse_vs_noise.png/.csv``,
     ``fig6_mse_vs_params.png``, ``fig6{a,b,c}_mse_vs_{sigma_s,sigma_a,g}.csv``,
-    ``regularization_sweep.png/.csv``.
+    ``regularization_sweep.png/.csv`` and ``study.json``.
     """
+
+    def done(n=1):
+        if progress is not None:
+            progress(n)
+
+    check_integer(seeds, "seeds", minimum=1)
+    check_nonnegative(noise, "noise")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     setup = study_setup()
     provider = cached_provider(resolve_provider(provider, setup.offsets))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise storage_error(exc, out) from None
     G = grids(quick)
     result = {
         "provider": provider.name,
@@ -83,6 +152,7 @@ def run_study(
     }
 
     ex = reconstruction_example(setup, provider, noise)
+    done()
     result["example_mse"] = ex["mse"]
     result["example_min"] = {m: float(ex[m].min()) for m in METHODS}
     result["files"].append(
@@ -95,8 +165,9 @@ def run_study(
     png = out / "fig5_reconstruction.png"
     figs.plot_reconstruction(ex, noise=noise, out=png)
     result["files"].append(png)
+    done()
 
-    ns = noise_sweep(setup, provider, G["noise"], seeds)
+    ns = noise_sweep(setup, provider, G["noise"], seeds, progress=progress)
     result["noise_sweep"] = {"noise": ns["noise"].tolist(), **_summary(ns["mse"])}
     result["files"].append(
         _write_csv(
@@ -106,10 +177,11 @@ def run_study(
     png = out / "fig5c_mse_vs_noise.png"
     figs.plot_noise_sweep(ns, out=png)
     result["files"].append(png)
+    done()
 
     sweeps = {}
-    for tag, name in (("a", "sigma_s"), ("b", "sigma_a"), ("c", "g")):
-        ps = parameter_sweep(setup, provider, name, G[name], seeds, noise)
+    for tag, name in _PARAMETERS:
+        ps = parameter_sweep(setup, provider, name, G[name], seeds, noise, progress=progress)
         sweeps[name] = ps
         result[f"{name}_sweep"] = {
             "values": ps["values"].tolist(),
@@ -126,8 +198,9 @@ def run_study(
     png = out / "fig6_mse_vs_params.png"
     figs.plot_parameter_sweeps(sweeps, noise=noise, out=png)
     result["files"].append(png)
+    done()
 
-    rs = regularization_sweep(setup, provider, G["alpha"], G["beta"], seeds, noise)
+    rs = regularization_sweep(setup, provider, G["alpha"], G["beta"], seeds, noise, progress=progress)
     i, j = np.unravel_index(np.argmin(rs["mse"]), rs["mse"].shape)
     ia, ib = int(np.argmin(np.abs(np.log(rs["alphas"] / 0.01)))), int(np.argmin(np.abs(np.log(rs["betas"] / 0.01))))
     result["regularization"] = {
@@ -152,5 +225,55 @@ def run_study(
     png = out / "regularization_sweep.png"
     figs.plot_regularization(rs, noise=noise, out=png)
     result["files"].append(png)
-    result["files"] = [str(f) for f in result["files"]]
+    done()
+    path = out / "study.json"
+    result["files"] = [str(f) for f in [*result["files"], path]]
+    with atomic_file(path) as tmp:
+        tmp.write_text(json.dumps(result, indent=2))
     return result
+
+
+def _sci(v: float) -> str:
+    return f"{v:.1e}"
+
+
+def _row(cells, width=11) -> str:
+    return "  " + "".join(f"{c:<{width}}" for c in cells).rstrip()
+
+
+def study_report(numbers: dict) -> list[str]:
+    """Text lines of the study's findings (what the README quotes) from :func:`run_study`'s numbers.
+
+    MSE are means over the noise seeds.
+    """
+    lines = [
+        f"profiles: {numbers['provider']}; {numbers['seeds']} noise seeds per point; "
+        f"{numbers['n_images']} images, {numbers['n_offsets']} offsets",
+        "Fig. 5a/b, eta {:g}: minimum of the reconstruction: {}; MSE: {}".format(
+            numbers["noise"],
+            ", ".join(f"{m} {v:.3g}" for m, v in numbers["example_min"].items()),
+            ", ".join(f"{m} {_sci(v)}" for m, v in numbers["example_mse"].items()),
+        ),
+    ]
+    ns = numbers["noise_sweep"]
+    lines.append("Fig. 5c: MSE vs noise eta")
+    lines.append(_row(["eta", *METHODS, "best"]))
+    for i, eta in enumerate(ns["noise"]):
+        mse = [ns[m]["mean"][i] for m in METHODS]
+        lines.append(_row([f"{eta:.2g}", *(_sci(v) for v in mse), METHODS[int(np.argmin(mse))]]))
+    for tag, name in _PARAMETERS:
+        ps = numbers[f"{name}_sweep"]
+        lines.append(f"Fig. 6{tag}: MSE vs {name}, eta {numbers['noise']:g}")
+        lines.append(_row([name, *METHODS, "pinv/full", "mean |u|"]))
+        for i, v in enumerate(ps["values"]):
+            mse = [ps[m]["mean"][i] for m in METHODS]
+            ratio = ps["pinv"]["mean"][i] / ps["full"]["mean"][i]
+            lines.append(_row([f"{v:.3g}", *(_sci(x) for x in mse), f"{ratio:.2g}", f"{ps['mean_abs_offset'][i]:.3g}"]))
+    reg = numbers["regularization"]
+    paper, best = reg["paper"], reg["best"]
+    lines.append(
+        f"regularization, eta {numbers['noise']:g}: alpha {paper['alpha']:.3g}, beta {paper['beta']:.3g}: "
+        f"MSE {_sci(paper['mse'])}; best alpha {best['alpha']:.3g}, beta {best['beta']:.3g}: "
+        f"MSE {_sci(best['mse'])} ({paper['mse'] / best['mse']:.3g}x lower)"
+    )
+    return lines

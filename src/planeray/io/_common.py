@@ -377,6 +377,29 @@ class LazyArray:
         for i in range(len(self)):
             yield self[i]
 
+    def update_digest(self, h) -> bool:
+        """Feed the array's stored bytes (metadata + every chunk file, in order) to hash ``h``.
+
+        Much cheaper than decoding every chunk (a 512x512x85 stack: ~0.2 s instead of
+        ~2.6 s); identical stored bytes mean identical values.  Returns False (and feeds
+        nothing) when the array is not in a local directory store; the caller then
+        hashes decoded values instead.
+        """
+        root = getattr(self.array.store, "root", None)
+        if root is None:
+            return False
+        base = Path(root) / str(self.array.store_path.path)
+        try:
+            h.update((base / "zarr.json").read_bytes())
+            for chunk in sorted(p for p in base.rglob("*") if p.is_file() and p.name != "zarr.json"):
+                h.update(str(chunk.relative_to(base)).encode())
+                h.update(chunk.read_bytes())
+        except OSError as exc:
+            raise self.error(
+                f"{self.name}: cannot read stored chunks ({type(exc).__name__}: {exc})", self.path
+            ) from None
+        return True
+
     def __array__(self, dtype=None, copy=None):
         data = self[...]
         return data if dtype is None else data.astype(dtype, copy=False)

@@ -351,6 +351,7 @@ def mc_line_profile(
     cutoff_mm=None,
     seed=0,
     cache=False,
+    progress=None,
 ) -> MCProfile:
     """Monte Carlo line-source reflectance profile of a homogeneous slab.
 
@@ -381,6 +382,11 @@ def mc_line_profile(
     cache : bool
         Read/write an ``.npz`` result keyed by the medium and every option under
         :func:`cache_dir` (after the read-only shipped tables, :data:`TABLES_DIR`).
+    progress : callable, optional
+        Called as ``progress(n)`` with the number of photons just traced, after
+        each group of batches (one batch per Numba thread; once with
+        ``n_photons`` on a cache hit), so the calls add up to ``n_photons``.
+        Tracing in groups gives the same bytes as without a callback.
 
     Returns
     -------
@@ -416,11 +422,20 @@ def mc_line_profile(
         source_width_mm,
         cutoff_mm,
         diffusion_depth_mfp,
+        progress,
     )
 
 
 def mc_point_profile(
-    medium: Medium, *, n_photons=10**6, radius_bins=None, mm_per_bin=1.0, cutoff_mm=None, seed=0, cache=False
+    medium: Medium,
+    *,
+    n_photons=10**6,
+    radius_bins=None,
+    mm_per_bin=1.0,
+    cutoff_mm=None,
+    seed=0,
+    cache=False,
+    progress=None,
 ) -> MCProfile:
     """Monte Carlo radial reflectance of a *point* (pencil-beam) source: MCML's ``R_d(r)``.
 
@@ -438,7 +453,7 @@ def mc_point_profile(
         Distinct non-negative bins; default ``arange(0, 51)``.
     mm_per_bin : float
         Annulus width in mm.
-    n_photons, cutoff_mm, seed, cache
+    n_photons, cutoff_mm, seed, cache, progress
         As :func:`mc_line_profile`.
 
     Returns
@@ -455,11 +470,21 @@ def mc_point_profile(
         radius_bins = np.arange(0, 51)
     if np.any(np.asarray(radius_bins) < 0):
         raise ValueError("radius_bins must be non-negative")
-    return _profile("point", medium, n_photons, radius_bins, mm_per_bin, seed, cache, 0.0, cutoff_mm, None)
+    return _profile("point", medium, n_photons, radius_bins, mm_per_bin, seed, cache, 0.0, cutoff_mm, None, progress)
 
 
 def _profile(
-    source, medium, n_photons, offsets_rows, mm_per_row, seed, cache, source_width_mm, cutoff_mm, diffusion_depth_mfp
+    source,
+    medium,
+    n_photons,
+    offsets_rows,
+    mm_per_row,
+    seed,
+    cache,
+    source_width_mm,
+    cutoff_mm,
+    diffusion_depth_mfp,
+    progress=None,
 ):
     """Validate, look up the caches, trace (:func:`_run`), store."""
     n_photons = int(n_photons)
@@ -508,12 +533,24 @@ def _profile(
         for hit in (TABLES_DIR / name, path):
             if hit.exists():
                 try:
-                    return load_profile(hit)
+                    prof = load_profile(hit)
                 except (OSError, ValueError, KeyError):
-                    pass  # unreadable entry: recompute (and overwrite the user cache)
+                    continue  # unreadable entry: recompute (and overwrite the user cache)
+                if progress is not None:
+                    progress(n_photons)
+                return prof
 
     prof = _run(
-        medium, n_photons, offsets, mm_per_row, int(seed), source_width_mm, cutoff_mm, params, radial=source == "point"
+        medium,
+        n_photons,
+        offsets,
+        mm_per_row,
+        int(seed),
+        source_width_mm,
+        cutoff_mm,
+        params,
+        radial=source == "point",
+        progress=progress,
     )
     if path is not None:
         try:
@@ -538,7 +575,7 @@ def _batch_stats(per_batch, counts):
     return mean, means.std(axis=0, ddof=1) / np.sqrt(used.sum())
 
 
-def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_mm, params, radial=False):
+def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_mm, params, radial=False, progress=None):
     sigma_s, sigma_a, g, n, d = medium.sigma_s, medium.sigma_a, medium.g, medium.n, medium.thickness_mm
     B = _N_BATCHES
     counts = np.full(B, n_photons // B, dtype=np.int64)
@@ -556,25 +593,38 @@ def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_m
     half = max(abs(kmin), abs(kmin + nk - 1)) * mm_per_row
     reach = int(np.ceil(min(cutoff_mm, half + 20.0 * z_cont) / mm_per_row)) if np.isfinite(z_cont) else 0
     hmin, nh = -reach, 2 * reach + 1
-    refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont, far = _trace(
-        states,
-        counts,
-        sigma_s,
-        sigma_a,
-        g,
-        n,
-        d,
-        kmin,
-        nk,
-        mm_per_row,
-        1.0 - r_sp,
-        source_width_mm,
-        cutoff_mm,
-        z_cont,
-        hmin,
-        nh,
-        radial,
-    )
+    # Batches are independent (own stream, own tallies), so tracing them in groups
+    # gives the same bytes as one call.  With a progress callback the batches go in
+    # groups of one per thread, reported after each group; without, in one call.
+    step = B if progress is None else max(1, min(B, numba.get_num_threads()))
+    parts = []
+    for lo in range(0, B, step):
+        group = slice(lo, min(B, lo + step))
+        parts.append(
+            _trace(
+                states[group],
+                counts[group],
+                sigma_s,
+                sigma_a,
+                g,
+                n,
+                d,
+                kmin,
+                nk,
+                mm_per_row,
+                1.0 - r_sp,
+                source_width_mm,
+                cutoff_mm,
+                z_cont,
+                hmin,
+                nh,
+                radial,
+            )
+        )
+        if progress is not None:
+            progress(int(counts[group].sum()))
+    tallies = parts[0] if len(parts) == 1 else tuple(np.concatenate(t) for t in zip(*parts))
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont, far = tallies
     # Radiance is tallied per unit area: divide by the bin's width (line) or annulus area (point).
     rad_bins /= bin_measure(np.arange(kmin, kmin + nk), mm_per_row, radial)
     if np.isfinite(z_cont) and (cont.any() or far.any()):

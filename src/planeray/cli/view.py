@@ -1,0 +1,162 @@
+"""``planeray view`` (the live explorer in the browser) and ``planeray video`` (a sweep written as a video)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .._console import console, print_verbatim, progress_bar
+from ..timing import PAPER_LINES_PER_SECOND
+from ._common import _friendly_errors
+
+PathArg = Annotated[
+    str, typer.Argument(help="A scene name (a virtual Episcan: see `planeray scenes`), a transport store or a stack.")
+]
+SizeOpt = Annotated[int, typer.Option(help="Scenes: image size (square, camera pixels).")]
+ProjectorRowsOpt = Annotated[int, typer.Option(help="Scenes: projector rows spanned by the image.")]
+SeedOpt = Annotated[int, typer.Option(help="Scenes: seed of the textures and the camera noise.")]
+TruthOpt = Annotated[Path | None, typer.Option(help="Ground-truth transport store, overlaid in the pixel plots.")]
+TruthScaleOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Multiply the ground truth by this in the T(u) plot (a transport demultiplexed from a simulated "
+        "stack is signal_scale = 0.6 times the scene's); default: compare by area."
+    ),
+]
+PatternOpt = Annotated[
+    list[Path] | None,
+    typer.Option(help="Relighting pattern (.npy/.csv/.txt/image), offered by its file name (repeatable)."),
+]
+
+
+def _open(path, *, size, projector_rows, seed, truth, truth_scale, pattern):
+    from ..viewer.session import open_source
+
+    with console.status(f"opening {path}"):
+        return open_source(
+            path,
+            size=size,
+            projector_rows=projector_rows,
+            seed=seed,
+            lines_per_second=PAPER_LINES_PER_SECOND,
+            truth=truth,
+            truth_scale=truth_scale,
+            patterns=[str(p) for p in pattern or []],
+        )
+
+
+def _can_open_browser() -> bool:
+    """A graphical browser can be shown (never a text-mode browser in this terminal)."""
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+@_friendly_errors
+def view(
+    path: PathArg,
+    host: Annotated[
+        str, typer.Option(help="Address to serve on. 127.0.0.1 (default): this machine only.")
+    ] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port (0: any free port; a port in use falls back to a free one).")] = 8765,
+    browser: Annotated[
+        bool, typer.Option(help="Open the page in the default browser (--no-browser: only print its URL).")
+    ] = True,
+    size: SizeOpt = 128,
+    projector_rows: ProjectorRowsOpt = 720,
+    seed: SeedOpt = 0,
+    truth: TruthOpt = None,
+    truth_scale: TruthScaleOpt = None,
+    pattern: PatternOpt = None,
+):
+    """Explore a scene, a transport or a stack live in the browser: delay and exposure sliders, epipolar,
+    non-epipolar, sharpened, short/long range, relighting, pixel plots, snapshots (Ctrl-C stops)."""
+    from ..viewer.server import ViewerServer
+
+    source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=truth, truth_scale=truth_scale,
+                   pattern=pattern)  # fmt: skip
+    server = ViewerServer(source, host=host, port=port)
+    if server.port_fallback:
+        console.print(f"port {port} is in use; serving on {server.port}")
+    if not server.loopback:
+        console.print(
+            f"note: serving on {host}, reachable from other machines; the access token in the URL is the only lock"
+        )
+    console.print(f"planeray view: {source.kind} {source.name} ({source.shape[0]}x{source.shape[1]}); Ctrl-C stops")
+    print_verbatim(server.url)
+    if browser and _can_open_browser():
+        import webbrowser
+
+        webbrowser.open(server.url)
+    try:
+        server.run()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+
+
+@_friendly_errors
+def video(
+    path: PathArg,
+    out_path: Annotated[Path, typer.Option("--out", "-o", help="Video to write (.mp4, .mkv or .webm).")],
+    sweep: Annotated[str, typer.Option(help="What changes over the video: delay or exposure.")] = "delay",
+    delay_us: Annotated[float, typer.Option("--delay-us", help="Delay of an exposure sweep (us).")] = 0.0,
+    exposure_us: Annotated[float, typer.Option("--exposure-us", help="Exposure of a delay sweep (us).")] = 600.0,
+    start_us: Annotated[
+        float | None, typer.Option("--from", help="First delay/exposure (us; default -1500 / 100, a stack's first).")
+    ] = None,
+    stop_us: Annotated[
+        float | None, typer.Option("--to", help="Last delay/exposure (us; default 1500 / 2400, a stack's last).")
+    ] = None,
+    frames: Annotated[int | None, typer.Option(help="Frames (scenes, transports; default 121).")] = None,
+    fps: Annotated[float | None, typer.Option(help="Frames per second (default 30; 4 for a stack).")] = None,
+    noise: Annotated[bool, typer.Option(help="Scenes: camera noise.")] = False,
+    ambient: Annotated[bool, typer.Option(help="Scenes: ambient light.")] = False,
+    white: Annotated[
+        float | None, typer.Option(help="Value shown white (default: 99.5th percentile over the sweep).")
+    ] = None,
+    gamma: Annotated[float, typer.Option(help="Display gamma.")] = 1.0,
+    colormap: Annotated[str, typer.Option(help="gray, magma, inferno, viridis, cividis or turbo.")] = "gray",
+    scale: Annotated[int | None, typer.Option(help="Whole-pixel upscaling (default: at least 512 rows).")] = None,
+    size: SizeOpt = 128,
+    projector_rows: ProjectorRowsOpt = 720,
+    seed: SeedOpt = 0,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing video.")] = False,
+):
+    """Write a delay (or exposure) sweep as a video: the paper's "sweeping the band"."""
+    from ..errors import InputError
+    from ..viewer.session import ViewSettings
+    from ..viewer.video import CODECS, sweep_values, write_sweep_video
+
+    if out_path.suffix.lower() not in CODECS:
+        raise InputError(f"--out must end in {', '.join(CODECS)}, got {out_path.name!r}")
+    if out_path.exists() and not overwrite:
+        raise InputError("already exists (pass --overwrite to replace it)", out_path)
+    source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=None, truth_scale=None,
+                   pattern=None)  # fmt: skip
+    settings = ViewSettings(delay_us=delay_us, exposure_us=exposure_us, noise=noise, ambient=ambient)
+    n = len(sweep_values(source, sweep, start_us=start_us, stop_us=stop_us, frames=frames))
+    with progress_bar() as bar:
+        task = bar.add_task(f"{sweep} sweep", total=n)
+        written = write_sweep_video(
+            source,
+            out_path,
+            sweep=sweep,
+            settings=settings,
+            start_us=start_us,
+            stop_us=stop_us,
+            frames=frames,
+            fps=fps,
+            white=white,
+            gamma=gamma,
+            colormap=colormap,
+            scale=scale,
+            overwrite=overwrite,
+            progress=lambda k: bar.advance(task, k),
+        )
+    print_verbatim(str(written))
