@@ -421,3 +421,31 @@ def test_report_writes_the_figures_and_numbers(tmp_path):
     assert load_model(out / "materials_model.zip").definition.floor == "edge"
     with pytest.raises(InputError, match="already exists"):
         run_materials_report(out, size=48, quick=True)
+
+
+def test_cli_report_prints_classes_without_interior_pixels(tmp_path, monkeypatch):
+    # Every soap pixel can be near a wall: its interior accuracy is None and must print as such.
+    from typer.testing import CliRunner
+
+    import planeray.experiments.materials as exp
+    from planeray.cli import app
+
+    acc = {"fat-free milk": 0.99, "liquid soap": 1.0}
+    fake = {
+        "seconds": 1.0,
+        "stack_profiles": {
+            "floor_edge": {
+                "test": {
+                    "accuracy": acc,
+                    "accuracy_near_wall": {"fat-free milk": 0.9, "liquid soap": 1.0},
+                    "accuracy_interior": {"fat-free milk": 1.0, "liquid soap": None},
+                    "errors": {"share_near_wall": 0.87},
+                }
+            }
+        },
+    }
+    monkeypatch.setattr(exp, "run_materials_report", lambda out, **kw: fake)
+    res = CliRunner().invoke(app, ["materials", "report", "--out", str(tmp_path / "r")])
+    assert res.exit_code == 0, res.output
+    assert "liquid soap: 1.000 (near walls 1.000, away no pixels)" in res.output
+    assert "share of the errors near walls: 0.87" in res.output

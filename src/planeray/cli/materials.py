@@ -165,6 +165,13 @@ def train(
     )
 
 
+def _acc(value) -> str:
+    """An accuracy for the terminal: three decimals, or "no pixels" (None / NaN: nothing to score)."""
+    if value is None or value != value:
+        return "no pixels"
+    return f"{value:.3f}"
+
+
 @materials_app.command("predict")
 @_friendly_errors
 def predict(
@@ -218,8 +225,10 @@ def predict(
         for name, acc in sc["accuracy"].items():
             extra = ""
             if "accuracy_near_wall" in sc:
-                extra = f"  (near walls {sc['accuracy_near_wall'][name]:.3f}, away {sc['accuracy_interior'][name]:.3f})"
-            out.print(f"  accuracy {name}: {acc:.3f}{extra}")
+                extra = (
+                    f"  (near walls {_acc(sc['accuracy_near_wall'][name])}, away {_acc(sc['accuracy_interior'][name])})"
+                )
+            out.print(f"  accuracy {name}: {_acc(acc)}{extra}")
 
 
 @materials_app.command("report")
@@ -243,7 +252,7 @@ def report(
     out.print(f"report: {out_dir}  ({numbers['seconds']:g} s)")
     for name, acc in main["accuracy"].items():
         out.print(
-            f"  {name}: {acc:.3f} (near walls {main['accuracy_near_wall'][name]:.3f}, "
-            f"away {main['accuracy_interior'][name]:.3f})"
+            f"  {name}: {_acc(acc)} (near walls {_acc(main['accuracy_near_wall'][name])}, "
+            f"away {_acc(main['accuracy_interior'][name])})"
         )
     out.print(f"  share of the errors near walls: {main['errors']['share_near_wall']:.2f}")

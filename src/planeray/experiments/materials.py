@@ -517,6 +517,7 @@ def run_materials_report(
             test.labels,
             np.where(shown, pred, 0),
             near_wall=test.near_wall,
+            scored=shown,
             names=names,
             out=tmp / "fig10c_segmentation.png",
         )

@@ -70,7 +70,7 @@ def materials_photo_figure(photo, labels, *, names=None, out=None, ax=None):
         ax.contour(m.astype(float), levels=[0.5], colors=[_rgb(cid)], linewidths=1.2)
         r, c = np.nonzero(m)
         ax.text(c.mean(), r.mean(), names.get(cid, str(cid)), ha="center", va="center", fontsize=8, color="k")
-    ax.set_title("room light only: every material is white", fontsize=9)
+    ax.set_title("room light only: what an ordinary camera sees", fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
     if own:
@@ -187,8 +187,17 @@ def confusion_figure(confusion, *, out=None, ax=None):
     return finish(fig, out)
 
 
-def accuracy_curves_figure(curves, *, out=None):
-    """Per-class accuracy as the noise factor and the ambient light grow (floor removed: solid; paper: dashed)."""
+def accuracy_curves_figure(curves, *, floor="edge", out=None):
+    """Per-class accuracy as the noise factor and the ambient light grow.
+
+    Colours: each material with the given ``floor`` (the report's model); black: the
+    worst class with that floor (solid), the minimum as the floor (dotted) and the
+    paper's plain normalization (dashed).  Grey bars: share of the material pixels
+    with a saturated observation.
+    """
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+    fkey = f"floor_{floor}"
     fig = new_figure((11, 4.2))
     axes = fig.subplots(1, 2)
     for ax, key, label in (
@@ -197,21 +206,31 @@ def accuracy_curves_figure(curves, *, out=None):
     ):
         rows = curves[key]
         x = [r["value"] for r in rows]
+        sat = [r.get("saturated_pixels", 0.0) for r in rows]
+        if any(s > 0 for s in sat):
+            ax.bar(x, sat, width=[0.12 * v for v in x], color="0.85", zorder=0, label="saturated pixels (share)")
         for cid, name in MATERIAL_CLASSES.items():
-            ax.plot(x, [r["floor_min"]["accuracy"][name] for r in rows], "-o", color=_rgb(cid), ms=3, label=name)
-        ax.plot(
-            x,
-            [r["floor_none"]["min_material_accuracy"] for r in rows],
-            "k--",
-            lw=1,
-            label="worst class, no floor removal",
-        )
-        ax.plot(x, [r["floor_min"]["min_material_accuracy"] for r in rows], "k-", lw=1.5, label="worst class")
+            ax.plot(x, [r[fkey]["accuracy"][name] for r in rows], "-o", color=_rgb(cid), ms=3, label=name)
+        ax.plot(x, [r[fkey]["min_material_accuracy"] for r in rows], "k-", lw=1.5, label=f"worst class, floor {floor}")
+        for other, style in (("min", ":"), ("none", "--")):
+            key_other = f"floor_{other}"
+            if key_other != fkey and key_other in rows[0]:
+                what = "no floor removal (paper)" if other == "none" else "floor min"
+                ax.plot(
+                    x,
+                    [r[key_other]["min_material_accuracy"] for r in rows],
+                    "k" + style,
+                    lw=1,
+                    label=f"worst class, {what}",
+                )
         ax.axhline(0.9, color="0.6", lw=0.8, ls=":")
         ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xticks(x)
         ax.set_ylim(0, 1.02)
         ax.set_xlabel(label, fontsize=8)
-        ax.set_ylabel("per-class accuracy")
+        ax.set_ylabel("per-class accuracy" + (" (grey bars: saturated pixel share)" if any(s > 0 for s in sat) else ""))
     axes[0].legend(fontsize=7, frameon=False, loc="lower left")
     fig.suptitle(
         "recognition of the held-out placement as the capture gets worse (model trained at x1, 0.5 e-/us)", fontsize=9
