@@ -1,11 +1,19 @@
 """Regenerate the Monte Carlo kernels shipped in src/planeray/mc/tables/.
 
 Every built-in scene is built once with its defaults in an empty cache; whatever
-Monte Carlo profiles that traces (10^6 photons each, today only the wax medium)
-are copied into the package, so building a scene never waits for Monte Carlo.
-Run after any change to the MC engine or to a scene's medium defaults (the
-engine version and all parameters are part of every cache key, so stale tables
-are simply not found; tests/test_mc.py checks they are):
+Monte Carlo profiles that traces are copied into the package, so building a scene
+never waits for Monte Carlo:
+
+* the wax medium's line kernel (10^6 photons);
+* the ``materials`` scene's wall-kernel tables (``wall-*.npz``: per medium, the slab
+  kernel with 10^6 photons and the kernels beside a wall at 15 distances and 3 angles
+  with 10^5 photons each; :func:`planeray.mc.wall.mc_wall_table`), for the default
+  (Narasimhan et al.) media and for the Jensen et al. milks of the report's robustness
+  check.  The slab profiles they trace on the way are not shipped (the tables hold them).
+
+Run after any change to the MC engine, the wall runs or a scene's medium defaults (the
+engine and wall versions and all parameters are part of every cache key, so stale tables
+are simply not found; tests/test_mc.py and tests/test_mc_wall.py check they are):
 
     python tools/build_mc_tables.py
 """
@@ -22,18 +30,27 @@ from pathlib import Path
 from planeray.mc.cache import TABLES_DIR
 from planeray.scenes import list_scenes, make_scene
 
+#: Scene builds beyond the defaults whose kernels ship too: (scene, parameters).
+EXTRA = [("materials", {"source": "jensen"})]
+
 
 def main() -> int:
     TABLES_DIR.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["PLANERAY_CACHE"] = tmp
-        for name in list_scenes():
+        builds = [(name, {}) for name in list_scenes()] + EXTRA
+        cache = Path(tmp) / "mc"
+        for name, params in builds:
             t0 = time.perf_counter()
-            make_scene(name, (64, 64), projector_rows=720, seed=0)
-            for f in sorted((Path(tmp) / "mc").glob("*.npz")):
+            before = set(cache.glob("*.npz"))
+            make_scene(name, (64, 64), projector_rows=720, seed=0, **params)
+            pattern = "wall-*.npz" if name == "materials" else "*.npz"
+            for f in sorted(set(cache.glob(pattern)) - before):
                 if not (TABLES_DIR / f.name).exists():
                     shutil.copy(f, TABLES_DIR / f.name)
-                    print(f"{name}: {f.name} ({time.perf_counter() - t0:.0f} s)")
+                    print(
+                        f"{name} {params or ''}: {f.name} ({f.stat().st_size / 1e3:.0f} kB, {time.perf_counter() - t0:.0f} s)"
+                    )
     return 0
 
 

@@ -16,6 +16,7 @@ order) and holds the entry point:
 * ``calibrate.py``  calibrate lines | simulate-lines | delay-zero (Sec. 6)
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
+* ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
 * ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
@@ -35,6 +36,7 @@ from . import (
     calibrate,
     demo,
     demux,
+    materials,
     mc,
     simulate,
     stacks,
@@ -83,6 +85,7 @@ app.add_typer(baselines.separate_app, name="separate")
 app.add_typer(calibrate.calibrate_app, name="calibrate")
 app.add_typer(mc.mc_app, name="mc")
 app.add_typer(study.study_app, name="study")
+app.add_typer(materials.materials_app, name="materials")
 
 
 def main(argv: list[str] | None = None):

@@ -36,6 +36,10 @@ __all__ = [
 ALREADY_EXISTS = "already exists (pass --overwrite, or overwrite=True, to replace it)"
 
 _KINDS = {"planeray-stack": "stack", "planeray-transport": "transport"}
+#: Result folders recognized by the ``format`` of their ``planeray.json``.
+_FOLDER_KINDS = {"planeray-materials-capture": "materials capture", "planeray-materials-report": "materials report"}
+#: The marker file of such folders.
+MARKER = "planeray.json"
 
 
 def planeray_output_kind(path) -> str | None:
@@ -44,7 +48,9 @@ def planeray_output_kind(path) -> str | None:
     ``"stack"`` / ``"transport"``: a Zarr group whose ``format`` attribute is
     ``planeray-stack`` / ``planeray-transport``; ``"export folder"``: an import folder
     written by :func:`planeray.io.export_folder` (its ``acquisition.json`` carries
-    ``planeray_version``).  Symbolic links and plain files are never recognized.
+    ``planeray_version``); ``"materials capture"`` / ``"materials report"``: a folder
+    whose ``planeray.json`` has that ``format`` (``planeray-materials-capture`` /
+    ``planeray-materials-report``).  Symbolic links and plain files are never recognized.
     """
     p = Path(path)
     if p.is_symlink() or not p.is_dir():
@@ -54,6 +60,10 @@ def planeray_output_kind(path) -> str | None:
         if zarr_json.is_file():
             attrs = json.loads(zarr_json.read_text(encoding="utf-8")).get("attributes") or {}
             return _KINDS.get(attrs.get("format"))
+        marker = p / MARKER
+        if marker.is_file():
+            meta = json.loads(marker.read_text(encoding="utf-8"))
+            return _FOLDER_KINDS.get(meta.get("format")) if isinstance(meta, dict) else None
         acquisition = p / "acquisition.json"
         if acquisition.is_file() and (p / "manifest.csv").is_file():
             meta = json.loads(acquisition.read_text(encoding="utf-8"))

@@ -52,6 +52,8 @@ _SCALARS = (
     "absorbed",
     "truncated",
 )
+#: Scalars written since the wall runs (absent from older entries: read as 0).
+_OPTIONAL_SCALARS = ("wall_loss", "wall_loss_stderr")
 
 
 def save_profile(path: Path, prof: MCProfile) -> None:
@@ -64,7 +66,7 @@ def save_profile(path: Path, prof: MCProfile) -> None:
             n_photons=np.int64(prof.n_photons),
             n_interactions=np.int64(prof.n_interactions),
             params=np.array(json.dumps(prof.params, sort_keys=True)),
-            **{k: np.float64(getattr(prof, k)) for k in _SCALARS},
+            **{k: np.float64(getattr(prof, k)) for k in _SCALARS + _OPTIONAL_SCALARS},
         )
         os.replace(tmp, path)
     finally:
@@ -79,4 +81,5 @@ def load_profile(path: Path) -> MCProfile:
             n_interactions=int(z["n_interactions"]),
             params=json.loads(str(z["params"])),
             **{k: float(z[k]) for k in _SCALARS},
+            **{k: float(z[k]) for k in _OPTIONAL_SCALARS if k in z.files},
         )

@@ -55,6 +55,11 @@ class MCProfile:
     params : dict
         The parameters of the run (the cache key's content; the medium's
         thickness is under ``thickness``, ``None`` for a semi-infinite one).
+    wall_loss : float
+        Power that left through a container wall (:func:`planeray.mc.wall.mc_wall_profile`;
+        0 without a wall).
+    wall_loss_stderr : float
+        Its batch standard error.
     """
 
     offsets_rows: np.ndarray
@@ -73,6 +78,8 @@ class MCProfile:
     n_photons: int
     n_interactions: int = 0
     params: dict = field(default_factory=dict)
+    wall_loss: float = 0.0
+    wall_loss_stderr: float = 0.0
 
     @property
     def medium(self) -> Medium:
@@ -89,5 +96,12 @@ class MCProfile:
 
     @property
     def energy_balance(self) -> float:
-        """``diffuse + specular + transmitted + absorbed + truncated`` (1 up to round-off)."""
-        return self.total_reflectance + self.specular_reflectance + self.transmittance + self.absorbed + self.truncated
+        """``diffuse + specular + transmitted + absorbed + truncated + wall loss`` (1 up to round-off)."""
+        return (
+            self.total_reflectance
+            + self.specular_reflectance
+            + self.transmittance
+            + self.absorbed
+            + self.truncated
+            + self.wall_loss
+        )

@@ -67,6 +67,9 @@ class Scene:
         Dominant effect of each pixel, keys of :data:`EFFECTS`.
     params : dict
         JSON-serializable parameters that rebuild the scene.
+    maps : dict of str to ndarray (H, W)
+        Further per-pixel ground truth a scene provides (the ``materials`` scene: class
+        ids, distance to the nearest container wall, pixels whose kernel the wall changes).
     """
 
     name: str
@@ -75,6 +78,7 @@ class Scene:
     ambient_albedo: np.ndarray
     labels: np.ndarray
     params: dict = field(default_factory=dict)
+    maps: dict = field(default_factory=dict)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -146,7 +150,7 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
     >>> scene.shape, scene.geometry.projector_rows
     ((32, 32), 180)
     >>> sorted(list_scenes())
-    ['corner', 'diffuse_plane', 'disco_ball', 'mirror_ball', 'wax']
+    ['corner', 'diffuse_plane', 'disco_ball', 'materials', 'mirror_ball', 'wax']
     """
     _discover()
     if name not in _REGISTRY:

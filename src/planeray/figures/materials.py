@@ -1,0 +1,312 @@
+"""Figures of the material-recognition experiment (Sec. 8, Fig. 10) and of the wall model behind it.
+
+Every function returns a :class:`matplotlib.figure.Figure` (``out=`` also writes the PNG);
+the single-panel ones also draw into ``ax=``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.colors import ListedColormap
+from matplotlib.patches import Patch
+
+from ..materials.labels import class_colour
+from ..optical_data import CLASS_NAMES, MATERIAL_CLASSES
+from ._common import figure_for, finish, new_figure
+
+__all__ = [
+    "materials_photo_figure",
+    "material_profiles_figure",
+    "segmentation_figure",
+    "confusion_figure",
+    "accuracy_curves_figure",
+    "accuracy_by_distance_figure",
+    "wall_kernels_figure",
+]
+
+
+def _rgb(cid):
+    return tuple(v / 255.0 for v in class_colour(int(cid)))
+
+
+def _label_cmap(max_id=255):
+    return ListedColormap([_rgb(c) for c in range(max_id + 1)])
+
+
+def _label_image(ax, labels, max_id):
+    ax.imshow(labels, cmap=_label_cmap(max_id), vmin=-0.5, vmax=max_id + 0.5, interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def materials_photo_figure(photo, labels, *, names=None, out=None, ax=None):
+    """An ordinary photograph of the containers (room light only), outlined and named (Fig. 10a).
+
+    Parameters
+    ----------
+    photo : ndarray (H, W)
+        Reflectance under ambient light (the scene's ambient albedo).
+    labels : ndarray (H, W) int
+        Class ids (the containers' outlines and names).
+    names : dict, optional
+        Class names; default the documented list.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> lab = np.full((20, 20), 6)
+    >>> lab[5:15, 5:15] = 1
+    >>> fig = materials_photo_figure(np.full((20, 20), 0.8), lab)
+    >>> len(fig.axes)
+    1
+    """
+    names = names or CLASS_NAMES
+    fig, ax, own = figure_for(ax, (5.2, 5.2))
+    ax.imshow(photo, cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
+    for cid in MATERIAL_CLASSES:
+        m = labels == cid
+        if not m.any():
+            continue
+        ax.contour(m.astype(float), levels=[0.5], colors=[_rgb(cid)], linewidths=1.2)
+        r, c = np.nonzero(m)
+        ax.text(c.mean(), r.mean(), names.get(cid, str(cid)), ha="center", va="center", fontsize=8, color="k")
+    ax.set_title("room light only: what an ordinary camera sees", fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if own:
+        fig.tight_layout()
+    return finish(fig, out)
+
+
+def material_profiles_figure(delay_us, profiles, *, exposure_us, floor="edge", out=None):
+    """Average area-normalized delay profile of each material, away from walls and near them (Fig. 10b).
+
+    Two panels, linear and logarithmic (the tails tell the materials apart).
+
+    Parameters
+    ----------
+    delay_us : array_like (D,)
+    profiles : dict
+        ``{name: {"interior": {"mean", "std"}, "near_wall": {...}, "all": {...}}}`` (from the report).
+    exposure_us : float
+        The exposure of the curves (title).
+    floor : {"edge", "min", "none"}
+        The features' floor removal (title).
+    """
+    fig = new_figure((11.5, 4.2))
+    axes = fig.subplots(1, 2)
+    ids = {v: k for k, v in CLASS_NAMES.items()}
+    d = np.asarray(delay_us)
+    for ax in axes:
+        for name, entry in profiles.items():
+            colour = _rgb(ids.get(name, 0))
+            main = entry.get("interior") or entry.get("all")
+            label = name if "interior" in entry else f"{name} (every pixel near a wall)"
+            m, s = np.asarray(main["mean"]), np.asarray(main["std"])
+            ax.plot(d, m, "-o", color=colour, ms=3, lw=1.6, label=label)
+            ax.fill_between(d, m - s, m + s, color=colour, alpha=0.2, lw=0)
+            if "near_wall" in entry and "interior" in entry:
+                ax.plot(d, entry["near_wall"]["mean"], "--", color=colour, lw=1.0)
+        ax.set_xlabel("delay t_d (us)")
+    axes[0].plot([], [], "k--", lw=1.0, label="near a wall")
+    axes[0].set_ylabel("area-normalized intensity (1/ms)")
+    axes[0].legend(fontsize=7, frameon=False)
+    axes[1].set_yscale("log")
+    axes[1].set_ylim(1e-3, None)
+    fig.suptitle(
+        f"average delay profiles at t_e = {exposure_us:g} us, "
+        f"{ {'edge': 'edge floor subtracted, ', 'min': 'minimum subtracted, '}.get(floor, '') }"
+        "area-normalized (band: +-1 std over the pixels)",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    return finish(fig, out)
+
+
+def segmentation_figure(truth, pred, *, near_wall=None, scored=None, names=None, title=None, out=None):
+    """Ground truth, per-pixel prediction, and the errors with the near-wall zone (Fig. 10c).
+
+    ``scored``: the pixels that are classified and judged (default: every labelled
+    pixel); the prediction is shown there only.
+    """
+    names = names or CLASS_NAMES
+    truth, pred = np.asarray(truth), np.asarray(pred)
+    scored = (truth > 0) if scored is None else np.asarray(scored, bool)
+    shown = np.where(scored, pred, 0)
+    max_id = int(max(truth.max(), pred.max(), max(names)))
+    fig = new_figure((11.5, 4.4))
+    axes = fig.subplots(1, 3)
+    _label_image(axes[0], truth, max_id)
+    axes[0].set_title("ground truth", fontsize=9)
+    _label_image(axes[1], shown, max_id)
+    axes[1].set_title(f"prediction ({title})" if title else "prediction", fontsize=9)
+    wrong = scored & (pred != truth)
+    err = np.ones((*truth.shape, 3))
+    err[scored] = 0.7
+    err[wrong] = (0.85, 0.1, 0.1)
+    axes[2].imshow(err, interpolation="nearest")
+    if near_wall is not None and near_wall.any():
+        axes[2].contour(near_wall.astype(float), levels=[0.5], colors=["#1f77b4"], linewidths=0.8)
+    axes[2].set_title(f"errors (red): {wrong.sum()} of {scored.sum()} px; blue: near-wall zone", fontsize=9)
+    axes[2].set_xticks([])
+    axes[2].set_yticks([])
+    handles = [Patch(color=_rgb(c), label=names[c]) for c in sorted(names) if c > 0]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.07, 1, 0.97))
+    return finish(fig, out)
+
+
+def confusion_figure(confusion, *, out=None, ax=None):
+    """Row-normalized confusion matrix in percent (Fig. 10d); ``confusion`` as from :func:`score`."""
+    names = list(confusion["names"])
+    M = np.asarray(confusion["matrix"], dtype=np.float64)
+    if M.shape[1] == len(names) + 1:  # the "no prediction" column, shown only if used
+        if M[:, -1].sum() == 0:
+            M = M[:, :-1]
+            cols = names
+        else:
+            cols = [*names, "none"]
+    else:
+        cols = names
+    P = 100.0 * M / np.maximum(M.sum(axis=1, keepdims=True), 1)
+    fig, ax, own = figure_for(ax, (6.2, 5.2))
+    ax.imshow(P, cmap="Blues", vmin=0, vmax=100)
+    for i in range(P.shape[0]):
+        for j in range(P.shape[1]):
+            if M[i, j] > 0:
+                ax.text(
+                    j, i, f"{P[i, j]:.1f}", ha="center", va="center", fontsize=8, color="w" if P[i, j] > 60 else "k"
+                )
+    ax.set_xticks(range(len(cols)), cols, rotation=35, ha="right", fontsize=8)
+    ax.set_yticks(range(len(names)), names, fontsize=8)
+    ax.set_xlabel("predicted")
+    ax.set_ylabel("true")
+    ax.set_title("confusion matrix (% of each true class)", fontsize=9)
+    if own:
+        fig.tight_layout()
+    return finish(fig, out)
+
+
+def accuracy_curves_figure(curves, *, floor="edge", out=None):
+    """Per-class accuracy as the noise factor and the ambient light grow.
+
+    Colours: each material with the given ``floor`` (the report's model); black: the
+    worst class with that floor (solid), the minimum as the floor (dotted) and the
+    paper's plain normalization (dashed).  Grey bars: share of the material pixels
+    with a saturated observation.
+    """
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+    fkey = f"floor_{floor}"
+    fig = new_figure((11, 4.2))
+    axes = fig.subplots(1, 2)
+    for ax, key, label in (
+        (axes[0], "noise", "noise factor (x the default camera's shot and read noise)"),
+        (axes[1], "ambient_e_per_us", "ambient light (e- per us of row exposure, albedo 1)"),
+    ):
+        rows = curves[key]
+        x = [r["value"] for r in rows]
+        sat = [r.get("saturated_pixels", 0.0) for r in rows]
+        if any(s > 0 for s in sat):
+            ax.bar(x, sat, width=[0.12 * v for v in x], color="0.85", zorder=0, label="saturated pixels (share)")
+        for cid, name in MATERIAL_CLASSES.items():
+            ax.plot(x, [r[fkey]["accuracy"][name] for r in rows], "-o", color=_rgb(cid), ms=3, label=name)
+        ax.plot(x, [r[fkey]["min_material_accuracy"] for r in rows], "k-", lw=1.5, label=f"worst class, floor {floor}")
+        for other, style in (("min", ":"), ("none", "--")):
+            key_other = f"floor_{other}"
+            if key_other != fkey and key_other in rows[0]:
+                what = "no floor removal (paper)" if other == "none" else "floor min"
+                ax.plot(
+                    x,
+                    [r[key_other]["min_material_accuracy"] for r in rows],
+                    "k" + style,
+                    lw=1,
+                    label=f"worst class, {what}",
+                )
+        ax.axhline(0.9, color="0.6", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xticks(x)
+        ax.set_ylim(0, 1.02)
+        ax.set_xlabel(label, fontsize=8)
+        ax.set_ylabel("per-class accuracy" + (" (grey bars: saturated pixel share)" if any(s > 0 for s in sat) else ""))
+    axes[0].legend(fontsize=7, frameon=False, loc="lower left")
+    fig.suptitle(
+        "recognition of the held-out placement as the capture gets worse (model trained at x1, 0.5 e-/us)", fontsize=9
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    return finish(fig, out)
+
+
+def accuracy_by_distance_figure(results, *, out=None, ax=None):
+    """Accuracy of the material pixels against their distance to the container wall."""
+    fig, ax, own = figure_for(ax, (5.6, 3.8))
+    for (name, res), style in zip(results.items(), ("-o", "--s", ":^")):
+        rows = [r for r in res["by_distance_mm"] if r["accuracy"] is not None]
+        mid = [0.5 * (r["from_mm"] + (r["to_mm"] if r["to_mm"] is not None else r["from_mm"] + 10.0)) for r in rows]
+        ax.plot(mid, [r["accuracy"] for r in rows], style, ms=4, label=name)
+    ax.set_xlabel("distance to the container wall (mm)")
+    ax.set_ylabel("accuracy (material pixels)")
+    ax.set_ylim(0, 1.02)
+    ax.axhline(0.9, color="0.6", lw=0.8, ls=":")
+    ax.legend(fontsize=8, frameon=False)
+    ax.set_title("where the errors fall", fontsize=9)
+    if own:
+        fig.tight_layout()
+    return finish(fig, out)
+
+
+def wall_kernels_figure(tables, *, distances_rows=(0.0, 5.0, 17.0, 45.0), angle_deg=0.0, out=None):
+    """The Monte Carlo wall model: each material's kernel beside a wall, and the light the wall takes.
+
+    Parameters
+    ----------
+    tables : dict of int to WallKernelTable
+        By class id (:func:`planeray.scenes.materials.material_tables`).
+    distances_rows : sequence of float
+        Pixel-to-wall distances to draw (projector rows), with the slab (no wall).
+    angle_deg : float
+        Wall angle of the kernels (0: parallel to the lines, the wall at positive offsets).
+    """
+    n = len(tables)
+    fig = new_figure((3.2 * n, 7.0))
+    axes = fig.subplots(2, n, squeeze=False)
+    from matplotlib import colormaps
+
+    colours = colormaps["plasma"](np.linspace(0.0, 0.8, len(distances_rows)))
+    for k, (cid, tab) in enumerate(tables.items()):
+        ax = axes[0, k]
+        u = tab.offsets_rows * tab.mm_per_row
+        ax.semilogy(u, np.maximum(tab.slab, 1e-9), "k-", lw=1.4, label="no wall")
+        for d, colour in zip(distances_rows, colours):
+            kern = tab.kernels(d, angle_deg)
+            ax.semilogy(u, np.maximum(kern, 1e-9), color=colour, lw=1.0, label=f"wall {d * tab.mm_per_row:g} mm away")
+        peak = tab.slab.max()
+        ax.set_ylim(peak * 1e-4, peak * 2)
+        ax.set_xlim(-30, 30)
+        ax.set_title(CLASS_NAMES.get(cid, str(cid)), fontsize=9)
+        ax.set_xlabel("offset (mm)", fontsize=8)
+        if k == 0:
+            ax.set_ylabel("kernel (per projector row)", fontsize=8)
+            ax.legend(fontsize=7, frameon=True, loc="upper left")
+        ax2 = axes[1, k]
+        dist_mm = tab.distances_rows * tab.mm_per_row
+        for i, a in enumerate(tab.angles_deg):
+            total = tab.kernel[i].sum(axis=1) / tab.slab.sum()
+            ax2.plot(dist_mm, total, "-o", ms=2.5, lw=1, label=f"reflectance, wall at {a:g} deg")
+            ax2.plot(dist_mm, tab.wall_loss[i], "--", lw=1, label=f"lost through the wall, {a:g} deg")
+        ax2.set_xscale("symlog", linthresh=1.0)
+        ax2.set_ylim(0, 1.05)
+        ax2.grid(alpha=0.3)
+        ax2.set_xlabel("pixel-to-wall distance (mm)", fontsize=8)
+        if k == 0:
+            ax2.set_ylabel("relative reflectance / wall loss", fontsize=8)
+            ax2.legend(fontsize=6.5, frameon=True, loc="center right")
+    fig.suptitle(
+        f"Monte Carlo kernels beside a {next(iter(tables.values())).wall} wall (top: wall parallel to the lines, "
+        "on the right); bottom: the pixel's total relative to the slab and the power lost through the wall",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    return finish(fig, out)

@@ -1,0 +1,451 @@
+"""Material recognition from delay profiles (Sec. 8, Fig. 10): media, scene, features, model, files, CLI."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from planeray.errors import InputError
+from planeray.experiments.materials import TEST_SETTINGS, TRAIN_SETTINGS, camera_for, score, simulate_capture
+from planeray.materials import (
+    BACKGROUND_CLASS,
+    MATERIAL_CLASSES,
+    load_model,
+    material_medium,
+    normalize_profiles,
+    read_label_image,
+    stack_features,
+    train_model,
+    write_label_image,
+)
+from planeray.materials.features import FeatureDefinition
+from planeray.profiles import area_normalize
+from planeray.scenes import make_scene
+from planeray.stack import Stack
+
+SIZE = (64, 64)
+GRID = {"C": (10.0, 100.0), "gamma_scale": (0.3, 1.0)}
+
+
+# ----------------------------------------------------------------------------- media
+def test_published_media_as_cited():
+    m = material_medium("fat_free_milk")
+    assert (m.sigma_s, m.sigma_a, m.g, m.n) == (13.12, 0.00287, 0.932, 1.33)
+    m = material_medium(2, channel="blue")
+    assert (m.sigma_s, m.sigma_a, m.g) == (17.80, 0.01278, 0.746)
+    m = material_medium("whole milk", channel="green")
+    assert (m.sigma_s, m.sigma_a, m.g) == (20.38, 0.0046, 0.714)
+    # Jensen et al. 2001 give sigma_s' (the MC borrows Narasimhan's g).
+    assert material_medium(1, source="jensen").sigma_s_prime == pytest.approx(0.70)
+    assert material_medium(3, source="jensen", channel="blue").sigma_s_prime == pytest.approx(3.77)
+    assert material_medium(3, source="jensen").n == 1.3
+    # The two sets disagree: Narasimhan's regular milk scatters ~1.8x Jensen's whole milk.
+    assert material_medium(3).sigma_s_prime / material_medium(3, source="jensen").sigma_s_prime > 1.5
+    # The chosen media: toothpaste nearly opaque, soap weakly scattering and finite.
+    tooth, soap = material_medium("toothpaste"), material_medium("liquid_soap")
+    assert tooth.transport_mfp_mm < 0.1 and soap.transport_mfp_mm > 4 * material_medium(1).transport_mfp_mm
+    assert soap.thickness_mm == 30.0 and tooth.semi_infinite
+
+
+def test_bad_media_requests():
+    with pytest.raises(InputError, match="channel"):
+        material_medium(1, channel="infrared")
+    with pytest.raises(InputError, match="source"):
+        material_medium(1, source="wikipedia")
+    with pytest.raises(InputError, match="material"):
+        material_medium("mayonnaise")
+
+
+# ----------------------------------------------------------------------------- scene
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene("materials", SIZE, projector_rows=720, seed=0)
+
+
+def test_scene_layout_and_maps(scene):
+    mat = scene.maps["material"]
+    assert set(np.unique(mat)) == {*MATERIAL_CLASSES, BACKGROUND_CLASS}
+    near, dist = scene.maps["near_wall"], scene.maps["wall_distance_mm"]
+    assert not near[mat == BACKGROUND_CLASS].any() and np.isinf(dist[mat == BACKGROUND_CLASS]).all()
+    for cid in MATERIAL_CLASSES:
+        m = mat == cid
+        assert near[m].any(), cid  # every container has pixels the walls change
+        assert np.isfinite(dist[m]).all() and dist[m].min() > 0
+    # The wall changes the kernel of the broad media farther in than that of toothpaste.
+    assert near[mat == 1].mean() > near[mat == 4].mean()
+    assert (scene.labels == 2).sum() == np.isin(mat, list(MATERIAL_CLASSES)).sum()
+
+
+def test_scene_kernels_far_from_and_near_walls(scene):
+    mat, dist = scene.maps["material"], scene.maps["wall_distance_mm"]
+    T = scene.transport.dense
+    for cid in (1, 2, 3):
+        m = mat == cid
+        inner = np.argmax(np.where(m, dist, -1))  # the pixel farthest from the walls
+        edge = np.argmin(np.where(m, dist, np.inf))
+        t_in, t_edge = T.reshape(-1, T.shape[2])[inner], T.reshape(-1, T.shape[2])[edge]
+        assert t_edge.sum() < 0.9 * t_in.sum()  # light lost through the wall
+    # Toothpaste is nearly a diffuse surface: most of its light within a few rows.
+    tooth = T[mat == 4].mean(axis=0)
+    u = scene.transport.offsets_rows
+    assert tooth[np.abs(u) <= 6].sum() > 0.8 * tooth.sum()
+    # Liquids have no direct (surface) light; the table has nothing else.
+    assert np.all(scene.direct[np.isin(mat, [1, 2, 3, 5])] == 0)
+    table = mat == BACKGROUND_CLASS
+    assert np.allclose(T[table].sum(axis=1), scene.direct[table], rtol=1e-4)
+
+
+def test_placement_shuffles_and_moves(scene):
+    other = make_scene("materials", SIZE, projector_rows=720, seed=0, placement=1)
+    a, b = scene.params["containers"], other.params["containers"]
+    assert [c["class_id"] for c in a] == [1, 2, 3, 4, 5]
+    assert sorted(c["class_id"] for c in b) == [1, 2, 3, 4, 5] and [c["class_id"] for c in b] != [1, 2, 3, 4, 5]
+    assert any(c1["centre_mm"] != c2["centre_mm"] for c1, c2 in zip(a, b))
+    cups = make_scene("materials", SIZE, projector_rows=720, seed=0, container="cup")
+    assert set(np.unique(cups.maps["material"])) == {*MATERIAL_CLASSES, BACKGROUND_CLASS}
+    with pytest.raises(InputError, match="container"):
+        make_scene("materials", SIZE, projector_rows=720, container="bucket")
+    with pytest.raises(InputError, match="placement"):
+        make_scene("materials", SIZE, projector_rows=720, placement=-1)
+
+
+# ----------------------------------------------------------------------------- features
+def test_normalization_is_the_papers_and_floor_removes_ambient():
+    rng = np.random.default_rng(0)
+    delays = np.linspace(-1500, 1500, 17)
+    v = rng.uniform(0.1, 1.0, size=(6, 17))
+    f, _ = normalize_profiles(v, delays, floor="none")
+    assert np.allclose(f, area_normalize(v, delays), rtol=1e-5)
+    for floor in ("edge", "min"):
+        g1, _ = normalize_profiles(v, delays, floor=floor)
+        g2, _ = normalize_profiles(v + 0.37, delays, floor=floor)  # ambient: a constant per exposure
+        assert np.allclose(g1, g2, atol=1e-5)
+    g1, _ = normalize_profiles(v, delays, floor="min")
+    assert not np.allclose(f, normalize_profiles(v + 0.37, delays, floor="none")[0], atol=1e-3)
+    assert np.allclose(np.trapezoid(g1, delays * 1e-3, axis=1), 1.0, rtol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def captures():
+    train = simulate_capture(size=SIZE, **TRAIN_SETTINGS)
+    test = simulate_capture(size=SIZE, **TEST_SETTINGS)
+    return train, test
+
+
+@pytest.fixture(scope="module")
+def model(captures):
+    # The five materials, as in the paper (the table, class 6, left out: see the README).
+    train, _ = captures
+    return train_model([train.stack], [train.labels], param_grid=GRID, ignore_classes=(BACKGROUND_CLASS,))
+
+
+# ----------------------------------------------------------------------------- recognition
+def test_held_out_capture_recognized_per_class(captures, model):
+    # Another seed, 1.5x the noise, 3x the ambient light and another placement: >= 90 % per material.
+    _, test = captures
+    for key in ("seed", "placement", "noise", "ambient_e_per_us"):
+        assert test.settings[key] != TRAIN_SETTINGS[key]
+    pred = model.predict(test.stack)
+    truth = np.where(test.labels == BACKGROUND_CLASS, 0, test.labels)
+    s = score(pred, truth, near_wall=test.near_wall, wall_distance_mm=test.wall_distance_mm)
+    assert sorted(model.classes) == sorted(MATERIAL_CLASSES)
+    for name in MATERIAL_CLASSES.values():
+        assert s["accuracy"][name] >= 0.9, (name, s["accuracy"])
+    # The errors fall near the walls: interior pixels are recognized better than those near walls.
+    assert s["errors"]["share_near_wall"] >= s["errors"]["near_wall_pixel_share"]
+    assert s["overall"] > 0.95
+    assert model.training["groups"] == "4x4 image blocks" and model.training["cv_accuracy"] > 0.9
+
+
+def test_model_refuses_another_sweep(captures, model, tmp_path):
+    _, test = captures
+    st = test.stack
+    keep = np.arange(len(st)) != 3  # one image fewer
+    fewer = Stack(st.images[keep], st.delay_us[keep], st.exposure_us[keep], st.lines_per_second)
+    with pytest.raises(InputError, match=r"different sweep.*missing \(delay, exposure\)"):
+        model.predict(fewer, source="fewer.zarr")
+    faster = Stack(st.images, st.delay_us, st.exposure_us, 60_000.0)
+    with pytest.raises(InputError, match="60000 lines/s"):
+        model.predict(faster)
+    shifted = Stack(st.images, st.delay_us + 10.0, st.exposure_us, st.lines_per_second)
+    with pytest.raises(InputError, match="trained on stack profiles"):
+        model.predict(shifted)
+    # A model saved and loaded keeps its definition and refuses the same way.
+    path = model.save(tmp_path / "m.zip")
+    with pytest.raises(InputError, match="different sweep"):
+        load_model(path).predict(fewer)
+
+
+def test_model_file_round_trip_and_no_pickle(captures, model, tmp_path):
+    _, test = captures
+    path = model.save(tmp_path / "model.zip")
+    with zipfile.ZipFile(path) as z:
+        assert sorted(z.namelist()) == ["model.skops", "planeray-model.json"]
+        meta = json.loads(z.read("planeray-model.json"))
+    assert meta["format"] == "planeray-materials-model" and meta["definition"]["kind"] == "stack"
+    assert meta["definition"]["lines_per_second"] == 54_000.0 and len(meta["definition"]["delay_us"]) == 85
+    back = load_model(path)
+    assert np.array_equal(back.predict(test.stack), model.predict(test.stack))
+    assert back.classes == model.classes and back.definition == model.definition
+    # Outputs: an existing model is replaced only on request; a user's file never.
+    with pytest.raises(InputError, match="already exists"):
+        model.save(path)
+    model.save(path, overwrite=True)
+    mine = tmp_path / "notes.zip"
+    mine.write_text("my notes")
+    with pytest.raises(InputError, match="not a planeray materials model"):
+        model.save(mine, overwrite=True)
+    assert mine.read_text() == "my notes"
+
+
+def _rewrite(src, dst, **replace):
+    with zipfile.ZipFile(src) as z, zipfile.ZipFile(dst, "w") as w:
+        for name in z.namelist():
+            w.writestr(name, replace.get(name.replace(".", "_").replace("-", "_"), z.read(name)))
+
+
+def test_tampered_and_foreign_files_fail_clearly(model, tmp_path):
+    good = model.save(tmp_path / "good.zip")
+    # Not a zip at all.
+    junk = tmp_path / "junk.zip"
+    junk.write_bytes(b"\x80\x04 not a model")
+    with pytest.raises(InputError, match="not a zip archive"):
+        load_model(junk)
+    # A zip that is not a model.
+    other = tmp_path / "other.zip"
+    with zipfile.ZipFile(other, "w") as z:
+        z.writestr("readme.txt", "hello")
+    with pytest.raises(InputError, match="not a planeray materials model"):
+        load_model(other)
+    # The estimator's bytes altered: the recorded SHA-256 no longer matches.
+    with zipfile.ZipFile(good) as z:
+        blob = bytearray(z.read("model.skops"))
+        meta = json.loads(z.read("planeray-model.json"))
+    blob[len(blob) // 2] ^= 0xFF
+    bad = tmp_path / "tampered.zip"
+    _rewrite(good, bad, model_skops=bytes(blob))
+    with pytest.raises(InputError, match="SHA-256"):
+        load_model(bad)
+    # An estimator of another type, with a consistent digest: refused by the allowed types, before loading.
+    import hashlib
+
+    import skops.io as sio
+    from sklearn.linear_model import LogisticRegression
+
+    foreign = sio.dumps(LogisticRegression())
+    meta["estimator_sha256"] = hashlib.sha256(foreign).hexdigest()
+    evil = tmp_path / "foreign.zip"
+    _rewrite(good, evil, model_skops=foreign, planeray_model_json=json.dumps(meta).encode())
+    with pytest.raises(InputError, match="types planeray does not load: sklearn.linear_model"):
+        load_model(evil)
+    # A record of another format or a newer version.
+    meta2 = dict(meta, format="something-else")
+    odd = tmp_path / "odd.zip"
+    _rewrite(good, odd, planeray_model_json=json.dumps(meta2).encode())
+    with pytest.raises(InputError, match="not a planeray materials model"):
+        load_model(odd)
+
+
+# ----------------------------------------------------------------------------- label images
+def test_label_images_round_trip_and_refusals(tmp_path):
+    from PIL import Image
+
+    lab = np.zeros((5, 7), np.int64)
+    lab[1:3, 2:5] = 3
+    lab[4, 6] = 6
+    for name in ("l.png", "l.tif"):
+        write_label_image(tmp_path / name, lab)
+        assert np.array_equal(read_label_image(tmp_path / name, shape=(5, 7)), lab)
+    with pytest.raises(InputError, match="the stack 4x7"):
+        read_label_image(tmp_path / "l.png", shape=(4, 7))
+    Image.fromarray(np.zeros((5, 7, 3), np.uint8)).save(tmp_path / "rgb.png")
+    with pytest.raises(InputError, match="grayscale or palette"):
+        read_label_image(tmp_path / "rgb.png")
+    import tifffile
+
+    tifffile.imwrite(tmp_path / "f.tif", np.zeros((5, 7), np.float32))
+    with pytest.raises(InputError, match="integers"):
+        read_label_image(tmp_path / "f.tif")
+
+
+def test_score_counts_and_near_wall_split():
+    truth = np.array([[1, 1, 2, 2], [1, 1, 2, 6]])
+    pred = np.array([[1, 2, 2, 2], [1, 1, 2, 6]])
+    near = np.array([[False, True, False, False], [False, False, False, False]])
+    s = score(pred, truth, near_wall=near)
+    assert s["accuracy"]["fat-free milk"] == 0.75 and s["accuracy"]["2% milk"] == 1.0
+    assert s["accuracy_near_wall"]["fat-free milk"] == 0.0 and s["accuracy_interior"]["fat-free milk"] == 1.0
+    assert s["errors"] == {
+        "material_pixels": 7,
+        "misclassified": 1,
+        "near_wall": 1,
+        "share_near_wall": 1.0,
+        "near_wall_pixel_share": 1 / 7,
+    }
+    assert s["confusion"]["matrix"][0][:2] == [3, 1]
+
+
+def test_camera_noise_factor_keeps_levels():
+    base, noisy = camera_for(), camera_for(noise=2.0, ambient_e_per_us=2.0)
+    assert noisy.signal_scale == pytest.approx(base.signal_scale)
+    assert noisy.read_noise_e / noisy.full_well_e == pytest.approx(2 * base.read_noise_e / base.full_well_e)
+    assert noisy.ambient_e_per_us / noisy.full_well_e == pytest.approx(4 * base.ambient_e_per_us / base.full_well_e)
+    with pytest.raises(InputError, match="noise"):
+        camera_for(noise=0.0)
+
+
+def test_feature_definition_round_trip_and_messages(captures):
+    train, _ = captures
+    _, _, d = stack_features(train.stack)
+    assert FeatureDefinition.from_dict(json.loads(json.dumps(d.to_dict()))) == d
+    assert "17 delays -1500..1500 us x 5 exposures" in d.describe()
+    with pytest.raises(InputError, match="floor"):
+        FeatureDefinition(kind="stack", delay_us=(), exposure_us=(), lines_per_second=1.0, floor="median")
+
+
+# ----------------------------------------------------------------------------- command line
+def test_cli_simulate_train_predict(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    runner = CliRunner()
+
+    def invoke(*args):
+        return runner.invoke(app, [str(a) for a in args])
+
+    res = invoke("materials", "classes")
+    assert res.exit_code == 0 and "toothpaste" in res.output and "13.12" in res.output
+    a, b = tmp_path / "a", tmp_path / "b"
+    res = invoke("materials", "simulate", "--out", a, "--size", 48, 48, "--seed", 0)
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in a.iterdir()} == {"stack.zarr", "labels.png", "near_wall.png", "photo.png", "planeray.json"}
+    meta = json.loads((a / "planeray.json").read_text())
+    assert meta["format"] == "planeray-materials-capture" and meta["classes"]["4"] == "toothpaste"
+    res = invoke("materials", "simulate", "--out", a, "--size", 48, 48)
+    assert res.exit_code == 1 and "--overwrite" in res.output
+    res = invoke(
+        "materials",
+        "simulate",
+        "--out",
+        b,
+        "--size",
+        48,
+        48,
+        "--seed",
+        1,
+        "--placement",
+        2,
+        "--noise",
+        1.2,
+        "--ambient-e-per-us",
+        1.0,
+    )
+    assert res.exit_code == 0, res.output
+    model = tmp_path / "m.zip"
+    res = invoke(
+        "materials",
+        "train",
+        a / "stack.zarr",
+        "--labels",
+        a / "labels.png",
+        "--out",
+        model,
+        "--ignore-class",
+        6,
+        "--cv-folds",
+        3,
+    )
+    assert res.exit_code == 0, res.output
+    assert "cross-validated accuracy" in res.output
+    seg = tmp_path / "seg.png"
+    res = invoke(
+        "materials",
+        "predict",
+        model,
+        b / "stack.zarr",
+        "--out",
+        seg,
+        "--labels",
+        b / "labels.png",
+        "--near-wall",
+        b / "near_wall.png",
+        "--json",
+    )
+    assert res.exit_code == 0, res.output
+    numbers = json.loads(res.output)
+    assert numbers["score"]["overall"] > 0.8
+    assert read_label_image(seg, shape=(48, 48)).max() <= 5
+    # A stack of another sweep is refused in one line.
+    other = tmp_path / "q"
+    res = invoke("materials", "simulate", "--out", other, "--size", 48, 48, "--sweep", "quick")
+    assert res.exit_code == 0, res.output
+    res = invoke("materials", "predict", model, other / "stack.zarr", "--out", tmp_path / "x.png")
+    assert res.exit_code == 1 and "different sweep" in res.output and len(res.output.strip().splitlines()) == 1
+    res = invoke("materials", "predict", a / "labels.png", other / "stack.zarr", "--out", tmp_path / "x.png")
+    assert res.exit_code == 1 and "not a planeray materials model" in res.output
+    res = invoke("materials", "train", a / "stack.zarr", "--labels", a / "labels.png", "--out", model)
+    assert res.exit_code == 1 and "already exists" in res.output
+
+
+@pytest.mark.slow
+def test_report_writes_the_figures_and_numbers(tmp_path):
+    from planeray.experiments.materials import run_materials_report
+
+    out = tmp_path / "report"
+    n = run_materials_report(out, size=48, quick=True, param_grid=GRID)
+    for name in (
+        "fig10a_photo",
+        "fig10b_profiles",
+        "fig10c_segmentation",
+        "fig10d_confusion",
+        "accuracy_vs_noise_ambient",
+        "accuracy_vs_wall_distance",
+        "wall_kernels",
+    ):
+        assert (out / f"{name}.png").stat().st_size > 10_000, name
+    saved = json.loads((out / "materials.json").read_text())
+    assert (
+        saved["stack_profiles"]["floor_edge"]["test"]["accuracy"]
+        == n["stack_profiles"]["floor_edge"]["test"]["accuracy"]
+    )
+    main = saved["stack_profiles"]["floor_edge"]["test"]
+    assert set(main["accuracy_near_wall"]) == set(MATERIAL_CLASSES.values())
+    assert {"noise", "ambient_e_per_us"} <= set(saved["curves"])
+    # The paper's plain normalization does not survive a change of ambient light; the edge floor does.
+    assert saved["stack_profiles"]["floor_none"]["test"]["min_material_accuracy"] < 0.5
+    assert main["min_material_accuracy"] > 0.8
+    assert load_model(out / "materials_model.zip").definition.floor == "edge"
+    with pytest.raises(InputError, match="already exists"):
+        run_materials_report(out, size=48, quick=True)
+
+
+def test_cli_report_prints_classes_without_interior_pixels(tmp_path, monkeypatch):
+    # Every soap pixel can be near a wall: its interior accuracy is None and must print as such.
+    from typer.testing import CliRunner
+
+    import planeray.experiments.materials as exp
+    from planeray.cli import app
+
+    acc = {"fat-free milk": 0.99, "liquid soap": 1.0}
+    fake = {
+        "seconds": 1.0,
+        "stack_profiles": {
+            "floor_edge": {
+                "test": {
+                    "accuracy": acc,
+                    "accuracy_near_wall": {"fat-free milk": 0.9, "liquid soap": 1.0},
+                    "accuracy_interior": {"fat-free milk": 1.0, "liquid soap": None},
+                    "errors": {"share_near_wall": 0.87},
+                }
+            }
+        },
+    }
+    monkeypatch.setattr(exp, "run_materials_report", lambda out, **kw: fake)
+    res = CliRunner().invoke(app, ["materials", "report", "--out", str(tmp_path / "r")])
+    assert res.exit_code == 0, res.output
+    assert "liquid soap: 1.000 (near walls 1.000, away no pixels)" in res.output
+    assert "share of the errors near walls: 0.87" in res.output
