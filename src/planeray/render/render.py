@@ -190,8 +190,6 @@ def _setup(
     if max_depth != -1 and max_depth < 1:
         raise InputError(f"max_depth must be -1 (unbounded) or at least 1, got {max_depth}")
     chosen = choose_variant(rgb=rgb, prefer=variant)
-    if caustics and not chosen.startswith("llvm"):
-        raise InputError(f"the caustic pass needs an llvm variant (Mitsuba runs {chosen}: install libllvm19)")
     mi = mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
     scene_file = Path(scene_file)
@@ -203,8 +201,12 @@ def _setup(
             baseline = float(defaults["planeray_baseline"])
         if projector_aspect is None and "planeray_projector_aspect" in defaults:
             projector_aspect = float(defaults["planeray_projector_aspect"])
+        if caustics is None:
+            caustics = str(defaults.get("planeray_caustics", "false")).strip().lower() in ("true", "1", "yes")
     except ValueError as exc:
         raise InputError(f"a planeray_* default is not a number ({exc})", scene_file) from None
+    if caustics and not chosen.startswith("llvm"):
+        raise InputError(f"the caustic pass needs an llvm variant (Mitsuba runs {chosen}: install libllvm19)")
     if loaded.sensor is None:
         raise InputError(
             "the scene has no perspective sensor: planeray's camera is the file's first sensor", scene_file
@@ -401,7 +403,7 @@ def _common_kwargs(kw):
         "batch_spp": kw.get("batch_spp", 16),
         "max_depth": kw.get("max_depth", -1),
         "rr_depth": kw.get("rr_depth", 5),
-        "caustics": kw.get("caustics", False),
+        "caustics": kw.get("caustics"),
         "caustic_paths": kw.get("caustic_paths"),
         "seed": kw.get("seed", 0),
         "band_rows": kw.get("band_rows", 128),
@@ -422,7 +424,7 @@ def render_transport(
     batch_spp=16,
     max_depth=-1,
     rr_depth=5,
-    caustics=False,
+    caustics=None,
     caustic_paths=None,
     seed=0,
     band_rows=128,
@@ -450,8 +452,9 @@ def render_transport(
     max_depth, rr_depth : int
         Longest path (-1: unbounded; 2: direct light only) and the depth where
         Russian roulette starts, as Mitsuba's ``path``.
-    caustics : bool
-        Add the light-tracing pass for paths whose first bounce is specular.
+    caustics : bool, optional
+        Add the light-tracing pass for paths whose first bounce is specular
+        (default: the file's ``planeray_caustics`` default, else False).
     caustic_paths : int, optional
         Projector paths of that pass (default ``H * W * spp``).
     seed : int
