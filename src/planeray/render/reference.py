@@ -76,7 +76,9 @@ def render_rows(
     spp, max_depth, rr_depth : int
         As Mitsuba's ``path`` integrator.
     seed : int
-        Row ``rows[i]`` is rendered with seed ``seed + rows[i]``.
+        Every row is rendered with this seed: the same camera samples for
+        every row, so the rows of a pixel add up to the full-projector render
+        with the same seed exactly (each sample lights one row).
     progress : callable, optional
         ``progress(1)`` after each row.
 
@@ -91,7 +93,7 @@ def render_rows(
     for v in rows:
         pattern = np.zeros(rig.projector_rows)
         pattern[int(v)] = 1.0
-        out.append(_render(mi, scene, params, key, rig, pattern, spp=spp, seed=seed + int(v)))
+        out.append(_render(mi, scene, params, key, rig, pattern, spp=spp, seed=seed))
         if progress is not None:
             progress(1)
     return np.stack(out) if out else np.zeros((0, int(shape[0]), int(shape[1]), 3 if rgb else 1))

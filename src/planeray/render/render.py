@@ -193,8 +193,8 @@ def _setup(
     mi = mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
     scene_file = Path(scene_file)
-    digest = scene_file_digest(scene_file)
     loaded = load_scene_file(scene_file)
+    digest = scene_file_digest(scene_file)
     defaults = loaded.defaults
     try:
         if baseline is None and "planeray_baseline" in defaults:
