@@ -8,7 +8,7 @@ One module per command group; this file names the commands (in ``planeray --help
 order) and holds the entry point:
 
 * ``simulate.py``   scenes, simulate (built-in scenes on the simulated Episcan)
-* ``render.py``     render (a Mitsuba 3 scene file -> transport store, planeray.render)
+* ``render.py``     render, render-examples (a Mitsuba 3 scene file -> transport store, planeray.render)
 * ``stacks.py``     info, export, import (describe a stack; the import folder format)
 * ``acquire.py``    acquire (a sweep from a device into a resumable native stack), devices (the registry)
 * ``demux.py``      demux (stack -> 3D light transport, Sec. 4)
@@ -69,6 +69,7 @@ def _options(
 app.command()(simulate.scenes)
 app.command()(simulate.simulate)
 app.command()(render.render)
+app.command("render-examples")(render.render_examples)
 app.command()(stacks.info)
 app.command("contact-sheet")(analysis.contact_sheet)
 app.command()(analysis.profiles)

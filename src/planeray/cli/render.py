@@ -22,7 +22,9 @@ def render(
     rows: Annotated[int, typer.Option("--rows", help="Projector rows P.")] = 720,
     size: Annotated[tuple[int, int], typer.Option(help="Camera pixels H W.")] = (128, 128),
     spp: Annotated[int, typer.Option(help="Camera paths per pixel.")] = 64,
-    batch_spp: Annotated[int, typer.Option(help="Camera paths per pixel per batch (the unit of resuming).")] = 16,
+    batch_spp: Annotated[
+        int, typer.Option(help="Camera paths per pixel per batch (the unit of resuming; memory grows with it).")
+    ] = 64,
     max_depth: Annotated[int, typer.Option(help="Longest path, as Mitsuba's path (-1 unbounded; 2 direct only).")] = -1,
     caustics: Annotated[
         bool | None,
@@ -80,3 +82,26 @@ def render(
         f"transport: {out_path}  ({size[0]}x{size[1]}, {rows} rows, offsets -{band_rows}..{band_rows}, "
         f"{len(result.transport.sparse)} sparse entries, {a['variant']}, {a['seconds']:.1f} s)"
     )
+
+
+@_friendly_errors
+def render_examples(
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the stores, figures and numbers.")],
+    size: Annotated[int, typer.Option(help="Camera pixels per side.")] = 128,
+    rows: Annotated[int, typer.Option("--rows", help="Projector rows P.")] = 720,
+    spp: Annotated[int, typer.Option(help="Camera paths per pixel.")] = 64,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    scene: Annotated[list[str] | None, typer.Option(help="Only these examples (repeatable).")] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace what a previous run wrote.")] = False,
+):
+    """Render the shipped example scenes (mirror ball, disco ball, wax candle, room corner): stores + figures."""
+    from ..experiments.render import render_examples_work, run_render_examples
+
+    kw = dict(size=size, projector_rows=rows, spp=spp, seed=seed, names=scene or None)
+    with console.status("loading the example scenes"):
+        total = render_examples_work(**kw)
+    with progress_bar() as bar:
+        task = bar.add_task(f"rendering examples {size}x{size}, {rows} rows, {spp} spp", total=total)
+        summary = run_render_examples(out_dir, overwrite=overwrite, progress=lambda n: bar.advance(task, n), **kw)
+    for name, s in summary.items():
+        out.print(f"{name}: {out_dir / (name + '.zarr')}, {out_dir / (name + '.png')}  ({s['seconds']} s)")

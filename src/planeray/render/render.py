@@ -104,8 +104,8 @@ def labels_from_classes(classes, *, label_fraction=0.1, floor_fraction=1e-3) -> 
     Examples
     --------
     >>> c = np.zeros((4, 1, 3))
-    ... c[0] = [1, 1, 0]
-    ... c[2] = [0.05, 0.5, 0]
+    >>> c[0] = [1, 1, 0]
+    >>> c[2] = [0.05, 0.5, 0]
     >>> labels_from_classes(c).tolist()
     [[1, 3, 0]]
     """
@@ -400,7 +400,7 @@ def _common_kwargs(kw):
         "shape": kw.get("shape", (128, 128)),
         "projector_rows": kw.get("projector_rows", 720),
         "spp": kw.get("spp", 64),
-        "batch_spp": kw.get("batch_spp", 16),
+        "batch_spp": kw.get("batch_spp", 64),
         "max_depth": kw.get("max_depth", -1),
         "rr_depth": kw.get("rr_depth", 5),
         "caustics": kw.get("caustics"),
@@ -421,7 +421,7 @@ def render_transport(
     shape=(128, 128),
     projector_rows=720,
     spp=64,
-    batch_spp=16,
+    batch_spp=64,
     max_depth=-1,
     rr_depth=5,
     caustics=None,
