@@ -437,3 +437,37 @@ def test_cli_render(tmp_path):
     assert T.shape == (12, 12) and attrs["projector_rows"] == 48 and attrs["method"] == "mitsuba_render"
     res = runner.invoke(app, ["render", str(tmp_path / "none.xml"), "--out", str(tmp_path / "x.zarr")])
     assert res.exit_code == 1 and "no such scene file" in res.output and "Traceback" not in res.output
+
+
+@needs_llvm
+def test_viewer_and_scene_registry_take_mitsuba_scenes():
+    from planeray.scenes import is_scene_name, list_scenes
+    from planeray.viewer.session import ViewSettings, open_source
+
+    assert "mitsuba:FILE.xml" in list_scenes(parametric=True) and "mitsuba" not in list_scenes()
+    assert is_scene_name("mitsuba:room_corner") and not is_scene_name("mitsuba") and not is_scene_name("mitsuba:")
+    src = open_source("mitsuba:room_corner", size=16, projector_rows=64)
+    assert src.kind == "scene" and src.shape == (16, 16)
+    image, _ = src.render(ViewSettings(delay_us=0.0, exposure_us=600.0))
+    assert image.shape == (16, 16) and image.max() > 0
+
+
+@needs_llvm
+def test_render_examples_writes_stores_figures_and_numbers(tmp_path):
+    import json
+
+    from planeray.experiments.render import render_examples_work, run_render_examples
+    from planeray.io import read_transport_maps
+
+    ticks = []
+    kw = dict(size=16, projector_rows=64, spp=4, names=["room_corner", "disco_ball"])
+    summary = run_render_examples(tmp_path, progress=ticks.append, **kw)
+    assert sum(ticks) == render_examples_work(**kw)
+    assert summary["disco_ball"]["caustics"] is True  # the file's planeray_caustics default
+    assert summary["room_corner"]["light_fraction"]["diffuse_interreflection"] > 0.1
+    saved = json.loads((tmp_path / "render_examples.json").read_text())
+    assert saved["room_corner"]["labels"] == summary["room_corner"]["labels"]
+    assert (tmp_path / "disco_ball.png").stat().st_size > 1000
+    assert read_transport_maps(tmp_path / "room_corner.zarr")["labels"].shape == (16, 16)
+    with pytest.raises(Exception, match="already exists"):
+        run_render_examples(tmp_path, **kw)
