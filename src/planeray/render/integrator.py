@@ -14,7 +14,7 @@ returns itself, so the row mapping is the renderer's own (row 0 at the top).
 The tracer follows Mitsuba 3's ``path`` / ``volpath`` integrators [2]_ for the
 parts it supports -- any surface BSDF (smooth lobes get next-event estimation,
 delta lobes are followed), ``null`` interfaces, and homogeneous media (free-flight
-sampling, phase-function next-event estimation and sampling, the transmittance
+sampling with a channel drawn per flight and the channels' mean density -- spectral MIS --, phase-function next-event estimation and sampling, the transmittance
 of shadow rays through null interfaces and media) -- with Russian roulette from
 depth ``rr_depth`` and ``max_depth`` counted as Mitsuba does (``2`` = direct light
 only).  It is checked against per-row renders with Mitsuba's own integrators
@@ -202,9 +202,6 @@ def tally_transport(
     specular_seen = mi.Bool(False)
     surfaces = mi.UInt32(0)
     albedo_done = mi.Bool(False)
-    channel = mi.UInt32(0)
-    if C == 3:
-        channel = mi.UInt32(dr.minimum(sampler.next_1d() * 3, 2))
 
     state = (sampler, ray, beta, eta, depth, active, medium, medium_seen, specular_seen, surfaces, albedo_done)
 
@@ -224,6 +221,11 @@ def tally_transport(
 
         # ---------------- homogeneous media: free flight (spectral MIS over channels)
         in_medium = active & (medium != None)  # noqa: E711
+        # a fresh channel per free flight, so the mean of the channels' pdfs is this event's density
+        # (one-sample MIS over channels; a channel fixed per path would need its own pdf, as volpath does)
+        channel = mi.UInt32(0)
+        if C == 3:
+            channel = mi.UInt32(dr.minimum(sampler.next_1d(in_medium) * 3, 2))
         mei = medium.sample_interaction(ray, sampler.next_1d(in_medium), channel, in_medium)
         mei.t = dr.select(si.t < mei.t, dr.inf, mei.t)
         scatter = in_medium & mei.is_valid()
