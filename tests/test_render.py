@@ -364,6 +364,19 @@ def test_scalar_fallback_renders_row_by_row(tmp_path):
         choose_variant()  # back to the default variant for the other tests
     assert r.attrs["variant"] == "scalar_rgb"
     np.testing.assert_allclose(r.transport.full_image(), 0.7, rtol=1e-3)
+    from planeray.errors import InputError
+    from planeray.render import RenderWarning
+
+    try:
+        with pytest.raises(InputError, match="caustic pass needs an llvm variant"):
+            render_transport(path, shape=(8, 8), projector_rows=16, spp=1, caustics=True, variant="scalar")
+        # a file that asks for caustics renders without them, saying so
+        path.write_text(path.read_text().replace("<sensor", '<default name="planeray_caustics" value="true"/><sensor'))
+        with pytest.warns(RenderWarning, match="rendered without it"):
+            r = render_transport(path, shape=(8, 8), projector_rows=16, spp=1, variant="scalar")
+        assert r.attrs["caustics"] is False
+    finally:
+        choose_variant()
     u = r.transport.offsets_rows
     assert r.transport.dense[:, :, np.abs(u) <= 2].sum() / r.transport.dense.sum() > 0.999
 

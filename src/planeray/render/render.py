@@ -53,7 +53,7 @@ LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 
 
 class RenderWarning(UserWarning):
-    """Light outside the stored band was dropped (the message says how much)."""
+    """Light the render leaves out: long-range entries dropped (the message says how much), or a caustic pass skipped."""
 
 
 @dataclass
@@ -201,12 +201,21 @@ def _setup(
             baseline = float(defaults["planeray_baseline"])
         if projector_aspect is None and "planeray_projector_aspect" in defaults:
             projector_aspect = float(defaults["planeray_projector_aspect"])
-        if caustics is None:
+        from_file = caustics is None
+        if from_file:
             caustics = str(defaults.get("planeray_caustics", "false")).strip().lower() in ("true", "1", "yes")
     except ValueError as exc:
         raise InputError(f"a planeray_* default is not a number ({exc})", scene_file) from None
     if caustics and not chosen.startswith("llvm"):
-        raise InputError(f"the caustic pass needs an llvm variant (Mitsuba runs {chosen}: install libllvm19)")
+        if not from_file:
+            raise InputError(f"the caustic pass needs an llvm variant (Mitsuba runs {chosen}: install libllvm19)")
+        warnings.warn(
+            f"{scene_file.name} asks for the caustic pass, which needs an llvm variant (Mitsuba runs {chosen}): "
+            "rendered without it",
+            RenderWarning,
+            stacklevel=3,
+        )
+        caustics = False
     if loaded.sensor is None:
         raise InputError(
             "the scene has no perspective sensor: planeray's camera is the file's first sensor", scene_file
