@@ -90,16 +90,16 @@ def block_z(a1, a2, b1, b2, block=4):
 
 
 def block_z_runs(runs_a, runs_b, block=4):
-    """z-scores of block sums of two estimates, each the mean of independent runs (noise from their spread)."""
+    """z-scores of block sums of two estimates, each the mean of independent runs (noise from their spread per pixel)."""
 
     def blocks(x):
         h, w = x.shape
         return x[: h // block * block, : w // block * block].reshape(h // block, block, w // block, block).sum((1, 3))
 
-    A = np.stack([blocks(x) for x in runs_a])
-    B = np.stack([blocks(x) for x in runs_b])
-    a, b = A.mean(0), B.mean(0)
-    var = A.var(0, ddof=1) / len(A) + B.var(0, ddof=1) / len(B)
+    A, B = np.stack(runs_a), np.stack(runs_b)
+    a, b = blocks(A.mean(0)), blocks(B.mean(0))
+    # pixels are independent: a block's variance is the sum of its pixels' (pooled over the block's pixels)
+    var = blocks(A.var(0, ddof=1) / len(A)) + blocks(B.var(0, ddof=1) / len(B))
     scale = max(np.abs(a).max(), np.abs(b).max())
     lit = (np.abs(a) + np.abs(b) > 1e-6 * scale) & (var > 0)
     return (a - b)[lit] / np.sqrt(var[lit])
