@@ -489,6 +489,23 @@ def test_cli_render(tmp_path):
     assert res.exit_code == 0, res.output
     T, attrs = read_transport(out)
     assert T.shape == (12, 12) and attrs["projector_rows"] == 48 and attrs["method"] == "mitsuba_render"
+    # a file without a sensor: planeray places the camera (rectified rig from a baseline and a field of view)
+    bare = tmp_path / "bare.xml"
+    bare.write_text(
+        scene_xml(tmp_path, PAGE.format(half=50, albedo=0.7)).read_text().split("<sensor")[0]
+        + PAGE.format(half=50, albedo=0.7)
+        + "</scene>"
+    )
+    placed = ["--look-from", "0", "0", "10", "--look-at", "0", "0", "0", "--up", "0", "1", "0", "--vfov", "30"]
+    res = runner.invoke(
+        app, ["render", str(bare), "--out", str(tmp_path / "P.zarr"), "--rows", "16", "--size", "8", "8", *placed]
+    )
+    assert res.exit_code == 0, res.output
+    T, attrs = read_transport(tmp_path / "P.zarr")
+    np.testing.assert_allclose(T.full_image(), 0.7, rtol=1e-4)  # the white-plane check, camera placed by planeray
+    assert attrs["rig"]["vfov_deg"] == 30
+    res = runner.invoke(app, ["render", str(bare), "--out", str(tmp_path / "Q.zarr")])
+    assert res.exit_code == 1 and "no perspective sensor" in res.output
     res = runner.invoke(app, ["render", str(tmp_path / "none.xml"), "--out", str(tmp_path / "x.zarr")])
     assert res.exit_code == 1 and "no such scene file" in res.output and "Traceback" not in res.output
 

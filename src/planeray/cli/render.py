@@ -43,6 +43,13 @@ def render(
     variant: Annotated[
         str | None, typer.Option(help="Force the Mitsuba variant family: llvm or scalar (default: llvm if it loads).")
     ] = None,
+    look_from: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(help="Place the camera here (scene units) instead of the file's sensor; needs --look-at."),
+    ] = None,
+    look_at: Annotated[tuple[float, float, float] | None, typer.Option(help="Point the camera looks at.")] = None,
+    up: Annotated[tuple[float, float, float], typer.Option(help="Camera up direction (with --look-from).")] = (0, 0, 1),
+    vfov: Annotated[float, typer.Option(help="Vertical field of view, degrees (with --look-from).")] = 40.0,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing transport store.")] = False,
     restart: Annotated[bool, typer.Option(help="Discard an unfinished render of other inputs in the way.")] = False,
 ):
@@ -51,6 +58,8 @@ def render(
     from ..scenes.mitsuba_scene import resolve_scene_file
 
     _check_outputs((out_path, "transport"), overwrite=overwrite)
+    if (look_from is None) != (look_at is None):
+        raise ValueError("--look-from and --look-at go together")
     path = resolve_scene_file(scene_file)
     kwargs = dict(
         shape=size,
@@ -66,6 +75,8 @@ def render(
         rgb=rgb,
         baseline=baseline,
         variant=variant,
+        camera=None if look_from is None else (look_from, look_at, up),
+        vfov_deg=None if look_from is None else vfov,
     )
     with console.status(f"loading {path.name}"):
         total = render_work(path, **kwargs)

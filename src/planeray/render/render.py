@@ -177,6 +177,8 @@ def _setup(
     projector_aspect,
     variant,
     max_sparse,
+    camera,
+    vfov_deg,
 ) -> _Setup:
     from ._mitsuba import choose_variant, mitsuba
     from .rig import Rig
@@ -216,19 +218,34 @@ def _setup(
             stacklevel=3,
         )
         caustics = False
-    if loaded.sensor is None:
+    if camera is None and loaded.sensor is None:
         raise InputError(
-            "the scene has no perspective sensor: planeray's camera is the file's first sensor", scene_file
+            "the scene has no perspective sensor: planeray's camera is the file's first sensor, "
+            "or place one with camera= (--look-from/--look-at)",
+            scene_file,
         )
-    probe = Rig.from_sensor(
-        loaded.sensor, baseline=0.0, projector_rows=projector_rows, projector_aspect=projector_aspect
-    )
-    distance = _reference_distance(mi, loaded, probe)
+
+    def make_rig(b):
+        if camera is None:
+            return Rig.from_sensor(
+                loaded.sensor, baseline=b, projector_rows=projector_rows, projector_aspect=projector_aspect
+            )
+        origin, target, up = (np.asarray(c, dtype=np.float64).reshape(3) for c in camera)
+        fov = 40.0 if vfov_deg is None else float(vfov_deg)
+        return Rig.look_at(
+            origin,
+            target,
+            up,
+            vfov_deg=fov,
+            baseline=b,
+            projector_rows=projector_rows,
+            projector_aspect=projector_aspect,
+        )
+
+    distance = _reference_distance(mi, loaded, make_rig(0.0))
     if baseline is None:
         baseline = 0.1 * distance  # planeray's default: a tenth of the working distance
-    rig = Rig.from_sensor(
-        loaded.sensor, baseline=float(baseline), projector_rows=projector_rows, projector_aspect=projector_aspect
-    )
+    rig = make_rig(float(baseline))
     sensor = mi.load_dict(rig.sensor_dict((H, W), rgb=rgb))
     projector = mi.load_dict(rig.projector_dict())
     white = _white_radiance(mi, projector, rig, distance)
@@ -421,6 +438,8 @@ def _common_kwargs(kw):
         "projector_aspect": kw.get("projector_aspect"),
         "variant": kw.get("variant"),
         "max_sparse": kw.get("max_sparse", 4_000_000),
+        "camera": kw.get("camera"),
+        "vfov_deg": kw.get("vfov_deg"),
     }
 
 
@@ -442,6 +461,8 @@ def render_transport(
     projector_aspect=None,
     variant=None,
     max_sparse=4_000_000,
+    camera=None,
+    vfov_deg=None,
     progress=None,
 ) -> RenderResult:
     """Render a Mitsuba scene file's plane-to-ray transport in memory.
@@ -478,6 +499,10 @@ def render_transport(
         Force a variant family (default: llvm where its runtime loads).
     max_sparse : int
         Most long-range entries kept (the largest); the rest is dropped with a :class:`RenderWarning`.
+    camera : ((3,), (3,), (3,)), optional
+        ``(origin, target, up)``: place the camera here instead of the file's sensor
+        (Mitsuba's ``look_at``), with vertical field of view ``vfov_deg`` (default 40).
+    vfov_deg : float, optional
     progress : callable, optional
         ``progress(n)`` with the work units just done (:func:`render_work` gives the total).
 
