@@ -281,7 +281,7 @@ def test_wall_above_a_floor_interreflects_one_sided(tmp_path):
 
 # ------------------------------------------------------------------ driver
 @needs_llvm
-def test_resume_after_a_kill_equals_one_run_and_refuses_other_inputs(tmp_path):
+def test_resume_after_a_kill_equals_one_run_and_refuses_other_inputs(tmp_path, monkeypatch):
     from planeray.errors import InputError
     from planeray.io import read_transport
     from planeray.resumable import partial_path
@@ -301,6 +301,15 @@ def test_resume_after_a_kill_equals_one_run_and_refuses_other_inputs(tmp_path):
             raise Killed
 
     out = tmp_path / "resumed.zarr"
+
+    def die_in_the_first_batch(*args, **kwargs):
+        raise Killed
+
+    with monkeypatch.context() as m:
+        m.setattr("planeray.render.render._run_unit", die_in_the_first_batch)
+        with pytest.raises(Killed):
+            render_to_store(path, out, **kw)
+    assert not partial_path(out).exists()  # nothing finished: nothing left behind
     with pytest.raises(Killed):
         render_to_store(path, out, progress=die_after_two, **kw)
     assert partial_path(out).exists() and not out.exists()

@@ -577,7 +577,7 @@ def render_to_store(
 
     from ..io import write_transport
     from ..io.atomic import check_replaceable
-    from ..resumable import done_units, mark_done, open_partial, partial_path
+    from ..resumable import discard_if_empty, done_units, mark_done, open_partial, partial_path
     from ..timing import PAPER_LINES_PER_SECOND
 
     out = Path(out)
@@ -614,16 +614,20 @@ def render_to_store(
     else:
         full, classes, albedo = np.zeros((C, P, H, W)), np.zeros((4, H, W)), np.zeros((H, W))
     start = time.perf_counter()
-    for i in range(n_done, len(units)):
-        t, c, a = _run_unit(setup, units[i])
-        full, classes, albedo = full + t, classes + c, albedo + a
-        nxt = (i + 1) % 2
-        group["sum_T"][nxt] = full
-        group["sum_classes"][nxt] = classes
-        group["sum_albedo"][nxt] = albedo
-        mark_done(group, i)  # the commit: buffer nxt is now current
-        if progress is not None:
-            progress(1)
+    try:
+        for i in range(n_done, len(units)):
+            t, c, a = _run_unit(setup, units[i])
+            full, classes, albedo = full + t, classes + c, albedo + a
+            nxt = (i + 1) % 2
+            group["sum_T"][nxt] = full
+            group["sum_classes"][nxt] = classes
+            group["sum_albedo"][nxt] = albedo
+            mark_done(group, i)  # the commit: buffer nxt is now current
+            if progress is not None:
+                progress(1)
+    except BaseException:
+        discard_if_empty(out)  # a run that finished no batch leaves nothing behind
+        raise
     result = _finish(setup, full, classes, albedo, seconds=time.perf_counter() - start)
     attrs = dict(result.attrs)
     attrs["lines_per_second"] = float(lines_per_second or PAPER_LINES_PER_SECOND)
