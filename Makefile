@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test lint format bench bench-demux bench-mc bench-viewer browser clean venv
+.PHONY: demo test lint format bench bench-demux bench-mc bench-viewer bench-mitsuba browser llvm clean venv
 
 venv: $(VENV)/.installed
 
@@ -28,7 +28,19 @@ browser:
 		echo "note: no chromium, so the browser tests will be skipped; install it (Debian: sudo apt-get install chromium)"; \
 	fi
 
-test: venv browser
+# Mitsuba's llvm variants (planeray render: the one-pass tally) need LLVM >= 16 at run time; Debian 12
+# ships 14/15 by default.  As root (CI) libllvm19 is installed with apt; without it planeray renders
+# row by row in Mitsuba's scalar variant (slower) and the one-pass tests are skipped.
+llvm:
+	@if ls /usr/lib/x86_64-linux-gnu/libLLVM.so.19* /usr/lib/x86_64-linux-gnu/libLLVM-19* /usr/lib/llvm-19/lib/libLLVM* 2>/dev/null | grep -q . || [ -n "$$DRJIT_LIBLLVM_PATH" ]; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing libllvm19 for Mitsuba's llvm variants (apt-get install libllvm19)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null; \
+	else \
+		echo "note: no LLVM >= 16, so planeray render falls back to row-by-row scalar rendering; install it (Debian: sudo apt-get install libllvm19)"; \
+	fi
+
+test: venv browser llvm
 	$(PY) -m pytest -q
 
 lint: venv
@@ -47,6 +59,9 @@ bench-demux: venv
 
 bench-viewer: venv browser
 	$(PY) benchmarks/bench_viewer.py --sizes 128 512
+
+bench-mitsuba: venv llvm
+	$(PY) benchmarks/bench_render_mitsuba.py --size 64 --rows 720 --spp 64
 
 bench-mc: venv
 	$(PY) benchmarks/bench_mc.py --plot $(OUT)/mc_vs_mitsuba.png

@@ -35,6 +35,7 @@ LAYERS = [
     "calibration",
     "mc",
     "kernels",
+    "render",
     "scenes",
     "devices",
     "acquire",

@@ -19,7 +19,7 @@ The pipeline, one module (or subpackage) per stage, dependencies pointing down i
 :mod:`~planeray.acquire`, :mod:`~planeray.calibration`, :mod:`~planeray.io`,
 :mod:`~planeray.demux`, :mod:`~planeray.synthesis`, :mod:`~planeray.profiles`,
 :mod:`~planeray.classify`, :mod:`~planeray.baselines`, :mod:`~planeray.mc`,
-:mod:`~planeray.study`, :mod:`~planeray.figures`, :mod:`~planeray.experiments`.
+:mod:`~planeray.study`, :mod:`~planeray.render`, :mod:`~planeray.figures`, :mod:`~planeray.experiments`.
 """
 
 from __future__ import annotations
@@ -84,6 +84,8 @@ _EXPORTS = {
     "Medium": "medium",
     "mc_line_profile": "mc",
     "line_kernel": "kernels",
+    # any Mitsuba 3 scene -> transport
+    "render_transport": "render",
 }
 
 _SUBMODULES = {
@@ -103,6 +105,7 @@ _SUBMODULES = {
     "baselines",
     "mc",
     "kernels",
+    "render",
     "study",
     "figures",
     "experiments",

@@ -8,6 +8,7 @@ One module per command group; this file names the commands (in ``planeray --help
 order) and holds the entry point:
 
 * ``simulate.py``   scenes, simulate (built-in scenes on the simulated Episcan)
+* ``render.py``     render, render-examples (a Mitsuba 3 scene file -> transport store, planeray.render)
 * ``stacks.py``     info, export, import (describe a stack; the import folder format)
 * ``acquire.py``    acquire (a sweep from a device into a resumable native stack), devices (the registry)
 * ``demux.py``      demux (stack -> 3D light transport, Sec. 4)
@@ -38,6 +39,7 @@ from . import (
     demux,
     materials,
     mc,
+    render,
     simulate,
     stacks,
     study,
@@ -66,6 +68,8 @@ def _options(
 # Commands, in the order `planeray --help` lists them.
 app.command()(simulate.scenes)
 app.command()(simulate.simulate)
+app.command()(render.render)
+app.command("render-examples")(render.render_examples)
 app.command()(stacks.info)
 app.command("contact-sheet")(analysis.contact_sheet)
 app.command()(analysis.profiles)

@@ -19,14 +19,19 @@ def scenes():
     from ..scenes import list_scenes
 
     table = Table("scene", "what it shows")
-    for name, description in list_scenes().items():
+    for name, description in list_scenes(parametric=True).items():
         table.add_row(name, description)
     out.print(table)
 
 
 @_friendly_errors
 def simulate(
-    scene: Annotated[str, typer.Argument(help="Built-in scene (see `planeray scenes`).")],
+    scene: Annotated[
+        str,
+        typer.Argument(
+            help="Built-in scene (see `planeray scenes`), or mitsuba:FILE.xml (a Mitsuba 3 scene rendered with `planeray render`)."
+        ),
+    ],
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Stack to write (Zarr directory).")],
     size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
     projector_rows: Annotated[

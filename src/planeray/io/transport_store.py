@@ -79,7 +79,9 @@ def read_transport_maps(path) -> dict:
     return maps
 
 
-def write_transport(transport: Transport, path, *, attrs: dict | None = None, overwrite: bool = False) -> Path:
+def write_transport(
+    transport: Transport, path, *, attrs: dict | None = None, overwrite: bool = False, arrays: dict | None = None
+) -> Path:
     """Write a transport to a Zarr v3 store, atomically.
 
     Parameters
@@ -94,6 +96,11 @@ def write_transport(transport: Transport, path, *, attrs: dict | None = None, ov
         the dict returned by :func:`read_transport` can be passed back unchanged.
     overwrite : bool
         Replace an existing store at ``path`` (atomically).
+    arrays : dict of str to ndarray, optional
+        Further arrays stored beside ``T`` in the same atomic write (per-pixel
+        ``(H, W)`` maps, read back by :func:`read_transport_maps`, or others such
+        as a rendered scene's colour band ``T_rgb``).  Names may not be ``T`` or
+        a sparse array's.
 
     Returns
     -------
@@ -111,6 +118,10 @@ def write_transport(transport: Transport, path, *, attrs: dict | None = None, ov
     out = transport_attrs(transport.offsets_rows, transport.geometry.projector_rows, attrs=attrs, path=path)
     dense = np.asarray(transport.dense, dtype=np.float32)
     h, w, u = dense.shape
+    arrays = dict(arrays or {})
+    for name in arrays:
+        if name == "T" or name in SPARSE_ARRAYS:
+            raise TransportError(f"array name {name!r} is reserved", path)
     with atomic_directory(path, overwrite=overwrite, kind="transport", error=TransportError) as tmp:
         group = zarr.open_group(str(tmp), mode="w", zarr_format=3)
         chunks = (max(min(h, 64), 1), max(min(w, 64), 1), max(u, 1))
@@ -123,6 +134,8 @@ def write_transport(transport: Transport, path, *, attrs: dict | None = None, ov
             create_array(group, "sparse_col", data=np.asarray(sparse.col, dtype=np.int32))
             create_array(group, "sparse_offset", data=np.asarray(sparse.offset, dtype=np.int32))
             create_array(group, "sparse_value", data=np.asarray(sparse.value, dtype=np.float32))
+        for name, data in arrays.items():
+            create_array(group, name, data=np.asarray(data))
         group.attrs.update(out)
     return path
 

@@ -4,20 +4,24 @@ from .base import (
     EFFECTS,
     Scene,
     footprint_kernel,
+    is_scene_name,
     list_scenes,
     make_scene,
     register_scene,
     representative_pixels,
     scene_offsets,
+    split_scene_name,
 )
 
 __all__ = [
     "EFFECTS",
     "Scene",
     "footprint_kernel",
+    "is_scene_name",
     "list_scenes",
     "make_scene",
     "register_scene",
     "representative_pixels",
     "scene_offsets",
+    "split_scene_name",
 ]

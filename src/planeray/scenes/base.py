@@ -26,6 +26,8 @@ __all__ = [
     "register_scene",
     "make_scene",
     "list_scenes",
+    "is_scene_name",
+    "split_scene_name",
     "scene_offsets",
     "footprint_kernel",
     "DEFAULT_BAND_ROWS",
@@ -93,19 +95,28 @@ class Scene:
 class _Entry:
     build: Callable[..., Scene]
     description: str
+    argument: str | None = None
 
 
 _REGISTRY: dict[str, _Entry] = {}
 _DISCOVERED = False
 
 
-def register_scene(name: str, description: str):
-    """Decorator registering ``build(shape, projector_rows, seed, **params) -> Scene``."""
+def register_scene(name: str, description: str, *, argument: str | None = None):
+    """Decorator registering ``build(shape, projector_rows, seed, **params) -> Scene``.
+
+    A *parametric* scene takes an argument in its name, ``NAME:ARGUMENT`` (the
+    ``mitsuba`` scene: ``mitsuba:path/to/scene.xml``); ``argument`` names it for
+    help texts, and ``build`` receives it as the keyword ``argument``.
+    Parametric scenes are listed by ``list_scenes(parametric=True)`` only.
+    """
 
     def deco(build):
         if name in _REGISTRY and _REGISTRY[name].build is not build:
             raise ValueError(f"scene {name!r} registered twice")
-        _REGISTRY[name] = _Entry(build, description)
+        if ":" in name:
+            raise ValueError(f"scene names may not contain ':', got {name!r}")
+        _REGISTRY[name] = _Entry(build, description, argument)
         return build
 
     return deco
@@ -122,10 +133,37 @@ def _discover() -> None:
     _DISCOVERED = True
 
 
-def list_scenes() -> dict[str, str]:
-    """Names and one-line descriptions of all registered scenes."""
+def list_scenes(*, parametric: bool = False) -> dict[str, str]:
+    """Names and one-line descriptions of the registered scenes.
+
+    With ``parametric``, the scenes that take an argument are listed too, as
+    ``NAME:ARGUMENT`` (e.g. ``mitsuba:FILE.xml``).
+    """
     _discover()
-    return {k: v.description for k, v in sorted(_REGISTRY.items())}
+    out = {k: v.description for k, v in sorted(_REGISTRY.items()) if v.argument is None}
+    if parametric:
+        out.update({f"{k}:{v.argument}": v.description for k, v in sorted(_REGISTRY.items()) if v.argument})
+    return out
+
+
+def split_scene_name(text: str) -> tuple[str, str | None]:
+    """``"mitsuba:room.xml"`` -> ``("mitsuba", "room.xml")``; ``"wax"`` -> ``("wax", None)``."""
+    name, sep, argument = str(text).partition(":")
+    return name, (argument if sep else None)
+
+
+def is_scene_name(text: str) -> bool:
+    """True if ``text`` names a registered scene (``NAME`` or, for a parametric one, ``NAME:ARGUMENT``).
+
+    Examples
+    --------
+    >>> is_scene_name("wax"), is_scene_name("mitsuba:room.xml"), is_scene_name("wax:x"), is_scene_name("nope")
+    (True, True, False, False)
+    """
+    _discover()
+    name, argument = split_scene_name(text)
+    entry = _REGISTRY.get(name)
+    return entry is not None and (argument is None) == (entry.argument is None) and argument != ""
 
 
 def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None, seed: int = 0, **params) -> Scene:
@@ -134,7 +172,8 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
     Parameters
     ----------
     name : str
-        One of :func:`list_scenes`.
+        One of :func:`list_scenes`, or ``NAME:ARGUMENT`` for a parametric scene
+        (``mitsuba:scene.xml``: :mod:`planeray.scenes.mitsuba_scene`).
     shape : (int, int)
         Camera image ``(H, W)``.
     projector_rows : int, optional
@@ -153,14 +192,23 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
     ['corner', 'diffuse_plane', 'disco_ball', 'materials', 'mirror_ball', 'wax']
     """
     _discover()
+    full_name = name
+    name, argument = split_scene_name(name)
     if name not in _REGISTRY:
-        raise ValueError(f"unknown scene {name!r}; choose one of {sorted(_REGISTRY)}")
+        raise ValueError(f"unknown scene {full_name!r}; choose one of {sorted(list_scenes(parametric=True))}")
+    entry = _REGISTRY[name]
+    if entry.argument is not None and not argument:
+        raise ValueError(f"scene {name!r} needs an argument: {name}:{entry.argument}")
+    if entry.argument is None and argument is not None:
+        raise ValueError(f"scene {name!r} takes no argument, got {full_name!r}")
+    if argument is not None:
+        params["argument"] = argument
     H, W = (int(shape[0]), int(shape[1]))
     if H < 8 or W < 8:
         raise ValueError(f"scene size must be at least 8x8, got {H}x{W}")
-    scene = _REGISTRY[name].build((H, W), projector_rows, int(seed), **params)
+    scene = entry.build((H, W), projector_rows, int(seed), **params)
     scene.params = {
-        "name": name,
+        "name": full_name,
         "shape": [H, W],
         "projector_rows": scene.geometry.projector_rows,
         "seed": int(seed),

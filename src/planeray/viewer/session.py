@@ -724,12 +724,12 @@ def open_source(
     (dtype('float32'), 'band  t_d 0 us  t_e 600 us')
     """
     from ..io import read_stack, read_transport
-    from ..scenes import list_scenes, make_scene
+    from ..scenes import is_scene_name, list_scenes, make_scene
 
     text = str(path)
     p = Path(path)
-    scenes = list_scenes()
-    if not p.exists() and text in scenes and truth is not None:
+    scenes = list_scenes(parametric=True)
+    if not p.exists() and is_scene_name(text) and truth is not None:
         raise InputError("a scene is its own ground truth; --truth is for stacks and transport stores")
     truth_T = None
     if truth is not None:
@@ -753,7 +753,7 @@ def open_source(
         return TransportSource(
             T, name=text, lines_per_second=lps, truth=truth_T, truth_scale=truth_scale, patterns=pats, attrs=attrs
         )
-    if text not in scenes:
+    if not is_scene_name(text):
         raise InputError(f"no such file or folder, and not a scene name (scenes: {', '.join(scenes)})", text)
     scene = make_scene(text, (int(size), int(size)), projector_rows=projector_rows, seed=int(seed))
     pats = {Path(v).stem: syn.load_pattern(v, scene.geometry.projector_rows) for v in patterns}
