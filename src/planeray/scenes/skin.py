@@ -123,7 +123,7 @@ __all__ = [
 SKIN_BAND_ROWS = 64
 #: Photons of the shipped vein tables and of the background kernels of other tones.
 TABLE_PHOTONS = 400_000
-KERNEL_PHOTONS = 200_000
+KERNEL_PHOTONS = 100_000
 #: Depth of the vein's top and its diameter, as tabulated (mm).
 VEIN_DEPTH_RANGE_MM = (float(TABLE_DEPTHS_MM[0]), float(TABLE_DEPTHS_MM[-1]))
 VEIN_DIAMETER_RANGE_MM = (float(TABLE_DIAMETERS_MM[0]), float(TABLE_DIAMETERS_MM[-1]))
