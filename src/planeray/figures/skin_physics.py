@@ -56,7 +56,7 @@ def vein_validation_figure(rows, *, out=None):
     colors = [f"C{i % 10}" for i in range(len(rows))]
     ax.errorbar(sb, sf, xerr=2 * se, fmt="none", ecolor="0.5", lw=0.8)
     ax.scatter(sb, sf, c=colors, s=40, label="short-range band (500 us / 200 us)", zorder=3)
-    ax.scatter(eb, ef, c=colors, marker="s", s=25, facecolors="none", label="epipolar band (|u| <= 2)")
+    ax.scatter(eb, ef, edgecolors=colors, marker="s", s=25, facecolors="none", label="epipolar band (|u| <= 2)")
     top = max(sb.max(), sf.max(), ef.max(), eb.max(), 0.05) * 1.1
     ax.plot([0, top], [0, top], "k-", lw=0.8)
     ax.fill_between([0, top], [0, 0.9 * top], [0, 1.1 * top], color="0.9", label="+-10 %")
