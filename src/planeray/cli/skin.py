@@ -85,10 +85,10 @@ def validate(
     wavelength: Annotated[int, typer.Option("--wavelength", "--wavelength-nm", help="638 (red) or 850 (nm).")] = 638,
 ):
     """Check the fast vein model against brute-force Monte Carlo and the layers against adding-doubling."""
-    from ..experiments.skin_physics import VALIDATION_CASES, run_skin_validation
+    from ..experiments.skin_physics import DARK_CASES, VALIDATION_CASES, run_skin_validation
 
     with progress_bar() as bar:
-        task = bar.add_task("brute-force Monte Carlo", total=len(VALIDATION_CASES))
+        task = bar.add_task("brute-force Monte Carlo", total=len(VALIDATION_CASES) + len(DARK_CASES))
         rep = run_skin_validation(
             out_dir, n_photons=n_photons, wavelength_nm=wavelength, progress=lambda k: bar.advance(task, k)
         )
@@ -96,6 +96,11 @@ def validate(
         out.print(
             f"{r['angle_deg']:>4.0f} deg top {r['depth_mm']:g} mm D {r['diameter_mm']:g} mm rho {r['rho_rows']:+.0f}: "
             f"short-range contrast {r['short_brute']:.3f} (brute) {r['short_fast']:.3f} (fast)"
+        )
+    for r in rep["dark_skin_cases"]:
+        out.print(
+            f"dark skin, {r['angle_deg']:.0f} deg top {r['depth_mm']:g} mm: short-range contrast "
+            f"{r['short_brute']:.3f} (brute) {r['short_fast']:.3f} (fast, fair-skin table)"
         )
     ad = rep["adding_doubling"]
     out.print(

@@ -31,6 +31,7 @@ from ..timing import PAPER_LINES_PER_SECOND, band_bin_weights, band_centre_rows,
 
 __all__ = [
     "VALIDATION_CASES",
+    "DARK_CASES",
     "SHORT_RANGE_DELAY_US",
     "SHORT_RANGE_EXPOSURE_US",
     "short_range_weights",
@@ -56,6 +57,10 @@ VALIDATION_CASES = (
     (90.0, 2.0, 4.0, 0.0),
     (45.0, 2.0, 2.0, 0.0),
 )
+
+
+#: Cases checked on dark skin (melanosome fraction 0.3) with the fair skin's table.
+DARK_CASES = ((0.0, 2.0, 2.0, 0.0), (90.0, 2.0, 2.0, 0.0))
 
 
 def short_range_weights(offsets_rows, *, delay_us=SHORT_RANGE_DELAY_US, exposure_us=SHORT_RANGE_EXPOSURE_US):
@@ -189,8 +194,14 @@ def layered_adding_doubling(*, wavelength_nm=638, tone="fair", n_photons=200_000
 def run_skin_validation(out=None, *, n_photons=200_000, wavelength_nm=638, progress=None) -> dict:
     """Both checks; with ``out`` (a folder) writes ``skin_validation.json`` and ``skin_validation.png``."""
     rows = vein_validation(wavelength_nm=wavelength_nm, n_photons=n_photons, progress=progress)
+    # Dark skin reuses the fair skin's vein table (with its own background kernel): check it.
+    dark = vein_validation(
+        wavelength_nm=wavelength_nm, tone="dark", cases=DARK_CASES, n_photons=n_photons, progress=progress
+    )
     ad = layered_adding_doubling(wavelength_nm=wavelength_nm, n_photons=n_photons)
-    report = dict(wavelength_nm=wavelength_nm, n_photons=n_photons, adding_doubling=ad, cases=rows)
+    report = dict(
+        wavelength_nm=wavelength_nm, n_photons=n_photons, adding_doubling=ad, cases=rows, dark_skin_cases=dark
+    )
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
