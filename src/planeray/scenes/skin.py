@@ -73,7 +73,7 @@ Assumptions
 -----------
 * Vein tables are traced per wavelength and layer thicknesses for fair (3 % melanosomes)
   and dark (30 %) skin: the melanin changes the vein's contrast (dark skin: +6 to +19 % in
-  the short-range band, -25 to -30 % in the epipolar band for veins 1-3 mm deep), so other
+  the short-range band, -26 to -35 % in the epipolar band for veins 1-3 mm deep), so other
   tones interpolate the log ratio linearly in the melanosome fraction (clamped below fair)
   and get their own background kernel ``K0``.
 * Veins are locally straight (the nearest segment of the centreline gives ``rho`` and the
