@@ -9,7 +9,11 @@ never waits for Monte Carlo:
   kernel with 10^6 photons and the kernels beside a wall at 15 distances and 3 angles
   with 10^5 photons each; :func:`planeray.mc.wall.mc_wall_table`), for the default
   (Narasimhan et al.) media and for the Jensen et al. milks of the report's robustness
-  check.  The slab profiles they trace on the way are not shipped (the tables hold them).
+  check.  The slab profiles they trace on the way are not shipped (the tables hold them);
+* the ``skin`` scene's vein perturbation tables (``skin-*.npz``: fair and dark skin at 638
+  and 850 nm, 400,000 photons each; :func:`planeray.mc.layered.mc_vein_table`) and the
+  background kernels of the tones in between (``layered-*.npz``, 100,000 photons each;
+  tests/test_skin.py checks they are all shipped).
 
 Run after any change to the MC engine, the wall runs or a scene's medium defaults (the
 engine and wall versions and all parameters are part of every cache key, so stale tables
@@ -28,10 +32,15 @@ import time
 from pathlib import Path
 
 from planeray.mc.cache import TABLES_DIR
+from planeray.optical_data_skin import SKIN_TONES
 from planeray.scenes import list_scenes, make_scene
 
 #: Scene builds beyond the defaults whose kernels ship too: (scene, parameters).
-EXTRA = [("materials", {"source": "jensen"})]
+EXTRA = [("materials", {"source": "jensen"})] + [
+    ("skin", {"wavelength_nm": w, "tone": t}) for w in (638, 850) for t in SKIN_TONES if (w, t) != (638, "fair")
+]
+#: Which of a scene's cache entries ship (default: all it traced).
+SHIPPED = {"materials": "wall-*.npz"}
 
 
 def main() -> int:
@@ -44,7 +53,7 @@ def main() -> int:
             t0 = time.perf_counter()
             before = set(cache.glob("*.npz"))
             make_scene(name, (64, 64), projector_rows=720, seed=0, **params)
-            pattern = "wall-*.npz" if name == "materials" else "*.npz"
+            pattern = SHIPPED.get(name, "*.npz")
             for f in sorted(set(cache.glob(pattern)) - before):
                 if not (TABLES_DIR / f.name).exists():
                     shutil.copy(f, TABLES_DIR / f.name)

@@ -52,6 +52,7 @@ _EXPORTS = {
     "CameraModel": "camera",
     "make_scene": "scenes",
     "list_scenes": "scenes",
+    "skin_veins": "scenes.skin",
     "SimulatedEpiscan": "devices",
     "ReplayDevice": "devices",
     "simulate_stack": "acquire",

@@ -18,6 +18,7 @@ order) and holds the entry point:
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
 * ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
+* ``skin.py``       skin simulate | validate (the skin-and-veins scene, Sec. 10)
 * ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
@@ -41,6 +42,7 @@ from . import (
     mc,
     render,
     simulate,
+    skin,
     stacks,
     study,
     view,
@@ -90,6 +92,7 @@ app.add_typer(calibrate.calibrate_app, name="calibrate")
 app.add_typer(mc.mc_app, name="mc")
 app.add_typer(study.study_app, name="study")
 app.add_typer(materials.materials_app, name="materials")
+app.add_typer(skin.skin_app, name="skin")
 
 
 def main(argv: list[str] | None = None):
