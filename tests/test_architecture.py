@@ -44,6 +44,7 @@ LAYERS = [
     "classify",
     "materials",
     "baselines",
+    "skin",
     "study",
     "figures",
     "experiments",
