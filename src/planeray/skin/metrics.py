@@ -89,7 +89,7 @@ def background_bands(vein_id, *, gap_px=None, width_px=None, exclude=None) -> di
     Examples
     --------
     >>> ids = np.zeros((9, 9), int)
-    ... ids[:, 4] = 1
+    >>> ids[:, 4] = 1
     >>> band = background_bands(ids, gap_px=1, width_px=2)[1]
     >>> band[0].astype(int).tolist()
     [0, 1, 1, 0, 0, 0, 1, 1, 0]
@@ -196,8 +196,8 @@ def vein_metrics(
     >>> rng = np.random.default_rng(0)
     >>> img = 1.0 + 0.01 * rng.standard_normal((40, 40))
     >>> ids = np.zeros((40, 40), int)
-    ... ids[:, 10:12] = 1
-    ... ids[:, 28:30] = 2
+    >>> ids[:, 10:12] = 1
+    >>> ids[:, 28:30] = 2
     >>> img[:, 10:12] -= 0.05
     >>> m = vein_metrics(img, ids)
     >>> [v["detected"] for v in m["veins"]], m["n_detected"]
