@@ -66,6 +66,7 @@ __all__ = [
     "best_delay_by_depth",
     "depth_from_delay_map",
     "run_skin_compare",
+    "compare_steps",
 ]
 
 REPORT_FORMAT = "planeray-skin-report"
@@ -225,6 +226,13 @@ def depth_from_delay_map(delay_map_us, scene, valid=None) -> dict:
     pix = _fit(delay_map_us[on], depth[on])
     vein = _fit([v["delay_us"] for v in per_vein], [v["depth_mm"] for v in per_vein])
     return {"pixels": pix, "veins": per_vein, "per_vein_fit": vein}
+
+
+def compare_steps(quick: bool = False) -> int:
+    """Progress steps of :func:`run_skin_compare` (conditions, ambient levels, sweep, enhancement, figures)."""
+    n_cond = len(QUICK_CONDITIONS) if quick else len(CONDITIONS)
+    n_lev = sum(1 for k in AMBIENT_LEVELS if (k in QUICK_LEVELS or not quick))
+    return n_cond + n_lev + 3
 
 
 def _csv(rows: list[dict]) -> str:
