@@ -47,8 +47,12 @@ def _fmt(x, f="{:.2f}"):
 
 
 def show_image(ax, image, *, valid=None, title=None):
-    """Grayscale image with its 1-99 % range over ``valid`` pixels; axes off."""
+    """Grayscale image with its 1-99 % range over ``valid`` pixels, cropped to their rows; axes off."""
     img = np.asarray(image, np.float64)
+    if valid is not None and np.any(valid):  # crop to the rows the metrics use
+        valid = np.asarray(valid, bool)
+        rows = np.flatnonzero(valid.any(axis=1))
+        img, valid = img[rows[0] : rows[-1] + 1], valid[rows[0] : rows[-1] + 1]
     vals = img[valid] if valid is not None and np.any(valid) else img.ravel()
     vals = vals[np.isfinite(vals)]
     lo, hi = np.percentile(vals, [1, 99]) if vals.size else (0.0, 1.0)
@@ -67,14 +71,14 @@ def methods_figure(panels, *, methods=None, out=None):
     """
     methods = list(methods or panels[0]["images"])
     n, m = len(panels), len(methods) + 1
-    fig = new_figure((1.75 * m, 1.9 * n + 0.3))
+    fig = new_figure((1.75 * m, 2.1 * n + 0.4))
     axes = np.atleast_2d(fig.subplots(n, m, squeeze=False))
     for i, p in enumerate(panels):
         ids = np.asarray(p["truth"]["vein_id"])
         mask_img = np.where(ids > 0, 1.0, 0.0)
         if p["truth"].get("exclude") is not None:
             mask_img = np.where(p["truth"]["exclude"], 0.5, mask_img)
-        show_image(axes[i, 0], mask_img, title=f"{p['condition']}\nveins (truth)")
+        show_image(axes[i, 0], mask_img, valid=p["valid"], title=f"{p['condition']}\nveins (truth; grey: hair)")
         for j, meth in enumerate(methods, start=1):
             mt = p["metrics"][meth]
             show_image(
