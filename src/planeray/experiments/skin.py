@@ -12,8 +12,9 @@ scene and writes its numbers and figures:
 2. **Ambient light (Fig. 13).**  The light-skin, 638 nm scene under
    :data:`planeray.skin.ambient.AMBIENT_LEVELS` (dark room to sunlight and the brightest
    surgical lamp): pooled CNR of every method against the illuminance.
-3. **Best delay against depth.**  A delay sweep (exposure 600 us, delays 400-1500 us):
-   per vein, the delay of highest CNR, against the vein's depth; a straight-line fit.
+3. **Best delay against depth.**  A delay sweep (exposure 600 us, delays 400-1500 us, three
+   noise realizations): per vein, the delay of highest mean CNR, against the vein's depth; a
+   straight-line fit.
 4. **Contrast enhancement (Eq. 7, Fig. 14).**  The same sweep through
    :func:`planeray.skin.enhance.enhance_contrast`: CNR and detections against the best
    single delay image, and the blurred delay map against the ground-truth depth of the vein
@@ -169,19 +170,33 @@ def _fit(x, y) -> dict | None:
 def best_delay_by_depth(images, delays_us, scene, valid=None) -> dict:
     """Per vein: CNR at every delay, the delay of highest CNR, the vein's depth; fit best delay ~ depth.
 
-    Only veins detected (CNR >= 1, darker than their band) at their best delay enter the fit.
+    ``images`` is one sweep (N, H, W) or several noise realizations of it (R, N, H, W): the
+    per-vein CNR is then averaged over them before the argmax (a steadier best delay).  Only
+    veins detected (mean CNR >= 1, darker than their band in most realizations) at their best
+    delay enter the fit.
     """
     t = scene_truth(scene)
-    per_delay = [
-        vein_metrics(
+    stacks = np.asarray(images)
+    stacks = stacks[None] if stacks.ndim == 3 else stacks
+
+    def metrics(im):
+        return vein_metrics(
             im, t["vein_id"], exclude=t["exclude"], depth_mm=t["depth_mm"], diameter_mm=t["diameter_mm"], valid=valid
         )
-        for im in images
-    ]
+
+    runs = [[metrics(im) for im in sweep] for sweep in stacks]  # [repeat][delay]
+    per_delay = runs[0]
     veins = []
     for j, v in enumerate(per_delay[0]["veins"]):
-        cnrs = [pd["veins"][j]["cnr"] for pd in per_delay]
-        dets = [pd["veins"][j]["detected"] for pd in per_delay]
+        cnrs, dets = [], []
+        for i in range(len(delays_us)):
+            vals_r = [run[i]["veins"][j]["cnr"] for run in runs]
+            cnrs.append(None if any(c is None for c in vals_r) else float(np.mean(vals_r)))
+            dets.append(
+                cnrs[-1] is not None
+                and cnrs[-1] >= 1.0
+                and np.mean([run[i]["veins"][j]["mu_vein"] < run[i]["veins"][j]["mu_bg"] for run in runs]) > 0.5
+            )
         vals = np.array([-np.inf if c is None else c for c in cnrs])
         k = int(np.argmax(vals))
         veins.append(
@@ -197,7 +212,12 @@ def best_delay_by_depth(images, delays_us, scene, valid=None) -> dict:
         )
     used = [v for v in veins if v["detected"] and v["depth_mm"] is not None]
     fit = _fit([v["depth_mm"] for v in used], [v["best_delay_us"] for v in used])
-    return {"delays_us": [float(d) for d in delays_us], "veins": veins, "fit_delay_vs_depth": fit}
+    return {
+        "delays_us": [float(d) for d in delays_us],
+        "repeats": int(stacks.shape[0]),
+        "veins": veins,
+        "fit_delay_vs_depth": fit,
+    }
 
 
 def depth_from_delay_map(delay_map_us, scene, valid=None) -> dict:
@@ -410,8 +430,15 @@ def run_skin_compare(
     # 3. best delay against depth, 4. contrast enhancement (Eq. 7)
     step("delay sweep")
     cam_room = camera_at(ROOM_LIGHT, wl0)
-    sweep_imgs = capture_delay_sweep(base_scene, cam_room, sweep, exposure_us=exposure_us, seed=seed + 100)
-    best = best_delay_by_depth(sweep_imgs, sweep, base_scene, valid0)
+    repeats = 1 if quick else 3
+    sweeps = np.stack(
+        [
+            capture_delay_sweep(base_scene, cam_room, sweep, exposure_us=exposure_us, seed=seed + 100 + 1000 * r)
+            for r in range(repeats)
+        ]
+    )
+    sweep_imgs = sweeps[0]
+    best = best_delay_by_depth(sweeps, sweep, base_scene, valid0)
     numbers["best_delay"] = best
     step("contrast enhancement (Eq. 7)")
     enh = enhance_contrast(sweep_imgs, sweep)
