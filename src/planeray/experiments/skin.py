@@ -58,6 +58,9 @@ __all__ = [
     "CONDITIONS",
     "ROOM_LIGHT",
     "SWEEP_DELAYS_US",
+    "SWEEP_EXPOSURE_US",
+    "LADDER_DEPTHS_MM",
+    "ladder_veins",
     "skin_scene",
     "camera_at",
     "scene_truth",
@@ -73,18 +76,24 @@ __all__ = [
 REPORT_FORMAT = "planeray-skin-report"
 #: Condition name -> keyword arguments of ``make_scene("skin", ...)``.
 CONDITIONS = {
-    "light, 638 nm": dict(tone="light", wavelength_nm=638),
+    "fair, 638 nm": dict(tone="fair", wavelength_nm=638),
     "dark, 638 nm": dict(tone="dark", wavelength_nm=638),
-    "light, 638 nm, hair": dict(tone="light", wavelength_nm=638, hair=True),
-    "light, 850 nm": dict(tone="light", wavelength_nm=850),
+    "fair, 638 nm, hair": dict(tone="fair", wavelength_nm=638, hair=True),
+    "fair, 850 nm": dict(tone="fair", wavelength_nm=850),
     "dark, 850 nm": dict(tone="dark", wavelength_nm=850),
 }
-QUICK_CONDITIONS = ("light, 638 nm", "dark, 638 nm")
+QUICK_CONDITIONS = ("fair, 638 nm", "dark, 638 nm")
+#: The depth ladder: straight veins across the image (perpendicular to the projector rows),
+#: 3 mm wide, their tops at these depths (the range of the scene's vein tables).
+LADDER_DEPTHS_MM = (1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0)
+LADDER_DIAMETER_MM = 3.0
 #: The ambient level of the method comparison (:data:`AMBIENT_LEVELS`).
 ROOM_LIGHT = "office"
 QUICK_LEVELS = ("dark", "office", "surgical lamp", "sunlight")
-#: Delays of the sweep (exposure 600 us): every band off the epipolar plane.
-SWEEP_DELAYS_US = np.arange(400.0, 1500.1, 100.0)
+#: Delays and exposure of the sweep (Eq. 7 and the best delay against depth): every band off the
+#: epipolar plane (``t_d - t_e/2 >= 100 us``) and inside the skin scene's offset band (64 rows).
+SWEEP_DELAYS_US = np.arange(250.0, 1000.1, 50.0)
+SWEEP_EXPOSURE_US = 300.0
 
 
 def skin_scene(shape, *, seed: int = 0, **conditions):
@@ -92,6 +101,17 @@ def skin_scene(shape, *, seed: int = 0, **conditions):
     from ..scenes import make_scene
 
     return make_scene("skin", tuple(shape), projector_rows=PAPER_PROJECTOR_ROWS, seed=seed, **conditions)
+
+
+def ladder_veins(shape, projector_rows=PAPER_PROJECTOR_ROWS, mm_per_row=0.3, depths_mm=LADDER_DEPTHS_MM):
+    """Straight veins down the image (x: down, y: across, surface mm), evenly spaced, one per depth."""
+    height = projector_rows * mm_per_row
+    width = shape[1] * projector_rows * mm_per_row / shape[0]
+    ys = (np.arange(len(depths_mm)) + 1.0) * width / (len(depths_mm) + 1.0)
+    return [
+        {"depth_mm": float(d), "diameter_mm": LADDER_DIAMETER_MM, "points_mm": [[0.0, float(y)], [height, float(y)]]}
+        for d, y in zip(depths_mm, ys)
+    ]
 
 
 def camera_at(level: str, wavelength_nm: float, camera: CameraModel | None = None) -> CameraModel:
@@ -110,9 +130,13 @@ def scene_truth(scene) -> dict:
     ids = m.get("vein_id")
     if ids is None:
         ids = m["vein_mask"]
+    exclude = np.asarray(m["hair"], bool) if "hair" in m else None
+    if "skin" in m:  # off the skin (a curved arm on its cloth)
+        off = ~np.asarray(m["skin"], bool)
+        exclude = off if exclude is None else exclude | off
     return {
         "vein_id": np.asarray(ids),
-        "exclude": np.asarray(m["hair"], bool) if "hair" in m else None,
+        "exclude": exclude,
         "depth_mm": m.get("vein_depth_mm"),
         "diameter_mm": m.get("vein_diameter_mm"),
     }
@@ -348,7 +372,7 @@ def run_skin_compare(
         step(f"methods: {name}")
         scene = factory(shape, seed=seed, **kw)
         scenes[name] = scene
-        valid = valid_rows(scene, max(delay_us, float(sweep[-1])), exposure_us, lines_per_second=lps)
+        valid = valid_rows(scene, delay_us, exposure_us, lines_per_second=lps)
         wl = float(kw.get("wavelength_nm", 638))
         imgs, info = device_images(
             scene,
@@ -400,7 +424,7 @@ def run_skin_compare(
 
     # 2. ambient light (Fig. 13)
     wl0 = float(conditions[first].get("wavelength_nm", 638))
-    valid0 = valid_rows(base_scene, max(delay_us, float(sweep[-1])), exposure_us, lines_per_second=lps)
+    valid0 = valid_rows(base_scene, delay_us, exposure_us, lines_per_second=lps)
     amb_rows, strongest = [], None
     for level in levels:
         step(f"ambient light: {level}")
@@ -427,53 +451,92 @@ def run_skin_compare(
     numbers["ambient"] = amb_rows
     numbers["ambient_levels"] = ambient_table(wl0)
 
-    # 3. best delay against depth, 4. contrast enhancement (Eq. 7)
-    step("delay sweep")
+    # 3. the depth ladder: detection and best delay against depth; 4. contrast enhancement (Eq. 7)
+    step("depth ladder")
+    ladder = factory(shape, seed=seed, **conditions[first], veins=ladder_veins(shape, mm_per_row=mpr))
+    valid_l = valid_rows(ladder, max(delay_us, float(sweep[-1])), SWEEP_EXPOSURE_US, lines_per_second=lps)
+    valid_l &= valid_rows(ladder, delay_us, exposure_us, lines_per_second=lps)
     cam_room = camera_at(ROOM_LIGHT, wl0)
+    imgs, _ = device_images(
+        ladder, cam_room, delay_us=delay_us, exposure_us=exposure_us, lines_per_second=lps, seed=seed
+    )
+    m = measure(imgs, ladder, valid_l)
+    ladder_rows = [
+        {"method": meth, "vein": v["id"], "depth_mm": v.get("depth_mm"), "cnr": v["cnr"], "detected": v["detected"]}
+        for meth in METHODS
+        for v in m[meth]["veins"]
+    ]
+    numbers["ladder"] = {"veins": ladder_rows, "n_detected": {k: m[k]["n_detected"] for k in METHODS}}
     repeats = 1 if quick else 3
     sweeps = np.stack(
         [
-            capture_delay_sweep(base_scene, cam_room, sweep, exposure_us=exposure_us, seed=seed + 100 + 1000 * r)
+            capture_delay_sweep(ladder, cam_room, sweep, exposure_us=SWEEP_EXPOSURE_US, seed=seed + 100 + 1000 * r)
             for r in range(repeats)
         ]
     )
-    sweep_imgs = sweeps[0]
-    best = best_delay_by_depth(sweeps, sweep, base_scene, valid0)
+    best = best_delay_by_depth(sweeps, sweep, ladder, valid_l)
+    best["exposure_us"] = SWEEP_EXPOSURE_US
     numbers["best_delay"] = best
+
+    def enhancement(scene, sweep_imgs, valid):
+        enh = enhance_contrast(sweep_imgs, sweep)
+        single = measure({f"{d:g}": im for d, im in zip(sweep, sweep_imgs)}, scene, valid)
+        best_key = max(single, key=lambda k: -np.inf if single[k]["cnr"] is None else single[k]["cnr"])
+        filtered = measure({f"{d:g}": im for d, im in zip(sweep, enh.normalized)}, scene, valid)
+        best_f = max(filtered, key=lambda k: -np.inf if filtered[k]["cnr"] is None else filtered[k]["cnr"])
+        em = measure({"enhanced": enh.image}, scene, valid)["enhanced"]
+        b = single[best_key]["cnr"]
+        return enh, {
+            "params": enh.params,
+            "exposure_us": SWEEP_EXPOSURE_US,
+            "single": {k: {"cnr": v["cnr"], "n_detected": v["n_detected"]} for k, v in single.items()},
+            "best_single_delay_us": float(best_key),
+            "best_single_cnr": b,
+            "best_single_detected": single[best_key]["n_detected"],
+            "best_filtered_delay_us": float(best_f),
+            "best_filtered_cnr": filtered[best_f]["cnr"],
+            "enhanced_cnr": em["cnr"],
+            "enhanced_detected": em["n_detected"],
+            "n_veins": em["n_veins"],
+            "gain": (em["cnr"] / b) if em["cnr"] and b else None,
+            "gain_over_filtered": (em["cnr"] / filtered[best_f]["cnr"])
+            if em["cnr"] and filtered[best_f]["cnr"]
+            else None,
+            "depth_from_delay_map": depth_from_delay_map(enh.delay_map_us, scene, valid),
+        }
+
     step("contrast enhancement (Eq. 7)")
-    enh = enhance_contrast(sweep_imgs, sweep)
-    single = measure({f"{d:g}": im for d, im in zip(sweep, sweep_imgs)}, base_scene, valid0)
-    best_key = max(single, key=lambda k: -np.inf if single[k]["cnr"] is None else single[k]["cnr"])
-    em = measure({"enhanced": enh.image}, base_scene, valid0)["enhanced"]
-    depth_fit = depth_from_delay_map(enh.delay_map_us, base_scene, valid0)
-    numbers["enhancement"] = {
-        "params": enh.params,
-        "single": {k: {"cnr": v["cnr"], "n_detected": v["n_detected"]} for k, v in single.items()},
-        "best_single_delay_us": float(best_key),
-        "best_single_cnr": single[best_key]["cnr"],
-        "best_single_detected": single[best_key]["n_detected"],
-        "enhanced_cnr": em["cnr"],
-        "enhanced_detected": em["n_detected"],
-        "n_veins": em["n_veins"],
-        "gain": (em["cnr"] / single[best_key]["cnr"]) if em["cnr"] and single[best_key]["cnr"] else None,
-        "depth_from_delay_map": depth_fit,
-    }
+    enh_l, numbers["enhancement"] = enhancement(ladder, sweeps[0], valid_l)
+    valid_f = valid_rows(base_scene, float(sweep[-1]), SWEEP_EXPOSURE_US, lines_per_second=lps)
+    forearm_sweep = capture_delay_sweep(base_scene, cam_room, sweep, exposure_us=SWEEP_EXPOSURE_US, seed=seed + 50)
+    enh_f, numbers["enhancement_forearm"] = enhancement(base_scene, forearm_sweep, valid_f)
     numbers["seconds"] = time.perf_counter() - t0
 
     if out_dir is not None:
         step("figures")
         figures_out = {
             "fig16_skin_methods.png": lambda p: figs.methods_figure(panels, out=p),
-            "fig16_skin_depth.png": lambda p: figs.vein_depth_figure(vein_rows, out=p),
+            "fig16_skin_depth.png": lambda p: figs.vein_depth_figure(
+                [{**r, "condition": "depth ladder"} for r in ladder_rows], out=p
+            ),
             "fig13_skin_ambient.png": lambda p: figs.ambient_figure(amb_rows, strongest, valid=valid0, out=p),
             "skin_best_delay.png": lambda p: figs.best_delay_figure(best, out=p),
             "fig14_skin_enhance.png": lambda p: figs.enhancement_figure(
-                sweep_imgs[list(sweep).index(float(best_key))],
-                float(best_key),
-                enh,
-                scene_truth(base_scene),
+                sweeps[0][list(sweep).index(numbers["enhancement"]["best_single_delay_us"])],
+                numbers["enhancement"]["best_single_delay_us"],
+                enh_l,
+                scene_truth(ladder),
                 numbers["enhancement"],
-                valid=valid0,
+                valid=valid_l,
+                out=p,
+            ),
+            "fig14_skin_enhance_forearm.png": lambda p: figs.enhancement_figure(
+                forearm_sweep[list(sweep).index(numbers["enhancement_forearm"]["best_single_delay_us"])],
+                numbers["enhancement_forearm"]["best_single_delay_us"],
+                enh_f,
+                scene_truth(base_scene),
+                numbers["enhancement_forearm"],
+                valid=valid_f,
                 out=p,
             ),
         }
