@@ -125,18 +125,52 @@ MaskOpt = Annotated[
     Path | None,
     typer.Option(
         "--mask",
-        help="Vein mask (PNG/TIFF, image size; 0 skin, nonzero vein; several values = vein ids) for the metrics.",
+        help="Vein mask (PNG/TIFF, image size; 0 skin, nonzero vein; several values = vein ids) for the metrics "
+        "(default: the ground truth `planeray skin simulate` wrote beside the stack, if any).",
     ),
 ]
 
 
-def _truth_for(stack, mask: Path | None):
-    """Vein ids from ``--mask``, else None."""
-    if mask is None:
-        return None
-    from ..skin.masks import read_vein_mask
+def _truth_for(stack, stack_path: Path, mask: Path | None):
+    """Ground truth for the metrics: ``--mask``, else the truth ``planeray skin simulate`` wrote beside the stack.
 
-    return read_vein_mask(mask, stack.shape)
+    Returns None (no metrics), or a dict with ``vein_id`` and, from a simulated capture,
+    ``exclude`` (hair, off the skin), ``depth_mm``, ``diameter_mm`` and ``source``.
+    """
+    if mask is not None:
+        from ..skin.masks import read_vein_mask
+
+        return {"vein_id": read_vein_mask(mask, stack.shape), "source": str(mask)}
+    from ..experiments.skin_capture import read_skin_truth, truth_paths
+
+    if not truth_paths(stack_path)["veins"].is_file():
+        return None
+    _, maps = read_skin_truth(stack_path)
+    exclude = maps.get("hair")
+    if "skin" in maps:
+        off = ~np.asarray(maps["skin"], bool)
+        exclude = off if exclude is None else np.asarray(exclude, bool) | off
+    if tuple(maps["vein_id"].shape) != tuple(stack.shape):
+        raise ValueError(f"{truth_paths(stack_path)['maps']}: ground truth of another image size than the stack")
+    return {
+        "vein_id": maps["vein_id"],
+        "exclude": exclude,
+        "depth_mm": maps.get("vein_depth_mm"),
+        "diameter_mm": maps.get("vein_diameter_mm"),
+        "source": str(truth_paths(stack_path)["maps"]),
+    }
+
+
+def _metrics(image, truth):
+    from ..skin.metrics import vein_metrics
+
+    return vein_metrics(
+        image,
+        truth["vein_id"],
+        exclude=truth.get("exclude"),
+        depth_mm=truth.get("depth_mm"),
+        diameter_mm=truth.get("diameter_mm"),
+    )
 
 
 def _write_png(path: Path, image, valid=None) -> None:
@@ -199,11 +233,10 @@ def veins(
     from ..io import atomic_directory
     from ..io.atomic import MARKER
     from ..skin.imaging import delay_band_mm, stack_images
-    from ..skin.metrics import vein_metrics
 
     _check_outputs((out_dir, "skin veins"), overwrite=overwrite)
     stack = _load_stack(stack_path)
-    ids = _truth_for(stack, mask)
+    truth = _truth_for(stack, stack_path, mask)
     images, info = stack_images(stack, delay_us=delay_us, exposure_us=exposure_us)
     mpr = float(stack.metadata.get("scene", {}).get("mm_per_row", 0.3)) if isinstance(stack.metadata, dict) else 0.3
     near, far = delay_band_mm(
@@ -218,9 +251,10 @@ def veins(
         "mm_per_row": mpr,
     }
     metrics = None
-    if ids is not None:
-        metrics = {k: vein_metrics(v, ids) for k, v in images.items()}
+    if truth is not None:
+        metrics = {k: _metrics(v, truth) for k, v in images.items()}
         result["metrics"] = {k: _summary(m) for k, m in metrics.items()}
+        result["ground_truth"] = truth["source"]
     with atomic_directory(out_dir, overwrite=overwrite, kind="skin veins") as tmp:
         for k, img in images.items():
             _write_png(tmp / f"{k}.png", img)
@@ -262,11 +296,10 @@ def enhance(
     from ..io.atomic import MARKER
     from ..skin.enhance import enhance_contrast
     from ..skin.imaging import delay_sweep_images
-    from ..skin.metrics import vein_metrics
 
     _check_outputs((out_dir, "skin enhance"), overwrite=overwrite)
     stack = _load_stack(stack_path)
-    ids = _truth_for(stack, mask)
+    truth = _truth_for(stack, stack_path, mask)
     with console.status("reading the delay images"):
         imgs, delays = delay_sweep_images(stack, exposure_us=exposure_us, min_delay_us=min_delay_us)
     with console.status(f"enhancing ({len(delays)} delay images)"):
@@ -278,10 +311,11 @@ def enhance(
         "delays_us": [float(d) for d in delays],
         "params": res.params,
     }
-    if ids is not None:
-        single = {f"{d:g}": vein_metrics(im, ids) for d, im in zip(delays, imgs)}
+    if truth is not None:
+        single = {f"{d:g}": _metrics(im, truth) for d, im in zip(delays, imgs)}
         best = max(single, key=lambda k: -np.inf if single[k]["cnr"] is None else single[k]["cnr"])
-        em = vein_metrics(res.image, ids)
+        em = _metrics(res.image, truth)
+        result["ground_truth"] = truth["source"]
         result["metrics"] = {
             "enhanced": _summary(em),
             "best_single": {"delay_us": float(best), **_summary(single[best])},
@@ -293,7 +327,7 @@ def enhance(
         _write_png(tmp / "delay_map.png", res.delay_map_us)
         (tmp / MARKER).write_text(json.dumps(result, indent=1))
     out.print(f"{out_dir}: enhanced from {len(delays)} delay images ({delays[0]:g}-{delays[-1]:g} us)")
-    if ids is not None:
+    if truth is not None:
         e, b = result["metrics"]["enhanced"], result["metrics"]["best_single"]
         out.print(
             f"  enhanced: CNR {e['cnr']:.2f}, {e['n_detected']}/{e['n_veins']} veins; best single delay "
