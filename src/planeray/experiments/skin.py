@@ -482,7 +482,7 @@ def run_skin_compare(
         enh = enhance_contrast(sweep_imgs, sweep)
         single = measure({f"{d:g}": im for d, im in zip(sweep, sweep_imgs)}, scene, valid)
         best_key = max(single, key=lambda k: -np.inf if single[k]["cnr"] is None else single[k]["cnr"])
-        filtered = measure({f"{d:g}": im for d, im in zip(sweep, enh.normalized)}, scene, valid)
+        filtered = measure({f"{d:g}": im for d, im in zip(enh.delays_us, enh.normalized)}, scene, valid)
         best_f = max(filtered, key=lambda k: -np.inf if filtered[k]["cnr"] is None else filtered[k]["cnr"])
         em = measure({"enhanced": enh.image}, scene, valid)["enhanced"]
         b = single[best_key]["cnr"]

@@ -27,7 +27,13 @@ What this module makes explicit (the paper leaves it open):
   argmax picks the noisiest image.  Each patch's gradient is divided by the noise level of
   that patch (Immerkaer's estimator, :func:`noise_sigma`, on the normalized image before
   filtering): the argmax then picks the delay whose edges stand out most from its noise.
+  Each delay's score is then standardized over the image (median and MAD: most pixels hold no
+  edge, so they give the score of noise alone), the argmax is taken over these z-scores, and
+  a pixel whose best z stays below ``min_significance`` (3) -- no significant edge at any
+  delay -- takes the least noisy delay instead of one its noise picked.
   ``noise_normalize=False`` is the paper's plain Eq. 7.
+* **Too-dark delays left out** (``max_relative_noise``, our addition): a delay image whose
+  relative noise exceeds 25 % carries no usable contrast; it is dropped before the argmax.
 * **Blurred delay map** (Gaussian, ``map_sigma_px``, default ``patch_px / 6``), and the
   composite at a fractional delay by linear interpolation between the two nearest delay
   images (:func:`compose`, Eq. 7).
@@ -80,7 +86,8 @@ def local_normalize(image, sigma_px: float) -> np.ndarray:
     """``image / local mean`` (Gaussian of ``sigma_px``): relative contrast around 1."""
     img = np.asarray(image, np.float64)
     mean = ndimage.gaussian_filter(img, sigma_px, mode="reflect")
-    floor = max(1e-12, 1e-6 * float(np.abs(mean).max()))
+    # a floor at a tenth of the typical local mean: noise-only regions must not explode
+    floor = max(1e-12, 0.1 * float(np.median(np.abs(mean))))
     return img / np.maximum(mean, floor)
 
 
@@ -207,6 +214,8 @@ def enhance_contrast(
     gradient_sigma_px: float | None = None,
     map_sigma_px: float | None = None,
     noise_normalize: bool = True,
+    min_significance: float = 3.0,
+    max_relative_noise: float | None = 0.25,
 ) -> EnhanceResult:
     """Contrast-enhanced image from a sweep of delay images (Sec. 10, Eq. 7, Fig. 14).
 
@@ -223,6 +232,12 @@ def enhance_contrast(
     noise_normalize : bool
         Divide each patch's gradient by its noise level (see the module notes); False is the
         paper's plain argmax of the gradient.
+    min_significance : float
+        With ``noise_normalize``: the standardized score (robust z over the image) a pixel's
+        best delay must reach; below it the pixel takes the least noisy delay.
+    max_relative_noise : float or None
+        Delay images whose noise (Immerkaer, relative to the local mean) exceeds this are left
+        out (0.25: a vein of 25 % contrast would sit at one sigma); None keeps them all.
 
     Returns
     -------
@@ -256,12 +271,27 @@ def enhance_contrast(
     s_map = patch / 6.0 if map_sigma_px is None else float(map_sigma_px)
     relative = [local_normalize(im, patch / 2.0) for im in imgs]
     noise = [noise_sigma(r) for r in relative]
+    all_delays, all_noise = d.copy(), list(noise)
+    if max_relative_noise is not None:  # delays too dark to carry any contrast are left out
+        keep = np.flatnonzero(np.asarray(noise) <= float(max_relative_noise))
+        keep = keep if keep.size else np.array([int(np.argmin(noise))])
+        imgs, d = imgs[keep], d[keep]
+        relative, noise = [relative[i] for i in keep], [noise[i] for i in keep]
     ranges = [2.0 * n if bilateral_sigma_range is None else float(bilateral_sigma_range) for n in noise]
     normalized = np.stack([bilateral(r, sigma_range=sr, sigma_px=s_bil) for r, sr in zip(relative, ranges)])
     grads = np.stack([ndimage.gaussian_filter(gradient_magnitude(n), s_grad) for n in normalized])
     if noise_normalize:
         grads = grads / np.stack([np.maximum(patch_noise_map(r, patch), 1e-12) for r in relative])
-    raw = best_delay_map(grads, d)
+        # standardize each delay's score over the image: most pixels carry no edge, so the median
+        # and MAD give the score of noise alone; a pixel without a significant edge in any delay
+        # (z < min_significance) takes the least noisy delay instead of a noise-picked one.
+        med = np.median(grads, axis=(1, 2), keepdims=True)
+        mad = 1.4826 * np.median(np.abs(grads - med), axis=(1, 2), keepdims=True)
+        z = (grads - med) / np.maximum(mad, 1e-12)
+        quiet = int(np.argmin(noise))
+        raw = np.where(z.max(axis=0) >= min_significance, best_delay_map(z, d), d[quiet])
+    else:
+        raw = best_delay_map(grads, d)
     smooth = ndimage.gaussian_filter(raw, s_map, mode="reflect") if s_map > 0 else raw
     image = compose(normalized, d, smooth)
     params = {
@@ -273,5 +303,10 @@ def enhance_contrast(
         "gradient_sigma_px": s_grad,
         "map_sigma_px": s_map,
         "noise_normalize": bool(noise_normalize),
+        "min_significance": float(min_significance),
+        "max_relative_noise": None if max_relative_noise is None else float(max_relative_noise),
+        "delays_in_us": [float(x) for x in all_delays],
+        "noise_sigma_in": [float(x) for x in all_noise],
+        "delays_used_us": [float(x) for x in d],
     }
     return EnhanceResult(image, smooth, raw, normalized, d, params)
