@@ -88,7 +88,7 @@ def methods_figure(panels, *, methods=None, out=None):
                 title=f"{_LABELS.get(meth, meth)}\nCNR {_fmt(mt['cnr'])}, {mt['n_detected']}/{mt['n_veins']} veins",
             )
     fig.suptitle("Veins through skin: methods (Fig. 16 analogue; per-vein CNR >= 1 counts as detected)", fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     return finish(fig, out)
 
 
@@ -250,6 +250,6 @@ def headline_figure(images: dict, *, metrics=None, valid=None, out=None):
         if metrics is not None:
             t += f"\nCNR {_fmt(metrics[k]['cnr'])}, {metrics[k]['n_detected']}/{metrics[k]['n_veins']} veins"
         show_image(ax, images[k], valid=valid, title=t)
-    fig.suptitle("Forearm: veins through skin (Sec. 10)", fontsize=9)
-    fig.tight_layout()
+    fig.suptitle("Forearm: veins through skin (Sec. 10), office light", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
     return finish(fig, out)
