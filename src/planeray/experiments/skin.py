@@ -244,11 +244,13 @@ def best_delay_by_depth(images, delays_us, scene, valid=None) -> dict:
     }
 
 
-def depth_from_delay_map(delay_map_us, scene, valid=None) -> dict:
+def depth_from_delay_map(delay_map_us, scene, valid=None, *, veins=None) -> dict:
     """Does Eq. 7's delay map estimate depth?  Fit depth ~ t_d* on vein pixels and per vein (median).
 
     Returns the pixel fit and the per-vein fit (``rmse`` in mm, ``spread`` the standard
-    deviation of the true depths: the error of always guessing the mean depth).
+    deviation of the true depths: the error of always guessing the mean depth).  ``veins``
+    (ids) restricts the fit to those veins -- the ones the enhanced image shows: a vein it does
+    not show has no edge of its own, and its delay is the fallback's, not a measurement.
     """
     t = scene_truth(scene)
     depth = t["depth_mm"]
@@ -261,6 +263,8 @@ def depth_from_delay_map(delay_map_us, scene, valid=None) -> dict:
     if valid is not None:
         on &= valid
     ids = np.asarray(t["vein_id"])
+    if veins is not None:
+        on &= np.isin(ids, np.asarray(list(veins), int))
     per_vein = []
     for k in np.unique(ids[on]):
         sel = on & (ids == k)
@@ -502,7 +506,10 @@ def run_skin_compare(
             "gain_over_filtered": (em["cnr"] / filtered[best_f]["cnr"])
             if em["cnr"] and filtered[best_f]["cnr"]
             else None,
-            "depth_from_delay_map": depth_from_delay_map(enh.delay_map_us, scene, valid),
+            "depth_from_delay_map": depth_from_delay_map(
+                enh.delay_map_us, scene, valid, veins=[v["id"] for v in em["veins"] if v["detected"]]
+            ),
+            "depth_from_delay_map_all_veins": depth_from_delay_map(enh.delay_map_us, scene, valid),
         }
 
     step("contrast enhancement (Eq. 7)")
