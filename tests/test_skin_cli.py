@@ -86,3 +86,20 @@ def test_compare_study_writes_numbers_and_figures(tmp_path):
     assert amb[("sunlight", "delay")] > amb[("sunlight", "photo")]
     assert amb[("sunlight", "delay")] > amb[("sunlight", "global")]
     assert np.isfinite(n["enhancement"]["enhanced_cnr"])
+
+
+def test_veins_on_a_simulated_skin_capture_uses_its_ground_truth(tmp_path):
+    """``skin simulate`` writes the truth beside the stack; ``skin veins`` finds it (hair and depths included)."""
+    r = _run(
+        "skin", "simulate", "--out", tmp_path / "arm.zarr", "--size", 64, 64, "--sweep", "quick", "--hair", "--seed", 1
+    )
+    assert r.exit_code == 0, r.output
+    r = _run("skin", "veins", tmp_path / "arm.zarr", "--delay-us", 375, "--out", tmp_path / "v")
+    assert r.exit_code == 0, r.output
+    meta = json.loads((tmp_path / "v" / "planeray.json").read_text())
+    assert meta["ground_truth"].endswith("arm_maps.npz")
+    rows = (tmp_path / "v" / "veins.csv").read_text().splitlines()
+    assert rows[0].startswith("image,id,pixels,band_pixels,depth_mm,diameter_mm")
+    r = _run("skin", "enhance", tmp_path / "arm.zarr", "--out", tmp_path / "e")
+    assert r.exit_code == 0, r.output
+    assert "best single delay" in r.output

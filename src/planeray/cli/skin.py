@@ -212,6 +212,10 @@ def _write_csv(path: Path, rows) -> None:
             w.writerows(rows)
 
 
+def _num(x) -> str:
+    return "n/a" if x is None else f"{x:.2f}"
+
+
 def _summary(m) -> dict:
     return {k: m[k] for k in ("cnr", "weber", "n_veins", "n_detected")}
 
@@ -330,8 +334,8 @@ def enhance(
     if truth is not None:
         e, b = result["metrics"]["enhanced"], result["metrics"]["best_single"]
         out.print(
-            f"  enhanced: CNR {e['cnr']:.2f}, {e['n_detected']}/{e['n_veins']} veins; best single delay "
-            f"({b['delay_us']:g} us): CNR {b['cnr']:.2f}, {b['n_detected']}/{b['n_veins']} veins"
+            f"  enhanced: CNR {_num(e['cnr'])}, {e['n_detected']}/{e['n_veins']} veins; best single delay "
+            f"({b['delay_us']:g} us): CNR {_num(b['cnr'])}, {b['n_detected']}/{b['n_veins']} veins"
         )
 
 
@@ -371,4 +375,6 @@ def compare(
         )
     e = numbers["enhancement"]
     if e.get("gain") is not None:
-        out.print(f"  Eq. 7 enhancement: CNR {e['enhanced_cnr']:.2f} vs best single delay {e['best_single_cnr']:.2f}")
+        out.print(
+            f"  Eq. 7 enhancement: CNR {_num(e['enhanced_cnr'])} vs best single delay {_num(e['best_single_cnr'])}"
+        )
