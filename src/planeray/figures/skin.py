@@ -127,7 +127,7 @@ def ambient_figure(amb_rows, strongest=None, *, valid=None, out=None):
     """
     shown = ["photo", "global", "delay"]
     ncol = 1 + (len(shown) if strongest is not None else 0)
-    fig = new_figure((3.2 + 2.0 * (ncol - 1), 3.4))
+    fig = new_figure((3.6 + 2.3 * (ncol - 1), 3.4))
     gs = fig.add_gridspec(1, ncol, width_ratios=[1.8] + [1.0] * (ncol - 1))
     ax = fig.add_subplot(gs[0, 0])
     for meth, col in _COLORS.items():
@@ -146,7 +146,7 @@ def ambient_figure(amb_rows, strongest=None, *, valid=None, out=None):
         level, imgs, m = strongest
         for j, meth in enumerate(shown, start=1):
             a = fig.add_subplot(gs[0, j])
-            show_image(a, imgs[meth], valid=valid, title=f"{_LABELS[meth]}, {level}\nCNR {_fmt(m[meth]['cnr'])}")
+            show_image(a, imgs[meth], valid=valid, title=f"{_LABELS[meth]}\n{level}: CNR {_fmt(m[meth]['cnr'])}")
     fig.tight_layout()
     return finish(fig, out)
 
@@ -162,10 +162,10 @@ def best_delay_figure(best, *, ax=None, out=None):
     if nod:
         ax.scatter(
             [v["depth_mm"] for v in nod],
-            [min(best["delays_us"])] * len(nod),
+            [v["best_delay_us"] for v in nod],
             marker="x",
             color="k",
-            label="not detected at any delay",
+            label="not detected at any delay (argmax of noise)",
         )
     fit = best.get("fit_delay_vs_depth")
     if fit:
@@ -175,7 +175,7 @@ def best_delay_figure(best, *, ax=None, out=None):
         )
     ax.set_xlabel("vein depth (mm)")
     ax.set_ylabel("delay of highest CNR (us)")
-    ax.set_title("The best delay grows with depth", fontsize=9)
+    ax.set_title(f"Delay of highest CNR against depth (t_e = {best.get('exposure_us', 0):g} us)", fontsize=9)
     ax.legend(fontsize=7)
     if own:
         fig.tight_layout()
