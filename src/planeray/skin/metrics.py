@@ -47,7 +47,7 @@ __all__ = [
 def default_band_px(shape) -> tuple[float, float]:
     """Default ``(gap_px, width_px)`` of the background band for an image of ``shape``.
 
-    2 and 6 pixels at 128 rows (0.6 and 1.7 mm at the simulator's 0.3 mm per projector row and
+    2 and 6 pixels at 128 rows (3.4 and 10.1 mm at the simulator's 0.3 mm per projector row and
     5.6 projector rows per camera row), scaled with the image height: a band of the same size
     on the skin whatever the resolution.
 
