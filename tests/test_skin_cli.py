@@ -103,3 +103,16 @@ def test_veins_on_a_simulated_skin_capture_uses_its_ground_truth(tmp_path):
     r = _run("skin", "enhance", tmp_path / "arm.zarr", "--out", tmp_path / "e")
     assert r.exit_code == 0, r.output
     assert "best single delay" in r.output
+
+
+def test_veins_on_a_captured_import_folder(capture, tmp_path):
+    """The import format (16-bit TIFFs + manifest) gives what the native stack gives, to quantization."""
+    r = _run("export", capture / "s.zarr", "--out", tmp_path / "folder")
+    assert r.exit_code == 0, r.output
+    for src, out in ((tmp_path / "folder", "v"), (capture / "s.zarr", "n")):
+        r = _run("skin", "veins", src, "--delay-us", 375, "--out", tmp_path / out, "--mask", capture / "mask.png")
+        assert r.exit_code == 0, r.output
+    imported = json.loads((tmp_path / "v" / "planeray.json").read_text())
+    native = json.loads((tmp_path / "n" / "planeray.json").read_text())
+    assert imported["delay_us"] == 375.0 and imported["metrics"]["delay"]["n_veins"] == 3
+    assert imported["metrics"]["delay"]["cnr"] == pytest.approx(native["metrics"]["delay"]["cnr"], rel=0.02)
