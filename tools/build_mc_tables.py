@@ -9,7 +9,11 @@ never waits for Monte Carlo:
   kernel with 10^6 photons and the kernels beside a wall at 15 distances and 3 angles
   with 10^5 photons each; :func:`planeray.mc.wall.mc_wall_table`), for the default
   (Narasimhan et al.) media and for the Jensen et al. milks of the report's robustness
-  check.  The slab profiles they trace on the way are not shipped (the tables hold them).
+  check.  The slab profiles they trace on the way are not shipped (the tables hold them);
+* the ``skin`` scene's vein perturbation tables (``skin-*.npz``: fair and dark skin at 638
+  and 850 nm, 400,000 photons each; :func:`planeray.mc.layered.mc_vein_table`) and the
+  background kernels of the tones in between (``layered-*.npz``, 100,000 photons each;
+  tests/test_skin.py checks they are all shipped).
 
 Run after any change to the MC engine, the wall runs or a scene's medium defaults (the
 engine and wall versions and all parameters are part of every cache key, so stale tables
