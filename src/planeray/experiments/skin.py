@@ -3,26 +3,28 @@
 :func:`run_skin_compare` (``planeray skin compare``) runs the whole study on the ``skin``
 scene and writes its numbers and figures:
 
-1. **Methods over conditions (Fig. 16).**  Skin tone (light, dark), hair, wavelength
-   (638 nm red, 850 nm NIR), each scene captured with every method of
+1. **Methods over conditions (Fig. 16).**  Skin tone (fair, dark), hair, wavelength
+   (638 nm red, 850 nm NIR), each seeded forearm captured with every method of
    :mod:`planeray.skin.imaging` on the simulated device under office light (500 lx); per
    method the pooled CNR, Weber contrast and detected veins (per-vein CNR >= 1), per vein
    its depth, diameter and CNR.  The noise-free Weber contrast of the scene's transport is
    reported next to it.
-2. **Ambient light (Fig. 13).**  The light-skin, 638 nm scene under
+2. **Ambient light (Fig. 13).**  The fair-skin, 638 nm forearm under
    :data:`planeray.skin.ambient.AMBIENT_LEVELS` (dark room to sunlight and the brightest
    surgical lamp): pooled CNR of every method against the illuminance.
-3. **Best delay against depth.**  A delay sweep (exposure 600 us, delays 400-1500 us, three
-   noise realizations): per vein, the delay of highest mean CNR, against the vein's depth; a
-   straight-line fit.
-4. **Contrast enhancement (Eq. 7, Fig. 14).**  The same sweep through
-   :func:`planeray.skin.enhance.enhance_contrast`: CNR and detections against the best
-   single delay image, and the blurred delay map against the ground-truth depth of the vein
-   pixels (a straight-line fit depth ~ t_d*, its RMSE against the spread of the depths).
+3. **Depth.**  A ladder of straight veins 3 mm wide, tops 1-5 mm deep
+   (:func:`ladder_veins`): which veins each method detects; and a delay sweep
+   (:data:`SWEEP_EXPOSURE_US` = 300 us, delays 250-1000 us, three noise realizations): per
+   vein, the delay of highest mean CNR against its depth, with a straight-line fit.
+4. **Contrast enhancement (Eq. 7, Fig. 14).**  The ladder's sweep and a sweep of the forearm
+   through :func:`planeray.skin.enhance.enhance_contrast`: CNR and detections against the
+   best single delay image (raw, and with the same filtering), and the blurred delay map
+   against the ground-truth depth of the pixels of the veins the composite shows (a
+   straight-line fit depth ~ t_d*, its RMSE against the spread of the depths).
 
 Metrics use only rows whose delay band lies on the projector for every delay used (near the
 bottom of the image the band of a long delay falls off the projector and the image darkens
-for that reason alone) and leave out hair.
+for that reason alone) and leave out hair and pixels off the skin.
 """
 
 from __future__ import annotations
