@@ -46,6 +46,7 @@ LAYERS = [
     "classify",
     "materials",
     "baselines",
+    "skin",
     "study",
     "figures",
     "experiments",

@@ -34,7 +34,7 @@ def demo_dir(tmp_path_factory):
 
 def test_the_readme_lists_the_demo_outputs():
     names = _promised_files()
-    assert "disco_ball.zarr" in names and "transport_vs_truth.png" in names and len(names) == 9
+    assert "disco_ball.zarr" in names and "transport_vs_truth.png" in names and len(names) == 10
 
 
 @pytest.mark.parametrize("name", _promised_files())

@@ -37,7 +37,13 @@ ALREADY_EXISTS = "already exists (pass --overwrite, or overwrite=True, to replac
 
 _KINDS = {"planeray-stack": "stack", "planeray-transport": "transport"}
 #: Result folders recognized by the ``format`` of their ``planeray.json``.
-_FOLDER_KINDS = {"planeray-materials-capture": "materials capture", "planeray-materials-report": "materials report"}
+_FOLDER_KINDS = {
+    "planeray-materials-capture": "materials capture",
+    "planeray-materials-report": "materials report",
+    "planeray-skin-report": "skin report",
+    "planeray-skin-veins": "skin veins",
+    "planeray-skin-enhance": "skin enhance",
+}
 #: The marker file of such folders.
 MARKER = "planeray.json"
 

@@ -1,0 +1,255 @@
+"""Figures of the vein study (Sec. 10): methods side by side (Fig. 16), CNR against depth and ambient
+light (Fig. 13), the best delay against depth, and the contrast enhancement of Eq. 7 (Fig. 14).
+
+Every function returns a :class:`matplotlib.figure.Figure`; ``out=`` also writes the PNG.
+Images are shown each with its own 1-99 % percentile range (what a viewer's auto contrast
+does), which shows structure but not absolute brightness; the CNR in each title is the number
+that compares them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import figure_for, finish, new_figure
+
+__all__ = [
+    "show_image",
+    "methods_figure",
+    "vein_depth_figure",
+    "ambient_figure",
+    "best_delay_figure",
+    "enhancement_figure",
+    "headline_figure",
+]
+
+_LABELS = {
+    "photo": "photo",
+    "flood": "flood + stretch",
+    "direct": "direct (epipolar)",
+    "global": "global (Nayar)",
+    "non_epipolar": "non-epipolar",
+    "delay": "short-range indirect",
+    "enhanced": "enhanced (Eq. 7)",
+}
+_COLORS = {
+    "photo": "tab:gray",
+    "flood": "tab:olive",
+    "direct": "tab:blue",
+    "global": "tab:orange",
+    "non_epipolar": "tab:purple",
+    "delay": "tab:red",
+}
+
+
+def _fmt(x, f="{:.2f}"):
+    return "n/a" if x is None else f.format(x)
+
+
+def show_image(ax, image, *, valid=None, title=None):
+    """Grayscale image with its 1-99 % range over ``valid`` pixels, cropped to their rows; axes off."""
+    img = np.asarray(image, np.float64)
+    if valid is not None and np.any(valid):  # crop to the rows the metrics use
+        valid = np.asarray(valid, bool)
+        rows = np.flatnonzero(valid.any(axis=1))
+        img, valid = img[rows[0] : rows[-1] + 1], valid[rows[0] : rows[-1] + 1]
+    vals = img[valid] if valid is not None and np.any(valid) else img.ravel()
+    vals = vals[np.isfinite(vals)]
+    lo, hi = np.percentile(vals, [1, 99]) if vals.size else (0.0, 1.0)
+    ax.imshow(img, cmap="gray", vmin=lo, vmax=hi if hi > lo else lo + 1e-9, interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if title:
+        ax.set_title(title, fontsize=8)
+
+
+def methods_figure(panels, *, methods=None, out=None):
+    """Fig. 16 analogue: one row per condition, one column per method (+ the true vein mask).
+
+    ``panels``: list of dicts with ``condition``, ``images`` (method -> image), ``metrics``
+    (method -> :func:`~planeray.skin.metrics.vein_metrics`), ``valid`` and ``truth``.
+    """
+    methods = list(methods or panels[0]["images"])
+    n, m = len(panels), len(methods) + 1
+    fig = new_figure((1.75 * m, 2.1 * n + 0.4))
+    axes = np.atleast_2d(fig.subplots(n, m, squeeze=False))
+    for i, p in enumerate(panels):
+        ids = np.asarray(p["truth"]["vein_id"])
+        mask_img = np.where(ids > 0, 1.0, 0.0)
+        if p["truth"].get("exclude") is not None:
+            mask_img = np.where(p["truth"]["exclude"], 0.5, mask_img)
+        show_image(axes[i, 0], mask_img, valid=p["valid"], title=f"{p['condition']}\nveins (truth; grey: hair)")
+        for j, meth in enumerate(methods, start=1):
+            mt = p["metrics"][meth]
+            show_image(
+                axes[i, j],
+                p["images"][meth],
+                valid=p["valid"],
+                title=f"{_LABELS.get(meth, meth)}\nCNR {_fmt(mt['cnr'])}, {mt['n_detected']}/{mt['n_veins']} veins",
+            )
+    fig.suptitle("Veins through skin: methods (Fig. 16 analogue; per-vein CNR >= 1 counts as detected)", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    return finish(fig, out)
+
+
+def vein_depth_figure(vein_rows, *, condition=None, ax=None, out=None):
+    """Per-vein CNR against vein depth, one colour per method, threshold CNR = 1 dashed."""
+    fig, ax, own = figure_for(ax, (6.0, 4.0))
+    rows = [r for r in vein_rows if condition is None or r["condition"] == condition]
+    conds = sorted({r["condition"] for r in rows})
+    markers = dict(zip(conds, "os^Dvx<>"))
+    for meth in _COLORS:
+        sel = [r for r in rows if r["method"] == meth and r["depth_mm"] is not None]
+        for c in conds:
+            pts = [(r["depth_mm"], r["cnr"] if r["cnr"] is not None else 0.0) for r in sel if r["condition"] == c]
+            if pts:
+                x, y = zip(*pts)
+                ax.scatter(x, np.maximum(y, 1e-2), s=18, color=_COLORS[meth], marker=markers[c], alpha=0.75)
+    for meth, col in _COLORS.items():
+        ax.plot([], [], "o", color=col, label=_LABELS[meth])
+    for c, mk in markers.items():
+        ax.plot([], [], mk, color="k", label=c, markerfacecolor="none")
+    ax.axhline(1.0, color="k", ls="--", lw=0.8)
+    ax.set_yscale("log")
+    ax.set_xlabel("vein depth (mm, ground truth)")
+    ax.set_ylabel("per-vein CNR (office light)")
+    ax.set_title("Which veins each method shows, by depth (below the dashed line: not detected)", fontsize=9)
+    ax.legend(fontsize=6, ncol=2)
+    if own:
+        fig.tight_layout()
+    return finish(fig, out)
+
+
+def ambient_figure(amb_rows, strongest=None, *, valid=None, out=None):
+    """Fig. 13 analogue: pooled CNR against ambient illuminance per method, and the images at the brightest level.
+
+    ``strongest``: ``(level name, images, metrics)`` of the brightest level, or None.
+    """
+    shown = ["photo", "global", "delay"]
+    ncol = 1 + (len(shown) if strongest is not None else 0)
+    fig = new_figure((3.6 + 2.3 * (ncol - 1), 3.4))
+    gs = fig.add_gridspec(1, ncol, width_ratios=[1.8] + [1.0] * (ncol - 1))
+    ax = fig.add_subplot(gs[0, 0])
+    for meth, col in _COLORS.items():
+        pts = sorted((max(r["lux"], 10.0), r["cnr"] or 0.0) for r in amb_rows if r["method"] == meth)
+        if pts:
+            x, y = zip(*pts)
+            ax.plot(x, np.maximum(y, 1e-2), "o-", color=col, label=_LABELS[meth], ms=3)
+    ax.axhline(1.0, color="k", ls="--", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("ambient illuminance (lux; 'dark' drawn at 10)")
+    ax.set_ylabel("pooled vein CNR")
+    ax.set_title("CNR against ambient light (Fig. 13 analogue)", fontsize=9)
+    ax.legend(fontsize=6)
+    if strongest is not None:
+        level, imgs, m = strongest
+        for j, meth in enumerate(shown, start=1):
+            a = fig.add_subplot(gs[0, j])
+            show_image(a, imgs[meth], valid=valid, title=f"{_LABELS[meth]}\n{level}: CNR {_fmt(m[meth]['cnr'])}")
+    fig.tight_layout()
+    return finish(fig, out)
+
+
+def best_delay_figure(best, *, ax=None, out=None):
+    """The delay of highest CNR per vein against its depth, with the straight-line fit."""
+    fig, ax, own = figure_for(ax, (4.5, 3.5))
+    veins = [v for v in best["veins"] if v["depth_mm"] is not None]
+    det = [v for v in veins if v["detected"]]
+    nod = [v for v in veins if not v["detected"]]
+    if det:
+        ax.scatter([v["depth_mm"] for v in det], [v["best_delay_us"] for v in det], color="tab:red", label="detected")
+    if nod:
+        ax.scatter(
+            [v["depth_mm"] for v in nod],
+            [v["best_delay_us"] for v in nod],
+            marker="x",
+            color="k",
+            label="not detected at any delay (argmax of noise)",
+        )
+    fit = best.get("fit_delay_vs_depth")
+    if fit:
+        x = np.linspace(min(v["depth_mm"] for v in det), max(v["depth_mm"] for v in det), 20)
+        ax.plot(
+            x, fit["intercept"] + fit["slope"] * x, "k-", lw=1, label=f"{fit['slope']:.0f} us/mm, r = {fit['r']:.2f}"
+        )
+    ax.set_xlabel("vein depth (mm)")
+    ax.set_ylabel("delay of highest CNR (us)")
+    ax.set_title(f"Delay of highest CNR against depth (t_e = {best.get('exposure_us', 0):g} us)", fontsize=9)
+    ax.legend(fontsize=7)
+    if own:
+        fig.tight_layout()
+    return finish(fig, out)
+
+
+def enhancement_figure(single, single_delay_us, result, truth, numbers, *, valid=None, out=None):
+    """Fig. 14 analogue: best single delay image, enhanced composite, delay map, delay map against depth."""
+    fig = new_figure((12.0, 3.3))
+    axes = fig.subplots(1, 4)
+    e = numbers
+    show_image(
+        axes[0],
+        single,
+        valid=valid,
+        title=f"best single delay ({single_delay_us:g} us)\nCNR {_fmt(e['best_single_cnr'])}, "
+        f"{e['best_single_detected']}/{e['n_veins']} veins",
+    )
+    show_image(
+        axes[1],
+        result.image,
+        valid=valid,
+        title=f"enhanced (Eq. 7)\nCNR {_fmt(e['enhanced_cnr'])}, {e['enhanced_detected']}/{e['n_veins']} veins",
+    )
+    im = axes[2].imshow(result.delay_map_us, cmap="viridis", interpolation="nearest")
+    axes[2].set_xticks([])
+    axes[2].set_yticks([])
+    ids = np.asarray(truth["vein_id"])
+    axes[2].contour(ids > 0, levels=[0.5], colors="w", linewidths=0.5)
+    axes[2].set_title("blurred delay map t_d* (us)\nwhite: true veins", fontsize=8)
+    fig.colorbar(im, ax=axes[2], fraction=0.046)
+    ax = axes[3]
+    d = e.get("depth_from_delay_map") or {}
+    if d.get("veins"):
+        depth = np.asarray(truth["depth_mm"], float)
+        on = (ids > 0) & np.isfinite(depth)
+        if valid is not None:
+            on &= valid
+        ax.scatter(result.delay_map_us[on], depth[on], s=2, alpha=0.2, color="tab:blue", label="vein pixels")
+        ax.scatter(
+            [v["delay_us"] for v in d["veins"]],
+            [v["depth_mm"] for v in d["veins"]],
+            color="tab:red",
+            s=25,
+            label="per vein (median)",
+        )
+        f = d.get("pixels")
+        if f:
+            x = np.linspace(result.delay_map_us[on].min(), result.delay_map_us[on].max(), 10)
+            ax.plot(
+                x,
+                f["intercept"] + f["slope"] * x,
+                "k-",
+                lw=1,
+                label=f"fit: RMSE {f['rmse']:.2f} mm (spread {f['spread']:.2f}), r = {f['r']:.2f}",
+            )
+        ax.legend(fontsize=6)
+    ax.set_xlabel("t_d* (us)")
+    ax.set_ylabel("true vein depth (mm)")
+    ax.set_title("does the delay map estimate depth?", fontsize=8)
+    fig.tight_layout()
+    return finish(fig, out)
+
+
+def headline_figure(images: dict, *, metrics=None, valid=None, out=None):
+    """The demo's headline: photo, direct and short-range indirect images side by side."""
+    keys = [k for k in ("photo", "direct", "delay") if k in images]
+    fig = new_figure((3.0 * len(keys), 3.3))
+    axes = np.atleast_1d(fig.subplots(1, len(keys)))
+    for ax, k in zip(axes, keys):
+        t = _LABELS[k]
+        if metrics is not None:
+            t += f"\nCNR {_fmt(metrics[k]['cnr'])}, {metrics[k]['n_detected']}/{metrics[k]['n_veins']} veins"
+        show_image(ax, images[k], valid=valid, title=t)
+    fig.suptitle("Forearm: veins through skin (Sec. 10), office light", fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    return finish(fig, out)
