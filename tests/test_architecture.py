@@ -44,6 +44,7 @@ LAYERS = [
     "classify",
     "materials",
     "baselines",
+    "pulse",
     "study",
     "figures",
     "experiments",
