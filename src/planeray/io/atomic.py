@@ -38,6 +38,7 @@ ALREADY_EXISTS = "already exists (pass --overwrite, or overwrite=True, to replac
 _KINDS = {"planeray-stack": "stack", "planeray-transport": "transport"}
 #: Result folders recognized by the ``format`` of their ``planeray.json``.
 _FOLDER_KINDS = {"planeray-materials-capture": "materials capture", "planeray-materials-report": "materials report"}
+_FOLDER_KINDS["planeray-pulse-report"] = "pulse report"  # `planeray skin pulse` / `skin pulse-report`
 #: The marker file of such folders.
 MARKER = "planeray.json"
 
