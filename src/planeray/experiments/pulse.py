@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -169,7 +170,7 @@ def run_pulse_report(
     step("scene linearized")
     vein = _vein_region(model.scene, size)
     report = {
-        "settings": {k: v for k, v in base.__dict__.items()},
+        "settings": asdict(base),
         "linearity_error": model.linearity_error,
         "scene": model.scene.params,
     }

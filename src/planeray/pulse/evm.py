@@ -14,10 +14,9 @@ temporal band-pass of 0.5-2 Hz, ``alpha = 50`` and 4 pyramid levels.
   and down-sampled ``levels`` times (a 16x smaller video at 4 levels), filtered, amplified,
   up-sampled back and added.
 * ``pyramid="laplacian"`` (Wu's motion magnification): every band of a ``levels``-level Laplacian
-  pyramid is filtered and amplified, with Wu's spatial cut-off ``lambda_c`` (pixels) lowering
-  ``alpha`` on the fine levels (``alpha_l = min(alpha, lambda_l / (8 delta) - 1)``,
-  ``delta = lambda_c / (8 (1 + alpha))``) and the finest level and the low-pass residual left
-  unamplified, as in Wu's reference code.
+  pyramid is filtered and amplified; with Wu's spatial cut-off ``lambda_c`` (pixels) the gain
+  falls on the fine levels and the finest level and the low-pass residual are left unamplified,
+  as in Wu's reference code (:func:`level_alphas`).
 
 **Amplification convention.**  Our temporal filter is a real, two-sided ideal band-pass: the FFT
 along time keeps the bins with ``f_lo <= |f| <= f_hi`` (``numpy.fft.rfft`` / ``irfft``), so
@@ -176,22 +175,28 @@ def laplacian_pyramid(frames, levels: int) -> list[np.ndarray]:
     return bands
 
 
-def level_alphas(shape, levels: int, alpha: float, lambda_c: float | None) -> list[float]:
+def level_alphas(shape, levels: int, alpha: float, lambda_c: float | None, *, exaggeration: float = 2.0) -> list[float]:
     """Gain of every Laplacian level (finest first, then the residual), Wu et al.'s rule.
 
-    Without ``lambda_c`` every band level gets ``alpha`` and the residual 0; with it, the
-    representative wavelength ``lambda = sqrt(H^2 + W^2) / 3`` halves per level and a level gets
-    ``min(alpha, lambda / (8 delta) - 1)``, ``delta = lambda_c / (8 (1 + alpha))``; the finest
-    level and the residual get 0 (Wu et al. 2012, Sec. 3 and their ``amplify_spatial_lpyr_temporal_ideal``).
+    Without ``lambda_c`` every band level gets ``alpha`` and the residual 0.  With it (Wu et al.
+    2012, Sec. 3, as their ``amplify_spatial_lpyr_temporal_ideal`` does it): the residual has the
+    representative wavelength ``lambda = sqrt(H^2 + W^2) / 3``, which halves at each finer level;
+    a level gets ``min(alpha, exaggeration * (lambda / (8 delta) - 1))``,
+    ``delta = lambda_c / (8 (1 + alpha))``, and the finest level and the residual get 0.
+
+    Examples
+    --------
+    >>> [round(a, 1) for a in level_alphas((480, 640), 4, 50.0, 1000.0)]
+    [0.0, 1.4, 4.8, 11.6, 0.0]
     """
     if lambda_c is None:
         return [float(alpha)] * levels + [0.0]
     delta = lambda_c / 8.0 / (1.0 + alpha)
     lam = float(np.hypot(*shape)) / 3.0
-    out = []
-    for level in range(levels + 1):
-        a = min(alpha, lam / delta / 8.0 - 1.0)
-        out.append(0.0 if level in (0, levels) else max(a, 0.0))
+    out = [0.0] * (levels + 1)
+    for level in range(levels, -1, -1):  # from the residual to the finest level
+        a = exaggeration * (lam / delta / 8.0 - 1.0)
+        out[level] = 0.0 if level in (0, levels) else float(np.clip(a, 0.0, alpha))
         lam /= 2.0
     return out
 

@@ -15,8 +15,9 @@ Formats
   hyperstack (float32, ``finterval = 1/fps``) -- lossless, the format to keep a simulated capture in.
 * a folder of ``.png`` / ``.tif`` / ``.tiff`` / ``.jpg`` frames, in name order (natural order:
   ``frame2`` before ``frame10``); the folder carries no frame rate, so ``fps`` is required.
-* ``.mp4`` / ``.avi`` / ``.mkv`` / ``.mov``: decoded by ffmpeg through ``imageio-ffmpeg`` (the
-  wheel carries ffmpeg).  Written 8-bit (H.264 in mp4, lossless FFV1 in mkv, MJPEG in avi):
+* ``.mp4`` / ``.avi`` / ``.mkv`` / ``.mov``: decoded by OpenCV (``cv2.VideoCapture``, its bundled
+  FFmpeg), encoded by ffmpeg through ``imageio-ffmpeg`` (the wheel carries ffmpeg), 8-bit:
+  H.264 (lossless, ``crf 0``) in mp4/mov, lossless FFV1 in mkv, MJPEG in avi:
   quantization to 8 bits and lossy codecs dilute a 1 % pulse, so keep TIFF for analysis.
 """
 
@@ -38,7 +39,7 @@ __all__ = ["Video", "MIN_FRAMES", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "read_vide
 
 #: The fewest frames a pulse analysis accepts (one frame has no time axis).
 MIN_FRAMES = 8
-#: File suffixes decoded by ffmpeg -> codec used to write them.
+#: Video-file suffixes -> the codec that writes them.
 VIDEO_SUFFIXES = {".mp4": "libx264", ".avi": "mjpeg", ".mkv": "ffv1", ".mov": "libx264"}
 #: Frame files of a folder.
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
@@ -189,20 +190,29 @@ def _read_folder(path: Path):
     return np.stack(frames), None
 
 
-def _read_ffmpeg(path: Path):
-    import imageio_ffmpeg
+def _read_opencv(path: Path):
+    import os
 
+    # FFmpeg inside OpenCV would print its own complaints about a bad file; the error below says it in one line
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+    import cv2
+
+    cap = cv2.VideoCapture(str(path))
     try:
-        reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")
-        meta = next(reader)
-        w, h = meta["size"]
-        frames = [np.frombuffer(b, np.uint8).reshape(h, w, 3) for b in reader]
-    except Exception as exc:
-        raise InputError(f"cannot decode the video ({' '.join(str(exc).split())[:200]})", path) from None
-    fps = meta.get("fps")
-    fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
+        if not cap.isOpened():
+            raise InputError("cannot decode the video (OpenCV/FFmpeg could not open it)", path)
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        frames = []
+        while True:
+            ok, frame = cap.read()
+            if not ok:
+                break
+            frames.append(frame[..., ::-1] if frame.ndim == 3 else frame)  # BGR -> RGB
+    finally:
+        cap.release()
     if not frames:
-        raise InputError("the video holds no frames", path)
+        raise InputError("cannot decode the video (no frames)", path)
+    fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else None
     return np.stack(frames), fps
 
 
@@ -232,7 +242,7 @@ def read_video(path, *, fps: float | None = None, channel: str = "gray") -> Vide
     elif path.suffix.lower() in (".tif", ".tiff"):
         raw, file_fps = _read_tiff(path)
     elif path.suffix.lower() in VIDEO_SUFFIXES:
-        raw, file_fps = _read_ffmpeg(path)
+        raw, file_fps = _read_opencv(path)
     else:
         raise InputError(
             f"unknown video format {path.suffix!r}: expected .tif/.tiff, {'/'.join(VIDEO_SUFFIXES)} or a folder of frames",
