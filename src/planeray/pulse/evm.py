@@ -28,9 +28,11 @@ acts as ``alpha / 2`` (``1 + alpha/2`` overall).  ``alpha`` here is the gain tha
 reproduce a video made with Wu's code and factor ``alpha_w``, pass ``alpha = alpha_w / 2``.
 ``tests/test_pulse.py`` checks both (the one-sided filter is implemented there as a reference).
 
-The work is vectorized over frames: the frames of a pyramid level are stacked as the channels
-of one image (OpenCV filters up to 512 channels at a time) and the temporal filter is one FFT
-along the frame axis.
+The temporal filter is vectorized over pixels and frames: one real FFT along the frame axis of the
+whole pyramid level.  The spatial pyramid is OpenCV's, called once per frame and level (stacking
+the frames as the channels of one image was measured 4-7x slower: the transposes and OpenCV's
+many-channel kernels cost more than the calls they save), writing into preallocated arrays;
+``benchmarks/bench_pulse.py`` measures it against the per-frame structure of Wu's code.
 
 References
 ----------
@@ -64,8 +66,6 @@ __all__ = [
 DEFAULT_BAND_HZ = (0.5, 2.0)
 DEFAULT_ALPHA = 50.0
 DEFAULT_LEVELS = 4
-#: OpenCV filters at most this many channels at once (CV_CN_MAX).
-_CHANNELS = 512
 
 
 def check_band(band_hz, fps: float, name: str = "band") -> tuple[float, float]:
@@ -108,18 +108,32 @@ def ideal_bandpass(x, fps: float, band_hz=DEFAULT_BAND_HZ, *, axis: int = 0) -> 
     return out.astype(np.float32) if x.dtype == np.float32 else out
 
 
-def _by_channels(frames: np.ndarray, fn) -> np.ndarray:
-    """Apply an OpenCV image function to (T, H, W) frames, the frames as channels (<= 512 at a time)."""
-    import cv2  # noqa: F401  (imported by the callers' fn)
+def _down_chain(image, levels: int):
+    import cv2
 
-    out = []
-    for start in range(0, frames.shape[0], _CHANNELS):
-        block = np.ascontiguousarray(np.moveaxis(frames[start : start + _CHANNELS], 0, -1))
-        res = fn(block)
-        if res.ndim == 2:  # OpenCV drops a single channel
-            res = res[:, :, None]
-        out.append(np.moveaxis(res, -1, 0))
-    return np.concatenate(out, axis=0)
+    for _ in range(levels):
+        image = cv2.pyrDown(image)
+    return image
+
+
+def _up_chain(image, sizes):
+    import cv2
+
+    for h, w in reversed(sizes[:-1]):
+        image = cv2.pyrUp(image, dstsize=(w, h))
+    return image
+
+
+def _pyramid_sizes(shape, levels: int) -> list[tuple[int, int]]:
+    sizes = [tuple(int(v) for v in shape)]
+    for _ in range(levels):
+        h, w = sizes[-1]
+        if min(h, w) < 2:
+            raise InputError(
+                f"{levels} pyramid levels are too many for {shape[0]}x{shape[1]} frames (at most {len(sizes) - 1})"
+            )
+        sizes.append(((h + 1) // 2, (w + 1) // 2))  # cv2.pyrDown's default size
+    return sizes
 
 
 def pyramid_down(frames, levels: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
@@ -128,50 +142,41 @@ def pyramid_down(frames, levels: int) -> tuple[np.ndarray, list[tuple[int, int]]
     Returns the smallest level ``(T, h, w)`` and the ``(H, W)`` of every level from the
     original down (``levels + 1`` sizes), which :func:`pyramid_up` needs to return exactly.
     """
-    import cv2
-
     frames = np.asarray(frames, np.float32)
-    sizes = [frames.shape[1:3]]
-    level = frames
-    for _ in range(levels):
-        if min(level.shape[1:3]) < 2:
-            raise InputError(
-                f"{levels} pyramid levels are too many for {frames.shape[1]}x{frames.shape[2]} frames "
-                f"(at most {len(sizes) - 1})"
-            )
-        level = _by_channels(level, cv2.pyrDown)
-        sizes.append(level.shape[1:3])
-    return level, sizes
+    sizes = _pyramid_sizes(frames.shape[1:3], levels)
+    out = np.empty((frames.shape[0], *sizes[-1]), np.float32)
+    for t in range(frames.shape[0]):
+        out[t] = _down_chain(frames[t], levels)
+    return out, sizes
 
 
 def pyramid_up(frames, sizes: list[tuple[int, int]]) -> np.ndarray:
     """Up-sample ``frames`` (the level of ``sizes[-1]``) back through ``sizes`` to ``sizes[0]`` (``cv2.pyrUp``)."""
-    import cv2
-
-    level = np.asarray(frames, np.float32)
-    for h, w in reversed(sizes[:-1]):
-        level = _by_channels(level, lambda b, h=h, w=w: cv2.pyrUp(b, dstsize=(w, h)))
-    return level
+    frames = np.asarray(frames, np.float32)
+    out = np.empty((frames.shape[0], *sizes[0]), np.float32)
+    for t in range(frames.shape[0]):
+        out[t] = _up_chain(frames[t], sizes)
+    return out
 
 
 def laplacian_pyramid(frames, levels: int) -> list[np.ndarray]:
     """``levels`` band-pass levels (finest first) and the low-pass residual, each ``(T, h_l, w_l)``.
 
-    The frames are exactly ``sum_l pyramid_up(L_l)`` (the pyramid is lossless).
+    The frames are exactly the sum of every level up-sampled (the pyramid is lossless).
     """
     import cv2
 
     g = np.asarray(frames, np.float32)
-    bands = []
-    for _ in range(levels):
-        if min(g.shape[1:3]) < 2:
-            raise InputError(f"{levels} pyramid levels are too many for {frames.shape[1]}x{frames.shape[2]} frames")
-        down = _by_channels(g, cv2.pyrDown)
-        h, w = g.shape[1:3]
-        up = _by_channels(down, lambda b, h=h, w=w: cv2.pyrUp(b, dstsize=(w, h)))
-        bands.append(g - up)
-        g = down
-    bands.append(g)
+    sizes = _pyramid_sizes(g.shape[1:3], levels)
+    bands = [np.empty((g.shape[0], *sz), np.float32) for sz in sizes]
+    for t in range(g.shape[0]):
+        cur = g[t]
+        for level in range(levels):
+            down = cv2.pyrDown(cur)
+            h, w = sizes[level]
+            bands[level][t] = cur - cv2.pyrUp(down, dstsize=(w, h))
+            cur = down
+        bands[levels][t] = cur
     return bands
 
 
@@ -257,26 +262,40 @@ def magnify(
         if lambda_c is not None:
             raise InputError("lambda_c applies to the laplacian pyramid only")
         small, sizes = pyramid_down(frames, levels)
-        filtered = ideal_bandpass(small, fps, band, axis=0) * np.float32(alpha)
-        added = pyramid_up(filtered, sizes)
+        filtered = ideal_bandpass(small, fps, band, axis=0)
+        filtered *= np.float32(alpha)
+        out = frames.copy()
+        added = np.empty_like(frames) if return_band else None
+        for t in range(frames.shape[0]):
+            up = _up_chain(filtered[t], sizes)
+            out[t] += up
+            if return_band:
+                added[t] = up
     elif pyramid == "laplacian":
         if lambda_c is not None:
             check_positive(lambda_c, "lambda_c")
         bands = laplacian_pyramid(frames, levels)
         gains = level_alphas(frames.shape[1:3], levels, alpha, lambda_c)
-        added = None
-        # coarse to fine: up-sample the running sum by one level, add the next band
-        for level in range(levels, -1, -1):
-            b = bands[level]
-            term = ideal_bandpass(b, fps, band, axis=0) * np.float32(gains[level]) if gains[level] else np.zeros_like(b)
-            if added is not None:
-                import cv2
+        sizes = [b.shape[1:3] for b in bands]
+        filtered = [ideal_bandpass(b, fps, band, axis=0) * np.float32(g) if g else None for b, g in zip(bands, gains)]
+        out = frames.copy()
+        added = np.empty_like(frames) if return_band else None
+        import cv2
 
-                h, w = b.shape[1:3]
-                added = _by_channels(added, lambda x, h=h, w=w: cv2.pyrUp(x, dstsize=(w, h))) + term
-            else:
-                added = term
+        for t in range(frames.shape[0]):
+            acc = None
+            for level in range(levels, -1, -1):  # coarse to fine: up-sample the running sum, add the band
+                if acc is not None:
+                    h, w = sizes[level]
+                    acc = cv2.pyrUp(acc, dstsize=(w, h))
+                if filtered[level] is not None:
+                    acc = filtered[level][t].copy() if acc is None else acc + filtered[level][t]
+            if acc is not None:
+                out[t] += acc
+                if return_band:
+                    added[t] = acc
+            elif return_band:
+                added[t] = 0
     else:
         raise InputError(f"pyramid must be gaussian or laplacian, got {pyramid!r}")
-    out = frames + added
     return (out, added) if return_band else out
