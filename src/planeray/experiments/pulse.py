@@ -29,6 +29,7 @@ __all__ = [
     "REPORT_FORMAT",
     "write_pulse_analysis",
     "resolution_study",
+    "false_alarm_study",
     "run_pulse_report",
 ]
 
@@ -98,7 +99,36 @@ def write_pulse_analysis(video, out_dir, *, overwrite: bool = False, truth_bpm=N
     return result
 
 
-def resolution_study(*, fps: float = 30.0, frames: int = 480, rates_bpm=None, seeds=range(5), noise: float = 0.5):
+def false_alarm_study(*, fps: float = 30.0, seconds=(16.0, 20.0, 30.0), runs: int = 1000, breathing: float = 3.0):
+    """How often pulse-free signals (white noise plus breathing ``breathing`` times its std) report a rate.
+
+    Returns, per record length, the percentiles of the peak SNR (rate band) and the share of runs
+    at or above :data:`planeray.pulse.rate.MIN_BAND_SNR_DB` (the false-alarm rate).
+    """
+    from ..pulse.rate import MIN_BAND_SNR_DB
+    from ..pulse.waveform import breathing_signal
+
+    out = {"threshold_db": MIN_BAND_SNR_DB, "runs": int(runs), "by_seconds": {}}
+    for secs in seconds:
+        n = int(round(secs * fps))
+        vals = []
+        for seed in range(int(runs)):
+            rng = np.random.default_rng(seed)
+            x = rng.standard_normal(n) + breathing * breathing_signal(
+                n, fps, breaths_per_min=12 + 8 * rng.random(), seed=seed
+            )
+            vals.append(estimate_heart_rate(x, fps).band_snr_db)
+        vals = np.asarray(vals)
+        out["by_seconds"][f"{secs:g}"] = {
+            "p50_db": float(np.percentile(vals, 50)),
+            "p99_db": float(np.percentile(vals, 99)),
+            "max_db": float(vals.max()),
+            "false_alarm_rate": float(np.mean(vals >= MIN_BAND_SNR_DB)),
+        }
+    return out
+
+
+def resolution_study(*, fps: float = 30.0, frames: int = 480, rates_bpm=None, seeds=range(5), noise: float = 0.1):
     """Heart-rate error of a plain periodogram (largest bin) against zero-padding + peak interpolation.
 
     Synthetic PPG signals (:func:`planeray.pulse.waveform.cardiac_signal`, no variability) plus white
@@ -147,6 +177,7 @@ def run_pulse_report(
     rates_bpm=(50, 60, 70, 80, 90, 100, 110),
     seeds=(0, 1, 2),
     null_seeds=range(10),
+    null_runs: int = 1000,
     seed: int = 0,
     scene_params: dict | None = None,
     build=None,
@@ -229,8 +260,9 @@ def run_pulse_report(
         "max_band_snr_db": float(max(r["band_snr_db"] for r in null)) if null else None,
     }
     step("pulse-free videos")
-    report["resolution"] = resolution_study(fps=fps)
-    step("resolution study")
+    report["resolution"] = {f"noise {nz:g}": resolution_study(fps=fps, noise=nz) for nz in (0.1, 0.5)}
+    report["false_alarms_synthetic"] = false_alarm_study(fps=fps, runs=null_runs)
+    step("resolution and false-alarm studies")
     with atomic_directory(out_dir, overwrite=overwrite, kind="pulse report") as tmp:
         pulse_signal_figure(
             fig_a.time_s,
