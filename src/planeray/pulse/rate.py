@@ -16,7 +16,8 @@ than a bin (the Rayleigh limit ``1 / T``).
 
 **SNR** (de Haan and Jeanne 2013, Eq. 21; the rPPG toolboxes' definition): the power within
 ``+-half_width_bpm`` of the rate ``f0`` and of its first harmonic ``2 f0``, against the power at
-every other frequency of ``snr_band_hz`` (default 0.5-4 Hz, their 30-240 bpm), in dB.  The
+every other frequency of ``snr_band_hz``, in dB (default 0.6-3.3 Hz and 6 bpm, as the rPPG-Toolbox,
+Liu et al. 2023, computes it; de Haan and Jeanne summed over 30-240 bpm).  The
 template is centred on the detected rate, or on a known one (``reference_bpm``).
 
 **No pulse.**  The SNR above counts breathing (0.25 Hz and its harmonics) and the pulse's own
@@ -32,6 +33,8 @@ References
 ----------
 .. [1] de Haan and Jeanne, "Robust pulse rate from chrominance-based rPPG", IEEE TBME 60,
    2878 (2013), Eq. 21 (SNR).
+.. [4] Liu et al., "rPPG-Toolbox: Deep remote PPG toolbox", NeurIPS Datasets and Benchmarks
+   (2023) -- ``calculate_SNR``: +-6 bpm around f0 and 2 f0, 0.6-3.3 Hz.
 .. [2] Welch, "The use of fast Fourier transform for the estimation of power spectra", IEEE
    Trans. Audio Electroacoust. 15, 70 (1967).
 .. [3] Smith, "Spectral Audio Signal Processing", W3K 2011, "Quadratic interpolation of spectral
@@ -64,8 +67,9 @@ __all__ = [
 
 #: Where a heart rate is searched: 42-120 bpm (the paper's magnification band tops at 2 Hz).
 RATE_BAND_HZ = (0.7, 2.0)
-#: Band of the SNR (de Haan and Jeanne 2013: 30-240 bpm).
-SNR_BAND_HZ = (0.5, 4.0)
+#: Band of the SNR: 36-198 bpm, the rPPG-Toolbox's (de Haan and Jeanne 2013 used 30-240 bpm; 0.5 Hz
+#: would count the second harmonic of 15 breaths per minute).
+SNR_BAND_HZ = (0.6, 3.3)
 #: Below this peak SNR (rate band only) no rate is reported (see the module docstring).
 MIN_BAND_SNR_DB = 3.0
 
@@ -191,7 +195,7 @@ def estimate_heart_rate(
     band_hz : (float, float)
         Where the rate is searched (default 0.7-2 Hz, 42-120 bpm).
     snr_band_hz : (float, float)
-        Band of the SNR (default 0.5-4 Hz).
+        Band of the SNR (default 0.6-3.3 Hz).
     method : {"periodogram", "welch"}
     pad : int
         Zero-padding factor (1: none).

@@ -27,6 +27,12 @@ the largest error of the linear model there relative to the pulsatile change its
 Each method's exposure is scaled (as aperture or gain would) so that its brightest pixel sits at
 ``fill`` of full well: the regular camera is not left saturated by ambient light.
 
+**Pixels.**  A simulated pixel stands for ``(sensor_rows / H)^2`` pixels of the real sensor (the
+paper's camera, an IDS UI-3250, has 1200 rows) binned together: the camera's full well, laser and
+ambient electrons scale by that count and its read noise by the square root, and the ADC gains the
+bits the sum gains (up to 16), so shot noise per unit of skin is that of the real camera whatever
+the simulated size (``sensor_rows=None``: one sensor pixel per simulated pixel).
+
 **Motion.**  Breathing shifts the image by ``breathing_px`` (peak) and changes its brightness by
 ``breathing_gain`` (the distance to the projector); the arm drifts by ``motion_px`` (standard
 deviation, below 0.3 Hz).  Frames are shifted with linear interpolation (``scipy.ndimage.shift``).
@@ -56,6 +62,7 @@ __all__ = [
     "method_images",
     "linearize",
     "skin_builder",
+    "binned_camera",
     "simulate_live",
 ]
 
@@ -93,6 +100,8 @@ class LiveSettings:
         Camera noise on (False: the expected images).
     fill : float
         Brightest expected pixel of each method as a fraction of full well (auto-exposure).
+    sensor_rows : int, optional
+        Rows of the real sensor the image stands for (binning, see the module docstring).
     """
 
     seconds: float = 20.0
@@ -111,6 +120,7 @@ class LiveSettings:
     ambient: bool = True
     noise: bool = True
     fill: float = 0.7
+    sensor_rows: int | None = 1200
 
     def __post_init__(self):
         check_positive(self.seconds, "seconds")
@@ -124,6 +134,8 @@ class LiveSettings:
         check_positive(self.exposure_us, "exposure_us")
         check_positive(self.lines_per_second, "lines_per_second")
         check_number(self.fill, "fill", minimum=0.01, maximum=1.0)
+        if self.sensor_rows is not None:
+            check_positive(self.sensor_rows, "sensor_rows")
 
     def frame_rate(self, projector_rows: int) -> float:
         return float(self.fps) if self.fps is not None else self.lines_per_second / projector_rows
@@ -231,6 +243,22 @@ class LiveCapture:
         return next(iter(self.videos.values())).fps
 
 
+def binned_camera(camera: CameraModel, pixels: float) -> CameraModel:
+    """The camera whose one pixel is the sum of ``pixels`` sensor pixels (see the module docstring)."""
+    if pixels <= 1:
+        return camera
+    bits = min(16, camera.bit_depth + int(np.floor(np.log2(pixels) / 2 + 0.5)) * 2)
+    return replace(
+        camera,
+        full_well_e=camera.full_well_e * pixels,
+        laser_electrons=camera.laser_electrons * pixels,
+        ambient_e_per_us=camera.ambient_e_per_us * pixels,
+        read_noise_e=camera.read_noise_e * float(np.sqrt(pixels)),
+        bit_depth=bits,
+        black_level=camera.black_level * 2 ** (bits - camera.bit_depth),
+    )
+
+
 def _shift_frames(images: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     from scipy.ndimage import shift
 
@@ -280,6 +308,8 @@ def simulate_live(
     camera = replace(camera or CameraModel(), frames_averaged=1)
     if not s.ambient:
         camera = replace(camera, ambient_e_per_us=0.0)
+    if s.sensor_rows is not None:
+        camera = binned_camera(camera, (s.sensor_rows / scene.shape[0]) ** 2)
     fps = s.frame_rate(scene.geometry.projector_rows)
     n = int(round(s.seconds * fps))
     if n < 8:
