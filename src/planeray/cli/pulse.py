@@ -40,6 +40,9 @@ def pulse(
     rate_band: Annotated[str, typer.Option(help="Where the heart rate is searched, Hz.")] = "0.7,2",
     method: Annotated[str, typer.Option(help="Spectrum: periodogram or welch.")] = "periodogram",
     channel: Annotated[str, typer.Option(help="Colour videos: gray, red, green or blue.")] = "gray",
+    magnified: Annotated[
+        Path | None, typer.Option(help="Also write the magnified video here (.mp4 to watch, .tif lossless).")
+    ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a result folder planeray wrote.")] = False,
 ):
@@ -52,6 +55,11 @@ def pulse(
     from ..pulse.video_io import read_video
 
     check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
+    if magnified is not None and magnified.exists() and not overwrite:
+        from ..errors import InputError
+        from ..io.atomic import ALREADY_EXISTS
+
+        raise InputError(ALREADY_EXISTS, magnified)
     with console.status(f"reading {video_path}"):
         video = read_video(video_path, fps=fps, channel=channel)
     opts = {
@@ -69,7 +77,12 @@ def pulse(
 
         opts["mask"] = np.asarray(read_label_image(mask, shape=video.shape)) > 0
     with console.status(f"magnifying {video.n_frames} frames of {video.shape[0]}x{video.shape[1]}"):
-        res = write_pulse_analysis(video, out_dir, overwrite=overwrite, **opts)
+        res = write_pulse_analysis(video, out_dir, overwrite=overwrite, keep_video=magnified is not None, **opts)
+    if magnified is not None:
+        from ..pulse.video_io import Video, write_video
+
+        mag = Video(res.magnified, video.fps, str(video_path), {"magnified": res.settings})
+        write_video(magnified, mag, overwrite=overwrite, white=float(np.percentile(video.frames, 99.9)))
     if json_out:
         print_json(res.to_dict())
         return
