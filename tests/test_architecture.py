@@ -25,6 +25,7 @@ LAYERS = [
     "timing",
     "medium",
     "optical_data",
+    "optical_data_skin",
     "linesweep",
     "_bandsum",
     "transport",

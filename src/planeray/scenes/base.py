@@ -150,7 +150,7 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
     >>> scene.shape, scene.geometry.projector_rows
     ((32, 32), 180)
     >>> sorted(list_scenes())
-    ['corner', 'diffuse_plane', 'disco_ball', 'materials', 'mirror_ball', 'wax']
+    ['corner', 'diffuse_plane', 'disco_ball', 'materials', 'mirror_ball', 'skin', 'wax']
     """
     _discover()
     if name not in _REGISTRY:

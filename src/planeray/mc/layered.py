@@ -1,0 +1,932 @@
+"""Monte Carlo in layered media with an embedded blood cylinder (skin and veins), compiled with Numba.
+
+The engine's scheme (:mod:`planeray.mc.engine`: MCML weights [1]_, Henyey-Greenstein
+scattering, Russian roulette, 32 seeded xoshiro256+ batches -- a result depends on the
+seed only, never on the number of threads) for a stack of flat layers, top first, each a
+:class:`planeray.medium.Medium` with its own ``sigma_s``, ``sigma_a``, ``g``, index ``n``
+and thickness.  Steps cross layer interfaces the MCML way (the remaining optical depth is
+carried over into the next layer); the top face reflects the unpolarized Fresnel fraction
+of the weight against air (the rest escapes and is tallied); an internal interface between
+unequal indices reflects or refracts (Fresnel, chosen at random); light leaving the bottom
+of the stack is lost (``transmittance``) -- below the fat of the skin scene lies muscle,
+treated as a sink.
+
+Coordinates: ``x`` across the projector's lines (the offset axis: projector row minus
+camera row, ``u = x / mm_per_row``), ``y`` along them, ``z`` depth.  A **cylinder** (a
+vein) is infinitely long, its axis horizontal at depth ``z_c`` (the axis; its top is at
+``z_c - r``), along the direction ``(sin theta, cos theta, 0)``: ``theta = 0`` runs
+parallel to the projector rows, ``theta = 90`` across them.  The signed distance of a
+point from the vein is ``rho = (x, y) . (cos theta, -sin theta)`` (positive below a
+parallel vein).  Blood inside has its own ``sigma_s``, ``sigma_a``, ``g`` and the index of
+the tissue (no refraction at the vessel wall).
+
+Two runs:
+
+:func:`mc_layered_vein_brute`
+    **brute force**: the cylinder is in the medium and photons cross it.  A line source
+    (the projector's row, along ``y``, normal incidence) at random positions; exits binned
+    by the pixel's distance ``rho`` from the vein and the offset ``u``; a second run with
+    the same seed and no vein gives the ratio ``K_vein / K_background`` -- the vein's
+    contrast in the plane-to-ray kernel.
+:func:`mc_vein_table`
+    **perturbation** (the fast model's table): a pencil beam enters at the pixel and its
+    exits, binned by ``x``, give the pixel's line kernel by reciprocity (the wall kernels of
+    :mod:`planeray.mc.wall` do the same).  Along the way each photon records the optical
+    depth ``(mu_a,blood - mu_a,layer) L`` it spends inside virtual veins -- one per angle
+    and (depth, diameter), each placed at a random distance ``rho`` from the pixel -- and
+    every exit is tallied once with weight ``w`` and once per vein with
+    ``w exp(-(mu_a,blood - mu_a) L)``: the exact change of the kernel when the vein
+    *absorbs* like blood (Monte Carlo perturbation, the pathlength-in-cylinder weighting
+    of [2]_ [3]_).  Scattering inside the vein is that of the surrounding tissue: that is
+    the approximation, and :func:`mc_layered_vein_brute` measures it.
+
+Both tally the power leaving the top face (exitance), like the wax scene's kernel.
+
+References
+----------
+.. [1] L. Wang, S. L. Jacques, L. Zheng, "MCML -- Monte Carlo modeling of light transport
+   in multi-layered tissues", Comput. Methods Programs Biomed. 47, 131-146, 1995.
+.. [2] C. K. Hayakawa, J. Spanier, F. Bevilacqua, A. K. Dunn, J. S. You, B. J. Tromberg,
+   V. Venugopalan, "Perturbation Monte Carlo methods to solve inverse photon migration
+   problems in heterogeneous tissues", Opt. Lett. 26(17), 1335-1337, 2001.
+.. [3] C. Liu, A. K. Maity, A. W. Dubrawski, A. Sabharwal, S. G. Narasimhan, "High
+   resolution diffuse optical tomography using short range indirect subsurface
+   imaging", ICCP 2020 (the Episcan-style measurement as a convolution with a
+   perturbation kernel).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from ..errors import InputError
+from ..medium import Medium, as_medium
+from .cache import TABLES_DIR, cache_dir, cache_key
+from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _uniform
+from .physics import fresnel_jit, hg_cos_jit
+
+__all__ = [
+    "LAYERED_VERSION",
+    "LayeredResult",
+    "VeinTable",
+    "mc_layered_profile",
+    "mc_layered_vein_brute",
+    "mc_vein_table",
+]
+
+#: Bumped whenever the layered runs' results change (part of every cache key).
+LAYERED_VERSION = 1
+
+_MODE_PENCIL = 0
+_MODE_LINE = 1
+
+
+# ---------------------------------------------------------------- geometry helpers
+@numba.njit(cache=True, inline="always")
+def _cyl_roots(q, z, dq, dz, qc, zc, r):
+    """Parameters ``t1 <= t2`` where the line ``(q, z) + t (dq, dz)`` meets the circle; NaN if never."""
+    a = dq * dq + dz * dz
+    if a < 1e-14:
+        return math.nan, math.nan
+    b = 2.0 * ((q - qc) * dq + (z - zc) * dz)
+    c = (q - qc) * (q - qc) + (z - zc) * (z - zc) - r * r
+    disc = b * b - 4.0 * a * c
+    if disc <= 0.0:
+        return math.nan, math.nan
+    sq = math.sqrt(disc)
+    return (-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a)
+
+
+# ---------------------------------------------------------------- the kernel
+@numba.njit(cache=True, parallel=True, error_model="numpy")
+def _trace(
+    states,
+    counts,
+    zb,
+    mus,
+    mua,
+    gs,
+    ns,
+    mode,
+    src_x,
+    src_y,
+    acc_y,
+    mm,
+    kmin,
+    nk,
+    rmin,
+    nr,
+    cutoff_mm,
+    cyl_on,
+    cyl_nx,
+    cyl_ny,
+    cyl_zc,
+    cyl_r,
+    b_mus,
+    b_mua,
+    b_g,
+    v_nx,
+    v_ny,
+    rho0,
+    drho,
+    v_zc,
+    v_r,
+    v_dmua,
+):
+    """Trace ``counts[b]`` photons per batch ``b``; per-batch tallies (see the module docstring).
+
+    ``zb``: the L + 1 layer boundaries (``zb[0] = 0``).  ``mode`` pencil (at the origin)
+    or line (a line along ``y`` at ``x0`` uniform in ``[-src_x, src_x]``, ``y0`` uniform
+    in ``[-src_y, src_y]``; exits tallied only for ``|y| <= acc_y``).  ``cyl_*``: the real
+    cylinder (brute force); ``v_*``: virtual veins for the perturbation tallies, angles
+    ``j`` (normals ``v_nx, v_ny``), distances ``rho0 + i drho`` of the pixel (the origin) from
+    the vein (``i < nr``) and combos ``c`` (``v_zc, v_r``, ``v_dmua[c, layer]``).
+    """
+    B = counts.size
+    L = mus.size
+    nj = v_nx.size
+    nc = v_zc.size
+    refl_bins = np.zeros((B, nk))
+    hist = np.zeros((B, nr, nk))
+    pert = np.zeros((B, nj, nc, nr, nk))
+    refl = np.zeros(B)
+    trans = np.zeros(B)
+    absorbed = np.zeros(B)
+    truncated = np.zeros(B)
+    events = np.zeros(B, dtype=np.int64)
+    n0 = ns[0]
+    w0 = 1.0 - ((n0 - 1.0) / (n0 + 1.0)) ** 2
+    inv = 1.0 / mm
+    b_mut = b_mus + b_mua
+    b_alb = b_mus / b_mut
+    zlo_all = math.inf
+    for c in range(nc):
+        zlo_all = min(zlo_all, v_zc[c] - v_r[c])
+    for b in numba.prange(B):
+        s = states[b].copy()
+        tau = np.zeros((nj, nc, nr + 1))
+        refl_b = 0.0
+        trans_b = 0.0
+        abs_b = 0.0
+        trunc_b = 0.0
+        ev_b = 0
+        for _ in range(counts[b]):
+            if mode == _MODE_LINE:
+                x = (2.0 * _uniform(s) - 1.0) * src_x
+                y = (2.0 * _uniform(s) - 1.0) * src_y
+            else:
+                x = 0.0
+                y = 0.0
+            x0 = x
+            z = 0.0
+            ux = 0.0
+            uy = 0.0
+            uz = 1.0
+            w = w0
+            layer = 0
+            in_cyl = False
+            if nj > 0:
+                tau[:] = 0.0
+            alive = True
+            while alive:
+                left = -math.log(1.0 - _uniform(s))  # optical depth of this flight
+                collide = False
+                while True:
+                    if in_cyl:
+                        mut = b_mut
+                    else:
+                        mut = mus[layer] + mua[layer]
+                    step = left / mut
+                    dist = math.inf
+                    which = 0
+                    if not in_cyl:
+                        if uz < 0.0:
+                            dist = (zb[layer] - z) / uz
+                            which = -1
+                        elif uz > 0.0:
+                            dist = (zb[layer + 1] - z) / uz
+                            which = 1
+                    if cyl_on:
+                        q = x * cyl_nx + y * cyl_ny
+                        dq = ux * cyl_nx + uy * cyl_ny
+                        t1, t2 = _cyl_roots(q, z, dq, uz, 0.0, cyl_zc, cyl_r)
+                        if t2 == t2:
+                            if in_cyl:
+                                tc = t2
+                            else:
+                                tc = t1 if t1 > 1e-12 else math.inf
+                            if 0.0 <= tc < dist:
+                                dist = tc
+                                which = 2
+                    seg = step if step < dist else dist
+                    if nj > 0 and not in_cyl and seg > 0.0:
+                        # Path length inside every virtual vein, by the flight's midpoint (flights
+                        # are ~0.04 mm, veins >= 1 mm): the veins that contain the midpoint form a
+                        # run of rho indices per (angle, combo), booked in a difference array.
+                        zm = z + 0.5 * seg * uz
+                        if zm > zlo_all:
+                            for c in range(nc):
+                                dz = zm - v_zc[c]
+                                h2 = v_r[c] * v_r[c] - dz * dz
+                                if h2 <= 0.0:
+                                    continue
+                                h = math.sqrt(h2)
+                                dt = v_dmua[c, layer] * seg
+                                for j in range(nj):
+                                    qm = (x + 0.5 * seg * ux) * v_nx[j] + (y + 0.5 * seg * uy) * v_ny[j]
+                                    # veins at q_v = -rho with |qm - q_v| < h
+                                    i0 = max(0, math.ceil((-qm - h - rho0) / drho))
+                                    i1 = min(nr - 1, math.floor((-qm + h - rho0) / drho))
+                                    if i0 <= i1:
+                                        tau[j, c, i0] += dt
+                                        tau[j, c, i1 + 1] -= dt
+                    x += seg * ux
+                    y += seg * uy
+                    z += seg * uz
+                    if step < dist:
+                        collide = True
+                        break
+                    left -= dist * mut
+                    if which == 2:
+                        in_cyl = not in_cyl
+                        if not in_cyl:  # back in the tissue: which layer?
+                            layer = 0
+                            while layer < L - 1 and z >= zb[layer + 1]:
+                                layer += 1
+                        continue
+                    if which == -1:
+                        z = zb[layer]
+                        if layer == 0:  # the top face: partial escape (Fresnel)
+                            R = fresnel_jit(-uz, ns[0])
+                            esc = w * (1.0 - R)
+                            refl_b += esc
+                            if mode == _MODE_LINE:
+                                if abs(y) <= acc_y:
+                                    rho = x * cyl_nx + y * cyl_ny
+                                    r = math.floor(rho * inv + 0.5) - rmin
+                                    k = math.floor((x0 - x) * inv + 0.5) - kmin
+                                    if 0 <= r < nr and 0 <= k < nk:
+                                        hist[b, r, k] += esc
+                            else:
+                                k = math.floor(x * inv + 0.5) - kmin
+                                if 0 <= k < nk:
+                                    refl_bins[b, k] += esc
+                                    for j in range(nj):
+                                        for c in range(nc):
+                                            t = 0.0
+                                            for i in range(nr):
+                                                t += tau[j, c, i]
+                                                pert[b, j, c, i, k] += esc if t == 0.0 else esc * math.exp(-t)
+                            w *= R
+                            uz = -uz
+                            if w <= 0.0:
+                                alive = False
+                                break
+                            continue
+                        n1 = ns[layer]
+                        n2 = ns[layer - 1]
+                        nxt = layer - 1
+                    else:
+                        z = zb[layer + 1]
+                        if layer == L - 1:  # the bottom: lost into the sink below
+                            trans_b += w
+                            alive = False
+                            break
+                        n1 = ns[layer]
+                        n2 = ns[layer + 1]
+                        nxt = layer + 1
+                    if n1 == n2:
+                        layer = nxt
+                        continue
+                    ci = abs(uz)
+                    R = fresnel_jit(ci, n1 / n2)
+                    if _uniform(s) < R:
+                        uz = -uz
+                    else:
+                        rel = n1 / n2
+                        ct = math.sqrt(max(1.0 - rel * rel * (1.0 - ci * ci), 0.0))
+                        ux *= rel
+                        uy *= rel
+                        uz = ct if uz > 0.0 else -ct
+                        layer = nxt
+                if not alive or not collide:
+                    break
+                ev_b += 1
+                if in_cyl:
+                    alb = b_alb
+                    g = b_g
+                else:
+                    alb = mus[layer] / (mus[layer] + mua[layer])
+                    g = gs[layer]
+                abs_b += w * (1.0 - alb)
+                w *= alb
+                ct = hg_cos_jit(_uniform(s), g)
+                st = math.sqrt(max(1.0 - ct * ct, 0.0))
+                phi = 2.0 * math.pi * _uniform(s)
+                cp = math.cos(phi)
+                sp = math.sin(phi)
+                den2 = 1.0 - uz * uz
+                if den2 < 1e-10:
+                    sgn = 1.0 if uz >= 0.0 else -1.0
+                    nux = st * cp
+                    nuy = st * sp
+                    nuz = sgn * ct
+                else:
+                    den = math.sqrt(den2)
+                    a = st / den
+                    nux = a * (ux * uz * cp - uy * sp) + ux * ct
+                    nuy = a * (uy * uz * cp + ux * sp) + uy * ct
+                    nuz = -st * cp * den + uz * ct
+                nrm = 1.0 / math.sqrt(nux * nux + nuy * nuy + nuz * nuz)
+                ux = nux * nrm
+                uy = nuy * nrm
+                uz = nuz * nrm
+                if w < ROULETTE_THRESHOLD:
+                    if _uniform(s) < 1.0 / ROULETTE_CHANCE:
+                        abs_b -= w * (ROULETTE_CHANCE - 1.0)
+                        w *= ROULETTE_CHANCE
+                    else:
+                        abs_b += w
+                        break
+                if abs(x - x0) > cutoff_mm or abs(y) > cutoff_mm + src_y:
+                    trunc_b += w
+                    break
+        refl[b] = refl_b
+        trans[b] = trans_b
+        absorbed[b] = abs_b
+        truncated[b] = trunc_b
+        events[b] = ev_b
+    return refl_bins, hist, pert, refl, trans, absorbed, truncated, events
+
+
+# ---------------------------------------------------------------- inputs
+def _layer_arrays(layers):
+    layers = [as_medium(m) for m in layers]
+    if not layers:
+        raise InputError("a layered medium needs at least one layer")
+    th = np.array([m.thickness_mm for m in layers], dtype=np.float64)
+    if not np.all(np.isfinite(th[:-1])) or np.any(th <= 0):
+        raise InputError("every layer but the last needs a finite positive thickness")
+    zb = np.concatenate([[0.0], np.cumsum(th)])
+    return (
+        layers,
+        zb,
+        np.array([m.sigma_s for m in layers]),
+        np.array([m.sigma_a for m in layers]),
+        np.array([m.g for m in layers]),
+        np.array([m.n for m in layers]),
+    )
+
+
+def _medium_json(m: Medium) -> dict:
+    return {"sigma_s": m.sigma_s, "sigma_a": m.sigma_a, "g": m.g, "n": m.n, "thickness_mm": m.thickness_mm}
+
+
+def _states(seed):
+    return np.stack([s.generate_state(4, np.uint64) for s in np.random.SeedSequence(int(seed)).spawn(_N_BATCHES)])
+
+
+def _counts(n_photons):
+    n_photons = int(n_photons)
+    if n_photons < _N_BATCHES:
+        raise InputError(f"n_photons must be >= {_N_BATCHES}, got {n_photons}")
+    counts = np.full(_N_BATCHES, n_photons // _N_BATCHES, dtype=np.int64)
+    counts[: n_photons % _N_BATCHES] += 1
+    return counts
+
+
+def _run(
+    layers,
+    *,
+    n_photons,
+    seed,
+    mode,
+    mm,
+    kmin,
+    nk,
+    rmin=0,
+    nr=1,
+    src_x=0.0,
+    src_y=0.0,
+    acc_y=0.0,
+    cutoff_mm=40.0,
+    normal=(1.0, 0.0),
+    cylinder=None,
+    blood=None,
+    virtual=None,
+    progress=None,
+):
+    _, zb, mus, mua, gs, ns = _layer_arrays(layers)
+    counts = _counts(n_photons)
+    states = _states(seed)
+    cyl_on = cylinder is not None
+    nx, ny = normal
+    zc, rc = (1.0, 0.0) if cylinder is None else cylinder
+    bl = as_medium(blood) if blood is not None else Medium(sigma_s=1.0, sigma_a=0.0, g=0.0)
+    if virtual is None:
+        v_nx = v_ny = np.zeros(0)
+        v_zc = v_r = np.zeros(0)
+        v_dmua = np.zeros((0, mus.size))
+        rho0, drho = 0.0, 1.0
+    else:
+        v_nx, v_ny, rho0, drho, v_zc, v_r, v_dmua = virtual
+    step = _N_BATCHES if progress is None else max(1, min(_N_BATCHES, numba.get_num_threads()))
+    parts = []
+    for lo in range(0, _N_BATCHES, step):
+        g = slice(lo, min(_N_BATCHES, lo + step))
+        parts.append(
+            _trace(
+                states[g],
+                counts[g],
+                zb,
+                mus,
+                mua,
+                gs,
+                ns,
+                mode,
+                float(src_x),
+                float(src_y),
+                float(acc_y),
+                float(mm),
+                int(kmin),
+                int(nk),
+                int(rmin),
+                int(nr),
+                float(cutoff_mm),
+                cyl_on,
+                float(nx),
+                float(ny),
+                float(zc),
+                float(rc),
+                bl.sigma_s,
+                bl.sigma_a,
+                bl.g,
+                np.ascontiguousarray(v_nx, dtype=np.float64),
+                np.ascontiguousarray(v_ny, dtype=np.float64),
+                float(rho0),
+                float(drho),
+                np.ascontiguousarray(v_zc, dtype=np.float64),
+                np.ascontiguousarray(v_r, dtype=np.float64),
+                np.ascontiguousarray(v_dmua, dtype=np.float64),
+            )
+        )
+        if progress is not None:
+            progress(int(counts[g].sum()))
+    out = parts[0] if len(parts) == 1 else tuple(np.concatenate(t) for t in zip(*parts))
+    return counts, out
+
+
+def _stats(per_batch, counts):
+    n = counts.sum()
+    mean = per_batch.sum(axis=0) / n
+    means = per_batch / counts.reshape((-1,) + (1,) * (per_batch.ndim - 1))
+    return mean, means.std(axis=0, ddof=1) / np.sqrt(counts.size)
+
+
+# ---------------------------------------------------------------- the background kernel
+@dataclass(frozen=True)
+class LayeredResult:
+    """Line kernel of a layered medium (pencil beam at the pixel, exits binned by ``x``: reciprocity).
+
+    ``values[k]``: power leaving the top face through offset bin ``k`` (``[k - 1/2, k + 1/2)
+    * mm_per_row``) per unit incident power; the sum over all bins is the total diffuse
+    reflectance ``total_reflectance``.  Energy: ``specular + diffuse + transmitted +
+    absorbed + truncated == 1``.
+    """
+
+    offsets_rows: np.ndarray
+    mm_per_row: float
+    values: np.ndarray
+    stderr: np.ndarray
+    total_reflectance: float
+    total_reflectance_stderr: float
+    specular_reflectance: float
+    transmittance: float
+    absorbed: float
+    truncated: float
+    n_photons: int
+
+    @property
+    def energy_balance(self) -> float:
+        return self.specular_reflectance + self.total_reflectance + self.transmittance + self.absorbed + self.truncated
+
+
+_LAYERED_SCALARS = (
+    "mm_per_row",
+    "total_reflectance",
+    "total_reflectance_stderr",
+    "specular_reflectance",
+    "transmittance",
+    "absorbed",
+    "truncated",
+)
+
+
+def _check_offsets(offsets_rows):
+    off = np.asarray(offsets_rows)
+    o = off.astype(np.int64).ravel()
+    if o.size == 0 or np.any(o != off.ravel()) or np.any(np.diff(o) != 1):
+        raise InputError("offsets_rows must be consecutive integers")
+    return o
+
+
+def mc_layered_profile(
+    layers, *, n_photons=200_000, offsets_rows=None, mm_per_row=0.3, seed=0, cache=False, progress=None
+) -> LayeredResult:
+    """Monte Carlo line kernel and total reflectance of a stack of layers (top first).
+
+    Parameters
+    ----------
+    layers : sequence of Medium
+        The layers, top first; every layer but the last needs a finite thickness (the last
+        may be semi-infinite).  Each has its own index (Fresnel at unequal interfaces); the
+        top layer's index meets air.
+    n_photons : int
+        Photon packets (at least 32).
+    offsets_rows : array_like of int, optional
+        Consecutive offset bins; default ``arange(-64, 65)``.
+    mm_per_row : float
+        Bin width, mm.
+    seed : int
+        Seed; same seed, same bytes whatever the number of threads.
+    cache : bool
+        Read/write the result in the Monte Carlo cache (shipped tables first).
+    progress : callable, optional
+        ``progress(n)`` with the photons just traced.
+
+    Examples
+    --------
+    >>> from planeray.medium import Medium
+    >>> r = mc_layered_profile(
+    ...     [
+    ...         Medium(sigma_s=10.0, sigma_a=0.1, g=0.9, n=1.4, thickness_mm=1.0),
+    ...         Medium(sigma_s=5.0, sigma_a=0.05, g=0.9, n=1.4),
+    ...     ],
+    ...     n_photons=2000,
+    ... )
+    >>> abs(r.energy_balance - 1.0) < 1e-9
+    True
+    """
+    off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
+    mm = float(mm_per_row)
+    params = {
+        "kind": "layered-profile",
+        "version": LAYERED_VERSION,
+        "layers": [_medium_json(as_medium(m)) for m in layers],
+        "mm_per_row": mm,
+        "n_photons": int(n_photons),
+        "seed": int(seed),
+    }
+    path = cache_dir() / f"layered-{cache_key(params, off)}.npz"
+    if cache:
+        for hit in (TABLES_DIR / path.name, path):
+            if hit.exists():
+                try:
+                    with np.load(hit, allow_pickle=False) as z:
+                        res = LayeredResult(
+                            **{k: z[k] for k in ("offsets_rows", "values", "stderr")},
+                            **{k: float(z[k]) for k in _LAYERED_SCALARS},
+                            n_photons=int(z["n_photons"]),
+                        )
+                except (OSError, ValueError, KeyError):
+                    continue
+                if progress is not None:
+                    progress(int(n_photons))
+                return res
+    counts, out = _run(
+        layers, n_photons=n_photons, seed=seed, mode=_MODE_PENCIL, mm=mm, kmin=off[0], nk=off.size, progress=progress
+    )
+    refl_bins, _, _, refl, trans, absorbed, truncated, _ = out
+    values, err = _stats(refl_bins, counts)
+    r, r_err = _stats(refl, counts)
+    n0 = as_medium(layers[0]).n
+    n = counts.sum()
+    res = LayeredResult(
+        offsets_rows=off,
+        mm_per_row=mm,
+        values=values,
+        stderr=err,
+        total_reflectance=float(r),
+        total_reflectance_stderr=float(r_err),
+        specular_reflectance=float(((n0 - 1.0) / (n0 + 1.0)) ** 2),
+        transmittance=float(trans.sum() / n),
+        absorbed=float(absorbed.sum() / n),
+        truncated=float(truncated.sum() / n),
+        n_photons=int(n),
+    )
+    if cache:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
+            np.savez(
+                tmp,
+                offsets_rows=res.offsets_rows,
+                values=res.values,
+                stderr=res.stderr,
+                n_photons=np.int64(res.n_photons),
+                **{k: np.float64(getattr(res, k)) for k in _LAYERED_SCALARS},
+            )
+            os.replace(tmp, path)
+        except OSError as exc:
+            warnings.warn(
+                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+    return res
+
+
+# ---------------------------------------------------------------- brute force: the vein in the medium
+def _normal(angle_deg):
+    t = math.radians(float(angle_deg))
+    return math.cos(t), -math.sin(t)
+
+
+def _check_vein(layers, depth_mm, diameter_mm):
+    _, zb, *_ = _layer_arrays(layers)
+    r = 0.5 * float(diameter_mm)
+    top = float(depth_mm)
+    if not (r > 0 and top > 0):
+        raise InputError(f"vein depth and diameter must be positive, got {depth_mm} and {diameter_mm}")
+    if top + 2 * r >= zb[-1]:
+        raise InputError(f"a vein {depth_mm} mm deep and {diameter_mm} mm wide reaches below the stack ({zb[-1]} mm)")
+    return top + r, r
+
+
+def mc_layered_vein_brute(
+    layers,
+    blood: Medium,
+    *,
+    depth_mm,
+    diameter_mm,
+    angle_deg=0.0,
+    rho_rows=None,
+    offsets_rows=None,
+    mm_per_row=0.3,
+    n_photons=1_000_000,
+    seed=0,
+    progress=None,
+):
+    """Brute-force Monte Carlo of a vein in the layered medium: the kernel ratio ``K_vein / K_background``.
+
+    A line source along ``y`` (the projector's row) lights the skin at random positions;
+    the vein (``depth_mm`` to its top, ``diameter_mm`` wide, at ``angle_deg`` to the rows,
+    its axis through the origin) is a cylinder of ``blood`` that photons actually cross.
+    Exits are binned by the pixel's signed distance ``rho`` from the vein (rows) and by the
+    offset ``u`` from the pixel to the lit line; a second run with the same seed and no vein
+    is the background.  Only ``angle_deg`` 0 (parallel to the rows) and 90 (across them)
+    are exact 1-D problems; they are what the validation uses.
+
+    Returns
+    -------
+    dict
+        ``rho_rows``, ``offsets_rows``, ``vein`` and ``background`` (power per bin,
+        arbitrary common units), ``ratio`` (``vein / background``, NaN where the
+        background is 0), ``n_photons``.
+    """
+    zc, r = _check_vein(layers, depth_mm, diameter_mm)
+    mm = float(mm_per_row)
+    rho = _check_offsets(np.arange(-24, 25) if rho_rows is None else rho_rows)
+    off = _check_offsets(np.arange(-48, 49) if offsets_rows is None else offsets_rows)
+    nx, ny = _normal(angle_deg)
+    reach = (max(abs(rho[0]), abs(rho[-1])) + 0.5) * mm
+    span = (max(abs(off[0]), abs(off[-1])) + 0.5) * mm
+    margin = 15.0
+    parallel = abs(ny) < 1e-12
+    across = abs(nx) < 1e-12
+    src_x = 0.0 if across else reach + span
+    src_y = 0.0 if parallel else (reach if across else 2 * (reach + span)) + margin
+    acc_y = math.inf if parallel else src_y - margin
+    res = {}
+    for name, cyl in (("vein", (zc, r)), ("background", None)):
+        counts, out = _run(
+            layers,
+            n_photons=n_photons,
+            seed=seed,
+            mode=_MODE_LINE,
+            mm=mm,
+            kmin=off[0],
+            nk=off.size,
+            rmin=rho[0],
+            nr=rho.size,
+            src_x=src_x,
+            src_y=src_y,
+            acc_y=acc_y,
+            normal=(nx, ny),
+            cylinder=cyl,
+            blood=blood,
+            progress=progress,
+        )
+        res[name] = out[1].sum(axis=0) / counts.sum()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(res["background"] > 0, res["vein"] / res["background"], np.nan)
+    return {
+        "rho_rows": rho,
+        "offsets_rows": off,
+        "vein": res["vein"],
+        "background": res["background"],
+        "ratio": ratio,
+        "n_photons": int(n_photons),
+        "mm_per_row": mm,
+        "angle_deg": float(angle_deg),
+        "depth_mm": float(depth_mm),
+        "diameter_mm": float(diameter_mm),
+    }
+
+
+# ---------------------------------------------------------------- the perturbation table
+@dataclass(frozen=True)
+class VeinTable:
+    """How a vein changes the plane-to-ray kernel of a layered skin: ``K = K0(u) R(rho, u)``.
+
+    ``ratio[a, d, D, r, k]``: kernel ratio for angle ``angles_deg[a]`` (0: the vein parallel
+    to the projector rows, 90: across them), depth of the vein's top ``depths_mm[d]``,
+    diameter ``diameters_mm[D]``, the pixel's signed distance ``rho_rows[r]`` from the vein
+    axis (rows, ``rho = (x, y) . (cos a, -sin a)``) and offset ``offsets_rows[k]``.
+    ``kernel`` is the background line kernel ``K0`` (power per offset bin per unit
+    power), ``kernel_stderr`` its batch standard error, ``total_reflectance`` the total
+    diffuse reflectance of the skin.
+    """
+
+    angles_deg: np.ndarray
+    depths_mm: np.ndarray
+    diameters_mm: np.ndarray
+    rho_rows: np.ndarray
+    offsets_rows: np.ndarray
+    mm_per_row: float
+    ratio: np.ndarray
+    kernel: np.ndarray
+    kernel_stderr: np.ndarray
+    total_reflectance: float
+    params: dict
+
+    _ARRAYS = ("angles_deg", "depths_mm", "diameters_mm", "rho_rows", "offsets_rows", "kernel", "kernel_stderr")
+
+    def save(self, path) -> Path:
+        """Write the table as an ``.npz`` (no pickle); atomic (a temporary, then a rename)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
+        try:
+            np.savez_compressed(
+                tmp,
+                **{k: getattr(self, k) for k in self._ARRAYS},
+                ratio=self.ratio.astype(np.float32),
+                mm_per_row=np.float64(self.mm_per_row),
+                total_reflectance=np.float64(self.total_reflectance),
+                params=np.array(json.dumps(self.params, sort_keys=True)),
+            )
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
+        return path
+
+    @classmethod
+    def load(cls, path) -> VeinTable:
+        """Read a table written by :meth:`save`."""
+        with np.load(path, allow_pickle=False) as z:
+            return cls(
+                **{k: z[k] for k in cls._ARRAYS},
+                ratio=z["ratio"].astype(np.float64),
+                mm_per_row=float(z["mm_per_row"]),
+                total_reflectance=float(z["total_reflectance"]),
+                params=json.loads(str(z["params"])),
+            )
+
+
+#: Default grid of the vein tables: angles (deg), depth of the vein's top (mm), diameter (mm).
+TABLE_ANGLES_DEG = (0.0, 45.0, 90.0)
+TABLE_DEPTHS_MM = (1.0, 2.0, 3.0, 4.0, 5.0)
+TABLE_DIAMETERS_MM = (1.0, 2.0, 3.0, 4.0)
+
+
+def _rho_grid(rho_rows):
+    rho = np.asarray(rho_rows, dtype=np.float64).ravel()
+    if rho.size < 2 or not np.allclose(np.diff(rho), rho[1] - rho[0]) or rho[1] <= rho[0]:
+        raise InputError("rho_rows must be an increasing, evenly spaced grid")
+    return rho
+
+
+def mc_vein_table(
+    layers,
+    blood: Medium,
+    *,
+    depths_mm=TABLE_DEPTHS_MM,
+    diameters_mm=TABLE_DIAMETERS_MM,
+    angles_deg=TABLE_ANGLES_DEG,
+    rho_rows=None,
+    offsets_rows=None,
+    mm_per_row=0.3,
+    n_photons=400_000,
+    seed=0,
+    cache=True,
+    progress=None,
+) -> VeinTable:
+    """The vein perturbation table of a layered skin (pencil beam at the pixel + pathlength weighting).
+
+    One run traces ``n_photons`` photons from a pencil beam at the pixel through the
+    vein-free layers.  Each photon carries the optical depth ``(mu_a,blood - mu_a,layer) L``
+    of its path inside every virtual vein of the grid -- per angle, per distance ``rho``
+    of the pixel from the vein (``rho_rows``, default every 2 rows over +-48 rows) and per
+    (depth, diameter) -- and every exit adds ``w`` to the background and ``w exp(-tau)`` to
+    each vein's bin ``(rho, u)``; their ratio is the vein's effect on the pixel's kernel
+    (exact for absorption; blood is taken to scatter like the tissue around it, which
+    :func:`mc_layered_vein_brute` checks).
+
+    Cached like the other Monte Carlo results (shipped tables first, :data:`TABLES_DIR`,
+    then :func:`planeray.mc.cache.cache_dir`), keyed by every input.
+    """
+    _, zb, _, mua, _, _ = _layer_arrays(layers)
+    blood = as_medium(blood)
+    mm = float(mm_per_row)
+    rho = _rho_grid(np.arange(-48, 49, 2) if rho_rows is None else rho_rows)
+    off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
+    depths = np.asarray(depths_mm, dtype=np.float64)
+    diams = np.asarray(diameters_mm, dtype=np.float64)
+    angles = np.asarray(angles_deg, dtype=np.float64)
+    combos = [(d, D) for d in depths for D in diams]
+    for d, D in combos:
+        _check_vein(layers, d, D)
+    params = {
+        "kind": "skin-vein-table",
+        "version": LAYERED_VERSION,
+        "layers": [_medium_json(as_medium(m)) for m in layers],
+        "blood": _medium_json(blood),
+        "depths_mm": depths.tolist(),
+        "diameters_mm": diams.tolist(),
+        "angles_deg": angles.tolist(),
+        "rho_rows": rho.tolist(),
+        "mm_per_row": mm,
+        "n_photons": int(n_photons),
+        "seed": int(seed),
+    }
+    name = f"skin-{cache_key(params, off)}.npz"
+    path = cache_dir() / name
+    if cache:
+        for hit in (TABLES_DIR / name, path):
+            if hit.exists():
+                try:
+                    table = VeinTable.load(hit)
+                except (OSError, ValueError, KeyError):
+                    continue
+                if progress is not None:
+                    progress(int(n_photons))
+                return table
+    v_zc = np.array([d + 0.5 * D for d, D in combos])
+    v_r = np.array([0.5 * D for _, D in combos])
+    v_dmua = np.array([[blood.sigma_a - a for a in mua] for _ in combos])
+    nxy = np.array([_normal(a) for a in angles])
+    counts, out = _run(
+        layers,
+        n_photons=n_photons,
+        seed=seed,
+        mode=_MODE_PENCIL,
+        mm=mm,
+        kmin=off[0],
+        nk=off.size,
+        nr=rho.size,
+        virtual=(nxy[:, 0], nxy[:, 1], rho[0] * mm, (rho[1] - rho[0]) * mm, v_zc, v_r, v_dmua),
+        progress=progress,
+    )
+    refl_bins, _, pert, refl, *_ = out
+    kernel, kernel_err = _stats(refl_bins, counts)
+    base = refl_bins.sum(axis=0)  # (u,)
+    pert = pert.sum(axis=0)  # (angle, combo, rho, u)
+    if np.allclose(rho, -rho[::-1]) and off[0] == -off[-1]:
+        # Mirroring x -> -x maps (rho, u) to (-rho, -u) at the same angle: average both.
+        base = base + base[::-1]
+        pert = pert + pert[:, :, ::-1, ::-1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(base > 0, pert / base, 1.0)
+    ratio = ratio.reshape(angles.size, depths.size, diams.size, rho.size, off.size)
+    table = VeinTable(
+        angles_deg=angles,
+        depths_mm=depths,
+        diameters_mm=diams,
+        rho_rows=rho,
+        offsets_rows=off,
+        mm_per_row=mm,
+        ratio=ratio,
+        kernel=kernel,
+        kernel_stderr=kernel_err,
+        total_reflectance=float(refl.sum() / counts.sum()),
+        params=params,
+    )
+    if cache:
+        try:
+            table.save(path)
+        except OSError as exc:
+            warnings.warn(
+                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+    return table
