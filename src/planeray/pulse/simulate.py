@@ -27,15 +27,19 @@ the largest error of the linear model there relative to the pulsatile change its
 Each method's exposure is scaled (as aperture or gain would) so that its brightest pixel sits at
 ``fill`` of full well: the regular camera is not left saturated by ambient light.
 
-**Pixels.**  A simulated pixel stands for ``(sensor_rows / H)^2`` pixels of the real sensor (the
-paper's camera, an IDS UI-3250, has 1200 rows) binned together: the camera's full well, laser and
+**Pixels.**  A simulated pixel stands for the pixels of the real sensor that see the same patch
+of skin, binned together: the sensor's ``sensor_rows`` (the paper's camera, an IDS UI-3250, has
+1200) span the whole 720-row projector field, so a scene of ``H`` rows showing ``P`` projector rows
+has ``(sensor_rows P / 720 / H)^2`` sensor pixels per simulated pixel: the camera's full well, laser and
 ambient electrons scale by that count and its read noise by the square root, and the ADC gains the
 bits the sum gains (up to 16), so shot noise per unit of skin is that of the real camera whatever
 the simulated size (``sensor_rows=None``: one sensor pixel per simulated pixel).
 
-**Motion.**  Breathing shifts the image by ``breathing_px`` (peak) and changes its brightness by
-``breathing_gain`` (the distance to the projector); the arm drifts by ``motion_px`` (standard
-deviation, below 0.3 Hz).  Frames are shifted with linear interpolation (``scipy.ndimage.shift``).
+**Motion and flicker.**  Breathing shifts the image by ``breathing_px`` (peak) and changes the
+laser light by ``breathing_gain`` (the distance to the projector); the arm moves by ``motion_px``
+(standard deviation, ``1/f`` below 5 Hz); the laser's power fluctuates by ``laser_flicker``
+(``1/f``).  These act on all four methods alike in relative terms, while shot noise favours the
+brightest (README, Pulse).  Frames are shifted with linear interpolation (``scipy.ndimage.shift``).
 """
 
 from __future__ import annotations
@@ -48,9 +52,9 @@ import numpy as np
 from .._validate import check_nonnegative, check_number, check_positive
 from ..camera import CameraModel
 from ..errors import InputError
-from ..timing import PAPER_LINES_PER_SECOND, Band
+from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, Band
 from .video_io import Video
-from .waveform import arm_motion, breathing_signal, cardiac_signal
+from .waveform import arm_motion, breathing_signal, cardiac_signal, power_fluctuation
 
 __all__ = [
     "METHODS",
@@ -69,9 +73,9 @@ __all__ = [
 #: The four videos of Fig. 15b.
 METHODS = ("regular", "direct", "global", "indirect")
 #: The paper's skin delay: 400-600 us at ~0.5 m (Sec. 10).
-DEFAULT_DELAY_US = 500.0
+DEFAULT_DELAY_US = 450.0
 #: Row exposure of the delay images.
-DEFAULT_EXPOSURE_US = 300.0
+DEFAULT_EXPOSURE_US = 600.0
 
 
 @dataclass(frozen=True)
@@ -88,9 +92,11 @@ class LiveSettings:
         Heart rate, its variability and respiratory sinus arrhythmia (fractions of the rate), breathing rate
         (:func:`planeray.pulse.waveform.cardiac_signal`).
     pulse_amplitude : float
-        Relative blood-volume change from diastole to the systolic peak (0.015).
+        Relative blood-volume change of the veins from diastole to the systolic peak (0.02).
     breathing_px, breathing_gain, motion_px : float
-        Breathing shift (pixels, peak), breathing brightness change (fraction, peak), arm drift (pixels, std).
+        Breathing shift (pixels, peak), breathing brightness change (fraction, peak), arm motion (pixels, std).
+    laser_flicker : float
+        Relative standard deviation of the laser's power fluctuation (``1/f``).
     delay_us, exposure_us : float
         The indirect image's delay and the row exposure of the delay and direct images.
     lines_per_second : float
@@ -104,16 +110,17 @@ class LiveSettings:
         Rows of the real sensor the image stands for (binning, see the module docstring).
     """
 
-    seconds: float = 20.0
+    seconds: float = 30.0
     fps: float | None = None
     bpm: float = 72.0
     hrv: float = 0.0
     rsa: float = 0.0
     breaths_per_min: float = 15.0
-    pulse_amplitude: float = 0.015
+    pulse_amplitude: float = 0.02
     breathing_px: float = 0.3
     breathing_gain: float = 0.003
-    motion_px: float = 0.15
+    motion_px: float = 0.1
+    laser_flicker: float = 0.0005
     delay_us: float = DEFAULT_DELAY_US
     exposure_us: float = DEFAULT_EXPOSURE_US
     lines_per_second: float = PAPER_LINES_PER_SECOND
@@ -127,7 +134,7 @@ class LiveSettings:
         if self.fps is not None:
             check_positive(self.fps, "fps")
         check_number(self.bpm, "bpm", minimum=30.0, maximum=240.0)
-        for name in ("hrv", "rsa", "pulse_amplitude", "breathing_px", "breathing_gain", "motion_px"):
+        for name in ("hrv", "rsa", "pulse_amplitude", "breathing_px", "breathing_gain", "motion_px", "laser_flicker"):
             check_nonnegative(getattr(self, name), name)
         check_positive(self.breaths_per_min, "breaths_per_min")
         check_number(self.delay_us, "delay_us")
@@ -137,8 +144,9 @@ class LiveSettings:
         if self.sensor_rows is not None:
             check_positive(self.sensor_rows, "sensor_rows")
 
-    def frame_rate(self, projector_rows: int) -> float:
-        return float(self.fps) if self.fps is not None else self.lines_per_second / projector_rows
+    def frame_rate(self) -> float:
+        """The camera's frame rate: ``fps``, or one frame per sweep of the whole (720-row) projector."""
+        return float(self.fps) if self.fps is not None else self.lines_per_second / PAPER_PROJECTOR_ROWS
 
 
 def method_images(scene, *, delay_us: float, exposure_us: float, lines_per_second: float = PAPER_LINES_PER_SECOND):
@@ -162,6 +170,8 @@ class LinearModel:
     derivatives: dict
     scene: object
     linearity_error: dict = field(default_factory=dict)
+    delay_us: float = DEFAULT_DELAY_US
+    exposure_us: float = DEFAULT_EXPOSURE_US
 
     def at(self, method: str, scale) -> np.ndarray:
         """Images at blood scale(s) ``scale`` (scalar or (T,) -> (H, W) or (T, H, W))."""
@@ -196,7 +206,7 @@ def linearize(
     up = method_images(build(1.0 + step), **kw)
     down = method_images(build(1.0 - step), **kw)
     deriv = {m: (up[m] - down[m]) / (2 * step) for m in base}
-    model = LinearModel(base, deriv, scene)
+    model = LinearModel(base, deriv, scene, delay_us=float(delay_us), exposure_us=float(exposure_us))
     if check_amplitude:
         far = method_images(build(1.0 + check_amplitude), **kw)
         for m in base:
@@ -304,13 +314,20 @@ def simulate_live(
         model = linearize(
             build or skin_builder(), delay_us=s.delay_us, exposure_us=s.exposure_us, lines_per_second=s.lines_per_second
         )
+    elif (model.delay_us, model.exposure_us) != (s.delay_us, s.exposure_us):
+        raise InputError(
+            f"the model was linearized at delay {model.delay_us:g} us, exposure {model.exposure_us:g} us, "
+            f"the settings ask for {s.delay_us:g} and {s.exposure_us:g} us"
+        )
     scene = model.scene
     camera = replace(camera or CameraModel(), frames_averaged=1)
     if not s.ambient:
         camera = replace(camera, ambient_e_per_us=0.0)
     if s.sensor_rows is not None:
-        camera = binned_camera(camera, (s.sensor_rows / scene.shape[0]) ** 2)
-    fps = s.frame_rate(scene.geometry.projector_rows)
+        # the sensor spans the whole projector field; the scene may show a part of it
+        rows = s.sensor_rows * scene.geometry.projector_rows / PAPER_PROJECTOR_ROWS
+        camera = binned_camera(camera, (rows / scene.shape[0]) ** 2)
+    fps = s.frame_rate()
     n = int(round(s.seconds * fps))
     if n < 8:
         raise InputError(f"{s.seconds:g} s at {fps:g} fps is {n} frames; a pulse video needs at least 8")
@@ -318,15 +335,15 @@ def simulate_live(
     breath = breathing_signal(n, fps, breaths_per_min=s.breaths_per_min, seed=seed)
     shifts = arm_motion(n, fps, std_px=s.motion_px, seed=seed)
     shifts[:, 0] += s.breathing_px * breath
-    gain = 1.0 + s.breathing_gain * breath
+    gain = (1.0 + s.breathing_gain * breath) * (1.0 + power_fluctuation(n, fps, std=s.laser_flicker, seed=seed))
     scale = 1.0 + s.pulse_amplitude * heart.volume
-    frame_us = scene.geometry.projector_rows / s.lines_per_second * 1e6
+    frame_us = PAPER_PROJECTOR_ROWS / s.lines_per_second * 1e6  # one frame of the whole projector
     albedo = np.asarray(scene.ambient_albedo, np.float64)
     rng = np.random.default_rng([seed, 1])
 
     def capture(method, exposure_us):
         laser = _shift_frames(model.at(method, scale), shifts) * gain[:, None, None]
-        amb = _shift_frames(np.broadcast_to(albedo, laser.shape), shifts) * gain[:, None, None]
+        amb = _shift_frames(np.broadcast_to(albedo, laser.shape), shifts)
         expected = camera.mean_electrons(laser.max(axis=0), exposure_us, ambient_albedo=amb.max(axis=0))
         k = min(1.0, s.fill * camera.full_well_e / max(float(expected.max()), 1e-12))
         image, _ = camera.expose(k * laser, exposure_us, rng, ambient_albedo=k * amb, noise=s.noise)

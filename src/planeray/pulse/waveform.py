@@ -14,9 +14,10 @@ al. 1993) and a slow random **heart-rate variability** ``h`` (band-limited Gauss
 0.15 Hz, the LF band, of standard deviation ``hrv``); the phase is ``2 pi int f dt``, so the
 beats stay continuous while the rate drifts.
 
-**Breathing** moves the chest and arm at 12-20 breaths per minute; **arm motion** is a slow
-random 2-D drift (band-limited noise below ``motion_hz``).  Both are returned in pixels for
-the video simulator (:mod:`planeray.pulse.simulate`) to shift the image by.
+**Breathing** moves the chest and arm at 12-20 breaths per minute; **arm motion** is a random
+2-D ``1/f`` drift below 5 Hz.  Both are returned in pixels for the video simulator
+(:mod:`planeray.pulse.simulate`) to shift the image by.  The projector laser's **power
+fluctuation** is ``1/f`` noise of a few tenths of a percent.
 
 References
 ----------
@@ -42,6 +43,7 @@ __all__ = [
     "cardiac_signal",
     "breathing_signal",
     "arm_motion",
+    "power_fluctuation",
 ]
 
 #: Gaussians ``(phase centre, phase width, amplitude)`` of one beat: the systolic peak, the
@@ -111,12 +113,17 @@ class CardiacSignal:
     mean_rate_bpm: float
 
 
-def _lowpass_noise(rng, n, fps, cutoff_hz, std):
-    """Gaussian noise band-limited below ``cutoff_hz`` (ideal filter in frequency), standard deviation ``std``."""
+def _lowpass_noise(rng, n, fps, cutoff_hz, std, *, pink=False):
+    """Gaussian noise band-limited below ``cutoff_hz`` (ideal filter in frequency), standard deviation ``std``.
+
+    ``pink``: a ``1/f`` power spectrum (amplitude ``1/sqrt(f)``) instead of a flat one.
+    """
     if std == 0 or n < 2:
         return np.zeros(n)
     spec = np.fft.rfft(rng.standard_normal(n))
     f = np.fft.rfftfreq(n, 1.0 / fps)
+    if pink:
+        spec[1:] /= np.sqrt(f[1:])
     spec[(f > cutoff_hz) | (f == 0)] = 0.0
     x = np.fft.irfft(spec, n)
     s = x.std()
@@ -189,8 +196,22 @@ def breathing_signal(n_samples: int, fps: float, *, breaths_per_min: float = 15.
     return x / np.max(np.abs(x)) if x.size else x
 
 
-def arm_motion(n_samples: int, fps: float, *, std_px: float = 0.2, cutoff_hz: float = 0.3, seed: int = 0) -> np.ndarray:
-    """Slow random arm drift ``(N, 2)`` in pixels (rows, columns): noise band-limited below ``cutoff_hz``."""
+def arm_motion(n_samples: int, fps: float, *, std_px: float = 0.2, cutoff_hz: float = 5.0, seed: int = 0) -> np.ndarray:
+    """Random arm motion ``(N, 2)`` in pixels (rows, columns): ``1/f`` (pink) noise below ``cutoff_hz``.
+
+    Postural sway and small movements of a resting limb have a ``1/f``-like spectrum (most of the
+    motion slow, some in the pulse band), standard deviation ``std_px``.
+    """
     rng = np.random.default_rng(seed + 104729)
     n = int(n_samples)
-    return np.stack([_lowpass_noise(rng, n, fps, cutoff_hz, std_px) for _ in range(2)], axis=1)
+    return np.stack([_lowpass_noise(rng, n, fps, cutoff_hz, std_px, pink=True) for _ in range(2)], axis=1)
+
+
+def power_fluctuation(n_samples: int, fps: float, *, std: float = 0.003, seed: int = 0) -> np.ndarray:
+    """Relative fluctuation of a light source's power over time: ``1/f`` noise of standard deviation ``std``.
+
+    Diode lasers drift with temperature and hop between modes: slow, ``1/f``-like power
+    changes of a few tenths of a percent (the projector's laser; multiplies all its light).
+    """
+    rng = np.random.default_rng(seed + 1299709)
+    return _lowpass_noise(rng, int(n_samples), fps, fps / 2, std, pink=True)

@@ -1,0 +1,65 @@
+"""The pulse in the skin scene (Sec. 10, Fig. 15): the acceptance tests of the simulated live capture.
+
+One linearized 48x48 patch of forearm (192 projector rows, 58 mm; shared by the module), 30 s
+videos at 30 fps with heart-rate variability, breathing, arm motion, laser flicker, ambient light
+and camera noise (the defaults of :class:`planeray.pulse.simulate.LiveSettings`).
+"""
+
+import pytest
+
+from planeray.pulse.analysis import analyze_pulse
+from planeray.pulse.simulate import METHODS, LiveSettings, linearize, simulate_live, skin_builder
+
+SIZE = (48, 48)
+PROJECTOR_ROWS = 192
+
+
+@pytest.fixture(scope="module")
+def model():
+    return linearize(skin_builder(SIZE, seed=0, projector_rows=PROJECTOR_ROWS), check_amplitude=0.03)
+
+
+def settings(**kw):
+    return LiveSettings(**{"fps": 30.0, "hrv": 0.02, "rsa": 0.03, **kw})
+
+
+def test_linearization_agrees_with_rebuilding_the_scene_at_the_extreme(model):
+    # the blood-volume derivative of each image predicts the image rebuilt at +3 % blood
+    assert set(model.linearity_error) == {"regular", "direct", "indirect"}
+    assert max(model.linearity_error.values()) < 0.02
+    assert model.scene.maps["vein_mask"].any()
+    # more blood absorbs more light on the veins, most of all in short-range indirect light
+    vein = model.scene.maps["vein_mask"]
+    rel = {
+        m: model.derivatives[m][vein].mean() / model.images[m][vein].mean() for m in ("regular", "direct", "indirect")
+    }
+    assert rel["indirect"] < rel["regular"] < 0 and rel["indirect"] < rel["direct"]
+
+
+@pytest.mark.parametrize("bpm", [50.0, 65.0, 80.0, 95.0, 110.0])
+def test_heart_rate_within_2_bpm_from_the_indirect_video(model, bpm):
+    vein = model.scene.maps["vein_mask"]
+    for seed in (0, 1, 2):
+        cap = simulate_live(settings(bpm=bpm), model=model, seed=seed, methods=("indirect",))
+        res = analyze_pulse(cap.videos["indirect"], mask=vein)
+        assert res.estimate.detected, (bpm, seed, res.estimate.band_snr_db)
+        assert res.estimate.rate_bpm == pytest.approx(cap.truth["mean_rate_bpm"], abs=2.0), (bpm, seed)
+
+
+def test_indirect_light_has_the_highest_pulse_snr_of_the_four(model):
+    from scipy.ndimage import binary_erosion
+
+    vein = binary_erosion(model.scene.maps["vein_mask"])  # the veins' cores, the same pixels in every video
+    for seed in (0, 1, 2):
+        cap = simulate_live(settings(bpm=60.0 + 15 * seed), model=model, seed=seed)
+        truth = cap.truth["mean_rate_bpm"]
+        snr = {m: analyze_pulse(cap.videos[m], region=vein, reference_bpm=truth).estimate.snr_db for m in METHODS}
+        assert max(snr, key=snr.get) == "indirect", snr
+
+
+def test_a_video_without_a_pulse_reports_none(model):
+    vein = model.scene.maps["vein_mask"]
+    for seed in range(4):
+        cap = simulate_live(settings(pulse_amplitude=0.0), model=model, seed=100 + seed, methods=("indirect",))
+        res = analyze_pulse(cap.videos["indirect"], mask=vein)
+        assert res.estimate.rate_bpm is None, (seed, res.estimate.peak_bpm, res.estimate.band_snr_db)
