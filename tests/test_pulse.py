@@ -279,7 +279,9 @@ def test_linearization_is_exact_for_a_linear_scene_and_the_capture_is_reproducib
         assert np.array_equal(a.videos[m].frames, b.videos[m].frames)
     assert a.truth["mean_rate_bpm"] == pytest.approx(90)
     # without noise and motion, the indirect vein signal is the blood volume, inverted (absorption)
-    quiet = LiveSettings(seconds=4, fps=FPS, bpm=90, noise=False, breathing_px=0, breathing_gain=0, motion_px=0)
+    quiet = LiveSettings(
+        seconds=4, fps=FPS, bpm=90, noise=False, breathing_px=0, breathing_gain=0, motion_px=0, laser_flicker=0
+    )
     c = simulate_live(quiet, model=model, seed=3, methods=("indirect",))
     sig = region_signal(c.videos["indirect"].frames, model.scene.maps["vein_mask"])
     assert np.corrcoef(sig, c.truth["volume"])[0, 1] < -0.999
