@@ -63,3 +63,60 @@ def test_a_video_without_a_pulse_reports_none(model):
         cap = simulate_live(settings(pulse_amplitude=0.0), model=model, seed=100 + seed, methods=("indirect",))
         res = analyze_pulse(cap.videos["indirect"], mask=vein)
         assert res.estimate.rate_bpm is None, (seed, res.estimate.peak_bpm, res.estimate.band_snr_db)
+
+
+def test_cli_video_writes_a_capture_that_skin_pulse_reads(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+    from planeray.pulse.video_io import read_video
+
+    runner = CliRunner()
+    out = tmp_path / "arm.tif"
+    res = runner.invoke(
+        app,
+        [
+            "skin",
+            "video",
+            "--out",
+            str(out),
+            "--size",
+            "24",
+            "24",
+            "--projector-rows",
+            "96",
+            "--seconds",
+            "3",
+            "--fps",
+            "20",
+            "--method",
+            "all",
+            "--bpm",
+            "80",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    for m in METHODS:
+        v = read_video(tmp_path / f"arm_{m}.tif")
+        assert v.fps == 20 and v.n_frames == 60 and v.shape == (24, 24)
+    res = runner.invoke(app, ["skin", "video", "--out", str(out.with_name("arm_indirect.tif")), "--seconds", "3"])
+    assert res.exit_code == 1 and "already exists" in res.output
+    res = runner.invoke(app, ["skin", "video", "--out", str(tmp_path / "x.tif"), "--method", "sideways"])
+    assert res.exit_code == 1 and "--method must be one of" in res.output
+
+
+@pytest.mark.slow
+def test_pulse_report_writes_fig15_and_its_numbers(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    res = CliRunner().invoke(app, ["skin", "pulse-report", "--out", str(tmp_path / "r"), "--quick"])
+    assert res.exit_code == 0, res.output
+    rep = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert rep["accuracy"]["detected"] == rep["accuracy"]["total"] and rep["accuracy"]["max_abs_error_bpm"] < 2
+    assert rep["pulse_free"]["false_alarms"] == 0
+    for name in ("fig15a_pulse.png", "fig15b_methods.png", "rate_accuracy.png"):
+        assert (tmp_path / "r" / name).is_file()

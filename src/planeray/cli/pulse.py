@@ -106,19 +106,24 @@ def video(
         Path, typer.Option("--out", "-o", help="Video to write: .tif (lossless float) or .mp4/.avi/.mkv.")
     ],
     bpm: Annotated[float, typer.Option(help="Mean heart rate, beats per minute.")] = 72.0,
-    seconds: Annotated[float, typer.Option(help="Length of the video.")] = 20.0,
+    seconds: Annotated[float, typer.Option(help="Length of the video.")] = 30.0,
     method: Annotated[
         str, typer.Option(help="indirect, regular, direct, global, or all (one file per method).")
     ] = "indirect",
     fps: Annotated[float | None, typer.Option(help="Camera frame rate (default: the projector's, 75 Hz).")] = None,
-    size: Annotated[tuple[int, int], typer.Option(help="Image size H W.")] = (64, 64),
+    size: Annotated[tuple[int, int], typer.Option(help="Image size H W.")] = (48, 48),
+    projector_rows: Annotated[
+        int, typer.Option(help="Projector rows the image spans (0.3 mm each: 192 = a 58 mm patch of forearm).")
+    ] = 192,
     seed: Annotated[int, typer.Option(help="Seed of the scene, the variability, motion and noise.")] = 0,
     hrv: Annotated[float, typer.Option(help="Slow heart-rate variability, fraction of the rate (std).")] = 0.02,
     rsa: Annotated[float, typer.Option(help="Respiratory sinus arrhythmia, fraction of the rate.")] = 0.03,
     breaths_per_min: Annotated[float, typer.Option(help="Breathing rate.")] = 15.0,
-    pulse_amplitude: Annotated[float, typer.Option(help="Blood-volume change diastole -> systole (fraction).")] = 0.015,
-    delay_us: Annotated[float, typer.Option(help="Delay of the short-range indirect image.")] = 500.0,
-    exposure_us: Annotated[float, typer.Option(help="Row exposure of the delay and direct images.")] = 300.0,
+    pulse_amplitude: Annotated[
+        float, typer.Option(help="Vein blood-volume change diastole -> systole (fraction).")
+    ] = 0.02,
+    delay_us: Annotated[float, typer.Option(help="Delay of the short-range indirect image.")] = 450.0,
+    exposure_us: Annotated[float, typer.Option(help="Row exposure of the delay and direct images.")] = 600.0,
     motion: Annotated[bool, typer.Option(help="Breathing and arm motion.")] = True,
     ambient: Annotated[bool, typer.Option(help="Ambient light.")] = True,
     noise: Annotated[bool, typer.Option(help="Camera noise.")] = True,
@@ -175,8 +180,9 @@ def video(
 
 def pulse_report(
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (report.json + figures).")],
-    size: Annotated[tuple[int, int], typer.Option(help="Image size H W.")] = (64, 64),
-    seconds: Annotated[float, typer.Option(help="Length of each video.")] = 20.0,
+    size: Annotated[tuple[int, int], typer.Option(help="Image size H W.")] = (48, 48),
+    projector_rows: Annotated[int, typer.Option(help="Projector rows the image spans (0.3 mm each).")] = 192,
+    seconds: Annotated[float, typer.Option(help="Length of each video.")] = 30.0,
     fps: Annotated[float, typer.Option(help="Camera frame rate.")] = 30.0,
     quick: Annotated[bool, typer.Option(help="Fewer rates, seeds and pulse-free videos.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a report folder planeray wrote.")] = False,
@@ -186,10 +192,17 @@ def pulse_report(
     from ..io.atomic import check_replaceable
 
     check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
-    kw = {"rates_bpm": (50, 80, 110), "seeds": (0,), "null_seeds": range(3)} if quick else {}
+    kw = {"rates_bpm": (50, 80, 110), "seeds": (0,), "null_seeds": range(3), "null_runs": 100} if quick else {}
     with console.status("pulse report") as status:
         rep = run_pulse_report(
-            out_dir, size=size, seconds=seconds, fps=fps, overwrite=overwrite, progress=status.update, **kw
+            out_dir,
+            size=size,
+            projector_rows=projector_rows,
+            seconds=seconds,
+            fps=fps,
+            overwrite=overwrite,
+            progress=status.update,
+            **kw,
         )
     acc = rep["accuracy"]
     out.print(

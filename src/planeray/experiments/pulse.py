@@ -30,6 +30,8 @@ __all__ = [
     "write_pulse_analysis",
     "resolution_study",
     "false_alarm_study",
+    "delay_study",
+    "noise_study",
     "run_pulse_report",
 ]
 
@@ -161,17 +163,85 @@ def resolution_study(*, fps: float = 30.0, frames: int = 480, rates_bpm=None, se
 
 
 def _vein_region(scene, shape):
+    """The veins' cores (the vein mask eroded by one pixel; the mask itself where that leaves nothing)."""
+    from scipy.ndimage import binary_erosion
+
     mask = scene.maps.get("vein_mask") if scene.maps else None
     if mask is None or not np.any(mask):
         return None
-    return np.asarray(mask, bool)
+    core = binary_erosion(np.asarray(mask, bool))
+    return core if core.any() else np.asarray(mask, bool)
+
+
+def delay_study(build, *, delays_us=(0, 150, 250, 350, 450, 550), exposures_us=(300, 600), amplitude=0.02):
+    """Per delay and exposure, on the veins' cores: the indirect image's level, its pulsatile fraction, ambient/laser.
+
+    ``fom`` is the shot-noise-limited pulse figure of merit per sensor pixel of the default camera,
+    ``pulse electrons / sqrt(all electrons)`` (laser + ambient over the row exposure).
+    """
+    from ..camera import CameraModel
+
+    cam = CameraModel()
+    rows = []
+    region = None
+    for te in exposures_us:
+        for d in delays_us:
+            m = linearize(build, delay_us=d, exposure_us=te, check_amplitude=None)
+            region = _vein_region(m.scene, None) if region is None else region
+            level = float(m.images["indirect"][region].mean())
+            pulse = amplitude * float(m.derivatives["indirect"][region].mean())
+            laser = cam.laser_electrons * level
+            amb = cam.ambient_e_per_us * te * float(m.scene.ambient_albedo[region].mean())
+            rows.append(
+                {
+                    "delay_us": d,
+                    "exposure_us": te,
+                    "level": level,
+                    "pulsatile_pct": 100 * pulse / level if level else 0.0,
+                    "ambient_over_laser": amb / laser if laser else float("inf"),
+                    "fom": abs(pulse) * cam.laser_electrons / np.sqrt(laser + amb),
+                }
+            )
+    m = linearize(build, check_amplitude=None)
+    lvl = float(m.images["regular"][region].mean())
+    laser = cam.laser_electrons * lvl
+    amb = cam.ambient_e_per_us * 720 / 54000 * 1e6 * float(m.scene.ambient_albedo[region].mean())
+    pulse = amplitude * float(m.derivatives["regular"][region].mean())
+    regular = {
+        "level": lvl,
+        "pulsatile_pct": 100 * pulse / lvl,
+        "ambient_over_laser": amb / laser,
+        "fom": abs(pulse) * cam.laser_electrons / np.sqrt(laser + amb),
+    }
+    return {"indirect": rows, "regular": regular}
+
+
+def noise_study(model, base, *, seeds=(0, 1)) -> dict:
+    """Pulse SNR of each method (veins' cores, mean over seeds) under shot noise only, the defaults, strong flicker."""
+    region = _vein_region(model.scene, None)
+    conditions = {
+        "camera noise only": {"motion_px": 0.0, "breathing_px": 0.0, "breathing_gain": 0.0, "laser_flicker": 0.0},
+        "defaults": {},
+        "laser flicker 0.2 %": {"laser_flicker": 0.002},
+    }
+    out = {}
+    for name, kw in conditions.items():
+        snr = {m: [] for m in METHODS}
+        for sd in seeds:
+            c = simulate_live(LiveSettings(**{**asdict(base), **kw}), model=model, seed=int(sd))
+            t = c.truth["mean_rate_bpm"]
+            for m in METHODS:
+                snr[m].append(analyze_pulse(c.videos[m], region=region, reference_bpm=t).estimate.snr_db)
+        out[name] = {m: float(np.mean(v)) for m, v in snr.items()}
+    return out
 
 
 def run_pulse_report(
     out_dir,
     *,
-    size=(64, 64),
-    seconds: float = 20.0,
+    size=(48, 48),
+    projector_rows: int = 192,
+    seconds: float = 30.0,
     fps: float = 30.0,
     bpm: float = 72.0,
     rates_bpm=(50, 60, 70, 80, 90, 100, 110),
@@ -195,7 +265,7 @@ def run_pulse_report(
         if progress:
             progress(text)
 
-    build = build or skin_builder(tuple(size), seed=seed, **(scene_params or {}))
+    build = build or skin_builder(tuple(size), seed=seed, projector_rows=projector_rows, **(scene_params or {}))
     base = LiveSettings(seconds=seconds, fps=fps, bpm=bpm, hrv=0.02, rsa=0.03)
     model = linearize(build, delay_us=base.delay_us, exposure_us=base.exposure_us)
     step("scene linearized")
@@ -221,9 +291,12 @@ def run_pulse_report(
         signals[m] = res.signal
         snrs[m] = res.estimate.snr_db
         if m == "indirect":
-            fig_a = res
-    signals["indirect (no magnification)"] = fig_a.raw_signal
-    snrs["indirect (no magnification)"] = fig_a.estimate_raw.snr_db
+            core = res
+    signals["indirect (no magnification)"] = core.raw_signal
+    snrs["indirect (no magnification)"] = core.estimate_raw.snr_db
+    # Fig. 15a: the pulse region found automatically on the vein mask, as `planeray skin pulse --mask` does
+    fig_a = analyze_pulse(cap.videos["indirect"], mask=model.scene.maps.get("vein_mask"), reference_bpm=None)
+    report["fig15a"] = {"region_pixels": int(fig_a.region.sum()), **fig_a.estimate.to_dict()}
     report["methods"] = per_method
     report["true_mean_rate_bpm"] = truth
     step("four methods analysed")
@@ -233,7 +306,7 @@ def run_pulse_report(
         for sd in seeds:
             s = LiveSettings(**{**base.__dict__, "bpm": float(r)})
             c = simulate_live(s, model=model, seed=int(sd), methods=("indirect",))
-            res = analyze_pulse(c.videos["indirect"], mask=vein)
+            res = analyze_pulse(c.videos["indirect"], mask=c.model.scene.maps.get("vein_mask"))
             t = c.truth["mean_rate_bpm"]
             rows.append(
                 {"true_bpm": t, "seed": int(sd), "rate_bpm": res.estimate.rate_bpm, "snr_db": res.estimate.snr_db}
@@ -252,7 +325,7 @@ def run_pulse_report(
     for sd in null_seeds:
         s = LiveSettings(**{**base.__dict__, "pulse_amplitude": 0.0})
         c = simulate_live(s, model=model, seed=1000 + int(sd), methods=("indirect",))
-        res = analyze_pulse(c.videos["indirect"], mask=vein)
+        res = analyze_pulse(c.videos["indirect"], mask=c.model.scene.maps.get("vein_mask"))
         null.append({"seed": int(sd), "rate_bpm": res.estimate.rate_bpm, "band_snr_db": res.estimate.band_snr_db})
     report["pulse_free"] = {
         "runs": null,
@@ -260,6 +333,10 @@ def run_pulse_report(
         "max_band_snr_db": float(max(r["band_snr_db"] for r in null)) if null else None,
     }
     step("pulse-free videos")
+    report["noise_study"] = noise_study(model, base)
+    step("noise study")
+    report["delay_study"] = delay_study(build)
+    step("delay study")
     report["resolution"] = {f"noise {nz:g}": resolution_study(fps=fps, noise=nz) for nz in (0.1, 0.5)}
     report["false_alarms_synthetic"] = false_alarm_study(fps=fps, runs=null_runs)
     step("resolution and false-alarm studies")
