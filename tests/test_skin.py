@@ -104,3 +104,80 @@ def test_bad_veins_are_refused():
         make_scene("skin", (16, 16), veins=[dict(depth_mm=2.0, diameter_mm=2.0, points_mm=[[0, 0]])])
     with pytest.raises(InputError, match="skin scene"):
         skin_veins(make_scene("diffuse_plane", (16, 16)))
+
+
+# ----------------------------------------------------------------------------- geometry and optics
+def test_curved_arm():
+    s = make_scene("skin", (64, 48), projector_rows=720, seed=1, curved=True, hair=True)
+    skin = s.maps["skin"]
+    rows = np.flatnonzero(skin[:, 0])
+    assert 0 < rows[0] and rows[-1] < 63 and np.all(skin[rows[0] : rows[-1] + 1])  # a band across the image
+    assert np.all(s.labels[~skin] == 1) and np.all(s.labels[skin] == 2)
+    tilt = s.maps["surface_tilt_deg"][:, 0]
+    assert abs(tilt[rows].min()) > 60 and abs(tilt[rows[len(rows) // 2]]) < 10
+    assert s.maps["vein_mask"][skin].any() and not s.maps["vein_mask"][~skin].any()
+    # Near the limb the surface is stretched: the same subsurface spread covers fewer projector rows.
+    T = s.transport
+    u = np.abs(T.offsets_rows).astype(float)
+    k = T.dense[:, 10, :]  # beyond the footprint: subsurface light only
+    far = u > 12
+    spread = (k[:, far] * u[far]).sum(axis=1) / np.maximum(k[:, far].sum(axis=1), 1e-30)
+    centre, limb = rows[len(rows) // 2], rows[2]
+    assert spread[limb] < spread[centre]
+    assert np.all(T.dense[~skin][:, np.abs(T.offsets_rows) > 6] == 0)  # the cloth has direct light only
+
+
+def test_tone_darkens_and_keeps_vein_contrast():
+    vein = [dict(depth_mm=2.0, diameter_mm=3.0, points_mm=[[100.0, -5.0], [100.0, 300.0]])]
+    kw = dict(projector_rows=720, seed=0, veins=vein)
+    fair = make_scene("skin", (48, 48), tone="fair", **kw)
+    dark = make_scene("skin", (48, 48), tone="dark", **kw)
+    assert dark.ambient_albedo.mean() < 0.5 * fair.ambient_albedo.mean()
+    m = fair.maps["vein_mask"]
+    band = Band(500.0, 200.0, LPS)
+    c = [1 - (img := x.transport.render(band))[m].mean() / img[~m].mean() for x in (fair, dark)]
+    assert c[0] > 0.1 and abs(c[1] - c[0]) < 0.3 * c[0]
+
+
+def test_infrared_reaches_deeper():
+    """At 850 nm light goes deeper: a 4 mm deep vein shows more short-range contrast than at 638 nm."""
+    vein = [dict(depth_mm=4.0, diameter_mm=3.0, points_mm=[[100.0, -5.0], [100.0, 300.0]])]
+    c = []
+    for w in (638, 850):
+        s = make_scene("skin", (48, 48), projector_rows=720, seed=0, veins=vein, wavelength_nm=w)
+        m = s.maps["vein_mask"]
+        img = s.transport.render(Band(500.0, 200.0, LPS))
+        c.append(1 - img[m].mean() / img[~m].mean())
+    assert 0 < c[0] < c[1]
+
+
+# ----------------------------------------------------------------------------- command line and files
+def test_cli_skin_simulate_writes_stack_and_truth(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+    from planeray.experiments.skin_capture import read_skin_truth, truth_paths
+    from planeray.io import read_stack
+
+    out = tmp_path / "arm.zarr"
+    args = ["skin", "simulate", "--out", str(out), "--size", "32", "32", "--sweep", "quick", "--seed", "4", "--hair"]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    st = read_stack(out)
+    assert st.shape == (32, 32) and st.metadata["scene"]["name"] == "skin"
+    meta, maps = read_skin_truth(out)
+    assert meta["format"] == "planeray-skin-truth" and meta["scene"]["hair"] is True
+    assert np.array_equal(maps["vein_mask"], maps["vein_id"] > 0)
+    from PIL import Image
+
+    mask = np.asarray(Image.open(truth_paths(out)["mask"])) > 0
+    assert np.array_equal(mask, maps["vein_mask"])
+    assert {v["id"] for v in meta["veins"]} == {v["id"] for v in meta["scene"]["veins"]}
+    # again: refused without --overwrite, in one line
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 1 and "already exists" in res.output and "Traceback" not in res.output
+    # a foreign file where the truth goes is never replaced
+    other = tmp_path / "b.zarr"
+    truth_paths(other)["veins"].write_text("{}")
+    res = CliRunner().invoke(app, [*args[:3], str(other), *args[4:], "--overwrite"])
+    assert res.exit_code == 1 and "did not write" in res.output

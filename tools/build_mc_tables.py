@@ -28,10 +28,15 @@ import time
 from pathlib import Path
 
 from planeray.mc.cache import TABLES_DIR
+from planeray.optical_data_skin import SKIN_TONES
 from planeray.scenes import list_scenes, make_scene
 
 #: Scene builds beyond the defaults whose kernels ship too: (scene, parameters).
-EXTRA = [("materials", {"source": "jensen"})]
+EXTRA = [("materials", {"source": "jensen"})] + [
+    ("skin", {"wavelength_nm": w, "tone": t}) for w in (638, 850) for t in SKIN_TONES if (w, t) != (638, "fair")
+]
+#: Which of a scene's cache entries ship (default: all it traced).
+SHIPPED = {"materials": "wall-*.npz"}
 
 
 def main() -> int:
@@ -44,7 +49,7 @@ def main() -> int:
             t0 = time.perf_counter()
             before = set(cache.glob("*.npz"))
             make_scene(name, (64, 64), projector_rows=720, seed=0, **params)
-            pattern = "wall-*.npz" if name == "materials" else "*.npz"
+            pattern = SHIPPED.get(name, "*.npz")
             for f in sorted(set(cache.glob(pattern)) - before):
                 if not (TABLES_DIR / f.name).exists():
                     shutil.copy(f, TABLES_DIR / f.name)

@@ -218,7 +218,7 @@ def skin_layers(
     --------
     >>> s = skin_layers(638, "fair")
     >>> [round(m.sigma_a, 4) for m in s.layers], round(s.blood.sigma_a, 3)
-    ([0.9055, 0.002, 0.19], 0.892)
+    ([0.9051, 0.002, 0.0462], 0.892)
     """
     line = _line(wavelength_nm)
     for name, v in (("epidermis_mm", epidermis_mm), ("dermis_mm", dermis_mm), ("fat_mm", fat_mm)):

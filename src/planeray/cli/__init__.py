@@ -17,7 +17,8 @@ order) and holds the entry point:
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
 * ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
-* ``skin.py``       the ``skin`` group (Sec. 10); ``pulse.py``: skin pulse | video | pulse-report (Fig. 15)
+* ``skin.py``       skin simulate | validate (the skin-and-veins scene, Sec. 10)
+* ``pulse.py``      skin pulse | video | pulse-report (the pulse, Sec. 10, Fig. 15), on the skin group
 * ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)

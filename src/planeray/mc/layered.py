@@ -79,6 +79,7 @@ __all__ = [
     "VeinTable",
     "mc_layered_profile",
     "mc_layered_vein_brute",
+    "mc_vein_kernel_brute",
     "mc_vein_table",
 ]
 
@@ -128,6 +129,7 @@ def _trace(
     cyl_on,
     cyl_nx,
     cyl_ny,
+    cyl_q,
     cyl_zc,
     cyl_r,
     b_mus,
@@ -217,7 +219,7 @@ def _trace(
                     if cyl_on:
                         q = x * cyl_nx + y * cyl_ny
                         dq = ux * cyl_nx + uy * cyl_ny
-                        t1, t2 = _cyl_roots(q, z, dq, uz, 0.0, cyl_zc, cyl_r)
+                        t1, t2 = _cyl_roots(q, z, dq, uz, cyl_q, cyl_zc, cyl_r)
                         if t2 == t2:
                             if in_cyl:
                                 tc = t2
@@ -429,7 +431,7 @@ def _run(
     states = _states(seed)
     cyl_on = cylinder is not None
     nx, ny = normal
-    zc, rc = (1.0, 0.0) if cylinder is None else cylinder
+    qc, zc, rc = (0.0, 1.0, 0.0) if cylinder is None else cylinder
     bl = as_medium(blood) if blood is not None else Medium(sigma_s=1.0, sigma_a=0.0, g=0.0)
     if virtual is None:
         v_nx = v_ny = np.zeros(0)
@@ -464,6 +466,7 @@ def _run(
                 cyl_on,
                 float(nx),
                 float(ny),
+                float(qc),
                 float(zc),
                 float(rc),
                 bl.sigma_s,
@@ -706,7 +709,7 @@ def mc_layered_vein_brute(
     src_y = 0.0 if parallel else (reach if across else 2 * (reach + span)) + margin
     acc_y = math.inf if parallel else src_y - margin
     res = {}
-    for name, cyl in (("vein", (zc, r)), ("background", None)):
+    for name, cyl in (("vein", (0.0, zc, r)), ("background", None)):
         counts, out = _run(
             layers,
             n_photons=n_photons,
@@ -740,6 +743,66 @@ def mc_layered_vein_brute(
         "depth_mm": float(depth_mm),
         "diameter_mm": float(diameter_mm),
     }
+
+
+def mc_vein_kernel_brute(
+    layers,
+    blood: Medium,
+    *,
+    depth_mm,
+    diameter_mm,
+    angle_deg=0.0,
+    rho_rows=0.0,
+    offsets_rows=None,
+    mm_per_row=0.3,
+    n_photons=200_000,
+    seed=0,
+    progress=None,
+) -> LayeredResult:
+    """Brute-force line kernel of one pixel beside a vein in the medium (pencil beam at the pixel).
+
+    The pixel sits at signed distance ``rho_rows`` from the axis of a blood cylinder
+    (``depth_mm`` to its top, ``diameter_mm`` wide, at ``angle_deg`` to the rows) that
+    photons cross with blood's own ``sigma_s``, ``sigma_a`` and ``g``; exits binned by
+    ``x`` give the pixel's kernel over all offsets at once (reciprocity, as for
+    :func:`mc_vein_table`, whose approximation this checks bin by bin).  Compare with
+    :func:`mc_layered_profile` (same seed) for the ratio.
+    """
+    zc, r = _check_vein(layers, depth_mm, diameter_mm)
+    off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
+    mm = float(mm_per_row)
+    nx, ny = _normal(angle_deg)
+    counts, out = _run(
+        layers,
+        n_photons=n_photons,
+        seed=seed,
+        mode=_MODE_PENCIL,
+        mm=mm,
+        kmin=off[0],
+        nk=off.size,
+        normal=(nx, ny),
+        cylinder=(-float(rho_rows) * mm, zc, r),
+        blood=blood,
+        progress=progress,
+    )
+    refl_bins, _, _, refl, trans, absorbed, truncated, _ = out
+    values, err = _stats(refl_bins, counts)
+    r_tot, r_err = _stats(refl, counts)
+    n0 = as_medium(layers[0]).n
+    n = counts.sum()
+    return LayeredResult(
+        offsets_rows=off,
+        mm_per_row=mm,
+        values=values,
+        stderr=err,
+        total_reflectance=float(r_tot),
+        total_reflectance_stderr=float(r_err),
+        specular_reflectance=float(((n0 - 1.0) / (n0 + 1.0)) ** 2),
+        transmittance=float(trans.sum() / n),
+        absorbed=float(absorbed.sum() / n),
+        truncated=float(truncated.sum() / n),
+        n_photons=int(n),
+    )
 
 
 # ---------------------------------------------------------------- the perturbation table

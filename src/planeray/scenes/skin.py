@@ -61,7 +61,9 @@ along the image rows, centred, on a dark cloth.  A pixel at height ``x`` from th
 sees the surface tilted by ``phi = asin(x / R)``; distances on the surface grow as
 ``1 / cos(phi)`` (the kernel is evaluated at stretched offsets), light enters with the
 Fresnel transmission of oblique incidence, and the surface reflection falls as
-``cos(phi)``.  The layers follow the surface; veins live in surface coordinates.
+``cos(phi)``.  Only rows lit on the arm send light into it (the kernel is cut at the arm's
+silhouette, like the wax candle's).  The layers follow the surface; veins live in surface
+coordinates.
 
 ``hair=True``: dark strands (80 um thick, 3-15 mm long, seeded) lying on the skin: a
 pixel partly covered by hair shows the hair's reflectance over that fraction instead of
@@ -123,7 +125,7 @@ __all__ = [
 SKIN_BAND_ROWS = 64
 #: Photons of the shipped vein tables and of the background kernels of other tones.
 TABLE_PHOTONS = 400_000
-KERNEL_PHOTONS = 200_000
+KERNEL_PHOTONS = 100_000
 #: Depth of the vein's top and its diameter, as tabulated (mm).
 VEIN_DEPTH_RANGE_MM = (float(TABLE_DEPTHS_MM[0]), float(TABLE_DEPTHS_MM[-1]))
 VEIN_DIAMETER_RANGE_MM = (float(TABLE_DIAMETERS_MM[0]), float(TABLE_DIAMETERS_MM[-1]))
@@ -552,6 +554,11 @@ def build(
     cos_in = np.cos(phi)
     t_in = (1.0 - fresnel_unpolarized(cos_in, 1.0 / SKIN_N)) / (1.0 - fresnel_unpolarized(1.0, 1.0 / SKIN_N))
     k_row *= t_in[:, None]
+    if curved:  # light must enter the arm: the part of each offset bin that lies on it
+        xc, half_arc = 0.5 * P * mm, 0.97 * arm_radius_mm
+        top, bottom = (xc - half_arc) / mm - 0.5, (xc + half_arc) / mm - 0.5  # projector coordinates
+        lo = geometry.projector_row_of(np.arange(H))[:, None] + wide[None, :] - 0.5
+        k_row *= np.clip(np.minimum(lo + 1.0, bottom) - np.maximum(lo, top), 0.0, 1.0)
 
     # Vein ratios, per pixel (product over veins).
     ratio = np.ones((H, W, wide.size))
