@@ -5,6 +5,7 @@ videos at 30 fps with heart-rate variability, breathing, arm motion, laser flick
 and camera noise (the defaults of :class:`planeray.pulse.simulate.LiveSettings`).
 """
 
+import numpy as np
 import pytest
 
 from planeray.pulse.analysis import analyze_pulse
@@ -120,3 +121,19 @@ def test_pulse_report_writes_fig15_and_its_numbers(tmp_path):
     assert rep["pulse_free"]["false_alarms"] == 0
     for name in ("fig15a_pulse.png", "fig15b_methods.png", "rate_accuracy.png"):
         assert (tmp_path / "r" / name).is_file()
+
+
+def test_blood_scale_knob_of_the_skin_scene():
+    from planeray.scenes import make_scene
+
+    vein = [{"depth_mm": 2.0, "diameter_mm": 3.0, "points_mm": [[0.0, 14.0], [28.8, 14.0]]}]
+    kw = {"projector_rows": 96, "seed": 0}
+    none = make_scene("skin", (24, 24), veins=[], **kw).transport.dense
+    zero = make_scene("skin", (24, 24), veins=vein, blood_scale=0.0, **kw).transport.dense
+    one = make_scene("skin", (24, 24), veins=vein, **kw)
+    more = make_scene("skin", (24, 24), veins=vein, blood_scale=1.5, **kw).transport.dense
+    assert np.allclose(zero, none)  # no blood, no vein
+    mask = one.maps["vein_mask"]
+    d1, d15, d0 = (x[mask].sum() for x in (one.transport.dense, more, none))
+    assert d15 < d1 < d0  # more blood, less light
+    assert np.log(d0 / d15) > np.log(d0 / d1)
