@@ -129,7 +129,12 @@ def video(
     noise: Annotated[bool, typer.Option(help="Camera noise.")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
 ):
-    """Simulate a live capture of the pulse in the skin scene and write it as a video (Fig. 15)."""
+    """Simulate a live capture of the pulse in the skin scene and write it as a video (Fig. 15).
+
+    Also writes STEM_vein_mask.png, the scene's vein mask (for ``planeray skin pulse --mask``).
+    """
+    import numpy as np
+
     from ..errors import InputError
     from ..io.atomic import ALREADY_EXISTS
     from ..pulse.simulate import METHODS, LiveSettings, simulate_live, skin_builder
@@ -162,11 +167,20 @@ def video(
         task = bar.add_task("building the skin scene, simulating", total=len(methods))
         cap = simulate_live(
             settings,
-            build=skin_builder(tuple(size), seed=seed),
+            build=skin_builder(tuple(size), seed=seed, projector_rows=projector_rows),
             methods=methods,
             seed=seed,
             progress=lambda i: bar.advance(task),
         )
+    mask_path = out_path.with_name(f"{out_path.stem}_vein_mask.png")
+    vein = cap.model.scene.maps.get("vein_mask")
+    if vein is not None:
+        from PIL import Image
+
+        from ..io import atomic_file
+
+        with atomic_file(mask_path) as tmp:
+            Image.fromarray((np.asarray(vein, bool) * 255).astype(np.uint8)).save(tmp, format="PNG")
     for m, p in paths.items():
         v = cap.videos[m]
         v.meta = {**v.meta, "true_mean_rate_bpm": cap.truth["mean_rate_bpm"]}
@@ -176,6 +190,8 @@ def video(
             f"true mean rate {cap.truth['mean_rate_bpm']:.2f} bpm)",
             highlight=False,
         )
+    if vein is not None:
+        out.print(f"{mask_path}  (vein mask)", highlight=False)
 
 
 def pulse_report(
