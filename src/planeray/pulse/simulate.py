@@ -4,9 +4,10 @@ The skin scene (``make_scene("skin", ...)``) is imaged frame by frame at a fixed
 exposure, while the blood volume pulses, the arm breathes and drifts, ambient light shines, and
 the camera (:class:`planeray.camera.CameraModel`, one frame per video frame) adds its noise.
 
-**Pulsation.**  The heart changes the blood volume in the vessels by a small fraction
-``pulse_amplitude`` (1-2 % from diastole to systole): the scene is built with its blood-volume
-knob ``blood_scale = 1 + pulse_amplitude * w(t)``, ``w`` the cardiac waveform
+**Pulsation.**  The heart changes the blood volume in the veins by a small fraction
+``pulse_amplitude`` (2 % from diastole to systole by default): the scene is built with its
+blood-volume knob ``blood_scale = 1 + pulse_amplitude * w(t)`` (each vein's kernel ratio ``R``
+becomes ``R ** blood_scale``; the dermis's own blood has no knob in the scene and does not pulse), ``w`` the cardiac waveform
 (:func:`planeray.pulse.waveform.cardiac_signal`, 0 at diastole, 1 at the systolic peak).
 
 **Linearization.**  Every image here is linear in the transport, and the transport is smooth in
@@ -21,7 +22,7 @@ the largest error of the linear model there relative to the pulsatile change its
 * ``indirect``: the short-range indirect delay image, band at ``delay_us``, exposure ``exposure_us``.
 * ``direct``: the epipolar image, delay 0, exposure ``exposure_us``.
 * ``regular``: all projector rows (flood illumination, ``T`` summed over every offset), exposed for
-  a whole projector frame (``projector_rows / lines_per_second``), so ambient light adds up.
+  a whole frame of the 720-row projector (13.3 ms at 54,000 lines/s), so ambient light adds up.
 * ``global``: ``regular - direct``, two captures subtracted (their noise adds).
 
 Each method's exposure is scaled (as aperture or gain would) so that its brightest pixel sits at
