@@ -157,6 +157,8 @@ def test_heart_rate_from_a_noisy_video_and_its_region():
     est = estimate_heart_rate(region_signal(video.frames, region), FPS)
     assert est.rate_bpm == pytest.approx(83.0, abs=1.0)
     assert est.snr_db > 0 and est.band_snr_db > 3
+    welch = estimate_heart_rate(region_signal(video.frames, region), FPS, method="welch", segment_s=10)
+    assert welch.rate_bpm == pytest.approx(83.0, abs=1.5) and welch.bin_bpm == pytest.approx(6.0)
     assert region_signal(video.frames, parse_region("8,8,24,24", (32, 32))).shape == (600,)
     assert parse_region("3,4", (32, 32)) == (3, 4, 4, 5)
     with pytest.raises(InputError, match="not inside"):
