@@ -146,7 +146,8 @@ def video(
     paths = {
         m: out_path if method != "all" else out_path.with_name(f"{out_path.stem}_{m}{out_path.suffix}") for m in methods
     }
-    for p in paths.values():
+    mask_path = out_path.with_name(f"{out_path.stem}_vein_mask.png")
+    for p in [*paths.values(), mask_path]:
         if p.exists() and not overwrite:
             raise InputError(ALREADY_EXISTS, p)
     settings = LiveSettings(
@@ -172,14 +173,13 @@ def video(
             seed=seed,
             progress=lambda i: bar.advance(task),
         )
-    mask_path = out_path.with_name(f"{out_path.stem}_vein_mask.png")
     vein = cap.model.scene.maps.get("vein_mask")
     if vein is not None:
         from PIL import Image
 
         from ..io import atomic_file
 
-        with atomic_file(mask_path) as tmp:
+        with atomic_file(mask_path, overwrite=overwrite) as tmp:
             Image.fromarray((np.asarray(vein, bool) * 255).astype(np.uint8)).save(tmp, format="PNG")
     for m, p in paths.items():
         v = cap.videos[m]
