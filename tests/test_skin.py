@@ -220,3 +220,17 @@ def test_shipped_tables_are_current(monkeypatch, tmp_path):
         for tone in SKIN_TONES:
             table, kernel, r_total = skin_tables(w, tone)
             assert kernel.shape == table.offsets_rows.shape and 0.02 < r_total < 0.7
+
+
+@pytest.mark.slow
+def test_cli_skin_validate_writes_report_and_figure(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    res = CliRunner().invoke(app, ["skin", "validate", "--out", str(tmp_path), "--n-photons", "3200"])
+    assert res.exit_code == 0, res.output
+    rep = json.loads((tmp_path / "skin_validation.json").read_text())
+    assert len(rep["cases"]) == 10 and len(rep["dark_skin_cases"]) == 2
+    assert rep["adding_doubling"]["ad"] == pytest.approx(0.4116, abs=2e-3)
+    assert (tmp_path / "skin_validation.png").stat().st_size > 10_000

@@ -100,7 +100,7 @@ def validate(
     for r in rep["dark_skin_cases"]:
         out.print(
             f"dark skin, {r['angle_deg']:.0f} deg top {r['depth_mm']:g} mm: short-range contrast "
-            f"{r['short_brute']:.3f} (brute) {r['short_fast']:.3f} (fast, fair-skin table)"
+            f"{r['short_brute']:.3f} (brute) {r['short_fast']:.3f} (fast)"
         )
     ad = rep["adding_doubling"]
     out.print(

@@ -59,7 +59,7 @@ VALIDATION_CASES = (
 )
 
 
-#: Cases checked on dark skin (melanosome fraction 0.3) with the fair skin's table.
+#: Cases checked on dark skin (melanosome fraction 0.3, its own table).
 DARK_CASES = ((0.0, 2.0, 2.0, 0.0), (90.0, 2.0, 2.0, 0.0))
 
 
@@ -194,7 +194,7 @@ def layered_adding_doubling(*, wavelength_nm=638, tone="fair", n_photons=200_000
 def run_skin_validation(out=None, *, n_photons=200_000, wavelength_nm=638, progress=None) -> dict:
     """Both checks; with ``out`` (a folder) writes ``skin_validation.json`` and ``skin_validation.png``."""
     rows = vein_validation(wavelength_nm=wavelength_nm, n_photons=n_photons, progress=progress)
-    # Dark skin reuses the fair skin's vein table (with its own background kernel): check it.
+    # Dark skin has its own vein table (melanin changes the contrast): check it too.
     dark = vein_validation(
         wavelength_nm=wavelength_nm, tone="dark", cases=DARK_CASES, n_photons=n_photons, progress=progress
     )
