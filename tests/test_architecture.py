@@ -47,6 +47,7 @@ LAYERS = [
     "materials",
     "baselines",
     "skin",
+    "pulse",
     "study",
     "figures",
     "experiments",

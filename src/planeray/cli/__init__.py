@@ -19,6 +19,7 @@ order) and holds the entry point:
 * ``study.py``      study demux (the Sec. 5.2 study)
 * ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
 * ``skin.py``       skin simulate | validate | veins | enhance | compare (veins through skin, Sec. 10, Figs. 13, 14, 16)
+* ``pulse.py``      skin pulse | video | pulse-report (the pulse, Sec. 10, Fig. 15), on the skin group
 * ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
@@ -40,6 +41,7 @@ from . import (
     demux,
     materials,
     mc,
+    pulse,
     render,
     simulate,
     skin,
@@ -47,7 +49,7 @@ from . import (
     study,
     view,
 )
-from ._common import DEBUG, _join_pixel_args
+from ._common import DEBUG, _friendly_errors, _join_pixel_args
 
 __all__ = ["app", "main"]
 
@@ -93,6 +95,10 @@ app.add_typer(mc.mc_app, name="mc")
 app.add_typer(study.study_app, name="study")
 app.add_typer(materials.materials_app, name="materials")
 app.add_typer(skin.skin_app, name="skin")
+# The pulse commands of the skin group (Sec. 10, Fig. 15).
+skin.skin_app.command("pulse")(_friendly_errors(pulse.pulse))
+skin.skin_app.command("video")(_friendly_errors(pulse.video))
+skin.skin_app.command("pulse-report")(_friendly_errors(pulse.pulse_report))
 
 
 def main(argv: list[str] | None = None):

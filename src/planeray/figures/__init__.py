@@ -11,6 +11,15 @@ and :mod:`planeray.figures.study` (the Sec. 5.2 study).
 from .contact_sheet import contact_sheet_figure
 from .labels import label_map_figure
 from .profiles import delay_profiles_figure
+from .pulse import pulse_methods_figure, pulse_signal_figure, rate_accuracy_figure
 from .transport import transport_profiles_figure
 
-__all__ = ["contact_sheet_figure", "delay_profiles_figure", "label_map_figure", "transport_profiles_figure"]
+__all__ = [
+    "contact_sheet_figure",
+    "delay_profiles_figure",
+    "label_map_figure",
+    "pulse_methods_figure",
+    "pulse_signal_figure",
+    "rate_accuracy_figure",
+    "transport_profiles_figure",
+]
