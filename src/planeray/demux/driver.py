@@ -137,19 +137,9 @@ def solve_chunk(
         n_obs = np.full(B.shape[0], N) if mask is None else mask.sum(axis=1)
         X = np.where(n_obs[:, None] > 0, X, 0.0)  # nothing usable: T is 0, flagged (never "converged")
         conv = conv & (n_obs > 0)
-        with _blas_one_thread(2):
-            resid = X @ group.A.T - B
-        if mask is not None:
-            resid = np.where(mask, resid, 0.0)
         with _blas_one_thread(2):  # small products: threaded BLAS only spins
-            kkt = problem.kkt_residual(group, X, B, mask)
-            objective = problem.objective(group, X, B, mask)
-        if mask is not None:
-            kkt[n_obs == 0] = np.nan
-        pix_maps = {
-            "residual_rms": np.sqrt((resid**2).sum(axis=1) / np.maximum(n_obs, 1)),
-            "kkt_residual": kkt,
-            "objective": objective,
+            pix_maps = problem.diagnostics(group, X, B, mask)
+        pix_maps |= {
             "iterations": iters,
             "converged": conv,
             "n_observations": n_obs,
@@ -390,17 +380,40 @@ def demultiplex_to_store(
         if workers or scheduler:
             _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source)
         else:
-            for i in todo:
-                obs, sat = read_observations(stack, problem, chunks[i], source=source)
-                _write_chunk(group, solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol), i)
-                if progress is not None:
-                    progress(chunks[i].stop - chunks[i].start)
+            _run_local(stack, problem, chunks, todo, method, tol, group, progress, source)
         if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
             return resumable.partial_path(out)
     except BaseException:
         resumable.discard_if_empty(out)  # a run that finished nothing leaves nothing behind
         raise
     return resumable.promote(out, overwrite=overwrite, kind="transport", error=TransportError)
+
+
+def _run_local(stack, problem, chunks, todo, method, tol, group, progress, source):
+    """Chunks in order, with I/O overlapped: chunk i+1 is read and chunk i-1 written while i is solved.
+
+    One I/O thread (Zarr's codecs release the GIL); at most three chunks are in memory.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    if not todo:
+        return
+    with ThreadPoolExecutor(1, thread_name_prefix="planeray-demux-io") as io:
+        read = lambda i: read_observations(stack, problem, chunks[i], source=source)  # noqa: E731
+        pending_read = io.submit(read, todo[0])
+        pending_write = None
+        for n, i in enumerate(todo):
+            obs, sat = pending_read.result()
+            if n + 1 < len(todo):
+                pending_read = io.submit(read, todo[n + 1])
+            res = solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol)
+            del obs, sat
+            if pending_write is not None:
+                pending_write.result()  # in order: a chunk is marked done only after its data
+            pending_write = io.submit(_write_chunk, group, res, i)
+            if progress is not None:
+                progress(chunks[i].stop - chunks[i].start)
+        pending_write.result()
 
 
 def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source):

@@ -64,7 +64,7 @@ __all__ = ["solve_fast", "AdmmRowSolver", "DEFAULT_TOL"]
 DEFAULT_TOL = 1e-4
 _RELAX = 1.8
 _CHUNK = 1024
-_FIRST_CHECK = 30
+_FIRST_CHECK = 20
 _CHECK_EVERY = 10
 _MAX_ITER = 2000
 
@@ -83,7 +83,7 @@ _RHO_LADDER = (0.08, 0.25, 0.7, 2.0, 5.0, 15.0, 45.0)
 _RHO_START = 2  # index of 0.7 in the ladder
 #: Anderson memory (steps); 5 halved the mean iterations on random transports without ambient light.
 _AA_MEMORY = 5
-_BALANCE_AFTER = 60
+_BALANCE_AFTER = 20
 
 
 def _spd_inverse(S) -> np.ndarray:
@@ -314,6 +314,9 @@ class AdmmRowSolver:
         if start is not None and (level != start[1][idx]).any():  # pragma: no cover - see above
             return self.solve(B, tol, max_iter, mask, anderson)
         k, n = 0, _FIRST_CHECK
+        # Each pixel is certified when due: at _FIRST_CHECK, then every _CHECK_EVERY
+        # iterations (a warm-started pixel would join a batch in step with it).
+        due_at = np.full(idx.size, _FIRST_CHECK)
         while idx.size:
             levels = np.unique(level)
             rho = np.asarray(_RHO_LADDER, np.float32)[level]
@@ -330,46 +333,59 @@ class AdmmRowSolver:
                     V[sel] = Vs
                     state.put(sel, sub)
             k += n
-            Z = np.maximum(V, 0).astype(np.float64)
-            Lam = np.minimum(V, 0) * -rho[:, None]  # ADMM multiplier of z >= 0
-            f, g, kk = self.certify(Z, Bi, Lam, Mk, drop, cert_L)
-            done = (g <= tol * np.maximum(f - g, 0.0)) | (k >= max_iter)
-            # residual balancing (Boyd et al. 2011, Sec. 3.4.1) on the ladder
-            dz = np.linalg.norm(np.maximum(V, 0) - np.maximum(prev, 0), axis=1)
-            dw = np.linalg.norm(np.minimum(V, 0) - np.minimum(prev, 0), axis=1)
-            # Only pixels still running after _BALANCE_AFTER iterations move: most
-            # converge before, and each new rho costs a factorization.
-            late = k >= _BALANCE_AFTER
-            up = late & (dw > 3.0 * dz) & (level < len(_RHO_LADDER) - 1) & ~done
-            down = late & (dz > 3.0 * dw) & (level > 0) & ~done
-            if up.any() or down.any():
-                new_level = level + up - down
-                moved = np.flatnonzero(new_level != level)
-                ratio = (rho[moved] / np.asarray(_RHO_LADDER, np.float32)[new_level[moved]])[:, None]
-                V[moved] = np.maximum(V[moved], 0) + np.minimum(V[moved], 0) * ratio
-                level = new_level
-                state.restart(moved)
-                for lv in np.unique(level[moved]):
-                    m = moved[level[moved] == lv]
-                    fac = self.factor(lv)
+            due = np.flatnonzero(due_at <= k)
+            done = np.zeros(idx.size, bool)
+            if due.size:
+                Vd = V[due]
+                Z = np.maximum(Vd, 0).astype(np.float64)
+                Lam = np.minimum(Vd, 0) * -rho[due, None]  # ADMM multiplier of z >= 0
+                if drop is None:
+                    f, g, kk = self.certify(Z, Bi[due], Lam)
+                else:
+                    f, g, kk = self.certify(Z, Bi[due], Lam, Mk[due], drop.take(due), cert_L[due])
+                done_d = (g <= tol * np.maximum(f - g, 0.0)) | (k >= max_iter)
+                done[due] = done_d
+                due_at[due] = np.minimum(k + _CHECK_EVERY, max_iter)
+                # residual balancing (Boyd et al. 2011, Sec. 3.4.1) on the ladder
+                dz = np.linalg.norm(np.maximum(Vd, 0) - np.maximum(prev[due], 0), axis=1)
+                dw = np.linalg.norm(np.minimum(Vd, 0) - np.minimum(prev[due], 0), axis=1)
+                # Only pixels still running after _BALANCE_AFTER iterations move: most
+                # converge before, and each new rho costs a factorization.
+                late = k >= _BALANCE_AFTER
+                up = np.zeros(idx.size, bool)
+                down = np.zeros(idx.size, bool)
+                up[due] = late & (dw > 3.0 * dz) & (level[due] < len(_RHO_LADDER) - 1) & ~done_d
+                down[due] = late & (dz > 3.0 * dw) & (level[due] > 0) & ~done_d
+                if up.any() or down.any():
+                    new_level = level + up - down
+                    moved = np.flatnonzero(new_level != level)
+                    ratio = (rho[moved] / np.asarray(_RHO_LADDER, np.float32)[new_level[moved]])[:, None]
+                    V[moved] = np.maximum(V[moved], 0) + np.minimum(V[moved], 0) * ratio
+                    level = new_level
+                    state.restart(moved)
+                    for lv in np.unique(level[moved]):
+                        m = moved[level[moved] == lv]
+                        fac = self.factor(lv)
+                        if drop is not None:
+                            ok = drop.factor(fac.rho, fac.K)[m]
+                            if not ok.all():  # pragma: no cover - S_p is PD in exact arithmetic: stay put
+                                stay = m[~ok]
+                                level[stay] = lv - up[stay] + down[stay]
+                                V[stay] = np.maximum(V[stay], 0) + np.minimum(V[stay], 0) / ratio[np.isin(moved, stay)]
+                                m = m[ok]
+                        C[m] = fac.constant(Bi[m], drop.take(m) if drop is not None else None)
+                if done.any():
+                    dd = due[done_d]
+                    d = idx[dd]
+                    X[d], iters[d], gap[d], fval[d], kkt[d] = Z[done_d], k, g[done_d], f[done_d], kk[done_d]
+                    V_out[d], level_out[d] = V[dd], level[dd]
+                    keep = ~done
+                    idx, V, C, level, Bi = idx[keep], V[keep], C[keep], level[keep], Bi[keep]
+                    due_at = due_at[keep]
+                    state = state.take(np.flatnonzero(keep))
                     if drop is not None:
-                        ok = drop.factor(fac.rho, fac.K)[m]
-                        if not ok.all():  # pragma: no cover - S_p is PD in exact arithmetic: stay put
-                            stay = m[~ok]
-                            level[stay] = lv - up[stay] + down[stay]
-                            V[stay] = np.maximum(V[stay], 0) + np.minimum(V[stay], 0) / ratio[np.isin(moved, stay)]
-                            m = m[ok]
-                    C[m] = fac.constant(Bi[m], drop.take(m) if drop is not None else None)
-            if done.any():
-                d = idx[done]
-                X[d], iters[d], gap[d], fval[d], kkt[d] = Z[done], k, g[done], f[done], kk[done]
-                V_out[d], level_out[d] = V[done], level[done]
-                keep = ~done
-                idx, V, C, level, Bi = idx[keep], V[keep], C[keep], level[keep], Bi[keep]
-                state = state.take(np.flatnonzero(keep))
-                if drop is not None:
-                    drop, cert_L, Mk = drop.take(keep), cert_L[keep], Mk[keep]
-            n = _CHECK_EVERY
+                        drop, cert_L, Mk = drop.take(keep), cert_L[keep], Mk[keep]
+            n = max(1, int(due_at.min()) - k) if idx.size else 0
         rel_gap = gap / np.maximum(fval - gap, 1e-300)
         for p in fallback:  # one pixel at a time on its own rows (rare)
             keep = mask[p]
@@ -435,6 +451,14 @@ def _threads() -> int:
 
 
 _CONTROLLER = None
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """A process-wide pool of solver threads (starting threads per batch costs ms under load)."""
+    if threads not in _POOLS:
+        _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="planeray-demux")
+    return _POOLS[threads]
 
 
 def _blas_one_thread(threads: int):
@@ -538,8 +562,7 @@ def solve_fast(
                 return solver.solve(B[pix[s]], tol, mask=m, anderson=anderson, start=st)
 
             if threads > 1 and len(slices) > 1:
-                with ThreadPoolExecutor(threads) as pool:
-                    parts = list(pool.map(run, slices))
+                parts = list(_pool(threads).map(run, slices))
             else:
                 parts = [run(s) for s in slices]
             for s, part in zip(slices, parts):
