@@ -87,46 +87,48 @@ def woodbury_factors(K, sel, k, L, ok):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def woodbury_add(X, AM, sel, k, L, scale, out):  # pragma: no cover - compiled
-    """``out[p] += scale * (AM[s]^T S_p^{-1} AM[s]) x_p``: the Woodbury term of ``x_p M_p``."""
+def woodbury_add(X, AM, rows, sel, k, L, scale, out):  # pragma: no cover - compiled
+    """``out[p] += scale * (AM[s]^T S_p^{-1} AM[s]) x_p``: the Woodbury term of ``x_p M_p`` (pixel ``rows[p]``)."""
     y = np.empty(sel.shape[1])
     U = X.shape[1]
     for p in range(X.shape[0]):
-        kp = k[p]
+        q = rows[p]
+        kp = k[q]
         if kp == 0:
             continue
         for j in range(kp):
-            s = sel[p, j]
+            s = sel[q, j]
             acc = 0.0
             for u in range(U):
                 acc += AM[s, u] * X[p, u]
             y[j] = acc
-        _chol_solve(L[p], y, kp)
+        _chol_solve(L[q], y, kp)
         for j in range(kp):
-            s = sel[p, j]
+            s = sel[q, j]
             w = scale * y[j]
             for u in range(U):
                 out[p, u] += w * AM[s, u]
 
 
 @numba.njit(cache=True, nogil=True)
-def woodbury_quad(R, AQ, sel, k, L, out):  # pragma: no cover - compiled
-    """``out[p] = y^T S_p^{-1} y`` with ``y = AQ[s] r_p`` (the extra part of ``r^T Q_p^{-1} r``)."""
+def woodbury_quad(R, AQ, rows, sel, k, L, out):  # pragma: no cover - compiled
+    """``out[p] = y^T S_p^{-1} y`` with ``y = AQ[s] r_p`` (the extra part of ``r^T Q_p^{-1} r``; pixel ``rows[p]``)."""
     y = np.empty(sel.shape[1])
     U = R.shape[1]
     for p in range(R.shape[0]):
-        kp = k[p]
+        q = rows[p]
+        kp = k[q]
         out[p] = 0.0
         if kp == 0:
             continue
         for j in range(kp):
-            s = sel[p, j]
+            s = sel[q, j]
             acc = 0.0
             for u in range(U):
                 acc += AQ[s, u] * R[p, u]
             y[j] = acc
         z = y.copy()
-        _chol_solve(L[p], z, kp)
+        _chol_solve(L[q], z, kp)
         q = 0.0
         for j in range(kp):
             q += y[j] * z[j]
@@ -135,9 +137,12 @@ def woodbury_quad(R, AQ, sel, k, L, out):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
 def admm_step(
-    V, T, C, decay, rrho, AM, sel, k, L, Fp, Gp, dF, dG, gram, cnt, head, rn_prev, anderson
+    V, T, C, decay, rrho, AM, rows, sel, k, L, Fp, Gp, dF, dG, gram, cnt, head, rn_prev, anderson
 ):  # pragma: no cover
     """One ADMM step per pixel, in place on ``V`` (float32), after ``T = |V| Mp`` (BLAS).
+
+    Pixel ``p`` of the batch has its dropped rows in ``sel[rows[p]]``, ``k[rows[p]]`` and
+    its Woodbury factor in ``L[rows[p]]`` (``rows``: no copy of the factors per batch).
 
     ``g = decay v + T + c`` (+ ``rrho`` times the Woodbury term for dropped rows), then,
     when ``anderson``, the type-II Anderson extrapolation over the last ``m`` steps
@@ -155,17 +160,18 @@ def admm_step(
     for p in range(P):
         for u in range(U):
             g[u] = decay * V[p, u] + T[p, u] + C[p, u]
-        kp = k[p]
+        q = rows[p]
+        kp = k[q]
         if kp > 0:
             for j in range(kp):
-                s = sel[p, j]
+                s = sel[q, j]
                 acc = np.float32(0.0)
                 for u in range(U):
                     acc += AM[s, u] * abs(V[p, u])
                 y[j] = acc
-            _chol_solve(L[p], y, kp)
+            _chol_solve(L[q], y, kp)
             for j in range(kp):
-                s = sel[p, j]
+                s = sel[q, j]
                 w = np.float32(rrho[p] * y[j])
                 for u in range(U):
                     g[u] += w * AM[s, u]

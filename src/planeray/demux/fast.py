@@ -117,13 +117,13 @@ class _Factor:
         self.G1 = (2.0 * relax) * self.AM  # r c M = b G1 + g0 with c = 2 A^T b - beta 1
         self.g0 = -beta * relax * Minv.sum(axis=0)
 
-    def constant(self, B, drop=None):
-        """``r c M_p`` per pixel (float32), exact in float64 before rounding."""
+    def constant(self, B, drop=None, rows=None):
+        """``r c M_p`` per pixel (float32), exact in float64 before rounding (pixel ``rows[p]`` of ``drop``)."""
         C = B @ self.G1 + self.g0
         if drop is not None and drop.any:
             sel, k, L = drop.sel, drop.k, drop.factors[self.rho]
             c = 2.0 * B @ drop.A - drop.beta  # the pixel's own c (B already has dropped rows zeroed)
-            _kernels.woodbury_add(c, self.AM, sel, k, L, drop.relax, C)
+            _kernels.woodbury_add(c, self.AM, rows, sel, k, L, drop.relax, C)
         return _flush32(C)
 
 
@@ -157,13 +157,14 @@ class _Dropped:
             self.valid[rho] = ok
         return self.valid[rho]
 
-    def take(self, keep):
-        """The bookkeeping of a subset of the pixels."""
+    def take(self, keep, rhos=None):
+        """The bookkeeping of a subset of the pixels (with the factors of ``rhos``; default: all)."""
         out = object.__new__(_Dropped)
         out.__dict__.update(self.__dict__)
         out.k, out.sel = self.k[keep], self.sel[keep]
-        out.factors = {r: L[keep] for r, L in self.factors.items()}
-        out.valid = {r: ok[keep] for r, ok in self.valid.items()}
+        rhos = self.factors if rhos is None else rhos
+        out.factors = {r: self.factors[r][keep] for r in rhos}
+        out.valid = {r: self.valid[r][keep] for r in rhos}
         out.any = bool(out.k.size and out.k.max() > 0)
         return out
 
@@ -202,7 +203,7 @@ class AdmmRowSolver:
             self._AQ = (AL @ self._Linv, AL @ AL.T)  # A Q^{-1}, A Q^{-1} A^T (one assignment: threads)
         return self._AQ
 
-    def certify(self, Z, B, Lam, mask=None, drop=None, cert_L=None):
+    def certify(self, Z, B, Lam, mask=None, drop=None, cert_L=None, rows=None):
         """Objective, certified gap bound and KKT residual of feasible ``Z`` (float64).
 
         With ``mask`` the dropped observations count neither in the objective nor
@@ -226,25 +227,29 @@ class AdmmRowSolver:
         quad = np.einsum("ij,ij->i", W, W).astype(np.float64)
         if drop is not None and drop.any:
             extra = np.empty(Z.shape[0])
-            _kernels.woodbury_quad(GL.astype(np.float64), self._AQ[0], drop.sel, drop.k, cert_L, extra)
+            _kernels.woodbury_quad(GL.astype(np.float64), self._AQ[0], rows, drop.sel, drop.k, cert_L, extra)
             quad += extra
         gap = 0.5 * quad + np.einsum("ij,ij->i", Lam, Z)
         return f, gap, kkt
 
-    def _iterate(self, V, C, fac: _Factor, n: int, state, drop, rrho):
-        """``n`` ADMM iterations in place; returns V before the last one (for residuals)."""
+    def _iterate(self, V, C, fac: _Factor, n: int, state, drop, rrho, rows=None):
+        """``n`` ADMM iterations in place; returns V before the last one (for residuals).
+
+        ``rows``: the batch's pixels in ``drop`` (default: all, in order).
+        """
         absV, T = np.empty_like(V), np.empty_like(V)
         prev = V
         if drop is not None and drop.any:
             sel, k, L = drop.sel, drop.k, drop.factors[fac.rho]
+            rows = np.arange(V.shape[0]) if rows is None else rows
         else:
-            sel, k, L = _NO_SEL, np.zeros(V.shape[0], np.int64), _NO_L
+            sel, k, L, rows = _NO_SEL, _NO_K, _NO_L, np.zeros(V.shape[0], np.int64)
         for i in range(n):
             if i == n - 1:
                 prev = V.copy()
             np.abs(V, out=absV)
             np.matmul(absV, fac.Mp, out=T)
-            _kernels.admm_step(V, T, C, self.decay, rrho, fac.AM32, sel, k, L, *state.arrays(), state.anderson)
+            _kernels.admm_step(V, T, C, self.decay, rrho, fac.AM32, rows, sel, k, L, *state.arrays(), state.anderson)
         return prev
 
     def solve(self, B, tol=DEFAULT_TOL, max_iter=_MAX_ITER, mask=None, anderson=False, start=None):
@@ -308,6 +313,7 @@ class AdmmRowSolver:
                 idx, Bi, level, V, Mk, cert_L = idx[keep], Bi[keep], level[keep], V[keep], Mk[keep], cert_L[keep]
                 drop = drop.take(keep)
                 state = _AndersonState(idx.size, U, anderson)
+        drow = np.arange(idx.size)  # each running pixel's row in drop (drop itself is never compacted)
         C = np.empty((idx.size, U), np.float32)
         for lv in np.unique(level):
             m = np.flatnonzero(level == lv)
@@ -316,7 +322,7 @@ class AdmmRowSolver:
                 ok = drop.factor(fac.rho, fac.K)[m]
                 level[m[~ok]] = _RHO_START
                 m = m[ok]
-            C[m] = fac.constant(Bi[m], drop.take(m) if drop is not None else None)
+            C[m] = fac.constant(Bi[m], drop, m)
         if start is not None and (level != start[1][idx]).any():  # pragma: no cover - see above
             return self.solve(B, tol, max_iter, mask, anderson)
         k, n = 0, _FIRST_CHECK
@@ -329,14 +335,14 @@ class AdmmRowSolver:
             rho = np.asarray(_RHO_LADDER, np.float32)[level]
             rrho = (self.relax * rho).astype(np.float32)
             if levels.size == 1:  # the common case: no gather/scatter
-                prev = self._iterate(V, C, self.factor(levels[0]), n, state, drop, rrho)
+                prev = self._iterate(V, C, self.factor(levels[0]), n, state, drop, rrho, drow)
             else:
                 prev = np.empty_like(V)
                 for lv in levels:
                     sel = np.flatnonzero(level == lv)
                     Vs, sub = V[sel], state.take(sel)
-                    dsub = drop.take(sel) if drop is not None else None
-                    prev[sel] = self._iterate(Vs, C[sel], self.factor(lv), n, sub, dsub, rrho[sel])
+                    fac = self.factor(lv)
+                    prev[sel] = self._iterate(Vs, C[sel], fac, n, sub, drop, rrho[sel], drow[sel])
                     V[sel] = Vs
                     state.put(sel, sub)
             k += n
@@ -349,7 +355,7 @@ class AdmmRowSolver:
                 if drop is None:
                     f, g, kk = self.certify(Z, Bi[due], Lam)
                 else:
-                    f, g, kk = self.certify(Z, Bi[due], Lam, Mk[due], drop.take(due), cert_L[due])
+                    f, g, kk = self.certify(Z, Bi[due], Lam, Mk[due], drop, cert_L, drow[due])
                 done_d = (g <= tol * np.maximum(f - g, 0.0)) | (k >= max_iter)
                 done[due] = done_d
                 due_at[due] = np.minimum(k + _CHECK_EVERY, max_iter)
@@ -376,13 +382,13 @@ class AdmmRowSolver:
                         m = moved[level[moved] == lv]
                         fac = self.factor(lv)
                         if drop is not None:
-                            ok = drop.factor(fac.rho, fac.K)[m]
+                            ok = drop.factor(fac.rho, fac.K)[drow[m]]
                             if not ok.all():  # pragma: no cover - S_p is PD in exact arithmetic: stay put
                                 stay = m[~ok]
                                 level[stay] = lv - up[stay] + down[stay]
                                 V[stay] = np.maximum(V[stay], 0) + np.minimum(V[stay], 0) / ratio[np.isin(moved, stay)]
                                 m = m[ok]
-                        C[m] = fac.constant(Bi[m], drop.take(m) if drop is not None else None)
+                        C[m] = fac.constant(Bi[m], drop, None if drop is None else drow[m])
                 if done.any():
                     dd = due[done_d]
                     d = idx[dd]
@@ -393,7 +399,7 @@ class AdmmRowSolver:
                     due_at, moves = due_at[keep], moves[keep]
                     state = state.take(np.flatnonzero(keep))
                     if drop is not None:
-                        drop, cert_L, Mk = drop.take(keep), cert_L[keep], Mk[keep]
+                        drow, Mk = drow[keep], Mk[keep]
             n = max(1, int(due_at.min()) - k) if idx.size else 0
         rel_gap = gap / np.maximum(fval - gap, 1e-300)
         for p in fallback:  # one pixel at a time on its own rows (rare)
@@ -406,6 +412,7 @@ class AdmmRowSolver:
 
 _NO_SEL = np.zeros((1, 1), np.int64)
 _NO_L = np.zeros((1, 1, 1))
+_NO_K = np.zeros(1, np.int64)
 
 
 class _AndersonState:
