@@ -257,9 +257,12 @@ def demultiplex(
     H, W = stack.shape
     T = np.zeros((H, W, problem.n_offsets), np.float32)
     maps = {name: np.zeros((H, W), dtype) for name, dtype in MAP_NAMES.items()}
-    for rows in _chunks(H, chunk_rows):
+    order = _chunks(H, chunk_rows)
+    release = _cache_release(problem, order)
+    for n, rows in enumerate(order):
         obs, sat = read_observations(stack, problem, rows)
         res = solve_chunk(problem, obs, sat, rows, method=method, tol=tol)
+        release(n)
         T[rows] = res.T
         for name in maps:
             maps[name][rows] = res.maps[name]
@@ -389,6 +392,25 @@ def demultiplex_to_store(
     return resumable.promote(out, overwrite=overwrite, kind="transport", error=TransportError)
 
 
+def _cache_release(problem: DemuxProblem, order: list[slice]) -> Callable[[int], None]:
+    """``release(n)`` drops the cached factorizations of row groups whose last chunk is ``order[n]``.
+
+    Memory stays bounded by the chunk: a 512-row image has ~160 distinct row matrices
+    (~2 MB of factorizations each), and only the interior one spans the whole image.
+    """
+    last = {}
+    for n, rows in enumerate(order):
+        for g in np.unique(problem.row_group[rows]):
+            last[int(g)] = n
+
+    def release(n: int) -> None:
+        for g, m in last.items():
+            if m == n:
+                problem.groups[g].__dict__.pop("_admm_cache", None)
+
+    return release
+
+
 def _run_local(stack, problem, chunks, todo, method, tol, group, progress, source):
     """Chunks in order, with I/O overlapped: chunk i+1 is read and chunk i-1 written while i is solved.
 
@@ -398,6 +420,7 @@ def _run_local(stack, problem, chunks, todo, method, tol, group, progress, sourc
 
     if not todo:
         return
+    release = _cache_release(problem, [chunks[i] for i in todo])
     with ThreadPoolExecutor(1, thread_name_prefix="planeray-demux-io") as io:
         read = lambda i: read_observations(stack, problem, chunks[i], source=source)  # noqa: E731
         pending_read = io.submit(read, todo[0])
@@ -408,6 +431,7 @@ def _run_local(stack, problem, chunks, todo, method, tol, group, progress, sourc
                 pending_read = io.submit(read, todo[n + 1])
             res = solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol)
             del obs, sat
+            release(n)
             if pending_write is not None:
                 pending_write.result()  # in order: a chunk is marked done only after its data
             pending_write = io.submit(_write_chunk, group, res, i)

@@ -125,17 +125,16 @@ class _Factor:
         U = Q.shape[0]
         Minv = _spd_inverse(Q + rho * np.eye(U))
         self.rho = rho
-        self.M = Minv
         self.Mp = _flush32(relax * rho * Minv - 0.5 * relax * np.eye(U))
         self.AM = A @ Minv  # (N, U): the rows of M A^T, for the Woodbury term
         self.AM32 = _flush32(self.AM)
         self.K = self.AM @ A.T  # A M A^T
-        self.G1 = (2.0 * relax) * self.AM  # r c M = b G1 + g0 with c = 2 A^T b - beta 1
+        self.relax = relax  # r c M = 2 r b (A M) + g0 with c = 2 A^T b - beta 1
         self.g0 = -beta * relax * Minv.sum(axis=0)
 
     def constant(self, B, drop=None, rows=None):
         """``r c M_p`` per pixel (float32), exact in float64 before rounding (pixel ``rows[p]`` of ``drop``)."""
-        C = B @ self.G1 + self.g0
+        C = (B @ self.AM) * (2.0 * self.relax) + self.g0
         if drop is not None and drop.any:
             sel, k, L = drop.sel, drop.k, drop.factors[self.rho]
             c = 2.0 * B @ drop.A - drop.beta  # the pixel's own c (B already has dropped rows zeroed)
