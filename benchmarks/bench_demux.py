@@ -98,7 +98,10 @@ def time_command(stack_path: Path, out: Path, repeat: int, *extra) -> dict:
             "import resource, runpy, sys, time; t0 = time.perf_counter(); sys.argv = ['planeray'] + sys.argv[1:]\n"
             "try:\n    runpy.run_module('planeray.cli', run_name='__main__')\n"
             "except SystemExit:\n    pass\n"
-            "print('WALL', time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)"
+            # VmHWM, not ru_maxrss: that one survives exec and would report this (large) parent
+            "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')]\n"
+            "peak = int(hwm[0].split()[1]) / 1024 if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024\n"
+            "print('WALL', time.perf_counter() - t0, peak)"
         )
         run = subprocess.run(
             [sys.executable, "-c", code, "demux", str(stack_path), "--out", str(out), "--overwrite", *map(str, extra)],
