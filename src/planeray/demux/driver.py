@@ -31,7 +31,6 @@ from ..io.atomic import check_replaceable
 from ..stack import Stack
 from ..timing import RowGeometry
 from ..transport import Transport
-from .fast import _blas_one_thread
 from .problem import DemuxProblem, RowGroup
 from .solvers import get_solver
 
@@ -113,7 +112,6 @@ def solve_chunk(
         A key of :data:`planeray.demux.SOLVERS`.
     """
     solve = get_solver(method)
-    options = _solver_options(solve)
     N, r, W = observations.shape
     U = problem.n_offsets
     T = np.zeros((r, W, U), np.float32)
@@ -122,65 +120,50 @@ def solve_chunk(
     for g in np.unique(problem.row_group[row_ids]):
         group = problem.groups[g]
         local = np.flatnonzero(problem.row_group[row_ids] == g)
-        B = observations[:, local, :].reshape(N, -1).T  # (P, N) pixels of these rows, row-major
+        B = observations[:, local, :].reshape(N, -1).T  # (P, N) pixels of these rows
         mask = None if saturated is None else ~saturated[:, local, :].reshape(N, -1).T
-        if mask is not None and mask.all():
-            mask = None
-        kwargs = {"image_width": W} if "image_width" in options and np.all(np.diff(local) == 1) else {}
-        if mask is not None and "mask" in options:
-            kwargs["mask"] = mask  # the solver handles dropped observations itself (fast: in the same batch)
-        if mask is None or "mask" in kwargs:
-            res = solve(group, B, problem.alpha, problem.beta, tol, **kwargs)
-            X, iters, conv = res.X, res.iterations, res.converged
-        else:  # a solver without masks: pixels with dropped observations one by one
-            X, iters, conv = _solve_masked_one_by_one(solve, problem, group, B, mask, tol)
+        X = np.zeros((B.shape[0], group.A.shape[1]))
+        iters = np.zeros(B.shape[0], np.int32)
+        conv = np.zeros(B.shape[0], bool)
+        full = np.ones(B.shape[0], bool) if mask is None else mask.all(axis=1)
+        if full.any():
+            res = solve(group, B[full], problem.alpha, problem.beta, tol)
+            X[full], iters[full], conv[full] = res.X, res.iterations, res.converged
+        for p in np.flatnonzero(~full):  # rare: pixels with saturated observations
+            keep = mask[p]
+            if not keep.any():  # nothing usable: T stays 0, flagged (never "converged")
+                continue
+            sub = RowGroup(group.rows, group.A[keep], group.valid)
+            res = solve(sub, B[p : p + 1, keep], problem.alpha, problem.beta, tol)
+            X[p], iters[p], conv[p] = res.X[0], res.iterations[0], res.converged[0]
+        resid = X @ group.A.T - B
+        if mask is not None:
+            resid = np.where(mask, resid, 0.0)
         n_obs = np.full(B.shape[0], N) if mask is None else mask.sum(axis=1)
-        X = np.where(n_obs[:, None] > 0, X, 0.0)  # nothing usable: T is 0, flagged (never "converged")
         conv = conv & (n_obs > 0)
-        with _blas_one_thread(2):  # small products: threaded BLAS only spins
-            pix_maps = problem.diagnostics(group, X, B, mask)
-        pix_maps |= {
+        pix_maps = {
+            "residual_rms": np.sqrt((resid**2).sum(axis=1) / np.maximum(n_obs, 1)),
+            "kkt_residual": problem.kkt_residual(group, X, np.where(mask, B, 0.0) if mask is not None else B),
+            "objective": problem.objective(group, X, B, mask),
             "iterations": iters,
             "converged": conv,
             "n_observations": n_obs,
         }
+        if mask is not None and (~full).any():
+            # The KKT test above used the full matrix; redo masked pixels exactly.
+            for p in np.flatnonzero(~full):
+                keep = mask[p]
+                if not keep.any():
+                    pix_maps["kkt_residual"][p] = np.nan
+                    continue
+                sub = RowGroup(group.rows, group.A[keep], group.valid)
+                pix_maps["kkt_residual"][p] = problem.kkt_residual(sub, X[p : p + 1], B[p : p + 1, keep])[0]
         Tg = np.zeros((B.shape[0], U), np.float32)
         Tg[:, group.valid] = X
         T[local] = Tg.reshape(local.size, W, U)
         for name, value in pix_maps.items():
             maps[name][local] = np.asarray(value).reshape(local.size, W)
     return ChunkResult(rows, T, maps)
-
-
-def _solver_options(solve) -> set:
-    """Keyword options a registered solver accepts beyond ``(group, B, alpha, beta, tol)``."""
-    import inspect
-
-    try:
-        params = inspect.signature(solve).parameters
-    except (TypeError, ValueError):  # pragma: no cover - builtins
-        return set()
-    return {n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY}
-
-
-def _solve_masked_one_by_one(solve, problem, group, B, mask, tol):
-    """For solvers that take no mask: every pixel with dropped observations on its own rows."""
-    X = np.zeros((B.shape[0], group.A.shape[1]))
-    iters = np.zeros(B.shape[0], np.int32)
-    conv = np.zeros(B.shape[0], bool)
-    full = mask.all(axis=1)
-    if full.any():
-        res = solve(group, B[full], problem.alpha, problem.beta, tol)
-        X[full], iters[full], conv[full] = res.X, res.iterations, res.converged
-    for p in np.flatnonzero(~full):
-        keep = mask[p]
-        if not keep.any():
-            continue
-        res = solve(
-            RowGroup(group.rows, group.A[keep], group.valid), B[p : p + 1, keep], problem.alpha, problem.beta, tol
-        )
-        X[p], iters[p], conv[p] = res.X[0], res.iterations[0], res.converged[0]
-    return X, iters, conv
 
 
 def _check_run_options(method, chunk_rows, tol, workers=None) -> None:
@@ -257,12 +240,9 @@ def demultiplex(
     H, W = stack.shape
     T = np.zeros((H, W, problem.n_offsets), np.float32)
     maps = {name: np.zeros((H, W), dtype) for name, dtype in MAP_NAMES.items()}
-    order = _chunks(H, chunk_rows)
-    release = _cache_release(problem, order)
-    for n, rows in enumerate(order):
+    for rows in _chunks(H, chunk_rows):
         obs, sat = read_observations(stack, problem, rows)
         res = solve_chunk(problem, obs, sat, rows, method=method, tol=tol)
-        release(n)
         T[rows] = res.T
         for name in maps:
             maps[name][rows] = res.maps[name]
@@ -383,61 +363,17 @@ def demultiplex_to_store(
         if workers or scheduler:
             _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source)
         else:
-            _run_local(stack, problem, chunks, todo, method, tol, group, progress, source)
+            for i in todo:
+                obs, sat = read_observations(stack, problem, chunks[i], source=source)
+                _write_chunk(group, solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol), i)
+                if progress is not None:
+                    progress(chunks[i].stop - chunks[i].start)
         if _stop_after is not None and len(todo) < sum(1 for i in range(len(chunks)) if not done[i]):
             return resumable.partial_path(out)
     except BaseException:
         resumable.discard_if_empty(out)  # a run that finished nothing leaves nothing behind
         raise
     return resumable.promote(out, overwrite=overwrite, kind="transport", error=TransportError)
-
-
-def _cache_release(problem: DemuxProblem, order: list[slice]) -> Callable[[int], None]:
-    """``release(n)`` drops the cached factorizations of row groups whose last chunk is ``order[n]``.
-
-    Memory stays bounded by the chunk: a 512-row image has ~160 distinct row matrices
-    (~2 MB of factorizations each), and only the interior one spans the whole image.
-    """
-    last = {}
-    for n, rows in enumerate(order):
-        for g in np.unique(problem.row_group[rows]):
-            last[int(g)] = n
-
-    def release(n: int) -> None:
-        for g, m in last.items():
-            if m == n:
-                problem.groups[g].__dict__.pop("_admm_cache", None)
-
-    return release
-
-
-def _run_local(stack, problem, chunks, todo, method, tol, group, progress, source):
-    """Chunks in order, with I/O overlapped: chunk i+1 is read and chunk i-1 written while i is solved.
-
-    One I/O thread (Zarr's codecs release the GIL); at most three chunks are in memory.
-    """
-    from concurrent.futures import ThreadPoolExecutor
-
-    if not todo:
-        return
-    release = _cache_release(problem, [chunks[i] for i in todo])
-    with ThreadPoolExecutor(1, thread_name_prefix="planeray-demux-io") as io:
-        read = lambda i: read_observations(stack, problem, chunks[i], source=source)  # noqa: E731
-        pending_read = io.submit(read, todo[0])
-        pending_write = None
-        for n, i in enumerate(todo):
-            obs, sat = pending_read.result()
-            if n + 1 < len(todo):
-                pending_read = io.submit(read, todo[n + 1])
-            res = solve_chunk(problem, obs, sat, chunks[i], method=method, tol=tol)
-            del obs, sat
-            release(n)
-            if pending_write is not None:
-                pending_write.result()  # in order: a chunk is marked done only after its data
-            pending_write = io.submit(_write_chunk, group, res, i)
-            if progress is not None:
-                progress(chunks[i].stop - chunks[i].start)
-        pending_write.result()
 
 
 def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source):

@@ -7,11 +7,7 @@
 ``cvxpy``  the paper's formulation solved by CVXPY + Clarabel (slow reference).
 
 The last three are in :mod:`planeray.demux.reference`.  Every solver has the
-signature ``solve(group, B, alpha, beta, tol) -> SolveResult``; a solver may also
-take the keyword-only options ``mask=`` (observations to use: the driver then leaves
-saturated pixels to it) and ``image_width=`` (the pixels are whole image rows: warm
-starts).  The driver passes only the options a solver declares; without ``mask=``
-it solves each pixel with dropped observations on its own rows.
+signature ``solve(group, B, alpha, beta, tol) -> SolveResult``.
 """
 
 from __future__ import annotations
