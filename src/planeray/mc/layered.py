@@ -71,7 +71,7 @@ from ..errors import InputError
 from ..medium import Medium, as_medium
 from .cache import TABLES_DIR, cache_dir, cache_key
 from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _uniform
-from .physics import fresnel_jit, hg_cos_jit
+from .physics import fresnel_jit, hg_scatter_jit
 
 __all__ = [
     "LAYERED_VERSION",
@@ -330,27 +330,7 @@ def _trace(
                     g = gs[layer]
                 abs_b += w * (1.0 - alb)
                 w *= alb
-                ct = hg_cos_jit(_uniform(s), g)
-                st = math.sqrt(max(1.0 - ct * ct, 0.0))
-                phi = 2.0 * math.pi * _uniform(s)
-                cp = math.cos(phi)
-                sp = math.sin(phi)
-                den2 = 1.0 - uz * uz
-                if den2 < 1e-10:
-                    sgn = 1.0 if uz >= 0.0 else -1.0
-                    nux = st * cp
-                    nuy = st * sp
-                    nuz = sgn * ct
-                else:
-                    den = math.sqrt(den2)
-                    a = st / den
-                    nux = a * (ux * uz * cp - uy * sp) + ux * ct
-                    nuy = a * (uy * uz * cp + ux * sp) + uy * ct
-                    nuz = -st * cp * den + uz * ct
-                nrm = 1.0 / math.sqrt(nux * nux + nuy * nuy + nuz * nuz)
-                ux = nux * nrm
-                uy = nuy * nrm
-                uz = nuz * nrm
+                ux, uy, uz = hg_scatter_jit(ux, uy, uz, g, _uniform(s), _uniform(s))
                 if w < ROULETTE_THRESHOLD:
                     if _uniform(s) < 1.0 / ROULETTE_CHANCE:
                         abs_b -= w * (ROULETTE_CHANCE - 1.0)

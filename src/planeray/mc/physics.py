@@ -43,6 +43,35 @@ def hg_cos_jit(xi, g):
 
 
 @numba.njit(cache=True, inline="always")
+def hg_scatter_jit(ux, uy, uz, g, xi_cos, xi_phi):
+    """New unit direction after an HG scattering event (MCML's rotation, Wang et al. 1995).
+
+    ``xi_cos`` draws the polar cosine (:func:`hg_cos_jit`), ``xi_phi`` the uniform
+    azimuth; the new direction is rotated into the frame of ``(ux, uy, uz)`` and
+    renormalized.
+    """
+    ct = hg_cos_jit(xi_cos, g)
+    st = math.sqrt(max(1.0 - ct * ct, 0.0))
+    phi = 2.0 * math.pi * xi_phi
+    cp = math.cos(phi)
+    sp = math.sin(phi)
+    den2 = 1.0 - uz * uz
+    if den2 < 1e-10:
+        sgn = 1.0 if uz >= 0.0 else -1.0
+        nux = st * cp
+        nuy = st * sp
+        nuz = sgn * ct
+    else:
+        den = math.sqrt(den2)
+        a = st / den
+        nux = a * (ux * uz * cp - uy * sp) + ux * ct
+        nuy = a * (uy * uz * cp + ux * sp) + uy * ct
+        nuz = -st * cp * den + uz * ct
+    norm = 1.0 / math.sqrt(nux * nux + nuy * nuy + nuz * nuz)
+    return nux * norm, nuy * norm, nuz * norm
+
+
+@numba.njit(cache=True, inline="always")
 def hg_pdf_jit(mu, g):
     """HG phase function per steradian, ``(1 - g^2) / (4 pi (1 + g^2 - 2 g mu)^1.5)``."""
     q = 1.0 + g * g - 2.0 * g * mu
