@@ -10,13 +10,15 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from .result import MCProfile
 
-__all__ = ["ENGINE_VERSION", "TABLES_DIR", "cache_dir", "cache_key", "save_profile", "load_profile"]
+__all__ = ["ENGINE_VERSION", "TABLES_DIR", "cache_dir", "cache_key", "save_profile", "load_profile", "write_or_warn"]
 
 #: Bumped whenever the engine's results change, so stale cache entries are never used.
 ENGINE_VERSION = 4
@@ -54,6 +56,23 @@ _SCALARS = (
 )
 #: Scalars written since the wall runs (absent from older entries: read as 0).
 _OPTIONAL_SCALARS = ("wall_loss", "wall_loss_stderr")
+
+
+def write_or_warn(write: Callable[[Path], None], path: Path) -> None:
+    """Write a cache entry with ``write(path)``; if the disk refuses, warn and go on.
+
+    A read-only home must not cost the result just computed: the warning (a
+    ``RuntimeWarning`` attributed to the caller of the Monte Carlo function) names the
+    file and says how to point the cache elsewhere.
+    """
+    try:
+        write(path)
+    except OSError as exc:
+        warnings.warn(
+            f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def save_profile(path: Path, prof: MCProfile) -> None:

@@ -84,13 +84,12 @@ References
 from __future__ import annotations
 
 import math
-import warnings
 
 import numba
 import numpy as np
 
 from ..medium import Medium, as_medium
-from .cache import TABLES_DIR, cache_dir, cache_key, load_profile, save_profile
+from .cache import TABLES_DIR, cache_dir, cache_key, load_profile, save_profile, write_or_warn
 from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
 from .physics import fresnel_jit, hg_pdf_jit, hg_scatter_jit
 from .result import MCProfile
@@ -533,14 +532,7 @@ def _profile(
         progress=progress,
     )
     if path is not None:
-        try:
-            save_profile(path, prof)
-        except OSError as exc:  # a read-only home must not cost the result
-            warnings.warn(
-                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        write_or_warn(lambda p: save_profile(p, prof), path)
     return prof
 
 

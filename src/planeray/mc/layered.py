@@ -60,7 +60,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,7 +68,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..medium import Medium, as_medium
-from .cache import TABLES_DIR, cache_dir, cache_key
+from .cache import TABLES_DIR, cache_dir, cache_key, write_or_warn
 from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _uniform
 from .physics import fresnel_jit, hg_scatter_jit
 
@@ -521,6 +520,21 @@ def _check_offsets(offsets_rows):
     return o
 
 
+def _save_layered(path: Path, res: LayeredResult) -> None:
+    """Write a layered kernel to the cache, atomically."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
+    np.savez(
+        tmp,
+        offsets_rows=res.offsets_rows,
+        values=res.values,
+        stderr=res.stderr,
+        n_photons=np.int64(res.n_photons),
+        **{k: np.float64(getattr(res, k)) for k in _LAYERED_SCALARS},
+    )
+    os.replace(tmp, path)
+
+
 def mc_layered_profile(
     layers, *, n_photons=200_000, offsets_rows=None, mm_per_row=0.3, seed=0, cache=False, progress=None
 ) -> LayeredResult:
@@ -606,24 +620,7 @@ def mc_layered_profile(
         n_photons=int(n),
     )
     if cache:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
-            np.savez(
-                tmp,
-                offsets_rows=res.offsets_rows,
-                values=res.values,
-                stderr=res.stderr,
-                n_photons=np.int64(res.n_photons),
-                **{k: np.float64(getattr(res, k)) for k in _LAYERED_SCALARS},
-            )
-            os.replace(tmp, path)
-        except OSError as exc:
-            warnings.warn(
-                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        write_or_warn(lambda p: _save_layered(p, res), path)
     return res
 
 
@@ -964,12 +961,5 @@ def mc_vein_table(
         params=params,
     )
     if cache:
-        try:
-            table.save(path)
-        except OSError as exc:
-            warnings.warn(
-                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        write_or_warn(table.save, path)
     return table

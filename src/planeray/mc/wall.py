@@ -77,7 +77,6 @@ import functools
 import json
 import math
 import os
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -88,7 +87,7 @@ from scipy.special import k1e
 
 from ..errors import InputError
 from ..medium import Medium, as_medium
-from .cache import ENGINE_VERSION, TABLES_DIR, cache_dir, cache_key, load_profile, save_profile
+from .cache import ENGINE_VERSION, TABLES_DIR, cache_dir, cache_key, load_profile, save_profile, write_or_warn
 from .diffusion import boundary_mismatch_A, diffusion_exit, diffusion_normal_radiance_ratio
 from .engine import (
     _N_BATCHES,
@@ -760,14 +759,7 @@ def mc_wall_profile(
                     pass
     prof, _ = _run_wall(medium, offsets, params)
     if path is not None:
-        try:
-            save_profile(path, prof)
-        except OSError as exc:
-            warnings.warn(
-                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        write_or_warn(lambda p: save_profile(p, prof), path)
     return prof
 
 
@@ -1174,12 +1166,5 @@ def mc_wall_table(
         ),
     )
     if cache:
-        try:
-            table.save(path)
-        except OSError as exc:
-            warnings.warn(
-                f"{path}: could not write the Monte Carlo cache ({exc}); set PLANERAY_CACHE to a writable folder",
-                RuntimeWarning,
-                stacklevel=2,
-            )
+        write_or_warn(table.save, path)
     return table
