@@ -69,7 +69,7 @@ import numpy as np
 from ..errors import InputError
 from ..medium import Medium, as_medium
 from .cache import TABLES_DIR, cache_dir, cache_key, write_or_warn
-from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _uniform
+from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _batch_stats, _uniform
 from .physics import fresnel_jit, hg_scatter_jit
 
 __all__ = [
@@ -466,13 +466,6 @@ def _run(
     return counts, out
 
 
-def _stats(per_batch, counts):
-    n = counts.sum()
-    mean = per_batch.sum(axis=0) / n
-    means = per_batch / counts.reshape((-1,) + (1,) * (per_batch.ndim - 1))
-    return mean, means.std(axis=0, ddof=1) / np.sqrt(counts.size)
-
-
 # ---------------------------------------------------------------- the background kernel
 @dataclass(frozen=True)
 class LayeredResult:
@@ -602,8 +595,8 @@ def mc_layered_profile(
         layers, n_photons=n_photons, seed=seed, mode=_MODE_PENCIL, mm=mm, kmin=off[0], nk=off.size, progress=progress
     )
     refl_bins, _, _, refl, trans, absorbed, truncated, _ = out
-    values, err = _stats(refl_bins, counts)
-    r, r_err = _stats(refl, counts)
+    values, err = _batch_stats(refl_bins, counts)
+    r, r_err = _batch_stats(refl, counts)
     n0 = as_medium(layers[0]).n
     n = counts.sum()
     res = LayeredResult(
@@ -763,8 +756,8 @@ def mc_vein_kernel_brute(
         progress=progress,
     )
     refl_bins, _, _, refl, trans, absorbed, truncated, _ = out
-    values, err = _stats(refl_bins, counts)
-    r_tot, r_err = _stats(refl, counts)
+    values, err = _batch_stats(refl_bins, counts)
+    r_tot, r_err = _batch_stats(refl, counts)
     n0 = as_medium(layers[0]).n
     n = counts.sum()
     return LayeredResult(
@@ -937,7 +930,7 @@ def mc_vein_table(
         progress=progress,
     )
     refl_bins, _, pert, refl, *_ = out
-    kernel, kernel_err = _stats(refl_bins, counts)
+    kernel, kernel_err = _batch_stats(refl_bins, counts)
     base = refl_bins.sum(axis=0)  # (u,)
     pert = pert.sum(axis=0)  # (angle, combo, rho, u)
     if np.allclose(rho, -rho[::-1]) and off[0] == -off[-1]:
