@@ -30,6 +30,9 @@ __all__ = [
     "relaxed_step",
     "woodbury_factors",
     "woodbury_add",
+    "woodbury_inverses",
+    "woodbury_apply",
+    "woodbury_coeffs",
     "woodbury_quad",
     "split_dual",
     "finish_residual",
@@ -148,23 +151,167 @@ def woodbury_add(X, AM, masked, sel, k, L, scale, out):  # pragma: no cover - co
 
 
 @numba.njit(**_JIT)
+def woodbury_inverses(K, sel, k, pix, Sinv, ok):  # pragma: no cover - compiled
+    """``Sinv[q] = (I/2 - K[s_q, s_q])^{-1}`` (float64, via Cholesky) for the masked pixels ``pix``."""
+    kmax = sel.shape[1]
+    S = np.empty((kmax, kmax))
+    e = np.empty(kmax)
+    for q in pix:
+        kq = k[q]
+        for i in range(kq):
+            for j in range(kq):
+                S[i, j] = -K[sel[q, i], sel[q, j]]
+            S[i, i] += 0.5
+        ok[q] = _chol(S, kq)
+        if not ok[q]:
+            continue
+        for c in range(kq):
+            for i in range(kq):
+                e[i] = 0.0
+            e[c] = 1.0
+            _chol_solve(S, e, kq)
+            for i in range(kq):
+                Sinv[q, i, c] = e[i]
+
+
+@numba.njit(**_JIT)
+def woodbury_coeffs(Y, masked, sel, k, Sinv, scale, W):  # pragma: no cover - compiled
+    """``W[p, s_p] = scale S_p^{-1} Y[p, s_p]``, 0 elsewhere (float64): with ``Y = X (A M)^T``,
+    ``W (A M)`` is the Woodbury term of ``x_p M_p`` (the once-per-pixel constants)."""
+    for p in range(Y.shape[0]):
+        for i in range(W.shape[1]):
+            W[p, i] = 0.0
+        q = masked[p]
+        if q < 0:
+            continue
+        kq = k[q]
+        for i in range(kq):
+            acc = 0.0
+            for j in range(kq):
+                acc += Sinv[q, i, j] * Y[p, sel[q, j]]
+            W[p, sel[q, i]] = scale * acc
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def woodbury_apply(X, AMs, level, masked, sel, k, Sinv, scales, out):  # pragma: no cover - compiled
+    """``out[p] += scale (A_s M)^T S_p^{-1} (A_s M) x_p`` for the rows with ``masked[p] >= 0``.
+
+    Float32 (the iteration's precision). ``AMs[level[p]]`` (N, U) is ``A M`` at the row's
+    rho and ``scales[level[p]]`` its ``r rho``; ``Sinv[masked[p]]`` the pixel's ``S^{-1}``.
+    Four dropped rows at a time (independent sums: the dot products vectorize);
+    ``fastmath`` reassociates the sums, a change at the rounding of ``X``'s dtype.
+    """
+    kmax = sel.shape[1]
+    y = np.empty(kmax, np.float32)
+    w = np.empty(kmax, np.float32)
+    U = X.shape[1]
+    zero = np.float32(0.0)
+    for p in range(X.shape[0]):
+        q = masked[p]
+        if q < 0:
+            continue
+        kq = k[q]
+        x = X[p]
+        o = out[p]
+        AM = AMs[level[p]]
+        scale = scales[level[p]]
+        j = 0
+        while j + 4 <= kq:
+            r0 = AM[sel[q, j]]
+            r1 = AM[sel[q, j + 1]]
+            r2 = AM[sel[q, j + 2]]
+            r3 = AM[sel[q, j + 3]]
+            a0 = zero
+            a1 = zero
+            a2 = zero
+            a3 = zero
+            for u in range(U):
+                xu = x[u]
+                a0 += r0[u] * xu
+                a1 += r1[u] * xu
+                a2 += r2[u] * xu
+                a3 += r3[u] * xu
+            y[j] = a0
+            y[j + 1] = a1
+            y[j + 2] = a2
+            y[j + 3] = a3
+            j += 4
+        while j < kq:
+            r0 = AM[sel[q, j]]
+            a0 = zero
+            for u in range(U):
+                a0 += r0[u] * x[u]
+            y[j] = a0
+            j += 1
+        Si = Sinv[q]
+        for i in range(kq):
+            acc = 0.0
+            for j in range(kq):
+                acc += Si[i, j] * y[j]
+            w[i] = scale * acc
+        j = 0
+        while j + 4 <= kq:
+            r0 = AM[sel[q, j]]
+            r1 = AM[sel[q, j + 1]]
+            r2 = AM[sel[q, j + 2]]
+            r3 = AM[sel[q, j + 3]]
+            w0 = w[j]
+            w1 = w[j + 1]
+            w2 = w[j + 2]
+            w3 = w[j + 3]
+            for u in range(U):
+                o[u] += w0 * r0[u] + w1 * r1[u] + w2 * r2[u] + w3 * r3[u]
+            j += 4
+        while j < kq:
+            r0 = AM[sel[q, j]]
+            w0 = w[j]
+            for u in range(U):
+                o[u] += w0 * r0[u]
+            j += 1
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def woodbury_quad(H, AQ, masked, sel, k, L, out):  # pragma: no cover - compiled
-    """``out[p] += y^T S_p^{-1} y`` with ``y = (A Q^{-1})_s h_p``: the extra part of ``h^T Q_p^{-1} h``."""
-    y = np.empty(max(sel.shape[1], 1))
-    z = np.empty(max(sel.shape[1], 1))
+    """``out[p] += 1/2 y^T S_p^{-1} y`` with ``y = (A Q^{-1})_s h_p``: the extra part of ``1/2 h^T Q_p^{-1} h``.
+
+    Float64 sums, four dropped rows at a time (``fastmath`` reassociates them).
+    """
+    kmax = max(sel.shape[1], 1)
+    y = np.empty(kmax)
+    z = np.empty(kmax)
     U = H.shape[1]
     for p in range(H.shape[0]):
         q = masked[p]
         if q < 0:
             continue
         kq = k[q]
-        for j in range(kq):
-            s = sel[q, j]
-            acc = 0.0
+        h = H[p]
+        j = 0
+        while j < kq:
+            r0 = AQ[sel[q, j]]
+            r1 = AQ[sel[q, min(j + 1, kq - 1)]]
+            r2 = AQ[sel[q, min(j + 2, kq - 1)]]
+            r3 = AQ[sel[q, min(j + 3, kq - 1)]]
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            a3 = 0.0
             for u in range(U):
-                acc += AQ[s, u] * H[p, u]
-            y[j] = acc
-            z[j] = acc
+                hu = np.float64(h[u])
+                a0 += r0[u] * hu
+                a1 += r1[u] * hu
+                a2 += r2[u] * hu
+                a3 += r3[u] * hu
+            y[j] = a0
+            if j + 1 < kq:
+                y[j + 1] = a1
+            if j + 2 < kq:
+                y[j + 2] = a2
+            if j + 3 < kq:
+                y[j + 3] = a3
+            j += 4
+        for j in range(kq):
+            z[j] = y[j]
         _chol_solve(L[q], z, kq)
         acc = 0.0
         for j in range(kq):

@@ -265,7 +265,13 @@ def _solve_in_order(problem: DemuxProblem, read, chunks, method, tol, done):
             if rows is not None:
                 obs, sat = read(i)
                 tasks = _plan(problem, obs, sat, rows)
-                queued = (i, rows, obs.shape[2], tasks, [pool.submit(_run_task, problem, t, method, tol) for t in tasks])
+                queued = (
+                    i,
+                    rows,
+                    obs.shape[2],
+                    tasks,
+                    [pool.submit(_run_task, problem, t, method, tol) for t in tasks],
+                )
                 del obs, sat
             if pending is not None:
                 j, prow, W, ptasks, futures = pending

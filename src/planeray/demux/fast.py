@@ -115,6 +115,7 @@ class _Factor:
         self.rho = rho
         self.Mp = _flush32(relax * rho * Minv - 0.5 * relax * np.eye(U))
         self.AM = A @ Minv  # (N, U): rows of the Woodbury terms
+        self.AM32 = _flush32(self.AM)
         self.G1 = (2.0 * relax) * self.AM  # r c M = b G1 + g0 with c = 2 A^T b - beta 1
         self.g0 = -beta * relax * Minv.sum(axis=0)
         self.K = self.AM @ A.T  # A M A^T (N, N): Woodbury blocks of pixels with dropped observations
@@ -131,6 +132,10 @@ class AdmmRowSolver:
         self.Q = 2.0 * (A.T @ A + alpha * D.T @ D)
         self.decay = np.float32(1.0 - 0.5 * relax)
         self._factors: dict[int, _Factor] = {}
+        # A M of every rho on the ladder (filled as they are factored) and r rho: the
+        # Woodbury terms of a batch's masked rows in one call, whatever their rho
+        self._AMs = np.zeros((len(_RHO_LADDER), A.shape[0], A.shape[1]), np.float32)
+        self._scales = relax * np.asarray(_RHO_LADDER, np.float32)
         self._lock = threading.Lock()
         # Q^{-1} norm for the certificate: h^T Q^{-1} h = ||h Lc^{-T}||^2.  An
         # unregularized problem (alpha = 0) with unlit offsets is only semidefinite.
@@ -148,6 +153,7 @@ class AdmmRowSolver:
                 fac = self._factors.get(level)
                 if fac is None:
                     fac = _Factor(self.A, self.Q, self.beta, _RHO_LADDER[level], self.relax)
+                    self._AMs[level] = fac.AM32
                     self._factors[level] = fac
         return fac
 
@@ -226,8 +232,9 @@ class AdmmRowSolver:
         fac = self.factor(level)
         C = Bb @ fac.G1 + fac.g0
         if wb is not None and (masked >= 0).any():
-            cvec = 2.0 * Bb @ self.A - self.beta
-            K.woodbury_add(cvec, fac.AM, masked, wb.sel, wb.k, wb.L, np.full(len(Bb), self.relax), C)
+            m = masked >= 0
+            cvec = 2.0 * Bb[m] @ self.A - self.beta
+            C[m] += _woodbury(cvec, fac.AM, masked[m], wb, self.relax)
         C[np.abs(C) < 1e-30] = 0.0
         return C.astype(np.float32)
 
@@ -238,6 +245,11 @@ class AdmmRowSolver:
         Bb = Ball[idx]
         keep = np.zeros((0, 0), bool) if mask is None else np.ascontiguousarray(mask[idx])
         masked = np.full(P, -1) if wb is None else wb.index[idx]
+        if wb is not None:  # masked pixels lead the batch (then: each level's rows)
+            first = np.argsort(masked < 0, kind="stable")
+            idx, Bb, masked = idx[first], Bb[first], masked[first]
+            if keep.size:
+                keep = keep[first]
         level = np.full(P, _RHO_START)
         moves = np.zeros(P, np.int32)
         if wb is not None:
@@ -258,9 +270,8 @@ class AdmmRowSolver:
                 for lv, a, b in bounds:
                     fac = self.factor(int(lv))
                     np.matmul(absV[a:b], fac.Mp, out=T[a:b])
-                    if wb is not None:
-                        scale = np.full(b - a, self.relax * fac.rho)
-                        K.woodbury_add(absV[a:b], fac.AM, masked[a:b], wb.sel, wb.k, wb.L, scale, T[a:b])
+                if wb is not None:
+                    K.woodbury_apply(absV, self._AMs, level, masked, wb.sel, wb.k, wb.Sinv, self._scales, T)
                 K.relaxed_step(V, T, C, self.decay, absV, i == n - 1, dz2, dw2)
             k += n
             # ---- certificate
@@ -306,7 +317,7 @@ class AdmmRowSolver:
                     C[m] = self._constants(Bb[m], int(lv), masked[m], wb)
             if done.any() or moved.size:
                 order = np.flatnonzero(~done)
-                order = order[np.argsort(level[order], kind="stable")]
+                order = order[np.lexsort((masked[order] < 0, level[order]))]
                 idx, Bb, masked, level, moves = idx[order], Bb[order], masked[order], level[order], moves[order]
                 V, absV, C = V[order], absV[order], C[order]
                 if keep.size:
@@ -315,6 +326,14 @@ class AdmmRowSolver:
                 T = np.empty_like(V)
                 dz2, dw2 = dz2[:P], dw2[:P]
             n = _CHECK_EVERY
+
+
+def _woodbury(X, AM, masked, wb, scale) -> np.ndarray:
+    """Rows ``scale (A_s M)^T S_p^{-1} (A_s M) x_p`` of masked pixels in float64 (two products)."""
+    Y = X @ AM.T
+    W = np.empty_like(Y)
+    K.woodbury_coeffs(Y, masked, wb.sel, wb.k, wb.Sinv, float(scale), W)
+    return W @ AM
 
 
 class _Dropped:
@@ -328,16 +347,14 @@ class _Dropped:
         self.index[self.pix] = np.arange(self.n)
         self.k = drop[self.pix].sum(axis=1).astype(np.int64)
         kmax = int(self.k.max()) if self.n else 0
-        self.sel = np.zeros((self.n, max(kmax, 1)), np.int64)
-        for q, p in enumerate(self.pix):
-            rows = np.flatnonzero(drop[p])
-            self.sel[q, : rows.size] = rows
-        self.L = np.zeros((self.n, max(kmax, 1), max(kmax, 1)))  # at each pixel's current rho
-        self.L0 = np.zeros_like(self.L)  # for Q^{-1} (the certificate)
+        # each pixel's dropped rows, in order, first (the rest of the row is unused)
+        self.sel = np.ascontiguousarray(np.argsort(~drop[self.pix], axis=1, kind="stable")[:, : max(kmax, 1)])
+        self.Sinv = np.zeros((self.n, max(kmax, 1), max(kmax, 1)))  # at each pixel's current rho
+        self.L0 = np.zeros_like(self.Sinv)  # Cholesky factors for Q^{-1} (the certificate)
 
     def refactor(self, Kmat, which):
         ok = np.ones(self.n, bool)
-        K.woodbury_factors(Kmat, self.sel, self.k, np.asarray(which, np.int64), self.L, ok)
+        K.woodbury_inverses(Kmat, self.sel, self.k, np.asarray(which, np.int64), self.Sinv, ok)
         if not ok.all():  # pragma: no cover - S_p is a Schur complement of an SPD matrix
             raise np.linalg.LinAlgError("a Woodbury block lost positive definiteness")
 
