@@ -8,9 +8,8 @@ import pytest
 
 from planeray.acquire import simulate_stack
 from planeray.camera import CameraModel
-from planeray.demux import DemuxProblem, RowGroup, demultiplex, solve_chunk, solve_fast
+from planeray.demux import DemuxProblem, RowGroup, demultiplex, fast, solve_chunk, solve_fast
 from planeray.demux.driver import read_observations
-from planeray.demux import fast
 from planeray.demux.fast import AdmmRowSolver
 from planeray.scenes import make_scene
 from planeray.stack import Stack

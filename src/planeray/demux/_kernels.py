@@ -7,10 +7,14 @@ one pass, and two Python threads run two pixel batches at once (``nogil``):
 
 * :func:`relaxed_step`: ``v <- decay v + t + c`` and ``|v|`` for the next product, with
   the residual-balancing norms on the iteration before a check;
-* :func:`woodbury_add`: the low-rank correction of a pixel whose saturated observations
+* :func:`woodbury_apply`: the low-rank correction of a pixel whose saturated observations
   were dropped: its x-update operator is ``(Q + rho I - 2 A_s^T A_s)^{-1} =
   M + (A_s M)^T S^{-1} (A_s M)`` with ``S = I/2 - A_s M A_s^T`` (``k x k``, ``k`` dropped
-  rows), so the shared ``M`` serves every pixel for ``2 k U`` flops per iteration;
+  rows), so the shared ``M`` serves every pixel for ``2 k U`` flops per iteration
+  (:func:`woodbury_inverses` keeps ``S^{-1}`` per pixel and rho, :func:`woodbury_coeffs`
+  does the same in float64 for the once-per-pixel constants);
+* :func:`woodbury_factors`, :func:`woodbury_quad`: the same for the certificate's
+  ``Q_p^{-1}``;
 * :func:`split_dual`, :func:`finish_residual`, :func:`finish_gradient`, :func:`half_norms`:
   the certificate's per-pixel parts (objective, gradient, KKT residual, gap bound).
 
@@ -29,7 +33,6 @@ import numpy as np
 __all__ = [
     "relaxed_step",
     "woodbury_factors",
-    "woodbury_add",
     "woodbury_inverses",
     "woodbury_apply",
     "woodbury_coeffs",
@@ -120,34 +123,6 @@ def woodbury_factors(K, sel, k, pix, L, ok):  # pragma: no cover - compiled
                 S[i, j] = -K[sel[q, i], sel[q, j]]
             S[i, i] += 0.5
         ok[q] = _chol(S, kq)
-
-
-@numba.njit(**_JIT)
-def woodbury_add(X, AM, masked, sel, k, L, scale, out):  # pragma: no cover - compiled
-    """``out[p] += scale[p] (A_s M)^T S_p^{-1} (A_s M) x_p`` for every batch row with ``masked[p] >= 0``.
-
-    ``AM`` (N, U) is ``A M`` of the batch rows' rho; ``masked[p]`` indexes the pixel's row
-    in ``sel``, ``k``, ``L``.
-    """
-    y = np.empty(max(sel.shape[1], 1))
-    U = X.shape[1]
-    for p in range(X.shape[0]):
-        q = masked[p]
-        if q < 0:
-            continue
-        kq = k[q]
-        for j in range(kq):
-            s = sel[q, j]
-            acc = 0.0
-            for u in range(U):
-                acc += AM[s, u] * X[p, u]
-            y[j] = acc
-        _chol_solve(L[q], y, kq)
-        for j in range(kq):
-            s = sel[q, j]
-            w = scale[p] * y[j]
-            for u in range(U):
-                out[p, u] += w * AM[s, u]
 
 
 @numba.njit(**_JIT)

@@ -506,16 +506,30 @@ def demultiplex_to_store(
 
 
 def _run_local(stack, problem, chunks, todo, method, tol, group, progress, source):
-    """Chunks in order on the solver threads; each written (and marked done) as it finishes."""
+    """Chunks in order on the solver threads; each written (and marked done) as it finishes.
+
+    Writing (compression) runs on its own thread, in order, so that reading the next
+    chunk and queueing its work never wait for it; at most two writes are pending.
+    """
+    writes = []
 
     def done(i, res):
-        _write_chunk(group, res, i)
+        while len(writes) >= 2:
+            writes.pop(0).result()
+        writes.append(io.submit(_write_chunk, group, res, i))
         if progress is not None:
             progress(res.rows.stop - res.rows.start)
 
     reader = _RowReader(stack, problem, source=source)
     read = lambda i: reader(chunks[i])  # noqa: E731
-    _solve_in_order(problem, read, [(i, chunks[i]) for i in todo], method, tol, done)
+    with ThreadPoolExecutor(1, thread_name_prefix="planeray-demux-write") as io:
+        try:
+            _solve_in_order(problem, read, [(i, chunks[i]) for i in todo], method, tol, done)
+        finally:
+            for w in writes:  # in order; the first failure is raised (after the others finished)
+                w.exception()
+        for w in writes:
+            w.result()
 
 
 def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source):
