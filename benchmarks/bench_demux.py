@@ -177,10 +177,15 @@ def in_process(stack, repeat: int, rows: slice | None = None) -> dict:
             fresh = DemuxProblem.from_stack(stack)  # its factorizations are included
             feed = data if name == "mask used" else [(obs, None) for obs, _ in data]
             maps = {}
+
+            def read(i, feed=feed):
+                return feed[i]
+
+            def done(i, res, maps=maps):
+                maps[i] = res.maps
+
             t0 = time.perf_counter()
-            driver._solve_in_order(
-                fresh, lambda i: feed[i], chunks, "fast", None, lambda i, r: maps.__setitem__(i, r.maps)
-            )
+            driver._solve_in_order(fresh, read, chunks, "fast", None, done)
             dt = time.perf_counter() - t0
             if name not in out or dt < out[name][0]:
                 out[name] = (dt, {k: np.concatenate([maps[i][k] for i in sorted(maps)]) for k in maps[0]})
