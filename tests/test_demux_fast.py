@@ -125,7 +125,9 @@ def test_pixels_whose_penalty_moved_agree_with_cvxpy():
 def test_iteration_limit_is_never_reported_as_converged(saturated_stack):
     problem = DemuxProblem.from_stack(saturated_stack)
     group, B, mask = _rows(saturated_stack, problem, 15)
-    X, iters, conv, rel_gap, f, kkt = AdmmRowSolver(group.A, problem.alpha, problem.beta).solve(B, 1e-12, 40, mask=mask)
+    X, iters, conv, rel_gap, f, kkt, rss = AdmmRowSolver(group.A, problem.alpha, problem.beta).solve(
+        B, 1e-12, 40, mask=mask
+    )
     usable = mask.any(axis=1)
     assert (iters[usable] == 40).all() and not conv.any()
     assert np.all(rel_gap[usable] > 1e-12) and np.all(X >= 0)
@@ -164,3 +166,22 @@ def test_solver_without_mask_support_still_drops_saturated_rows(saturated_stack)
     nnls = solve_chunk(problem, obs, sat, slice(15, 16), method="nnls")
     np.testing.assert_array_equal(fast.maps["n_observations"], nnls.maps["n_observations"])
     assert fast.maps["converged"].all()
+
+
+def test_maps_from_the_certificate_equal_the_float64_diagnostics(saturated_stack):
+    """The stored objective / residual RMS / KKT maps come from the solver's last certificate;
+    they must be those of the stored transport (recomputed independently in float64)."""
+    problem = DemuxProblem.from_stack(saturated_stack)
+    rows = slice(10, 14)
+    obs, sat = read_observations(saturated_stack, problem, rows)
+    res = solve_chunk(problem, obs, sat, rows)
+    N, r, W = obs.shape
+    group = problem.groups[problem.row_group[12]]
+    assert (problem.row_group[rows] == problem.row_group[12]).all()
+    X = res.T.reshape(r * W, -1)[:, group.valid].astype(np.float64)
+    B = obs.reshape(N, -1).T
+    mask = ~sat.reshape(N, -1).T
+    ref = problem.diagnostics(group, X, B, mask)
+    for name in ("objective", "residual_rms"):
+        np.testing.assert_allclose(res.maps[name].ravel(), ref[name], rtol=1e-5)
+    np.testing.assert_allclose(res.maps["kkt_residual"].ravel(), ref["kkt_residual"], atol=1e-5)

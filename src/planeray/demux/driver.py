@@ -84,6 +84,17 @@ def _storage_rows(stack: Stack) -> int:
     return int(chunks[1]) if chunks is not None and len(chunks) == 3 else 1
 
 
+def _many_chunks_at_once():
+    """Zarr settings for reading one row block of every image (hundreds of small chunks).
+
+    Zarr's default of 10 concurrent chunk requests leaves its per-chunk overhead
+    serial; 128 with batches of 64 reads such a block ~1.5x faster (measured).
+    """
+    import zarr
+
+    return zarr.config.set({"async.concurrency": 128, "codec_pipeline.batch_size": 64})
+
+
 class _RowReader:
     """Reads the observations of successive row chunks, in blocks aligned to the stored chunks.
 
@@ -101,13 +112,16 @@ class _RowReader:
 
     def __call__(self, rows: slice):
         if self.block <= 1 or rows.stop - rows.start >= self.block:
-            return read_observations(self.stack, self.problem, rows, source=self.source)
+            with _many_chunks_at_once():
+                return read_observations(self.stack, self.problem, rows, source=self.source)
         if not (self._rows.start <= rows.start and rows.stop <= self._rows.stop):
             H = self.stack.shape[0]
             lo = rows.start // self.block * self.block
             hi = min(H, -(-rows.stop // self.block) * self.block)
             self._rows = slice(lo, hi)
-            self._data = read_observations(self.stack, self.problem, self._rows, source=self.source)
+            self._data = None
+            with _many_chunks_at_once():
+                self._data = read_observations(self.stack, self.problem, self._rows, source=self.source)
         imgs, sat = self._data
         part = slice(rows.start - self._rows.start, rows.stop - self._rows.start)
         sat = None if sat is None or not sat[:, part].any() else sat[:, part]
@@ -196,6 +210,7 @@ def _run_task(problem: DemuxProblem, task: _Task, method: str, tol):
     """Solution and per-pixel maps of one task (run in a solver thread)."""
     solve = get_solver(method)
     group, B, mask = task.group, task.B, task.mask
+    res = None
     if method == "fast":
         res = solve(group, B, problem.alpha, problem.beta, tol, mask=mask, threads=1)
         X, iters, conv = res.X, res.iterations, res.converged
@@ -206,7 +221,12 @@ def _run_task(problem: DemuxProblem, task: _Task, method: str, tol):
         X, iters, conv = _solve_masked_one_by_one(solve, problem, group, B, mask, tol)
     n_obs = np.full(B.shape[0], B.shape[1]) if mask is None else mask.sum(axis=1)
     X = np.where(n_obs[:, None] > 0, X, 0.0)  # nothing usable: T is 0, flagged (never "converged")
-    maps = problem.diagnostics(group, X, B, mask)
+    if res is not None and res.objective is not None:  # the solver's own (its last certificate)
+        kkt = np.where(n_obs > 0, res.kkt_residual, np.nan)
+        rms = np.sqrt(res.residual_ss / np.maximum(n_obs, 1))
+        maps = {"residual_rms": rms, "objective": res.objective, "kkt_residual": kkt}
+    else:
+        maps = problem.diagnostics(group, X, B, mask)
     maps |= {"iterations": iters, "converged": conv & (n_obs > 0), "n_observations": n_obs}
     return X, maps
 
@@ -404,11 +424,22 @@ def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_ro
 
 def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
     import zarr
+    from zarr.codecs import ZstdCodec
 
     H, W = shape
     U = problem.n_offsets
     group = zarr.open_group(str(directory), mode="w", zarr_format=3)
-    create_array(group, "T", shape=(H, W, U), chunks=(DEFAULT_CHUNK_ROWS, W, U), dtype="float32", fill_value=0.0)
+    # zstd level 1 (with its checksum, like every planeray array): on transports the same
+    # ratio as the default level 3 (1.85 on wax), ~1.6x faster to write
+    create_array(
+        group,
+        "T",
+        shape=(H, W, U),
+        chunks=(DEFAULT_CHUNK_ROWS, W, U),
+        dtype="float32",
+        fill_value=0.0,
+        compressors=(ZstdCodec(level=1, checksum=True),),
+    )
     for name, dtype in MAP_NAMES.items():
         create_array(group, name, shape=(H, W), chunks=(DEFAULT_CHUNK_ROWS, W), dtype=dtype, fill_value=0)
     group.attrs.update(transport_attrs(problem.offsets_rows, problem.projector_rows, attrs=attrs))

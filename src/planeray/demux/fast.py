@@ -82,11 +82,11 @@ _MAX_ITER = 2000
 #: Penalty ladder: each pixel's rho is moved along it by residual balancing
 #: (a factor ~3 per step; the best rho depends on the data, e.g. ~1 with ambient
 #: light and ~5 without, a 3-5x difference in iterations).
-_RHO_LADDER = (0.25, 0.7, 2.0, 5.0, 15.0)
-_RHO_START = 1  # index of 0.7 in the ladder
-_BALANCE_AFTER = 40
+_RHO_LADDER = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
+_RHO_START = 2  # index of 1.0 in the ladder
+_BALANCE_AFTER = 30
 #: A pixel's rho moves at most this often (balancing can otherwise cycle).
-_MAX_MOVES = 4
+_MAX_MOVES = 6
 
 
 def _flush32(M) -> np.ndarray:
@@ -181,7 +181,8 @@ class AdmmRowSolver:
 
         Returns
         -------
-        X, iterations, converged, relative gap bound, objective, unscaled KKT residual
+        X, iterations, converged, relative gap bound, objective, unscaled KKT residual,
+        residual sum of squares (over the observations used) -- of the returned ``X``.
         """
         B = np.ascontiguousarray(B, np.float64)
         P, N = B.shape
@@ -191,6 +192,7 @@ class AdmmRowSolver:
         gap = np.full(P, np.inf)
         fval = np.zeros(P)
         kkt = np.zeros(P)
+        rss = np.zeros(P)
         run = np.ones(P, bool)
         wb = None
         if mask is not None:
@@ -204,27 +206,27 @@ class AdmmRowSolver:
                 ok = np.ones(wb.n, bool)
                 K.woodbury_factors(KQ, wb.sel, wb.k, np.arange(wb.n), wb.L0, ok)
                 if not ok.all():  # numerically singular: those pixels on their own rows
-                    self._solve_apart(B, mask, wb.pix[~ok], tol, max_iter, X, iters, gap, fval, kkt)
+                    self._solve_apart(B, mask, wb.pix[~ok], tol, max_iter, X, iters, gap, fval, kkt, rss)
                     run[wb.pix[~ok]] = False
             else:
                 wb = None
         if U == 0 or not run.any():
             done = run if U == 0 else np.zeros(P, bool)
             gap[done] = 0.0
-            return X, iters, done, np.where(done, 0.0, np.inf), fval, kkt
-        self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt)
+            return X, iters, done, np.where(done, 0.0, np.inf), fval, kkt, rss
+        self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss)
         rel_gap = gap / np.maximum(fval - gap, 1e-300)
         conv = (rel_gap <= tol) & np.isfinite(gap)
         if mask is not None:
             conv &= mask.any(axis=1)
-        return X, iters, conv, rel_gap, fval, kkt
+        return X, iters, conv, rel_gap, fval, kkt, rss
 
-    def _solve_apart(self, B, mask, pix, tol, max_iter, X, iters, gap, fval, kkt):
+    def _solve_apart(self, B, mask, pix, tol, max_iter, X, iters, gap, fval, kkt, rss):
         for p in pix:
             keep = mask[p]
             sub = AdmmRowSolver(self.A[keep], self.alpha, self.beta, self.relax)
-            x, it, _, rg, f, kk = sub.solve(B[p : p + 1, keep], tol, max_iter)
-            X[p], iters[p], fval[p], kkt[p] = x[0], it[0], f[0], kk[0]
+            x, it, _, rg, f, kk, rs = sub.solve(B[p : p + 1, keep], tol, max_iter)
+            X[p], iters[p], fval[p], kkt[p], rss[p] = x[0], it[0], f[0], kk[0], rs[0]
             gap[p] = rg[0] * max(f[0], 1e-300) / (1.0 + rg[0])
 
     def _constants(self, Bb, level, masked, wb):
@@ -238,7 +240,7 @@ class AdmmRowSolver:
         C[np.abs(C) < 1e-30] = 0.0
         return C.astype(np.float32)
 
-    def _admm(self, Ball, tol, max_iter, idx, wb, mask, X, iters, gap, fval, kkt):
+    def _admm(self, Ball, tol, max_iter, idx, wb, mask, X, iters, gap, fval, kkt, rss):
         ladder = np.asarray(_RHO_LADDER)
         U = self.A.shape[1]
         P = idx.size
@@ -296,7 +298,7 @@ class AdmmRowSolver:
             done = (g <= tol * np.maximum(f - g, 0.0)) | (k >= max_iter)
             if done.any():
                 d = idx[done]
-                X[d], iters[d], gap[d], fval[d], kkt[d] = Z[done], k, g[done], f[done], kk[done]
+                X[d], iters[d], gap[d], fval[d], kkt[d], rss[d] = Z[done], k, g[done], f[done], kk[done], rr[done]
             # ---- residual balancing on the ladder (only pixels still running late)
             dz, dw = np.sqrt(dz2), np.sqrt(dw2)
             free = (k >= _BALANCE_AFTER) & ~done & (moves < _MAX_MOVES)
@@ -433,5 +435,9 @@ def solve_fast(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None, *, mask=None
             parts = [run(s) for s in slices]
     if not parts:
         return SolveResult(np.zeros((0, group.A.shape[1])), np.zeros(0, np.int32), np.zeros(0, bool))
-    X, iters, conv = (np.concatenate([p[i] for p in parts]) for i in range(3))
-    return SolveResult(X, iters, conv)
+    X, iters, conv, _, f, kkt, rss = (np.concatenate([p[i] for p in parts]) for i in range(7))
+    # the driver's maps, from the last certificate (float64 residual; gradient in float32)
+    Bm = B if mask is None else np.where(mask, B, 0.0)
+    c = 2.0 * (Bm.astype(np.float32) @ solver.A32) - np.float32(beta)
+    scaled = kkt / (1.0 + np.abs(c).max(axis=1, initial=0.0))
+    return SolveResult(X, iters, conv, objective=f, residual_ss=rss, kkt_residual=scaled)
