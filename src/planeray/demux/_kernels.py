@@ -41,6 +41,7 @@ __all__ = [
     "finish_residual",
     "finish_gradient",
     "half_norms",
+    "warm_up",
 ]
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
@@ -373,3 +374,18 @@ def half_norms(W, lamz, out):  # pragma: no cover - compiled
             w = W[p, u]
             s += w * w
         out[p] = 0.5 * s + lamz[p]
+
+
+def warm_up() -> None:
+    """Load every kernel from Numba's cache (compile on a first run) on tiny arrays.
+
+    The first call of a kernel in a process costs ~0.3 s (Numba's start); the driver
+    runs this on a solver thread while the first rows are read.
+    """
+    V = np.zeros((1, 4), np.float32)
+    z = np.zeros(1)
+    relaxed_step(V, V.copy(), V.copy(), np.float32(0.1), V.copy(), True, z.copy(), z.copy())
+    split_dual(V, np.ones(1, np.float32), np.zeros((1, 4)), V.copy())
+    finish_residual(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((0, 0), bool), np.zeros((1, 2), np.float32), z.copy())
+    finish_gradient(V.copy(), np.zeros((1, 4)), V.copy(), 0.01, 0.01, z.copy(), z.copy(), z.copy(), z.copy())
+    half_norms(V, z.copy(), z.copy())

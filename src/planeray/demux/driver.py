@@ -32,6 +32,7 @@ from ..io.atomic import check_replaceable
 from ..stack import Stack
 from ..timing import RowGeometry
 from ..transport import Transport
+from ._kernels import warm_up
 from .fast import _threads, blas_one_thread
 from .problem import DemuxProblem, RowGroup
 from .solvers import get_solver
@@ -279,6 +280,8 @@ def _solve_in_order(problem: DemuxProblem, read, chunks, method, tol, done):
     release = _cache_release(problem, [c for _, c in chunks])
     threads = _threads() if method == "fast" else 1
     with blas_one_thread(threads), ThreadPoolExecutor(threads, thread_name_prefix="planeray-demux") as pool:
+        if method == "fast":
+            pool.submit(warm_up)  # Numba's start, while the first rows are read
         pending = None
         for n, (i, rows) in enumerate(chunks + [(None, None)]):
             queued = None
