@@ -35,7 +35,7 @@ from ..transport import Transport
 from ._kernels import warm_up
 from .fast import _threads, blas_one_thread
 from .problem import DemuxProblem, RowGroup
-from .solvers import get_solver
+from .solvers import get_solver, options
 
 __all__ = [
     "DEFAULT_CHUNK_ROWS",
@@ -165,7 +165,7 @@ def solve_chunk(
         A key of :data:`planeray.demux.SOLVERS`.
     """
     tasks = _plan(problem, observations, saturated, rows)
-    threads = _threads() if method == "fast" and len(tasks) > 1 else 1
+    threads = _threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1
     run = lambda t: _run_task(problem, t, method, tol)  # noqa: E731
     if threads > 1:
         with blas_one_thread(threads), ThreadPoolExecutor(threads) as pool:
@@ -211,12 +211,13 @@ def _run_task(problem: DemuxProblem, task: _Task, method: str, tol):
     """Solution and per-pixel maps of one task (run in a solver thread)."""
     solve = get_solver(method)
     group, B, mask = task.group, task.B, task.mask
+    extra = {"threads": 1} if "threads" in options(solve) else {}
     res = None
-    if method == "fast":
-        res = solve(group, B, problem.alpha, problem.beta, tol, mask=mask, threads=1)
+    if mask is not None and "mask" in options(solve):  # dropped observations in the same batch
+        res = solve(group, B, problem.alpha, problem.beta, tol, mask=mask, **extra)
         X, iters, conv = res.X, res.iterations, res.converged
     elif mask is None:
-        res = solve(group, B, problem.alpha, problem.beta, tol)
+        res = solve(group, B, problem.alpha, problem.beta, tol, **extra)
         X, iters, conv = res.X, res.iterations, res.converged
     else:  # a solver without masks: pixels with dropped observations one by one
         X, iters, conv = _solve_masked_one_by_one(solve, problem, group, B, mask, tol)
@@ -278,7 +279,7 @@ def _solve_in_order(problem: DemuxProblem, read, chunks, method, tol, done):
     if not chunks:
         return
     release = _cache_release(problem, [c for _, c in chunks])
-    threads = _threads() if method == "fast" else 1
+    threads = _threads() if "threads" in options(get_solver(method)) else 1
     with blas_one_thread(threads), ThreadPoolExecutor(threads, thread_name_prefix="planeray-demux") as pool:
         if method == "fast":
             pool.submit(warm_up)  # Numba's start, while the first rows are read
