@@ -14,10 +14,11 @@ cost more than the whole budget in batched NumPy (measured: 1.9 s per exact solv
 round at 128x128).
 
 ADMM on the splitting ``x = z, z >= 0`` needs only ``(Q + rho I)^{-1}``, which is
-*shared*: one float64 Cholesky per distinct illumination matrix, then every
-iteration for all pixels of the group is a single float32 matrix product.  With
-over-relaxation ``r`` and the scaled dual ``w`` the iteration collapses onto one
-vector per pixel, ``v = x_relaxed + w`` (``z = max(v, 0)``, ``w = min(v, 0)``)::
+*shared*: one float64 Cholesky per distinct illumination matrix and penalty, then
+every iteration for all pixels of a batch is a single float32 matrix product and
+one fused per-pixel pass (:mod:`planeray.demux._kernels`).  With over-relaxation
+``r`` and the scaled dual ``w`` the iteration collapses onto one vector per pixel,
+``v = x_relaxed + w`` (``z = max(v, 0)``, ``w = min(v, 0)``)::
 
     v <- (1 - r/2) v + |v| (r rho M - r/2 I) + r c M,       M = (Q + rho I)^{-1}
 
@@ -25,15 +26,22 @@ Convergence is *certified*, not assumed: for any ``lam >= 0`` weak duality gives
 ``f(z) - f* <= 1/2 (g - lam)^T Q^{-1} (g - lam) + lam^T z`` with ``g`` the gradient
 at ``z``; with ``lam`` the ADMM multiplier ``-rho min(v, 0)`` this bound is within
 ~1.5x of the true gap.  A pixel stops when the bound proves a relative objective
-gap ``<= tol`` and leaves the batch, so the cost follows the mean iteration count
-(~45-60 at ``tol = 1e-4``), not the maximum.  ``rho = 0.7, r = 1.8`` minimized the
-mean iteration count over the built-in scenes.
+gap ``<= tol`` and leaves the batch, so the cost follows the mean iteration count,
+not the maximum.  Each pixel's ``rho`` moves along a ladder by residual balancing
+(Boyd et al. 2011, Sec. 3.4.1): the best ``rho`` depends on the data (~1 with
+ambient light, ~5 without).
 
-Practicalities measured on a 2-core machine: pixel chunks of 1024 on 2 Python
-threads with BLAS held to one thread (threadpoolctl) are 2-2.5x faster than
-multithreaded BLAS; float32 entries below 1e-30 are flushed to zero (denormals
-make sgemm ~10x slower); only NumPy's matmul is used in the loop (SciPy ships
-its own BLAS with its own spinning thread pool).
+**Saturated observations** stay in the batch.  A pixel that drops the rows ``s``
+has the Hessian ``Q - 2 A_s^T A_s``; its operator is the shared ``M`` plus a rank-k
+Woodbury term ``(A_s M)^T S^{-1} (A_s M)``, ``S = I/2 - A_s M A_s^T`` (a k x k
+Cholesky per pixel and rho, ``2 k U`` flops per iteration), and its certificate
+uses its own ``Q_p^{-1}`` the same way.
+
+Practicalities measured on a 2-core machine: batches of 512 pixels run on two
+Python threads (the products in BLAS held to one thread, the per-pixel passes
+compiled without the GIL); float32 entries below 1e-30 are flushed to zero
+(denormals make sgemm ~10x slower); only NumPy's matmul is used in the loop (SciPy
+ships its own BLAS with its own spinning thread pool).
 
 References
 ----------
@@ -42,6 +50,7 @@ References
    multipliers", Found. Trends Mach. Learn. 3(1), 2011 (over-relaxation, Sec. 3.4.3).
 .. [2] B. Stellato et al., "OSQP: an operator splitting solver for quadratic
    programs", Math. Prog. Comp. 12, 2020.
+.. [3] W. W. Hager, "Updating the inverse of a matrix", SIAM Review 31(2), 1989.
 """
 
 from __future__ import annotations
@@ -49,11 +58,13 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.linalg as sla
 
+from . import _kernels as K
 from .problem import RowGroup, difference_matrix
 from .result import SolveResult
 
@@ -62,10 +73,20 @@ __all__ = ["solve_fast", "AdmmRowSolver", "DEFAULT_TOL"]
 #: Certified relative objective gap at which a pixel stops.
 DEFAULT_TOL = 1e-4
 _RELAX = 1.8
-_CHUNK = 1024
+#: Pixels per batch (one task of a worker thread).
+_CHUNK = 512
 _FIRST_CHECK = 30
 _CHECK_EVERY = 10
 _MAX_ITER = 2000
+
+#: Penalty ladder: each pixel's rho is moved along it by residual balancing
+#: (a factor ~3 per step; the best rho depends on the data, e.g. ~1 with ambient
+#: light and ~5 without, a 3-5x difference in iterations).
+_RHO_LADDER = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
+_RHO_START = 2  # index of 1.0 in the ladder
+_BALANCE_AFTER = 30
+#: A pixel's rho moves at most this often (balancing can otherwise cycle).
+_MAX_MOVES = 6
 
 
 def _flush32(M) -> np.ndarray:
@@ -75,37 +96,29 @@ def _flush32(M) -> np.ndarray:
     return np.ascontiguousarray(M.astype(np.float32))
 
 
-#: Penalty ladder: each pixel's rho is moved along it by residual balancing
-#: (a factor ~3 per step; the best rho depends on the data, e.g. ~0.7 with ambient
-#: light and ~5 without, a 3-5x difference in iterations).
-_RHO_LADDER = (0.08, 0.25, 0.7, 2.0, 5.0, 15.0, 45.0)
-_RHO_START = 2  # index of 0.7 in the ladder
-_BALANCE_AFTER = 60
-
-
-def _spd_inverse(S) -> np.ndarray:
-    """Inverse of a symmetric positive definite matrix (Cholesky + LAPACK potri)."""
+def _lower_inverse(S) -> np.ndarray:
+    """``L^{-1}`` of the Cholesky factor ``S = L L^T`` (LAPACK potrf + trtri)."""
     L = np.linalg.cholesky(S)
-    inv, info = sla.lapack.dpotri(L, lower=1)
+    Li, info = sla.lapack.dtrtri(L, lower=1)
     if info != 0:  # pragma: no cover - L is a valid Cholesky factor
-        raise np.linalg.LinAlgError(f"dpotri failed ({info})")
-    inv = np.tril(inv)
-    return inv + np.tril(inv, -1).T
+        raise np.linalg.LinAlgError(f"dtrtri failed ({info})")
+    return np.tril(Li)
 
 
 class _Factor:
-    """ADMM operator for one rho: ``v <- decay v + |v| Mp + b G1 + g0``."""
+    """ADMM operator for one rho: ``v <- decay v + |v| Mp + c M r``."""
 
     def __init__(self, A, Q, beta, rho, relax):
         U = Q.shape[0]
-        Minv = _spd_inverse(Q + rho * np.eye(U))
+        Li = _lower_inverse(Q + rho * np.eye(U))
+        Minv = Li.T @ Li
         self.rho = rho
         self.Mp = _flush32(relax * rho * Minv - 0.5 * relax * np.eye(U))
-        self.G1 = (2.0 * relax) * (A @ Minv)  # r c M = b G1 + g0 with c = 2 A^T b - beta 1
+        self.AM = A @ Minv  # (N, U): rows of the Woodbury terms
+        self.AM32 = _flush32(self.AM)
+        self.G1 = (2.0 * relax) * self.AM  # r c M = b G1 + g0 with c = 2 A^T b - beta 1
         self.g0 = -beta * relax * Minv.sum(axis=0)
-
-    def constant(self, B):
-        return _flush32(B @ self.G1 + self.g0)
+        self.K = self.AM @ A.T  # A M A^T (N, N): Woodbury blocks of pixels with dropped observations
 
 
 class AdmmRowSolver:
@@ -119,112 +132,233 @@ class AdmmRowSolver:
         self.Q = 2.0 * (A.T @ A + alpha * D.T @ D)
         self.decay = np.float32(1.0 - 0.5 * relax)
         self._factors: dict[int, _Factor] = {}
-        # Q^{-1} norm for the certificate: r^T Q^{-1} r = ||r Lc^{-T}||^2.  An
+        # A M of every rho on the ladder (filled as they are factored) and r rho: the
+        # Woodbury terms of a batch's masked rows in one call, whatever their rho
+        self._AMs = np.zeros((len(_RHO_LADDER), A.shape[0], A.shape[1]), np.float32)
+        self._scales = relax * np.asarray(_RHO_LADDER, np.float32)
+        self._lock = threading.Lock()
+        # Q^{-1} norm for the certificate: h^T Q^{-1} h = ||h Lc^{-T}||^2.  An
         # unregularized problem (alpha = 0) with unlit offsets is only semidefinite.
-        Lc = np.linalg.cholesky(self.Q + 1e-12 * np.trace(self.Q) / U * np.eye(U))
-        Linv, info = sla.lapack.dtrtri(Lc, lower=1)
-        if info != 0:  # pragma: no cover - Lc is a valid Cholesky factor
-            raise np.linalg.LinAlgError(f"dtrtri failed ({info})")
+        Linv = _lower_inverse(self.Q + 1e-12 * np.trace(self.Q) / max(U, 1) * np.eye(U))
         self.LinvT32 = _flush32(Linv.T)
         self.A32 = A.astype(np.float32)
+        self.AT = np.ascontiguousarray(A.T)
+        self._Linv = Linv
+        self._AQ = None
 
     def factor(self, level: int) -> _Factor:
-        if level not in self._factors:
-            self._factors[level] = _Factor(self.A, self.Q, self.beta, _RHO_LADDER[level], self.relax)
-        return self._factors[level]
+        fac = self._factors.get(level)
+        if fac is None:
+            with self._lock:
+                fac = self._factors.get(level)
+                if fac is None:
+                    fac = _Factor(self.A, self.Q, self.beta, _RHO_LADDER[level], self.relax)
+                    self._AMs[level] = fac.AM32
+                    self._factors[level] = fac
+        return fac
 
-    def certify(self, Z, B, Lam):
-        """Objective, certified gap bound and KKT residual of feasible ``Z`` (float64)."""
-        al, be = self.alpha, self.beta
-        R = Z @ self.A.T - B  # float64: A z - b cancels
-        dZ = np.diff(Z, axis=1)
-        f = np.einsum("ij,ij->i", R, R) + al * np.einsum("ij,ij->i", dZ, dZ) + be * Z.sum(axis=1)
-        G = 2.0 * (R.astype(np.float32) @ self.A32)  # gradient of f at Z
-        dZ32 = (2.0 * al) * dZ.astype(np.float32)
-        G[:, :-1] -= dZ32
-        G[:, 1:] += dZ32
-        G += np.float32(be)
-        kkt = np.abs(np.minimum(Z, G)).max(axis=1)
-        W = (G - Lam) @ self.LinvT32
-        gap = 0.5 * np.einsum("ij,ij->i", W, W).astype(np.float64) + np.einsum("ij,ij->i", Lam, Z)
-        return f, gap, kkt
+    def certificate_woodbury(self):
+        """``A Q^{-1}`` and ``A Q^{-1} A^T`` (for the certificate of pixels with dropped observations)."""
+        with self._lock:
+            if self._AQ is None:
+                ALt = self.A @ self._Linv.T
+                self._AQ = (ALt @ self._Linv, ALt @ ALt.T)
+        return self._AQ
 
-    def _iterate(self, V, C, fac: _Factor, n: int):
-        """``n`` ADMM iterations in place; returns V before the last one (for residuals)."""
-        absV, T = np.empty_like(V), np.empty_like(V)
-        prev = V
-        for i in range(n):
-            if i == n - 1:
-                prev = V.copy()
-            np.abs(V, out=absV)
-            np.matmul(absV, fac.Mp, out=T)
-            T += C
-            V *= self.decay
-            V += T
-        return prev
+    # ------------------------------------------------------------------ solve
+    def solve(self, B, tol=DEFAULT_TOL, max_iter=_MAX_ITER, *, mask=None):
+        """ADMM for a batch of pixels ``B`` (P, N).
 
-    def solve(self, B, tol=DEFAULT_TOL, max_iter=_MAX_ITER):
-        """ADMM for a batch of pixels ``B`` (P, N); returns X and per-pixel diagnostics.
+        Parameters
+        ----------
+        B : ndarray (P, N)
+        tol : float
+            Certified relative objective gap at which a pixel stops.
+        max_iter : int
+        mask : ndarray (P, N) bool, optional
+            Observations to use (False: dropped, e.g. saturated).  A pixel without any
+            is returned as 0, not converged, with 0 iterations.
 
-        Every ``_CHECK_EVERY`` iterations each pixel's gap is certified (converged
-        pixels leave the batch) and its rho is re-balanced: when the primal residual
-        (change of the scaled dual) dominates the dual one (change of ``z``), rho
-        moves up the ladder, else down; the scaled dual is rescaled accordingly.
+        Returns
+        -------
+        X, iterations, converged, relative gap bound, objective, unscaled KKT residual,
+        residual sum of squares (over the observations used) -- of the returned ``X``.
         """
         B = np.ascontiguousarray(B, np.float64)
-        P, U = B.shape[0], self.A.shape[1]
+        P, N = B.shape
+        U = self.A.shape[1]
         X = np.zeros((P, U))
         iters = np.zeros(P, np.int32)
         gap = np.full(P, np.inf)
         fval = np.zeros(P)
         kkt = np.zeros(P)
-        idx = np.arange(P)
-        level = np.full(P, _RHO_START)
-        V = np.zeros((P, U), np.float32)
-        C = self.factor(_RHO_START).constant(B)
-        k, n = 0, _FIRST_CHECK
-        while idx.size:
-            levels = np.unique(level)
-            if levels.size == 1:  # the common case: no gather/scatter
-                prev = self._iterate(V, C, self.factor(levels[0]), n)
+        rss = np.zeros(P)
+        run = np.ones(P, bool)
+        wb = None
+        if mask is not None:
+            mask = np.asarray(mask, bool)
+            usable = mask.any(axis=1)
+            run &= usable
+            B = np.where(mask, B, 0.0)
+            wb = _Dropped(mask, usable)
+            if wb.n:
+                KQ = self.certificate_woodbury()[1]
+                ok = np.ones(wb.n, bool)
+                K.woodbury_factors(KQ, wb.sel, wb.k, np.arange(wb.n), wb.L0, ok)
+                if not ok.all():  # numerically singular: those pixels on their own rows
+                    self._solve_apart(B, mask, wb.pix[~ok], tol, max_iter, X, iters, gap, fval, kkt, rss)
+                    run[wb.pix[~ok]] = False
             else:
-                prev = np.empty_like(V)
-                for lv in levels:
-                    sel = np.flatnonzero(level == lv)
-                    Vs = V[sel]
-                    prev[sel] = self._iterate(Vs, C[sel], self.factor(lv), n)
-                    V[sel] = Vs
+                wb = None
+        if U == 0 or not run.any():
+            done = run if U == 0 else np.zeros(P, bool)
+            gap[done] = 0.0
+            return X, iters, done, np.where(done, 0.0, np.inf), fval, kkt, rss
+        self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss)
+        rel_gap = gap / np.maximum(fval - gap, 1e-300)
+        conv = (rel_gap <= tol) & np.isfinite(gap)
+        if mask is not None:
+            conv &= mask.any(axis=1)
+        return X, iters, conv, rel_gap, fval, kkt, rss
+
+    def _solve_apart(self, B, mask, pix, tol, max_iter, X, iters, gap, fval, kkt, rss):
+        for p in pix:
+            keep = mask[p]
+            sub = AdmmRowSolver(self.A[keep], self.alpha, self.beta, self.relax)
+            x, it, _, rg, f, kk, rs = sub.solve(B[p : p + 1, keep], tol, max_iter)
+            X[p], iters[p], fval[p], kkt[p], rss[p] = x[0], it[0], f[0], kk[0], rs[0]
+            gap[p] = rg[0] * max(f[0], 1e-300) / (1.0 + rg[0])
+
+    def _constants(self, Bb, level, masked, wb):
+        """``r c M_p`` for the rows of a batch (float32), all at rho ``level``."""
+        fac = self.factor(level)
+        C = Bb @ fac.G1 + fac.g0
+        if wb is not None and (masked >= 0).any():
+            m = masked >= 0
+            cvec = 2.0 * Bb[m] @ self.A - self.beta
+            C[m] += _woodbury(cvec, fac.AM, masked[m], wb, self.relax)
+        C[np.abs(C) < 1e-30] = 0.0
+        return C.astype(np.float32)
+
+    def _admm(self, Ball, tol, max_iter, idx, wb, mask, X, iters, gap, fval, kkt, rss):
+        ladder = np.asarray(_RHO_LADDER)
+        U = self.A.shape[1]
+        P = idx.size
+        Bb = Ball[idx]
+        keep = np.zeros((0, 0), bool) if mask is None else np.ascontiguousarray(mask[idx])
+        masked = np.full(P, -1) if wb is None else wb.index[idx]
+        if wb is not None:  # masked pixels lead the batch (then: each level's rows)
+            first = np.argsort(masked < 0, kind="stable")
+            idx, Bb, masked = idx[first], Bb[first], masked[first]
+            if keep.size:
+                keep = keep[first]
+        level = np.full(P, _RHO_START)
+        moves = np.zeros(P, np.int32)
+        if wb is not None:
+            wb.refactor(self.factor(_RHO_START).K, np.arange(wb.n))
+        V = np.zeros((P, U), np.float32)
+        absV = np.zeros_like(V)
+        T = np.empty_like(V)
+        C = self._constants(Bb, _RHO_START, masked, wb)
+        dz2 = np.zeros(P)
+        dw2 = np.zeros(P)
+        k, n = 0, _FIRST_CHECK
+        AQ = None if wb is None else self.certificate_woodbury()[0]
+        while P:
+            # rows are sorted by level: one product per level, on views
+            levels, starts = np.unique(level, return_index=True)
+            bounds = list(zip(levels, starts, list(starts[1:]) + [P]))
+            for i in range(n):
+                for lv, a, b in bounds:
+                    fac = self.factor(int(lv))
+                    np.matmul(absV[a:b], fac.Mp, out=T[a:b])
+                if wb is not None:
+                    K.woodbury_apply(absV, self._AMs, level, masked, wb.sel, wb.k, wb.Sinv, self._scales, T)
+                K.relaxed_step(V, T, C, self.decay, absV, i == n - 1, dz2, dw2)
             k += n
-            rho = np.asarray(_RHO_LADDER, np.float32)[level]
-            Z = np.maximum(V, 0).astype(np.float64)
-            Lam = np.minimum(V, 0) * -rho[:, None]  # ADMM multiplier of z >= 0
-            f, g, kk = self.certify(Z, B[idx], Lam)
+            # ---- certificate
+            rho = ladder[level]
+            Z = np.empty((P, U))
+            Lam = np.empty((P, U), np.float32)
+            K.split_dual(V, rho.astype(np.float32), Z, Lam)
+            R = Z @ self.AT
+            R32 = np.empty(R.shape, np.float32)
+            rr = np.empty(P)
+            K.finish_residual(R, Bb, keep, R32, rr)
+            G = R32 @ self.A32
+            f = np.empty(P)
+            kk = np.empty(P)
+            lamz = np.empty(P)
+            K.finish_gradient(G, Z, Lam, self.alpha, self.beta, rr, f, kk, lamz)
+            W = G @ self.LinvT32
+            g = np.empty(P)
+            K.half_norms(W, lamz, g)
+            if wb is not None:
+                K.woodbury_quad(G, AQ, masked, wb.sel, wb.k, wb.L0, g)
             done = (g <= tol * np.maximum(f - g, 0.0)) | (k >= max_iter)
-            # residual balancing (Boyd et al. 2011, Sec. 3.4.1) on the ladder
-            dz = np.linalg.norm(np.maximum(V, 0) - np.maximum(prev, 0), axis=1)
-            dw = np.linalg.norm(np.minimum(V, 0) - np.minimum(prev, 0), axis=1)
-            # Only pixels still running after _BALANCE_AFTER iterations move: most
-            # converge before, and each new rho costs a factorization.
-            late = k >= _BALANCE_AFTER
-            up = late & (dw > 3.0 * dz) & (level < len(_RHO_LADDER) - 1) & ~done
-            down = late & (dz > 3.0 * dw) & (level > 0) & ~done
-            if up.any() or down.any():
-                new_level = level + up - down
-                moved = np.flatnonzero(new_level != level)
-                ratio = (rho[moved] / np.asarray(_RHO_LADDER, np.float32)[new_level[moved]])[:, None]
-                V[moved] = np.maximum(V[moved], 0) + np.minimum(V[moved], 0) * ratio
-                level = new_level
-                for lv in np.unique(level[moved]):
-                    m = moved[level[moved] == lv]
-                    C[m] = self.factor(lv).constant(B[idx[m]])
             if done.any():
                 d = idx[done]
-                X[d], iters[d], gap[d], fval[d], kkt[d] = Z[done], k, g[done], f[done], kk[done]
-                keep = ~done
-                idx, V, C, level = idx[keep], V[keep], C[keep], level[keep]
+                X[d], iters[d], gap[d], fval[d], kkt[d], rss[d] = Z[done], k, g[done], f[done], kk[done], rr[done]
+            # ---- residual balancing on the ladder (only pixels still running late)
+            dz, dw = np.sqrt(dz2), np.sqrt(dw2)
+            free = (k >= _BALANCE_AFTER) & ~done & (moves < _MAX_MOVES)
+            up = free & (dw > 3.0 * dz) & (level < len(_RHO_LADDER) - 1)
+            down = free & (dz > 3.0 * dw) & (level > 0)
+            moved = np.flatnonzero(up | down)
+            if moved.size:
+                new = level[moved] + up[moved] - down[moved]
+                ratio = (rho[moved] / ladder[new]).astype(np.float32)[:, None]
+                V[moved] = np.maximum(V[moved], 0) + np.minimum(V[moved], 0) * ratio
+                absV[moved] = np.abs(V[moved])
+                level[moved] = new
+                moves[moved] += 1
+                for lv in np.unique(new):
+                    m = moved[new == lv]
+                    if wb is not None and (masked[m] >= 0).any():
+                        wb.refactor(self.factor(int(lv)).K, masked[m][masked[m] >= 0])
+                    C[m] = self._constants(Bb[m], int(lv), masked[m], wb)
+            if done.any() or moved.size:
+                order = np.flatnonzero(~done)
+                order = order[np.lexsort((masked[order] < 0, level[order]))]
+                idx, Bb, masked, level, moves = idx[order], Bb[order], masked[order], level[order], moves[order]
+                V, absV, C = V[order], absV[order], C[order]
+                if keep.size:
+                    keep = keep[order]
+                P = idx.size
+                T = np.empty_like(V)
+                dz2, dw2 = dz2[:P], dw2[:P]
             n = _CHECK_EVERY
-        rel_gap = gap / np.maximum(fval - gap, 1e-300)
-        return X, iters, rel_gap <= tol, rel_gap, kkt
+
+
+def _woodbury(X, AM, masked, wb, scale) -> np.ndarray:
+    """Rows ``scale (A_s M)^T S_p^{-1} (A_s M) x_p`` of masked pixels in float64 (two products)."""
+    Y = X @ AM.T
+    W = np.empty_like(Y)
+    K.woodbury_coeffs(Y, masked, wb.sel, wb.k, wb.Sinv, float(scale), W)
+    return W @ AM
+
+
+class _Dropped:
+    """Pixels of a batch with dropped observations: their rows and Woodbury factors."""
+
+    def __init__(self, mask, usable):
+        drop = ~mask & usable[:, None]
+        self.pix = np.flatnonzero(drop.any(axis=1))
+        self.n = self.pix.size
+        self.index = np.full(mask.shape[0], -1)
+        self.index[self.pix] = np.arange(self.n)
+        self.k = drop[self.pix].sum(axis=1).astype(np.int64)
+        kmax = int(self.k.max()) if self.n else 0
+        # each pixel's dropped rows, in order, first (the rest of the row is unused)
+        self.sel = np.ascontiguousarray(np.argsort(~drop[self.pix], axis=1, kind="stable")[:, : max(kmax, 1)])
+        self.Sinv = np.zeros((self.n, max(kmax, 1), max(kmax, 1)))  # at each pixel's current rho
+        self.L0 = np.zeros_like(self.Sinv)  # Cholesky factors for Q^{-1} (the certificate)
+
+    def refactor(self, Kmat, which):
+        ok = np.ones(self.n, bool)
+        K.woodbury_inverses(Kmat, self.sel, self.k, np.asarray(which, np.int64), self.Sinv, ok)
+        if not ok.all():  # pragma: no cover - S_p is a Schur complement of an SPD matrix
+            raise np.linalg.LinAlgError("a Woodbury block lost positive definiteness")
 
 
 def _threads() -> int:
@@ -239,7 +373,8 @@ def _threads() -> int:
     return max(1, min(2, os.cpu_count() or 1))
 
 
-def _blas_one_thread(threads: int):
+def blas_one_thread(threads: int):
+    """Hold BLAS to one thread while ``threads`` Python threads run solver batches."""
     if threads <= 1:
         return contextlib.nullcontext()
     try:
@@ -249,17 +384,21 @@ def _blas_one_thread(threads: int):
     return threadpool_limits(1, user_api="blas")
 
 
-def _row_solver(group: RowGroup, alpha: float, beta: float) -> AdmmRowSolver:
-    """The factorization of a row group, cached on the group (chunks reuse it)."""
+_CACHE_LOCK = threading.Lock()
+
+
+def row_solver(group: RowGroup, alpha: float, beta: float) -> AdmmRowSolver:
+    """The factorization of a row group, cached on the group (chunks and threads reuse it)."""
     key = (alpha, beta)
-    cache = group.__dict__.setdefault("_admm_cache", {})
-    if key not in cache:
-        cache.clear()
-        cache[key] = AdmmRowSolver(group.A, alpha, beta)
-    return cache[key]
+    with _CACHE_LOCK:
+        cache = group.__dict__.setdefault("_admm_cache", {})
+        if key not in cache:
+            cache.clear()
+            cache[key] = AdmmRowSolver(group.A, alpha, beta)
+        return cache[key]
 
 
-def solve_fast(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None) -> SolveResult:
+def solve_fast(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None, *, mask=None, threads=None) -> SolveResult:
     """Solve every pixel of ``B`` (P, N) sharing ``group``'s illumination matrix.
 
     Parameters
@@ -270,6 +409,11 @@ def solve_fast(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None) -> SolveResu
     alpha, beta : float
     tol : float, optional
         Certified relative objective gap at which a pixel stops (default 1e-4).
+    mask : ndarray (P, N) bool, optional
+        Observations to use (False: dropped, e.g. saturated); solved in the same
+        batches through a low-rank update.  A pixel without any is 0 and not converged.
+    threads : int, optional
+        Python threads for batches of 512 pixels (default: 2, 1 inside a Dask worker).
 
     Returns
     -------
@@ -279,17 +423,21 @@ def solve_fast(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None) -> SolveResu
     tol = DEFAULT_TOL if tol is None else float(tol)
     B = np.asarray(B, np.float64)
     P = B.shape[0]
-    threads = _threads()
-    with _blas_one_thread(threads):
-        solver = _row_solver(group, alpha, beta)
-        slices = [slice(s, min(P, s + _CHUNK)) for s in range(0, P, _CHUNK)]
-        run = lambda s: solver.solve(B[s], tol)  # noqa: E731
+    threads = _threads() if threads is None else max(1, int(threads))
+    slices = [slice(s, min(P, s + _CHUNK)) for s in range(0, P, _CHUNK)]
+    with blas_one_thread(threads):
+        solver = row_solver(group, alpha, beta)
+        run = lambda s: solver.solve(B[s], tol, mask=None if mask is None else mask[s])  # noqa: E731
         if threads > 1 and len(slices) > 1:
             with ThreadPoolExecutor(threads) as pool:
                 parts = list(pool.map(run, slices))
         else:
             parts = [run(s) for s in slices]
-    X = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, group.A.shape[1]))
-    iters = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int32)
-    conv = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0, bool)
-    return SolveResult(X, iters, conv)
+    if not parts:
+        return SolveResult(np.zeros((0, group.A.shape[1])), np.zeros(0, np.int32), np.zeros(0, bool))
+    X, iters, conv, _, f, kkt, rss = (np.concatenate([p[i] for p in parts]) for i in range(7))
+    # the driver's maps, from the last certificate (float64 residual; gradient in float32)
+    Bm = B if mask is None else np.where(mask, B, 0.0)
+    c = 2.0 * (Bm.astype(np.float32) @ solver.A32) - np.float32(beta)
+    scaled = kkt / (1.0 + np.abs(c).max(axis=1, initial=0.0))
+    return SolveResult(X, iters, conv, objective=f, residual_ss=rss, kkt_residual=scaled)

@@ -219,15 +219,48 @@ class DemuxProblem:
         dx = np.diff(X, axis=1)
         return (r * r).sum(axis=1) + self.alpha * (dx * dx).sum(axis=1) + self.beta * np.abs(X).sum(axis=1)
 
-    def kkt_residual(self, group: RowGroup, X, B) -> np.ndarray:
+    def diagnostics(self, group: RowGroup, X, B, mask=None) -> dict:
+        """Residual RMS, objective and scaled KKT residual of each pixel, from one residual.
+
+        The driver's per-pixel maps (:data:`planeray.demux.MAP_NAMES`); ``mask`` as in
+        :meth:`objective`.  A pixel without any observation gets RMS 0 and KKT NaN.
+        """
+        X = np.asarray(X, dtype=np.float64)
+        B = np.asarray(B, dtype=np.float64)
+        R = X @ group.A.T - B
+        if mask is not None:
+            R = np.where(mask, R, 0.0)
+            B = np.where(mask, B, 0.0)
+        n_obs = np.full(X.shape[0], B.shape[1]) if mask is None else mask.sum(axis=1)
+        rr = np.einsum("ij,ij->i", R, R)
+        dx = np.diff(X, axis=1)
+        objective = rr + self.alpha * np.einsum("ij,ij->i", dx, dx) + self.beta * np.abs(X).sum(axis=1)
+        kkt = self._kkt(group, X, R, B, dx)
+        kkt[n_obs == 0] = np.nan
+        return {"residual_rms": np.sqrt(rr / np.maximum(n_obs, 1)), "objective": objective, "kkt_residual": kkt}
+
+    def _kkt(self, group, X, R, Bm, dx):
+        g = 2.0 * R @ group.A + self.beta
+        if X.shape[1] > 1:
+            dX = (2.0 * self.alpha) * dx
+            g[:, :-1] -= dX
+            g[:, 1:] += dX
+        c = 2.0 * Bm @ group.A - self.beta
+        return np.abs(np.minimum(X, g)).max(axis=1) / (1.0 + np.abs(c).max(axis=1))
+
+    def kkt_residual(self, group: RowGroup, X, B, mask=None) -> np.ndarray:
         """Scaled KKT violation of each pixel (0 at the exact optimum).
 
         ``max |min(x, g)|`` over offsets, with ``g = Q x - c`` the QP gradient,
         divided by ``1 + max |c|``; it vanishes iff ``x >= 0``, ``g >= 0`` and
-        ``x g = 0``.
+        ``x g = 0``.  With ``mask`` (P, N) the dropped observations count in neither
+        ``Q`` nor ``c`` (the pixel's own problem).  Costs two ``(P, N) x (N, V)``
+        products: the Hessian is never formed.
         """
         X = np.asarray(X, dtype=np.float64)
-        Hm = group.hessian(self.alpha)
-        c = 2.0 * np.asarray(B, dtype=np.float64) @ group.A - self.beta
-        g = 2.0 * X @ Hm - c
-        return np.abs(np.minimum(X, g)).max(axis=1) / (1.0 + np.abs(c).max(axis=1))
+        B = np.asarray(B, dtype=np.float64)
+        R = X @ group.A.T - B
+        if mask is not None:
+            R = np.where(mask, R, 0.0)
+            B = np.where(mask, B, 0.0)
+        return self._kkt(group, X, R, B, np.diff(X, axis=1))

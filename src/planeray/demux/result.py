@@ -21,8 +21,15 @@ class SolveResult:
         Iterations each pixel took (solver-specific unit).
     converged : ndarray (P,) bool
         Whether the solver's own convergence test passed for the pixel.
+    objective, residual_ss, kkt_residual : ndarray (P,), optional
+        The objective, the residual sum of squares over the observations used and the
+        scaled KKT residual of ``X``, when the solver has them (the driver's maps;
+        otherwise it computes them).
     """
 
     X: np.ndarray
     iterations: np.ndarray
     converged: np.ndarray
+    objective: np.ndarray | None = None
+    residual_ss: np.ndarray | None = None
+    kkt_residual: np.ndarray | None = None

@@ -7,7 +7,12 @@
 ``cvxpy``  the paper's formulation solved by CVXPY + Clarabel (slow reference).
 
 The last three are in :mod:`planeray.demux.reference`.  Every solver has the
-signature ``solve(group, B, alpha, beta, tol) -> SolveResult``.
+signature ``solve(group, B, alpha, beta, tol) -> SolveResult``; it may also take the
+keyword-only options ``mask=`` (the observations to use: the driver then leaves
+pixels with saturated observations to it, in the same batch) and ``threads=`` (the
+driver then runs its batches on solver threads, calling it with ``threads=1``).  The
+driver passes only the options a solver declares (:func:`options`); without ``mask=``
+it solves each pixel with dropped observations on its own rows.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from ..errors import InputError
 from .fast import solve_fast
 from .reference import solve_cvxpy, solve_nnls, solve_pinv
 
-__all__ = ["SOLVERS", "get_solver"]
+__all__ = ["SOLVERS", "get_solver", "options"]
 
 #: Demultiplexing methods by name.
 SOLVERS: dict[str, Callable] = {"fast": solve_fast, "pinv": solve_pinv, "nnls": solve_nnls, "cvxpy": solve_cvxpy}
@@ -30,3 +35,14 @@ def get_solver(method: str) -> Callable:
         return SOLVERS[method]
     except KeyError:
         raise InputError(f"unknown demultiplexing method {method!r}; choose one of {sorted(SOLVERS)}") from None
+
+
+def options(solve: Callable) -> frozenset:
+    """The keyword-only options (``mask``, ``threads``) a registered solver accepts."""
+    import inspect
+
+    try:
+        params = inspect.signature(solve).parameters
+    except (TypeError, ValueError):  # pragma: no cover - builtins
+        return frozenset()
+    return frozenset(n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY)
