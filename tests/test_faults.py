@@ -394,7 +394,7 @@ def test_an_output_created_by_someone_else_mid_run_keeps_the_finished_result(tmp
     scene = pr.make_scene("wax", (16, 12), projector_rows=60, seed=4)
     src = write_stack(pr.simulate_stack(scene, pr.paper_sweep(), seed=4), tmp_path / "s.zarr")
     out = tmp_path / "T.zarr"
-    real = driver.solve_chunk
+    real = driver._write_chunk
     calls = {"n": 0}
 
     def intruder(*args, **kwargs):
@@ -404,7 +404,7 @@ def test_an_output_created_by_someone_else_mid_run_keeps_the_finished_result(tmp
             (out / "theirs.txt").write_text("someone else's")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(driver, "solve_chunk", intruder)
+    monkeypatch.setattr(driver, "_write_chunk", intruder)  # during the run, between chunks
     res = invoke("demux", src, "--out", out, "--chunk-rows", 4)
     line = one_line_error(res, out, "already exists", "kept")
     assert "different inputs" not in line and (out / "theirs.txt").exists()
