@@ -108,6 +108,15 @@ def _chol_solve(L, y, k):  # pragma: no cover - compiled
 
 
 @numba.njit(**_JIT)
+def _schur_block(K, rows, kq, S):  # pragma: no cover - compiled
+    """``S[:kq, :kq] = I/2 - K[rows, rows]`` (the Woodbury capacitance of the dropped rows)."""
+    for i in range(kq):
+        for j in range(kq):
+            S[i, j] = -K[rows[i], rows[j]]
+        S[i, i] += 0.5
+
+
+@numba.njit(**_JIT)
 def woodbury_factors(K, sel, k, pix, L, ok):  # pragma: no cover - compiled
     """Cholesky factors of ``S_p = I/2 - K[s_p, s_p]`` for the masked pixels ``pix``.
 
@@ -119,10 +128,7 @@ def woodbury_factors(K, sel, k, pix, L, ok):  # pragma: no cover - compiled
     for q in pix:
         kq = k[q]
         S = L[q]
-        for i in range(kq):
-            for j in range(kq):
-                S[i, j] = -K[sel[q, i], sel[q, j]]
-            S[i, i] += 0.5
+        _schur_block(K, sel[q], kq, S)
         ok[q] = _chol(S, kq)
 
 
@@ -134,10 +140,7 @@ def woodbury_inverses(K, sel, k, pix, Sinv, ok):  # pragma: no cover - compiled
     e = np.empty(kmax)
     for q in pix:
         kq = k[q]
-        for i in range(kq):
-            for j in range(kq):
-                S[i, j] = -K[sel[q, i], sel[q, j]]
-            S[i, i] += 0.5
+        _schur_block(K, sel[q], kq, S)
         ok[q] = _chol(S, kq)
         if not ok[q]:
             continue
@@ -169,19 +172,51 @@ def woodbury_coeffs(Y, masked, sel, k, Sinv, scale, W):  # pragma: no cover - co
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
+def _selected_dots(Mat, rows, kq, x, y):  # pragma: no cover - compiled
+    """``y[j] = Mat[rows[j]] . x`` for ``j < kq``, four rows at a time.
+
+    Four independent sums per pass over ``x`` vectorize (one sum is latency-bound);
+    ``fastmath`` reassociates them, a change at the rounding of the operands' type.
+    """
+    U = x.shape[0]
+    j = 0
+    while j < kq:
+        r0 = Mat[rows[j]]
+        r1 = Mat[rows[min(j + 1, kq - 1)]]
+        r2 = Mat[rows[min(j + 2, kq - 1)]]
+        r3 = Mat[rows[min(j + 3, kq - 1)]]
+        a0 = r0[0] * x[0] * 0
+        a1 = a0
+        a2 = a0
+        a3 = a0
+        for u in range(U):
+            xu = x[u]
+            a0 += r0[u] * xu
+            a1 += r1[u] * xu
+            a2 += r2[u] * xu
+            a3 += r3[u] * xu
+        y[j] = a0
+        if j + 1 < kq:
+            y[j + 1] = a1
+        if j + 2 < kq:
+            y[j + 2] = a2
+        if j + 3 < kq:
+            y[j + 3] = a3
+        j += 4
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True)
 def woodbury_apply(X, AMs, level, masked, sel, k, Sinv, scales, out):  # pragma: no cover - compiled
     """``out[p] += scale (A_s M)^T S_p^{-1} (A_s M) x_p`` for the rows with ``masked[p] >= 0``.
 
     Float32 (the iteration's precision). ``AMs[level[p]]`` (N, U) is ``A M`` at the row's
     rho and ``scales[level[p]]`` its ``r rho``; ``Sinv[masked[p]]`` the pixel's ``S^{-1}``.
-    Four dropped rows at a time (independent sums: the dot products vectorize);
-    ``fastmath`` reassociates the sums, a change at the rounding of ``X``'s dtype.
+    Four dropped rows at a time (:func:`_selected_dots`; the update likewise).
     """
     kmax = sel.shape[1]
     y = np.empty(kmax, np.float32)
     w = np.empty(kmax, np.float32)
     U = X.shape[1]
-    zero = np.float32(0.0)
     for p in range(X.shape[0]):
         q = masked[p]
         if q < 0:
@@ -191,34 +226,7 @@ def woodbury_apply(X, AMs, level, masked, sel, k, Sinv, scales, out):  # pragma:
         o = out[p]
         AM = AMs[level[p]]
         scale = scales[level[p]]
-        j = 0
-        while j + 4 <= kq:
-            r0 = AM[sel[q, j]]
-            r1 = AM[sel[q, j + 1]]
-            r2 = AM[sel[q, j + 2]]
-            r3 = AM[sel[q, j + 3]]
-            a0 = zero
-            a1 = zero
-            a2 = zero
-            a3 = zero
-            for u in range(U):
-                xu = x[u]
-                a0 += r0[u] * xu
-                a1 += r1[u] * xu
-                a2 += r2[u] * xu
-                a3 += r3[u] * xu
-            y[j] = a0
-            y[j + 1] = a1
-            y[j + 2] = a2
-            y[j + 3] = a3
-            j += 4
-        while j < kq:
-            r0 = AM[sel[q, j]]
-            a0 = zero
-            for u in range(U):
-                a0 += r0[u] * x[u]
-            y[j] = a0
-            j += 1
+        _selected_dots(AM, sel[q], kq, x, y)
         Si = Sinv[q]
         for i in range(kq):
             acc = 0.0
@@ -255,37 +263,13 @@ def woodbury_quad(H, AQ, masked, sel, k, L, out):  # pragma: no cover - compiled
     kmax = max(sel.shape[1], 1)
     y = np.empty(kmax)
     z = np.empty(kmax)
-    U = H.shape[1]
     for p in range(H.shape[0]):
         q = masked[p]
         if q < 0:
             continue
         kq = k[q]
         h = H[p]
-        j = 0
-        while j < kq:
-            r0 = AQ[sel[q, j]]
-            r1 = AQ[sel[q, min(j + 1, kq - 1)]]
-            r2 = AQ[sel[q, min(j + 2, kq - 1)]]
-            r3 = AQ[sel[q, min(j + 3, kq - 1)]]
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
-            a3 = 0.0
-            for u in range(U):
-                hu = np.float64(h[u])
-                a0 += r0[u] * hu
-                a1 += r1[u] * hu
-                a2 += r2[u] * hu
-                a3 += r3[u] * hu
-            y[j] = a0
-            if j + 1 < kq:
-                y[j + 1] = a1
-            if j + 2 < kq:
-                y[j + 2] = a2
-            if j + 3 < kq:
-                y[j + 3] = a3
-            j += 4
+        _selected_dots(AQ, sel[q], kq, h, y)
         for j in range(kq):
             z[j] = y[j]
         _chol_solve(L[q], z, kq)

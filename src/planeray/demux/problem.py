@@ -225,12 +225,7 @@ class DemuxProblem:
         The driver's per-pixel maps (:data:`planeray.demux.MAP_NAMES`); ``mask`` as in
         :meth:`objective`.  A pixel without any observation gets RMS 0 and KKT NaN.
         """
-        X = np.asarray(X, dtype=np.float64)
-        B = np.asarray(B, dtype=np.float64)
-        R = X @ group.A.T - B
-        if mask is not None:
-            R = np.where(mask, R, 0.0)
-            B = np.where(mask, B, 0.0)
+        X, R, B = _masked_residual(group, X, B, mask)
         n_obs = np.full(X.shape[0], B.shape[1]) if mask is None else mask.sum(axis=1)
         rr = np.einsum("ij,ij->i", R, R)
         dx = np.diff(X, axis=1)
@@ -257,10 +252,16 @@ class DemuxProblem:
         ``Q`` nor ``c`` (the pixel's own problem).  Costs two ``(P, N) x (N, V)``
         products: the Hessian is never formed.
         """
-        X = np.asarray(X, dtype=np.float64)
-        B = np.asarray(B, dtype=np.float64)
-        R = X @ group.A.T - B
-        if mask is not None:
-            R = np.where(mask, R, 0.0)
-            B = np.where(mask, B, 0.0)
+        X, R, B = _masked_residual(group, X, B, mask)
         return self._kkt(group, X, R, B, np.diff(X, axis=1))
+
+
+def _masked_residual(group: RowGroup, X, B, mask):
+    """``X``, the residual ``A x - b`` and ``B`` in float64, dropped observations set to 0 in both."""
+    X = np.asarray(X, dtype=np.float64)
+    B = np.asarray(B, dtype=np.float64)
+    R = X @ group.A.T - B
+    if mask is not None:
+        R = np.where(mask, R, 0.0)
+        B = np.where(mask, B, 0.0)
+    return X, R, B
