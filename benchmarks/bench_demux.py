@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import re
-import resource
 import subprocess
 import sys
 import tempfile
@@ -309,10 +308,6 @@ def main():
                 print(
                     f"  --workers 2 (Dask)          : {d['solve']:.1f} s ({d['solve'] / cmd['solve']:.2f}x the local run)"
                 )
-
-
-def _peak_rss_mib() -> float:  # pragma: no cover - kept for scripts importing it
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 if __name__ == "__main__":

@@ -211,12 +211,12 @@ def _run_task(problem: DemuxProblem, task: _Task, method: str, tol):
     """Solution and per-pixel maps of one task (run in a solver thread)."""
     solve = get_solver(method)
     group, B, mask = task.group, task.B, task.mask
-    extra = {"threads": 1} if "threads" in options(solve) else {}
+    opts = options(solve)
     res = None
-    if mask is not None and "mask" in options(solve):  # dropped observations in the same batch
-        res = solve(group, B, problem.alpha, problem.beta, tol, mask=mask, **extra)
-        X, iters, conv = res.X, res.iterations, res.converged
-    elif mask is None:
+    if mask is None or "mask" in opts:  # dropped observations (if any) in the same batch
+        extra = {"threads": 1} if "threads" in opts else {}
+        if mask is not None:
+            extra["mask"] = mask
         res = solve(group, B, problem.alpha, problem.beta, tol, **extra)
         X, iters, conv = res.X, res.iterations, res.converged
     else:  # a solver without masks: pixels with dropped observations one by one

@@ -80,8 +80,8 @@ _CHECK_EVERY = 10
 _MAX_ITER = 2000
 
 #: Penalty ladder: each pixel's rho is moved along it by residual balancing
-#: (a factor ~3 per step; the best rho depends on the data, e.g. ~1 with ambient
-#: light and ~5 without, a 3-5x difference in iterations).
+#: (a factor 2 per step; the best rho depends on the data, e.g. ~1 with ambient
+#: light and 4-8 without, a 3-5x difference in iterations).
 _RHO_LADDER = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
 _RHO_START = 2  # index of 1.0 in the ladder
 _BALANCE_AFTER = 30
@@ -115,7 +115,6 @@ class _Factor:
         self.rho = rho
         self.Mp = _flush32(relax * rho * Minv - 0.5 * relax * np.eye(U))
         self.AM = A @ Minv  # (N, U): rows of the Woodbury terms
-        self.AM32 = _flush32(self.AM)
         self.G1 = (2.0 * relax) * self.AM  # r c M = b G1 + g0 with c = 2 A^T b - beta 1
         self.g0 = -beta * relax * Minv.sum(axis=0)
         self.K = self.AM @ A.T  # A M A^T (N, N): Woodbury blocks of pixels with dropped observations
@@ -153,7 +152,7 @@ class AdmmRowSolver:
                 fac = self._factors.get(level)
                 if fac is None:
                     fac = _Factor(self.A, self.Q, self.beta, _RHO_LADDER[level], self.relax)
-                    self._AMs[level] = fac.AM32
+                    self._AMs[level] = _flush32(fac.AM)
                     self._factors[level] = fac
         return fac
 
@@ -216,9 +215,7 @@ class AdmmRowSolver:
             return X, iters, done, np.where(done, 0.0, np.inf), fval, kkt, rss
         self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss)
         rel_gap = gap / np.maximum(fval - gap, 1e-300)
-        conv = (rel_gap <= tol) & np.isfinite(gap)
-        if mask is not None:
-            conv &= mask.any(axis=1)
+        conv = (rel_gap <= tol) & np.isfinite(gap)  # pixels without observations: gap inf
         return X, iters, conv, rel_gap, fval, kkt, rss
 
     def _solve_apart(self, B, mask, pix, tol, max_iter, X, iters, gap, fval, kkt, rss):
