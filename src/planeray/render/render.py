@@ -303,34 +303,14 @@ def _run_unit(setup: _Setup, unit):
     p = setup.params
     H, W = setup.shape
     P = p["projector_rows"]
+    rig = (setup.loaded.scene, setup.sensor, setup.projector)
+    common = dict(shape=(H, W), projector_rows=P, seed=p["seed"], max_depth=p["max_depth"], rr_depth=p["rr_depth"])
     if kind == "camera":
-        r = tally_transport(
-            setup.loaded.scene,
-            setup.sensor,
-            setup.projector,
-            shape=(H, W),
-            projector_rows=P,
-            spp=count,
-            seed=p["seed"],
-            max_depth=p["max_depth"],
-            rr_depth=p["rr_depth"],
-            spp_offset=first,
-        )
+        r = tally_transport(*rig, spp=count, spp_offset=first, **common)
         # weight: this batch's share of all camera samples
         return r.transport / p["spp"], r.classes / p["spp"], r.albedo / p["spp"]
     if kind == "caustic":
-        r = trace_caustics(
-            setup.loaded.scene,
-            setup.sensor,
-            setup.projector,
-            shape=(H, W),
-            projector_rows=P,
-            n_paths=count,
-            seed=p["seed"],
-            max_depth=p["max_depth"],
-            rr_depth=p["rr_depth"],
-            path_offset=first,
-        )
+        r = trace_caustics(*rig, n_paths=count, path_offset=first, **common)
         share = count / p["caustic_paths"]
         return r.transport * share, r.classes * share, r.albedo
     # scalar fallback: rows first .. first + count, each with all spp (no class tallies: see labels)
