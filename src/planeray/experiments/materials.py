@@ -38,6 +38,7 @@ from ..materials import (
 )
 from ..scenes import make_scene
 from ..timing import PAPER_PROJECTOR_ROWS, make_sweep
+from ._report import jsonable
 
 __all__ = [
     "CAPTURE_FORMAT",
@@ -337,20 +338,6 @@ def _saturated_share(cap: Capture) -> float:
     return float(sat[mat].mean())
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not np.isfinite(x) else float(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    return x
-
-
 def run_materials_report(
     out_dir,
     *,
@@ -542,7 +529,7 @@ def run_materials_report(
             files[f.stem] = f.name
         numbers["files"] = files
         numbers["seconds"] = round(time.perf_counter() - t0, 1)
-        numbers = _jsonable(numbers)
+        numbers = jsonable(numbers)
         (tmp / "materials.json").write_text(json.dumps(numbers, indent=1))
         (tmp / MARKER).write_text(json.dumps({"format": REPORT_FORMAT, "format_version": 1}, indent=1))
     return numbers

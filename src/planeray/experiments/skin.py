@@ -54,6 +54,7 @@ from ..skin.imaging import (
 )
 from ..skin.metrics import vein_metrics
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
+from ._report import jsonable
 
 __all__ = [
     "REPORT_FORMAT",
@@ -292,20 +293,6 @@ def _csv(rows: list[dict]) -> str:
         w.writeheader()
         w.writerows(rows)
     return buf.getvalue()
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not np.isfinite(x) else float(x)
-    if isinstance(x, (np.integer, np.bool_)):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    return x
 
 
 def run_skin_compare(
@@ -551,11 +538,11 @@ def run_skin_compare(
         }
         with atomic_directory(Path(out_dir), overwrite=overwrite, kind="skin report") as tmp:
             (tmp / MARKER).write_text(json.dumps({"format": REPORT_FORMAT, "format_version": 1}, indent=1))
-            (tmp / "skin.json").write_text(json.dumps(_jsonable(numbers), indent=1))
-            (tmp / "skin_cnr.csv").write_text(_csv(_jsonable(table)))
-            (tmp / "skin_veins.csv").write_text(_csv(_jsonable(vein_rows)))
-            (tmp / "skin_ambient.csv").write_text(_csv(_jsonable(amb_rows)))
+            (tmp / "skin.json").write_text(json.dumps(jsonable(numbers), indent=1))
+            (tmp / "skin_cnr.csv").write_text(_csv(jsonable(table)))
+            (tmp / "skin_veins.csv").write_text(_csv(jsonable(vein_rows)))
+            (tmp / "skin_ambient.csv").write_text(_csv(jsonable(amb_rows)))
             for name, draw in figures_out.items():
                 draw(tmp / name)
         numbers["figures"] = list(figures_out)
-    return _jsonable(numbers)
+    return jsonable(numbers)
