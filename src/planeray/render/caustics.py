@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .integrator import TallyResult, _row_of, _shadow_transmittance
+from .integrator import TallyResult, _roulette, _row_of, _shadow_transmittance
 
 __all__ = ["trace_caustics"]
 
@@ -86,11 +86,7 @@ def trace_caustics(
 
     def body(sampler, ray, beta, depth, active):
         q = dr.minimum(dr.max(beta), 0.95)
-        rr = depth > rr_depth
-        active &= dr.any(beta != 0.0)
-        active &= (sampler.next_1d(active) < q) | ~rr
-        beta = dr.select(rr, beta / q, beta)
-        active &= depth < max_depth
+        beta, active = _roulette(dr, sampler, beta, q, depth, active, rr_depth, max_depth)
         si = scene.ray_intersect(ray, active)
         active &= si.is_valid()
         active &= ~si.is_medium_transition() | (si.target_medium(ray.d) == None)  # noqa: E711

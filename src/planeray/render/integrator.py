@@ -115,6 +115,19 @@ def _shadow_transmittance(mi, dr, scene, it, target, medium, active, *, from_sur
     return tr
 
 
+def _roulette(dr, sampler, beta, q, depth, active, rr_depth, max_depth):
+    """Russian roulette with survival ``q`` past ``rr_depth`` and the depth limit (as Mitsuba's path/volpath).
+
+    Returns the reweighted throughput and the paths still active.
+    """
+    rr = depth > rr_depth
+    active &= dr.any(beta != 0.0)
+    active &= (sampler.next_1d(active) < q) | ~rr
+    beta = dr.select(rr, beta / q, beta)
+    active &= depth < max_depth
+    return beta, active
+
+
 def _row_of(dr, mi, uv_y, P):
     """Projector row of a texture coordinate (row 0 at the top), as the ``nearest`` bitmap filter picks it."""
     return mi.UInt32(dr.clip(dr.floor(uv_y * P), 0, P - 1))
@@ -211,11 +224,7 @@ def tally_transport(
     def body(sampler, ray, beta, eta, depth, active, medium, medium_seen, specular_seen, surfaces, albedo_done):
         # Russian roulette (as Mitsuba's path/volpath) and the depth limit
         q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
-        rr = depth > rr_depth
-        active &= dr.any(beta != 0.0)
-        active &= (sampler.next_1d(active) < q) | ~rr
-        beta = dr.select(rr, beta / q, beta)
-        active &= depth < max_depth
+        beta, active = _roulette(dr, sampler, beta, q, depth, active, rr_depth, max_depth)
 
         si = scene.ray_intersect(ray, active)
 
