@@ -115,11 +115,15 @@ def _tally(path, rows, shape, spp, seed, rgb=False):
 
 # ------------------------------------------------------------------ against Mitsuba, row by row
 @needs_llvm
-@pytest.mark.parametrize("kind", ["surfaces", "medium"])
+@pytest.mark.parametrize("kind", ["surfaces", "medium", "medium_thin_glass"])
 def test_tally_matches_per_row_renders(tmp_path, kind):
     from planeray.render.reference import render_rows
 
-    extra = MIRROR_BALL if kind == "surfaces" else MEDIUM_BALL
+    extra = {
+        "surfaces": MIRROR_BALL,
+        "medium": MEDIUM_BALL,
+        "medium_thin_glass": MEDIUM_BALL.replace('<bsdf type="null"/>', '<bsdf type="thindielectric"/>'),
+    }[kind]
     path = scene_xml(tmp_path, PAGE.format(half=6, albedo=0.6), extra)
     shape, P, spp = (16, 16), 16, 512
     T1, _ = _tally(path, P, shape, spp, seed=1)
@@ -438,6 +442,16 @@ def test_bad_scene_files_give_one_line(tmp_path):
     )
     with pytest.raises(InputError, match="heterogeneous"):
         render_transport(hetero)
+    # a medium behind a refracting boundary: the point projector's light cannot enter it -- refused by name
+    glass = scene_xml(
+        tmp_path, PAGE.format(half=6, albedo=0.6), MEDIUM_BALL.replace("null", "dielectric"), name="g.xml"
+    )
+    with pytest.raises(InputError, match=r"g\.xml: shape 'ball' bounds a medium through a .*Dielectric boundary") as e:
+        render_transport(glass, shape=(8, 8), projector_rows=8, spp=1)
+    assert "\n" not in str(e.value)
+    rough = MEDIUM_BALL.replace('<bsdf type="null"/>', '<bsdf type="roughdielectric"/>')
+    with pytest.raises(InputError, match="refracts"):
+        render_transport(scene_xml(tmp_path, rough, name="r.xml"), shape=(8, 8), projector_rows=8, spp=1)
 
 
 # ------------------------------------------------------------------ scene plugin, pipeline, CLI
@@ -552,3 +566,52 @@ def test_render_examples_writes_stores_figures_and_numbers(tmp_path):
     assert read_transport_maps(tmp_path / "room_corner.zarr")["labels"].shape == (16, 16)
     with pytest.raises(Exception, match="already exists"):
         run_render_examples(tmp_path, **kw)
+
+
+# ------------------------------------------------------------------ the one binning rule, against per-row renders
+def _window_from_rows(per_row, P, H, lo, hi):
+    """Exact integral of projector coordinates p_t + [lo, hi) over a per-row rendering: projector row v is lit
+    evenly over [v - 1/2, v + 1/2), so it counts with the length of its overlap with the window."""
+    out = np.zeros(per_row.shape[1:])
+    for t in range(H):
+        p_t = (t + 0.5) * P / H - 0.5
+        for v in range(P):
+            w = max(0.0, min(v + 0.5, p_t + hi) - max(v - 0.5, p_t + lo))
+            out[t] += w * per_row[v, t]
+    return out
+
+
+@needs_llvm
+@pytest.mark.parametrize(("P", "windows"), [(24, (1.0, 3.0)), (90, (0.5, 1.0, 1.5, 3.0))])
+def test_rendered_windows_equal_the_exact_integral_over_per_row_renders(tmp_path, P, windows):
+    """A wall above a floor with P / H = 1.5 (96/64) and 5.625 (720/128): sharpened epipolar windows of the
+    rendered transport against the same windows integrated exactly over Mitsuba's own per-row renders.
+
+    Windows whose edges are bin edges (1 and 3 rows) are exact at every P / H.  Windows with edges inside
+    a bin (0.5 and 1.5 rows) are exact where neighbouring projector rows carry the same light -- at 720/128
+    the rows they touch lie inside every camera row's 5.6-row direct footprint; at 96/64 the footprint is
+    1.5 rows and a bin cannot say where inside it its light came from (README, "Conventions").
+    """
+    from planeray.render.reference import render_rows
+    from planeray.synthesis import sharpened_epipolar
+
+    path = scene_xml(tmp_path, PAGE.format(half=6, albedo=0.6), WALL)
+    H, shape, spp = 16, (16, 16), 256
+    rendered = [render_transport(path, shape=shape, projector_rows=P, spp=spp, seed=s, band_rows=8) for s in (1, 2)]
+    loaded, rig, _, _ = _parts(path, P, shape)
+    per_row = [render_rows(loaded, rig, shape, range(P), spp=spp, seed=s)[..., 0] for s in (10, 50)]
+    # the renderer's unit: the radiance of a white surface facing the projector (Mitsuba's own units here)
+    scale = 1.0 / rendered[0].attrs["white_radiance"]
+    zs, z_shifted = [], []
+    for w in windows:
+        est = [sharpened_epipolar(r.transport, width_rows=w) for r in rendered]
+        ref = [scale * _window_from_rows(r, P, H, -w / 2, w / 2) for r in per_row]
+        zs.append(block_z(*est, *ref))
+        # power: a window a quarter row wider is told apart
+        shifted = [scale * _window_from_rows(r, P, H, -w / 2 - 0.125, w / 2 + 0.125) for r in per_row]
+        z_shifted.append(np.abs(block_z(*est, *shifted)).max())
+    z = np.concatenate(zs)
+    assert z.size >= 12 * len(windows)
+    assert np.abs(z).max() < 5.0, np.abs(z).max()
+    assert np.mean(z**2) < 2.5, np.mean(z**2)
+    assert z_shifted[windows.index(1.0)] > 8, z_shifted  # the 1-row window: a quarter row wider adds 25 %

@@ -114,3 +114,113 @@ def test_sweep_render_speed_is_independent_of_band_width():
     for band in paper_sweep().bands(54000, jitter_us=5.0):
         w = T.illumination_weights(band)
         assert ((w > 0) & (w < 1 - 1e-9)).sum(axis=1).max() <= 16
+
+
+# ------------------------------------------------------- the one binning rule (projector rows -> offset bins)
+def _overlap(a0, a1, b0, b1):
+    """Length of the intersection of [a0, a1) and [b0, b1) (written out, independent of planeray)."""
+    return max(0.0, min(a1, b1) - max(a0, b0))
+
+
+def _exact_window(per_row, P, H, t, s, lo, hi):
+    """Light of projector coordinates p_t + [lo, hi) for pixel (t, s): each projector row v is lit
+    uniformly over [v - 1/2, v + 1/2), so it contributes its light times the overlap of its cell."""
+    p_t = (t + 0.5) * P / H - 0.5
+    return sum(per_row[v, t, s] * _overlap(v - 0.5, v + 0.5, p_t + lo, p_t + hi) for v in range(P))
+
+
+def _window_from_bins(dense, offsets, P, H, t, s, lo, hi):
+    """The same window from the offset bins: bin k holds the light of its part inside the projector,
+    [k - 1/2, k + 1/2) clipped to [-1/2, P - 1/2) - p_t, spread evenly over that part (the edge rule)."""
+    p_t = (t + 0.5) * P / H - 0.5
+    total = 0.0
+    for i, k in enumerate(offsets):
+        a, b = max(k - 0.5, -0.5 - p_t), min(k + 0.5, P - 0.5 - p_t)
+        if b > a:
+            total += dense[t, s, i] * _overlap(a, b, lo, hi) / (b - a)
+    return total
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    H=st.integers(1, 9),
+    ratio=st.floats(1.0, 7.0),
+    seed=st.integers(0, 10_000),
+    centre=st.integers(-3, 3),
+    half_width=st.integers(0, 3),
+)
+def test_projector_rows_binned_by_overlap_keep_every_bin_aligned_window_exact(H, ratio, seed, centre, half_width):
+    from planeray.transport import bin_projector_rows
+
+    P = max(1, int(round(H * ratio)))
+    g = RowGeometry(H, P)
+    rng = np.random.default_rng(seed)
+    per_row = rng.random((P, H, 2)) * (rng.random((P, H, 2)) < 0.6)  # sharp, arbitrary light per row
+    B = P + 2
+    offsets = np.arange(-B, B + 1)
+    dense, (row, col, off, val) = bin_projector_rows(per_row, g, offsets)
+    assert row.size == 0  # the band covers every projector row: nothing is long-range
+    # energy per pixel unchanged
+    np.testing.assert_allclose(dense.sum(axis=2), per_row.sum(axis=0), rtol=1e-6, atol=1e-6)
+    # a window whose edges are bin edges ([centre - w/2, centre + w/2), w = 2 half_width + 1) is exact
+    lo, hi = centre - half_width - 0.5, centre + half_width + 0.5
+    for t in range(H):
+        for s in range(2):
+            exact = _exact_window(per_row, P, H, t, s, lo, hi)
+            assert abs(_window_from_bins(dense, offsets, P, H, t, s, lo, hi) - exact) < 1e-5 * (1 + abs(exact))
+
+
+@settings(max_examples=40, deadline=None)
+@given(H=st.integers(1, 8), ratio=st.floats(1.0, 7.0), lo=st.floats(-4, 4), width=st.floats(0.05, 5))
+def test_evenly_lit_rows_give_every_window_exactly(H, ratio, lo, width):
+    """Where the light is the same in neighbouring rows, any window (sub-bin edges too) is exact."""
+    from planeray.transport import bin_projector_rows
+
+    P = max(1, int(round(H * ratio)))
+    g = RowGeometry(H, P)
+    per_row = np.ones((P, H, 1))
+    offsets = np.arange(-P - 2, P + 3)
+    dense, _ = bin_projector_rows(per_row, g, offsets)
+    hi = lo + width
+    for t in range(H):
+        exact = _exact_window(per_row, P, H, t, 0, lo, hi)
+        assert abs(_window_from_bins(dense, offsets, P, H, t, 0, lo, hi) - exact) < 1e-6
+        # planeray's own band weights (the edge rule included) give the same
+        centre_us, width_us = 0.5 * (lo + hi) * 1e6 / 54000, width * 1e6 / 54000
+        image = Transport(dense, offsets, g).render(Band(centre_us, width_us, 54000))
+        assert abs(image[t, 0] - exact) < 1e-5
+
+
+def test_row_bins_split_each_row_by_its_overlap_with_two_bins():
+    g = RowGeometry(64, 96)  # p_t = 1.5 t + 0.25: bins straddle projector rows
+    first, share = g.row_bins(np.arange(64))
+    for t in (0, 1, 17):
+        p_t = 1.5 * t + 0.25
+        for v in (0, 5, 95):
+            k = v + first[t]
+            assert _overlap(v - 0.5, v + 0.5, p_t + k - 0.5, p_t + k + 0.5) == pytest.approx(1 - share[t])
+            assert _overlap(v - 0.5, v + 0.5, p_t + k + 0.5, p_t + k + 1.5) == pytest.approx(share[t])
+    assert np.all(RowGeometry(16).row_bins(np.arange(16))[1] == 0)  # P = H: one bin per row
+
+
+def test_edge_rule_leaves_projector_coordinates_outside_the_projector_unlit():
+    """Eq. 4 integrates over [-1/2, P - 1/2): a bin straddling the edge holds the light of its part inside
+    and a band lights it in proportion to the fraction of that part it covers."""
+    g = RowGeometry(64, 96)
+    t = 0  # p_0 = 0.25: the projector's upper edge is at offset -0.75
+    assert g.coverage(t, 0) == 1.0
+    assert g.coverage(t, -1) == pytest.approx(0.25)  # bin [-1.5, -0.5) of which [-0.75, -0.5) is inside
+    assert g.coverage(t, -2) == 0.0
+    # evenly lit projector: a bin holds its length inside the projector
+    offsets = np.arange(-4, 5)
+    dense = np.broadcast_to(g.coverage(np.arange(64)[:, None], offsets[None, :])[:, None, :], (64, 1, 9))
+    T = Transport(np.ascontiguousarray(dense, np.float32), offsets, g)
+    row_us = 1e6 / 54000
+    image = T.render(Band(0.0, 5 * row_us, 54000))  # band [-2.5, 2.5): lights [-0.5, 2.75) of the projector
+    assert image[0, 0] == pytest.approx(3.25)
+    assert image[30, 0] == pytest.approx(5.0)
+    assert T.render(Band(-1.25 * row_us, 0.5 * row_us, 54000))[0, 0] == 0.0  # [-1.5, -1.0): outside
+    half = T.render(Band(-0.625 * row_us, 0.25 * row_us, 54000))[0, 0]  # [-0.75, -0.5): the inside part of bin -1
+    assert half == pytest.approx(0.25)
+    full = T.render(RowPattern(np.ones(96)))
+    np.testing.assert_allclose(full, T.full_image(), rtol=1e-6)  # all rows lit = all the light

@@ -47,6 +47,7 @@ __all__ = [
     "band_width_rows",
     "illumination",
     "band_bin_weights",
+    "band_interval_weights",
     "RowGeometry",
     "Band",
     "RowPattern",
@@ -212,6 +213,39 @@ def band_bin_weights(offset_rows, centre_rows, width_rows, *, blur_sigma_rows=0.
     (32.4, 1.0)
     """
     k = np.asarray(offset_rows, dtype=float)
+    w = band_interval_weights(
+        k - 0.5, k + 0.5, centre_rows, width_rows, blur_sigma_rows=blur_sigma_rows, line_width_rows=line_width_rows
+    )
+    return np.minimum(w, 1.0)
+
+
+def band_interval_weights(lo_rows, hi_rows, centre_rows, width_rows, *, blur_sigma_rows=0.0, line_width_rows=0.0):
+    """Exact integral of a (blurred) box band over intervals ``[lo, hi)`` of offsets.
+
+    :func:`band_bin_weights` is the case ``[k - 1/2, k + 1/2)``; the part of a bin
+    inside the projector (:meth:`RowGeometry.bin_parts`) is another.
+
+    Parameters
+    ----------
+    lo_rows, hi_rows : array_like
+        Interval ends (offsets, projector rows), ``hi >= lo``.
+    centre_rows, width_rows : array_like
+        Band centre ``I_d`` and width ``I_w`` (Eq. 2).
+    blur_sigma_rows, line_width_rows : float
+        Gaussian and box blur of the band edges (see :func:`band_bin_weights`).
+
+    Returns
+    -------
+    weights : ndarray of float64
+        Length of each interval lit by the band (rows); 0 below ``1e-10``.
+
+    Examples
+    --------
+    >>> float(band_interval_weights(-0.25, 0.5, 0.0, 1.0))
+    0.5
+    """
+    lo_e = np.asarray(lo_rows, dtype=float)
+    hi_e = np.asarray(hi_rows, dtype=float)
     c = np.asarray(centre_rows, dtype=float)
     half = 0.5 * np.asarray(width_rows, dtype=float)
     lo, hi = c - half, c + half
@@ -220,10 +254,10 @@ def band_bin_weights(offset_rows, centre_rows, width_rows, *, blur_sigma_rows=0.
     sigma = float(blur_sigma_rows) if blur_sigma_rows > 1e-6 else 0.0
     line = float(line_width_rows) if line_width_rows > 1e-3 else 0.0
     G = lambda x: _second_antiderivative(x, sigma, line)  # noqa: E731
-    w = G(k + 0.5 - lo) - G(k - 0.5 - lo) - G(k + 0.5 - hi) + G(k - 0.5 - hi)
+    w = G(hi_e - lo) - G(lo_e - lo) - G(hi_e - hi) + G(lo_e - hi)
     # Differences of large numbers leave ~1e-12 noise far from the band; a weight
     # of 1e-10 of a row is far below any photon count, so it is zeroed.
-    return np.where(w < 1e-10, 0.0, np.minimum(w, 1.0))
+    return np.where(w < 1e-10, 0.0, np.minimum(w, np.maximum(hi_e - lo_e, 0.0)))
 
 
 # ----------------------------------------------------------------------------
@@ -261,14 +295,83 @@ class RowGeometry:
         """Projector coordinate ``p_t`` of the centre of camera row ``t``."""
         return (np.asarray(camera_row, dtype=float) + 0.5) * self.rows_per_camera_row - 0.5
 
-    def coverage(self, camera_row, offset_rows):
-        """Fraction of offset bin ``[u - 1/2, u + 1/2)`` of row ``t`` inside the projector.
+    def row_bins(self, camera_row):
+        """Where each projector row falls among the offset bins of camera row ``t`` (the one binning rule).
 
-        Offsets whose projector row ``v = p_t + u`` falls outside ``[-1/2, P - 1/2)``
-        receive no light: rows near the top and bottom have fewer valid offsets.
+        Projector row ``v`` covers projector coordinates ``[v - 1/2, v + 1/2)``, i.e.
+        offsets ``[x - 1/2, x + 1/2)`` with ``x = v - p_t``; offset bin ``k`` covers
+        ``[k - 1/2, k + 1/2)``.  The row therefore overlaps exactly two bins: bin
+        ``v + first`` by ``1 - share`` and bin ``v + first + 1`` by ``share``, with
+        ``first = floor(-p_t)`` and ``share = -p_t - first``, the same for every row
+        ``v`` of one camera row.  Light of row ``v`` is filed under those bins in
+        those proportions (it is spread evenly over the row), so a transport's bins
+        are exact integrals over their cells of the light of whole projector rows.
+        ``share`` is 0 (one bin per row) when ``p_t`` is an integer, as for ``P = H``.
+
+        Parameters
+        ----------
+        camera_row : int or array_like of int
+            Camera row(s) ``t``.
+
+        Returns
+        -------
+        first : ndarray of int64
+            Offset bin of projector row 0's larger-or-equal part: ``floor(-p_t)``.
+        share : ndarray of float64
+            Fraction of every projector row filed under the next bin, in ``[0, 1)``.
+
+        Examples
+        --------
+        The paper's 128 rows of a 720-row projector: camera row 0 sits at
+        ``p_0 = 2.3125``, so projector row 3 (``x = 0.6875``) gives 0.3125 of its
+        light to bin 0 and 0.6875 to bin 1:
+
+        >>> first, share = RowGeometry(128, 720).row_bins(0)
+        >>> int(first) + 3, float(1 - share), float(share)
+        (0, 0.3125, 0.6875)
         """
-        v = self.projector_row_of(camera_row) + np.asarray(offset_rows, dtype=float)
-        return np.clip(np.minimum(v + 0.5, self.projector_rows - 0.5) - np.maximum(v - 0.5, -0.5), 0.0, 1.0)
+        minus_p = -self.projector_row_of(camera_row)
+        first = np.floor(minus_p)
+        return first.astype(np.int64), minus_p - first
+
+    def bin_parts(self, camera_row, offset_rows):
+        """The part of each offset bin inside the projector, ``[lo, hi)`` in offsets (the edge rule).
+
+        Eq. 4 integrates over the projector's rows only: projector coordinates
+        outside ``[-1/2, P - 1/2)`` (above row 0's upper edge, below row ``P - 1``'s
+        lower edge) do not exist, so no light comes from them.  Offset bin ``u`` of
+        camera row ``t`` lies at projector coordinates ``p_t + [u - 1/2, u + 1/2)``;
+        its part inside the projector is ``[lo, hi)`` (``hi = lo`` for a bin wholly
+        outside).  A transport's bin holds the light of that part, spread evenly
+        over it, and an illumination lights a bin in proportion to the fraction of
+        that part it covers (:meth:`Band.weights`, :meth:`RowPattern.weights`): a
+        bin straddling the edge is as bright under full illumination as its light,
+        and a bin wholly outside holds no light and gets weight 0.
+
+        Returns
+        -------
+        lo, hi : ndarray of float64
+            Broadcast over ``camera_row`` and ``offset_rows``.
+        """
+        p_t = self.projector_row_of(camera_row)
+        u = np.asarray(offset_rows, dtype=float)
+        lo = np.maximum(u - 0.5, -0.5 - p_t)
+        hi = np.maximum(np.minimum(u + 0.5, self.projector_rows - 0.5 - p_t), lo)
+        return lo, hi
+
+    def coverage(self, camera_row, offset_rows):
+        """Fraction of offset bin ``[u - 1/2, u + 1/2)`` of row ``t`` inside the projector (see :meth:`bin_parts`).
+
+        Rows near the top and bottom of the image have fewer valid offsets.
+        """
+        lo, hi = self.bin_parts(camera_row, offset_rows)
+        return hi - lo
+
+
+def _fraction_of_part(lit, lo, hi):
+    """``lit / (hi - lo)``: the fraction of each bin's part inside the projector that is lit (0 where none is)."""
+    inside = hi - lo
+    return np.where(inside > 1e-9, np.minimum(lit / np.where(inside > 1e-9, inside, 1.0), 1.0), 0.0)
 
 
 # ----------------------------------------------------------------------------
@@ -321,18 +424,34 @@ class Band:
         )
 
     def weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
-        """Illumination weight of offset bin ``offsets_rows`` for camera row ``rows`` (broadcast)."""
+        """Illumination weight of offset bin ``offsets_rows`` for camera row ``rows`` (broadcast).
+
+        The fraction of the bin's part inside the projector that the band lights
+        (:meth:`RowGeometry.bin_parts`: the edge rule); for a bin wholly inside, the
+        exact integral of the band over it (:func:`band_bin_weights`).
+        """
         rows = np.asarray(rows)
-        offsets = np.asarray(offsets_rows, dtype=float)
-        if self.row_shifts_rows is None:
-            w = self.profile(offsets)
-        else:
+        lo, hi = geometry.bin_parts(rows, offsets_rows)
+        sigma = self.jitter_us * 1e-6 * self.lines_per_second
+        line = self.line_width_us * 1e-6 * self.lines_per_second
+
+        def lit(shift, a, b):
+            c = self.centre_rows + shift
+            return band_interval_weights(a, b, c, self.width_rows, blur_sigma_rows=sigma, line_width_rows=line)
+
+        if self.row_shifts_rows is not None:
             shifts = np.asarray(self.row_shifts_rows, dtype=float)
             w = 0.0
             for frame_shift in shifts:  # a handful of frames; each term is vectorized
-                w = w + self.profile(offsets, frame_shift[rows])
-            w = w / len(shifts)
-        return w * geometry.coverage(rows, offsets)
+                w = w + lit(frame_shift[rows], lo, hi)
+            return _fraction_of_part(w / len(shifts), lo, hi)
+        # the same profile for every row, recomputed only on the bins that straddle the projector's edge
+        w = np.array(np.broadcast_to(self.profile(offsets_rows), lo.shape), dtype=np.float64)
+        edge = hi - lo < 1.0 - 1e-12
+        if edge.any():
+            a, b = lo[edge], hi[edge]
+            w[edge] = _fraction_of_part(lit(0.0, a, b), a, b)
+        return w
 
 
 @dataclass(frozen=True)
@@ -340,7 +459,8 @@ class RowPattern:
     """Any illumination given as an intensity per projector row (relighting, Sec. 9).
 
     ``pattern`` has one value per projector row ``v = 0 .. P-1``; the weight of an
-    offset bin is the exact average of the piecewise-constant pattern over the bin.
+    offset bin is the exact average of the piecewise-constant pattern over the
+    bin's part inside the projector (:meth:`RowGeometry.bin_parts`).
     """
 
     pattern: np.ndarray
@@ -350,9 +470,12 @@ class RowPattern:
         if p.size != geometry.projector_rows:
             raise ValueError(f"pattern has {p.size} rows, projector has {geometry.projector_rows}")
         edges = np.concatenate([[0.0], np.cumsum(p)])  # integral up to projector coordinate x - 1/2
-        v = geometry.projector_row_of(rows) + np.asarray(offsets_rows, dtype=float)
+        lo, hi = geometry.bin_parts(rows, offsets_rows)
+        p_t = geometry.projector_row_of(rows)
         cum = lambda x: np.interp(x + 0.5, np.arange(p.size + 1), edges)  # noqa: E731
-        return cum(v + 0.5) - cum(v - 0.5)
+        inside = hi - lo
+        mean = (cum(p_t + hi) - cum(p_t + lo)) / np.where(inside > 1e-9, inside, 1.0)
+        return np.where(inside > 1e-9, mean, 0.0)
 
 
 # ----------------------------------------------------------------------------

@@ -29,7 +29,7 @@ import numpy as np
 
 from .timing import RowGeometry, band_bin_weights
 
-__all__ = ["SparseEntries", "Transport"]
+__all__ = ["SparseEntries", "Transport", "bin_projector_rows"]
 
 _PLATEAU_TOL = 1e-9
 
@@ -62,6 +62,77 @@ class SparseEntries:
     def empty(cls) -> SparseEntries:
         z = np.zeros(0)
         return cls(z, z, z, z)
+
+
+def bin_projector_rows(per_row, geometry: RowGeometry, offsets_rows, *, far: bool = True):
+    """File light given per projector row under offset bins, by the one exact rule.
+
+    Projector row ``v`` covers ``[v - 1/2, v + 1/2)``; for camera row ``t`` its
+    light goes to the bins ``[k - 1/2, k + 1/2)`` of ``u = v - p_t`` that the row
+    overlaps, in proportion to the overlap (:meth:`planeray.timing.RowGeometry.row_bins`).
+    Every producer that knows its light per whole projector row (``planeray render``
+    in all its paths) bins it here, so the bins are the exact integrals of that
+    light over their cells and each pixel keeps its energy.
+
+    Parameters
+    ----------
+    per_row : ndarray, shape (P, H, W)
+        Light from projector row ``v`` to camera pixel ``(t, s)`` (any units).
+    geometry : RowGeometry
+        Camera and projector rows (``P`` must be ``geometry.projector_rows``).
+    offsets_rows : array_like of int, shape (U,)
+        Consecutive integer offsets of the dense band.
+    far : bool
+        Also return the light that falls outside the band, as coordinate entries.
+
+    Returns
+    -------
+    dense : ndarray of float32, shape (H, W, U)
+    entries : tuple of ndarray ``(row, col, offset, value)``
+        Nonzero light outside the band (empty arrays when ``far`` is False).
+
+    Examples
+    --------
+    Two camera rows of a three-row projector: camera row 0 sits at ``p_0 = 0.25``,
+    so projector row 0 gives 3/4 of its light to bin 0 and 1/4 to bin 1 (the
+    same energy, in the cells it covers):
+
+    >>> per_row = np.zeros((3, 2, 1))
+    ... per_row[0, 0, 0] = 1.0
+    >>> dense, _ = bin_projector_rows(per_row, RowGeometry(2, 3), [-1, 0, 1])
+    >>> dense[0, 0].tolist()
+    [0.0, 0.75, 0.25]
+    """
+    per_row = np.asarray(per_row)
+    offsets = np.asarray(offsets_rows).astype(np.int64)
+    P, H, W = per_row.shape
+    if P != geometry.projector_rows or H != geometry.camera_rows:
+        raise ValueError(f"light of shape {per_row.shape} for {geometry.projector_rows} projector and {H} camera rows")
+    k_lo, k_hi = int(offsets[0]), int(offsets[-1])
+    first, share = geometry.row_bins(np.arange(H))
+    dense = np.zeros((H, W, offsets.size), np.float32)
+    rows, cols, ks, vals = [], [], [], []
+    for t in range(H):
+        light = per_row[:, t, :].astype(np.float64)  # (P, W)
+        binned = np.zeros((P + 1, W))  # bins first[t] .. first[t] + P
+        binned[:P] += (1.0 - share[t]) * light
+        binned[1:] += share[t] * light
+        k = np.arange(P + 1) + first[t]
+        inside = (k >= k_lo) & (k <= k_hi)
+        dense[t][:, k[inside] - k_lo] = binned[inside].T
+        if far:
+            outside = binned[~inside]
+            nz = np.nonzero(outside)
+            if nz[0].size:
+                rows.append(np.full(nz[0].size, t))
+                cols.append(nz[1])
+                ks.append(k[~inside][nz[0]])
+                vals.append(outside[nz])
+    if rows:
+        entries = tuple(np.concatenate(a) for a in (rows, cols, ks, vals))
+    else:
+        entries = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    return dense, entries
 
 
 @dataclass
@@ -120,14 +191,17 @@ class Transport:
     def from_entries(cls, shape, offsets_rows, row, col, offset, value, *, geometry=None, dense=None) -> Transport:
         """Build a transport from coordinate entries, binning each offset into its bin.
 
-        Entries with offsets inside ``offsets_rows`` are added to the dense band (to
+        ``offset`` holds point positions ``u`` (continuous, in projector rows): each
+        is filed under the bin ``[k - 1/2, k + 1/2)`` that contains it,
+        ``k = floor(u + 1/2)``.  Light known per whole projector row goes through
+        :func:`bin_projector_rows` instead.  Entries with offsets inside ``offsets_rows`` are added to the dense band (to
         ``dense`` if given), the others become sparse long-range entries.
         """
         offsets_rows = np.asarray(offsets_rows)
         H, W = shape
         if dense is None:
             dense = np.zeros((H, W, offsets_rows.size), np.float32)
-        k = np.rint(np.asarray(offset, float)).astype(np.int64)
+        k = np.floor(np.asarray(offset, float) + 0.5).astype(np.int64)
         row = np.asarray(row, np.int64)
         col = np.asarray(col, np.int64)
         value = np.asarray(value, np.float64)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from .._validate import check_number, check_positive
-from ..timing import band_bin_weights
 from ._device import DEFAULT_FRAME_PERIOD_US, capture, device_geometry, signal_scale
 from .emulation import emulate_delay_image
 from .nayar import capture_direct_global
@@ -52,18 +51,12 @@ def synchronized_delay_image(device, delay_us: float, exposure_us: float, *, sub
 def deliverable_direct(scene) -> np.ndarray:
     """Ground-truth direct light a projector can actually deliver to each pixel.
 
-    ``Scene.direct`` spread over the camera row's footprint, keeping only the
-    part of the footprint that lies on the projector (rows at the very top and
-    bottom of a ``P != H`` image lose a few percent).  Equal to ``Scene.direct``
-    everywhere else.
+    A camera row's footprint ``p_t +- P / (2 H)`` always lies on the projector
+    (``[-1/2, P - 1/2)``), and by the edge rule (:meth:`planeray.timing.RowGeometry.bin_parts`)
+    a bin straddling the projector's end holds only light from its part on the
+    projector, so all of ``Scene.direct`` is deliverable, top and bottom rows included.
     """
-    g = scene.geometry
-    half = int(np.ceil(0.5 * g.rows_per_camera_row + 1.0))
-    offsets = np.arange(-half, half + 1)
-    foot = band_bin_weights(offsets, 0.0, g.rows_per_camera_row)
-    foot = foot / foot.sum()
-    inside = (foot[None, :] * g.coverage(np.arange(g.camera_rows)[:, None], offsets[None, :])).sum(axis=1)
-    return (np.asarray(scene.direct, np.float64) * inside[:, None]).astype(np.float32)
+    return np.asarray(scene.direct, np.float32).copy()
 
 
 def _errors(estimate, truth, masks: dict, reference=None, valid=None) -> dict:

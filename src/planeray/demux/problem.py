@@ -167,8 +167,8 @@ class DemuxProblem:
         bands = [b for i, b in enumerate(stack.bands()) if not stack.excluded[i]]
         geometry = stack.geometry
         rows = np.arange(stack.shape[0])
-        # A row's matrix is the bands' common profile clipped to the projector, so
-        # rows with the same projector coverage share one matrix.
+        # A row's matrix is the bands' common profile, clipped to the projector by the
+        # edge rule (RowGeometry.bin_parts), so rows with the same projector coverage share one matrix.
         profile = np.stack([b.profile(offsets) for b in bands])  # (N, U)
         coverage = geometry.coverage(rows[:, None], offsets[None, :])  # (H, U)
         lit_profile = profile.max(axis=0) > 0
@@ -190,7 +190,8 @@ class DemuxProblem:
             t0 = members[0]
             nz = np.flatnonzero(lit[t0])
             valid = slice(int(nz[0]), int(nz[-1]) + 1) if nz.size else slice(0, 0)
-            groups.append(RowGroup(members, (profile * coverage[t0])[:, valid].astype(np.float64), valid))
+            A = np.stack([b.weights(geometry, t0, offsets) for b in bands])  # the edge rule at the projector's ends
+            groups.append(RowGroup(members, A[:, valid].astype(np.float64), valid))
         problem = cls(
             offsets, used, groups, row_group, alpha, beta, stack.shape, stack.lines_per_second, stack.projector_rows
         )

@@ -14,8 +14,9 @@ transport store (resumable batch by batch).  Both:
    facing the projector, on its axis, at the depth the camera's centre pixel
    sees (``reference_distance``) -- so such a surface gives 1 summed over all
    rows, like the built-in scenes' white surfaces;
-4. bin it by offset ``u = v - p_t`` (:class:`planeray.timing.RowGeometry`):
-   the dense band ``|u| <= band_rows``, light from farther rows as sparse
+4. bin it by offset ``u = v - p_t``: projector row ``v`` covers ``[v - 1/2, v + 1/2)``
+   and its light goes to the two offset bins ``[k - 1/2, k + 1/2)`` it overlaps, in
+   proportion (:func:`planeray.transport.bin_projector_rows`); the dense band ``|u| <= band_rows``, light from farther rows as sparse
    long-range entries (at most ``max_sparse``, the largest; the rest dropped with
    a :class:`RenderWarning` stating the fraction of light dropped);
 5. label each pixel with its dominant light-transport effect from the path
@@ -44,7 +45,7 @@ import numpy as np
 from .._validate import check_integer
 from ..errors import InputError
 from ..timing import RowGeometry
-from ..transport import SparseEntries, Transport
+from ..transport import SparseEntries, Transport, bin_projector_rows
 
 __all__ = ["RenderWarning", "RenderResult", "render_transport", "render_to_store", "labels_from_classes"]
 
@@ -344,31 +345,15 @@ def _finish(setup: _Setup, full, classes, albedo, *, seconds) -> RenderResult:
     geometry = RowGeometry(H, P)
     B = p["band_rows"]
     offsets = np.arange(-B, B + 1)
-    # projector row v lies in offset bin k = round(v - p_t) of camera row t
-    p_t = geometry.projector_row_of(np.arange(H))
-    v = np.arange(P)
-    k = np.floor(v[None, :] - p_t[:, None] + 0.5).astype(np.int64)  # (H, P)
-    dense = np.zeros((H, W, offsets.size), np.float32)
-    rgb_band = np.zeros((H, W, offsets.size, 3), np.float32) if p["rgb"] else None
-    far_rows, far_cols, far_k, far_vals = [], [], [], []
-    for t in range(H):
-        inside = np.abs(k[t]) <= B
-        vin = v[inside]
-        dense[t][:, k[t][inside] + B] = mono[vin, t, :].T
-        if rgb_band is not None:
-            rgb_band[t][:, k[t][inside] + B, :] = np.moveaxis(full[:, vin, t, :], 0, -1).transpose(1, 0, 2)
-        vout = v[~inside]
-        block = mono[vout, t, :]  # (n_out, W)
-        nz = np.nonzero(block)
-        if nz[0].size:
-            far_rows.append(np.full(nz[0].size, t))
-            far_cols.append(nz[1])
-            far_k.append(k[t][vout][nz[0]])
-            far_vals.append(block[nz])
+    # projector row v covers [v - 1/2, v + 1/2): its light is shared between the two offset bins of
+    # u = v - p_t it overlaps (planeray.timing.RowGeometry.row_bins), band and long-range entries alike
+    dense, (row, col, off, val) = bin_projector_rows(mono, geometry, offsets)
+    rgb_band = None
+    if p["rgb"]:
+        rgb_band = np.stack([bin_projector_rows(c, geometry, offsets, far=False)[0] for c in full], axis=-1)
     dropped = 0.0
     total = float(np.abs(mono).sum())
-    if far_vals:
-        row, col, off, val = (np.concatenate(a) for a in (far_rows, far_cols, far_k, far_vals))
+    if val.size:
         if val.size > p["max_sparse"]:
             keep = np.argpartition(-np.abs(val), p["max_sparse"] - 1)[: p["max_sparse"]] if p["max_sparse"] else []
             lost = np.abs(val).sum() - np.abs(val[keep]).sum()
@@ -390,6 +375,7 @@ def _finish(setup: _Setup, full, classes, albedo, *, seconds) -> RenderResult:
         "method": "mitsuba_render",
         "reference_distance": setup.reference_distance,
         "radiance_unit": "white Lambertian surface facing the projector at reference_distance = 1",
+        "white_radiance": setup.white_radiance,  # that surface's radiance in the scene's own units
         "dropped_fraction": dropped,
         "seconds": float(seconds),
     }

@@ -4,7 +4,9 @@ planeray keeps the file's shapes (with their BSDFs and media) and its first
 ``perspective`` sensor (the camera pose, :mod:`planeray.render.rig`), and
 builds the rectified projector itself.  Media must be ``homogeneous`` (the
 one-pass tally handles them exactly; heterogeneous media are refused with
-one line).  The file's identity for resuming a render is the SHA-256 of its
+one line) behind boundaries that do not refract (``null``, ``thindielectric``):
+a point projector's light cannot refract into a medium, so a dielectric
+boundary is refused with one line naming the shape.  The file's identity for resuming a render is the SHA-256 of its
 bytes and of every file it references (``filename`` properties: meshes,
 textures), so a render resumes only on provably identical inputs.
 """
@@ -72,6 +74,30 @@ def scene_file_digest(path) -> str:
     return h.hexdigest()
 
 
+def _check_medium_boundary(mi, shape, path) -> None:
+    """Refuse a medium whose boundary refracts (a dielectric): no light of a point projector can enter it.
+
+    The projector is a pinhole (a delta light): a path inside the medium reaches it
+    only along a straight shadow ray, which a refracting interface never lets
+    through, and the caustic pass stops at medium boundaries.  Such light would be
+    silently missing from ``T`` (Mitsuba's own ``volpath`` misses it too), so the
+    scene is refused.  Boundaries that let light through unbent -- ``null``,
+    ``thindielectric`` (a null-transmission component) -- and opaque ones are fine.
+    """
+    bsdf = shape.bsdf()
+    if bsdf is None:
+        return
+    flags = int(bsdf.flags())
+    if flags & int(mi.BSDFFlags.Transmission) and not flags & int(mi.BSDFFlags.Null):
+        kind = str(bsdf).split("[", 1)[0].strip() or "refracting"
+        raise InputError(
+            f"shape {shape.id()!r} bounds a medium through a {kind} boundary, which refracts: no light of the "
+            "point projector can enter the medium that way, so it would be missing from T; give the shape an "
+            'index-matched boundary (<bsdf type="null"/>, or "thindielectric" for a thin glass wall)',
+            path,
+        )
+
+
 def load_scene_file(path) -> LoadedScene:
     """Load ``path`` in the active Mitsuba variant (:func:`planeray.render._mitsuba.choose_variant`)."""
     import mitsuba as mi
@@ -99,6 +125,7 @@ def load_scene_file(path) -> LoadedScene:
                         f"shape {shape.id()!r} has a heterogeneous medium; planeray renders homogeneous media only",
                         path,
                     )
+                _check_medium_boundary(mi, shape, path)
                 has_media = True
     sensors = list(loaded.sensors())
     sensor = sensors[0] if sensors else None

@@ -211,7 +211,7 @@ def trace_sphere(
             v = w * mirror_reflectance * alb[qr[ok], qc[ok]]
             ent_r.append(br[ok])
             ent_c.append(bc[ok])
-            ent_k.append(np.rint(to_proj(qy[ok]) - p_t[br[ok]]).astype(np.int64))
+            ent_k.append(np.floor(to_proj(qy[ok]) - p_t[br[ok]] + 0.5).astype(np.int64))
             ent_v.append(v)
             np.add.at(seen, (br[ok], bc[ok]), v)
 
@@ -227,7 +227,7 @@ def trace_sphere(
             v = mirror_reflectance * alb[qr, qc] / (n_splat * n_splat)
             ent_r.append(qr)
             ent_c.append(qc)
-            ent_k.append(np.rint(to_proj(y[ok]) - p_t[qr]).astype(np.int64))
+            ent_k.append(np.floor(to_proj(y[ok]) - p_t[qr] + 0.5).astype(np.int64))
             ent_v.append(v)
             np.add.at(splat, (qr, qc), v)
 
@@ -296,7 +296,7 @@ def gather_resting_sphere(
             r_hit, c_hit = rr[hit], cc[hit]
             rows_l.append(r_hit)
             cols_l.append(c_hit)
-            k_l.append(np.rint(y_src / mm_per_row - 0.5 - p_t[r_hit]).astype(np.int64))
+            k_l.append(np.floor(y_src / mm_per_row - p_t[r_hit]).astype(np.int64))
             v_l.append(mirror_reflectance * albedo[r_hit, c_hit] * density / (n_gather * n_gather))
     return np.concatenate(rows_l), np.concatenate(cols_l), np.concatenate(k_l), np.concatenate(v_l)
 

@@ -623,8 +623,10 @@ def build(
     direct = direct.astype(np.float32)
     fo = footprint_kernel(offsets, rpc).astype(np.float32)
     dense = sub.astype(np.float32) + direct[:, :, None] * fo[None, None, :]
+    ambient = dense.sum(axis=2, dtype=np.float64).astype(np.float32)  # room light reaches the whole arm
+    # the edge rule: light enters only where the projector is, [-1/2, P - 1/2) (RowGeometry.bin_parts)
+    dense *= geometry.coverage(np.arange(H)[:, None], offsets[None, :]).astype(np.float32)[:, None, :]
     transport = Transport(dense, offsets, geometry)
-    ambient = dense.sum(axis=2, dtype=np.float64).astype(np.float32)
     labels = np.where(on, 2, 1).astype(np.uint8)
     maps.update(
         vein_mask=vid > 0,
