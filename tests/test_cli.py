@@ -129,7 +129,9 @@ def test_export_import_round_trip(stack_path, tmp_path):
         (("info", "/no/such/stack"), "does not exist"),
         (("simulate", "no_such_scene", "--out", "/tmp/x.zarr"), "unknown scene"),
         (("simulate", "diffuse_plane", "--out", "/tmp/x.zarr", "--sweep", "bogus"), "unknown sweep"),
-        (("simulate", "diffuse_plane", "--out", "/tmp/x.zarr", "--bit-depth", "20"), "bit_depth"),
+        (("simulate", "diffuse_plane", "--out", "/tmp/x.zarr", "--bit-depth", "20"), "--bit-depth must be"),
+        (("simulate", "diffuse_plane", "--out", "/tmp/x.zarr", "--size", "4", "16"), "--size must be"),
+        (("simulate", "wax", "--out", "/tmp/x.zarr", "--spp", "16"), "--spp is a rendering option of mitsuba:"),
     ],
 )
 def test_errors_are_one_line(args, message):
@@ -137,6 +139,50 @@ def test_errors_are_one_line(args, message):
     assert res.exit_code == 1
     assert message in res.output
     assert "Traceback" not in res.output
+
+
+def test_simulate_sweeps_a_transport_store_as_its_scene(tmp_path):
+    """A transport written with plain zarr by the contract (no planeray writer): the stack's expected images are
+    Eq. 4 over its bins (independent dense sum here), and its size is the store's."""
+    import zarr
+
+    from planeray.timing import quick_sweep
+
+    H, W, P = 12, 10, 60
+    offsets = np.arange(-40, 41)
+    rng = np.random.default_rng(0)
+    T = (0.05 * rng.random((H, W, offsets.size)) * np.exp(-np.abs(offsets) / 6.0)).astype(np.float32)
+    store = tmp_path / "mine.zarr"
+    g = zarr.open_group(str(store), mode="w", zarr_format=3)
+    g.create_array("T", data=T)
+    g.attrs.update(
+        {"format": "planeray-transport", "format_version": 1, "offsets_rows": offsets.tolist(), "projector_rows": P}
+    )
+    args = ("--sweep", "quick", "--no-noise", "--ambient", 0, "--jitter-us", 0, "--row-jitter-us", 0)
+    res = invoke("simulate", store, "--out", tmp_path / "s.zarr", *args)
+    assert res.exit_code == 0, res.output
+    st = read_stack(tmp_path / "s.zarr")
+    assert st.shape == (H, W) and st.projector_rows == P and st.metadata["scene"]["store"] == str(store)
+    # expected images: sum over bins of the band's weight times T, the edge rule written out
+    scale = st.metadata["signal_scale"]
+    for i in (0, 4, 13):
+        d, e = quick_sweep().delay_us[i], quick_sweep().exposure_us[i]
+        ref = np.zeros((H, W))
+        for t in range(H):
+            p_t = (t + 0.5) * P / H - 0.5
+            for j, k in enumerate(offsets):
+                a, b = max(k - 0.5, -0.5 - p_t), min(k + 0.5, P - 0.5 - p_t)
+                if b <= a:
+                    continue
+                c, half = d * 54000e-6, e * 54000e-6 / 2
+                lit = max(0.0, min(b, c + half) - max(a, c - half)) / (b - a)
+                ref[t] += lit * T[t, :, j]
+        np.testing.assert_allclose(np.asarray(st.images[i]) / scale, ref, rtol=1e-5, atol=1e-6)
+    # a size or projector that is not the store's is refused, naming the option
+    res = invoke("simulate", store, "--out", tmp_path / "x.zarr", "--projector-rows", 720)
+    assert res.exit_code == 1 and "--projector-rows asks for 720" in res.output
+    res = invoke("simulate", tmp_path / "s.zarr", "--out", tmp_path / "y.zarr")
+    assert res.exit_code == 1 and "a stack, not a transport store" in res.output
 
 
 def test_bad_pixel_is_reported(stack_path, tmp_path):

@@ -534,6 +534,53 @@ def test_cli_render(tmp_path):
 
 
 @needs_llvm
+def test_cli_render_projector_options_are_recorded_and_bad_values_named_as_typed(tmp_path):
+    """--projector-columns / --projector-aspect / --projector-vfov set the rig; the store records it and where
+    each value came from; messages name the options as typed (--rows, --size), the file for a wrong sensor."""
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+    from planeray.io import read_transport
+
+    runner = CliRunner()
+    path = scene_xml(tmp_path, PAGE.format(half=6, albedo=0.6), WALL)
+    base = ["render", str(path), "--rows", "30", "--size", "10", "10", "--spp", "2"]
+    res = runner.invoke(app, [*base, "--out", str(tmp_path / "a.zarr"), "--projector-columns", "50"])
+    assert res.exit_code == 0, res.output
+    _, attrs = read_transport(tmp_path / "a.zarr")
+    rig = attrs["rig"]
+    assert rig["projector_columns"] == 50 and rig["projector_aspect"] == pytest.approx(5 / 3)
+    assert attrs["rig_sources"]["projector_aspect"] == "argument"
+    assert attrs["rig_sources"]["baseline"] == "scene file default planeray_baseline"
+    assert rig["vfov_deg"] == pytest.approx(40 * 16 / 16)  # the file's square sensor: vertical fov = its fov
+    res = runner.invoke(app, [*base, "--out", str(tmp_path / "b.zarr"), "--projector-vfov", "25"])
+    assert res.exit_code == 0, res.output
+    _, attrs = read_transport(tmp_path / "b.zarr")
+    assert attrs["rig"]["vfov_deg"] == 25 and attrs["rig_sources"]["vfov_deg"] == "argument (projector)"
+    assert attrs["rig_sources"]["projector_aspect"].startswith("planeray default: 16:9")
+    bad = [
+        ([*base, "--projector-columns", "50", "--projector-aspect", "1.5"], "columns or its aspect, not both"),
+        (["render", str(path), "--rows", "0"], "--rows must be an integer >= 1, got 0"),
+        (["render", str(path), "--size", "0", "4"], "--size must be an integer >= 1, got 0"),
+        ([*base, "--projector-vfov", "200"], "--projector-vfov must be in (0, 180) degrees"),
+        ([*base, "--variant", "cuda"], "--variant must be 'llvm' or 'scalar'"),
+    ]
+    for args, message in bad:
+        res = runner.invoke(app, [*args, "--out", str(tmp_path / "x.zarr")])
+        assert res.exit_code == 1 and message in res.output, (args, res.output)
+        assert "projector_rows" not in res.output and "shape[" not in res.output
+    ortho = tmp_path / "ortho.xml"
+    ortho.write_text(
+        path.read_text()
+        .replace('type="perspective"', 'type="orthographic"')
+        .replace('<float name="fov" value="40"/>', "")
+    )
+    res = runner.invoke(app, ["render", str(ortho), "--out", str(tmp_path / "o.zarr")])
+    assert res.exit_code == 1 and f"{ortho}: the scene's first sensor is a" in res.output
+    assert "--look-from" in res.output and "perspective" in res.output
+
+
+@needs_llvm
 def test_viewer_and_scene_registry_take_mitsuba_scenes():
     from planeray.scenes import is_scene_name, list_scenes
     from planeray.viewer.session import ViewSettings, open_source

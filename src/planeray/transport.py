@@ -6,7 +6,10 @@ light it receives from each projector row, indexed by the offset ``u = v - t``
 
 * a **dense band** ``dense[t, s, k]`` over the integer offsets ``offsets_rows[k]``
   around the epipolar plane -- direct light, subsurface scattering, diffuse
-  interreflections; this is the array stored as ``T`` in the transport store;
+  interreflections; this is the array stored as ``T`` in the transport store.
+  Bin ``k`` is ``[k - 1/2, k + 1/2)`` of ``u = v - p_t`` and holds the light of its
+  part on the projector (the binning and edge rules:
+  :meth:`planeray.timing.RowGeometry.row_bins`, :meth:`~planeray.timing.RowGeometry.bin_parts`);
 * optional **sparse long-range entries** ``(row, col, offset, value)`` for light
   from far rows (specular interreflections) that would waste a dense band.
 

@@ -27,8 +27,12 @@ StackArg = Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")
 DEBUG = {"enabled": False}
 
 
-def error_line(exc: BaseException) -> str:
-    """One line for any failure: planeray's own errors as they are, file-system and other errors named."""
+def error_line(exc: BaseException, options: dict | None = None) -> str:
+    """One line for any failure: planeray's own errors as they are, file-system and other errors named.
+
+    ``options`` maps the library's parameter names to the command's options as typed
+    (``{"projector_rows": "--rows"}``): a message about ``projector_rows`` then names ``--rows``.
+    """
     if isinstance(exc, PlanerayError):
         text = str(exc)
     elif isinstance(exc, OSError) and exc.errno is not None:
@@ -39,16 +43,50 @@ def error_line(exc: BaseException) -> str:
         text = str(exc)
     else:
         text = f"{type(exc).__name__}: {exc} (unexpected; run `planeray --debug ...` for the traceback)"
-    return " ".join(text.split())  # one line, whatever the cause put in it
+    text = " ".join(text.split())  # one line, whatever the cause put in it
+    return _as_typed(text, options) if options else text
 
 
-def print_error(exc: BaseException) -> None:
-    """Print ``error: <one line>`` on stderr, verbatim (file names with [brackets] are not markup)."""
-    console.print(Text("error: ", style="bold red") + Text(error_line(exc)), highlight=False, soft_wrap=True)
+def _as_typed(text: str, options: dict) -> str:
+    """Rename the library's parameters to the options the user typed, where a message names them.
+
+    Only a parameter that a message is *about* is renamed: ``NAME must ...``, ``NAME = ...``,
+    ``NAME[0] must ...`` (one element of a tuple option such as ``shape`` -> ``--size``),
+    ``NAME (...)`` and ``NAME:`` -- never a word inside other text.
+    """
+    import re
+
+    for name in sorted(options, key=len, reverse=True):
+        pattern = rf"(?<![\w\-.]){re.escape(name)}(\[\d+\])?(?=( must\b| =| \(|:| is\b| and\b))"
+        text = re.sub(pattern, options[name], text)
+    return text
 
 
-def _friendly_errors(fn):
-    """Turn every failure into one red line and exit status 1 (``--debug``: the traceback)."""
+def option_spellings(fn) -> dict:
+    """``{parameter: "--option"}`` for every option of a typer command function (its first long spelling)."""
+    import typing
+
+    hints = typing.get_type_hints(fn, include_extras=True)
+    names = {}
+    for param, hint in hints.items():
+        for meta in getattr(hint, "__metadata__", ()):
+            decls = getattr(meta, "param_decls", None)
+            if decls is None or type(meta).__name__ != "OptionInfo":
+                continue
+            longs = [d.split("/")[0] for d in decls if d.startswith("--")]
+            names[param] = longs[0] if longs else "--" + param.replace("_", "-")
+    return names
+
+
+def _friendly_errors(fn=None, *, options: dict | None = None):
+    """Turn every failure into one red line and exit status 1 (``--debug``: the traceback).
+
+    Messages name the command's options as typed: every option of ``fn`` by its own
+    name, plus ``options`` (library parameter -> option) where the library calls a
+    value differently (``@_friendly_errors(options={"projector_rows": "--rows"})``).
+    """
+    if fn is None:
+        return functools.partial(_friendly_errors, options=options)
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
@@ -62,7 +100,10 @@ def _friendly_errors(fn):
         except Exception as exc:
             if DEBUG["enabled"]:
                 raise
-            print_error(exc)
+            spellings = {**option_spellings(fn), **(options or {})}
+            console.print(
+                Text("error: ", style="bold red") + Text(error_line(exc, spellings)), highlight=False, soft_wrap=True
+            )
             raise typer.Exit(1) from None
 
     return wrapper

@@ -12,8 +12,17 @@ from rich.text import Text
 from .._console import console, out, progress_bar
 from ._common import _check_outputs, _friendly_errors
 
+#: The library's names for what `render` and `simulate mitsuba:` call by their options.
+RENDER_OPTIONS = {
+    "projector_rows": "--rows",
+    "shape": "--size",
+    "prefer": "--variant",
+    "projector_vfov_deg": "--projector-vfov",
+    "vfov_deg": "--vfov",
+}
 
-@_friendly_errors
+
+@_friendly_errors(options=RENDER_OPTIONS)
 def render(
     scene_file: Annotated[
         str, typer.Argument(help="Mitsuba 3 XML scene with a perspective sensor, or a shipped example's name.")
@@ -39,6 +48,20 @@ def render(
     rgb: Annotated[bool, typer.Option("--rgb/--mono", help="Three colour channels (T is their luminance).")] = False,
     baseline: Annotated[
         float | None, typer.Option(help="Projector to the camera's right, in scene units (default: the file's).")
+    ] = None,
+    projector_aspect: Annotated[
+        float | None,
+        typer.Option(help="Projector width / height (default: the file's planeray_projector_aspect, else 16:9)."),
+    ] = None,
+    projector_columns: Annotated[
+        int | None, typer.Option(help="Projector columns, instead of --projector-aspect (e.g. 1280 for 1280x720).")
+    ] = None,
+    projector_vfov: Annotated[
+        float | None,
+        typer.Option(
+            help="Projector's vertical field of view, degrees, if it differs from the camera's "
+            "(the rectified camera then spans the projector's rows)."
+        ),
     ] = None,
     variant: Annotated[
         str | None, typer.Option(help="Force the Mitsuba variant family: llvm or scalar (default: llvm if it loads).")
@@ -74,6 +97,9 @@ def render(
         max_sparse=max_sparse,
         rgb=rgb,
         baseline=baseline,
+        projector_aspect=projector_aspect,
+        projector_columns=projector_columns,
+        projector_vfov_deg=projector_vfov,
         variant=variant,
         camera=None if look_from is None else (look_from, look_at, up),
         vfov_deg=None if look_from is None else vfov,
@@ -89,8 +115,10 @@ def render(
     for w in caught:
         console.print(Text("warning: ", style="bold yellow") + Text(str(w.message)), highlight=False, soft_wrap=True)
     a = result.attrs
+    r = a["rig"]
     out.print(
-        f"transport: {out_path}  ({size[0]}x{size[1]}, {rows} rows, offsets -{band_rows}..{band_rows}, "
+        f"transport: {out_path}  ({size[0]}x{size[1]}, projector {r['projector_rows']}x{r['projector_columns']} "
+        f"rows x columns, vfov {r['vfov_deg']:.4g} deg, baseline {r['baseline']:.4g}, offsets -{band_rows}..{band_rows}, "
         f"{len(result.transport.sparse)} sparse entries, {a['variant']}, {a['seconds']:.1f} s)"
     )
 

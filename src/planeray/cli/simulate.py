@@ -24,18 +24,25 @@ def scenes():
     out.print(table)
 
 
-@_friendly_errors
+#: What ``simulate`` calls by the library's names.
+SIMULATE_OPTIONS = {"shape": "--size", "projector_vfov_deg": "--projector-vfov", "prefer": "--variant"}
+
+
+@_friendly_errors(options=SIMULATE_OPTIONS)
 def simulate(
     scene: Annotated[
         str,
         typer.Argument(
-            help="Built-in scene (see `planeray scenes`), or mitsuba:FILE.xml (a Mitsuba 3 scene rendered with `planeray render`)."
+            help="Built-in scene (see `planeray scenes`), mitsuba:FILE.xml (a Mitsuba 3 scene, rendered as "
+            "`planeray render` does), or a transport store (rendered, demultiplexed or your own)."
         ),
     ],
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Stack to write (Zarr directory).")],
-    size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
+    size: Annotated[
+        tuple[int, int] | None, typer.Option(help="Image size H W (camera pixels; default 128 128, a store's own).")
+    ] = None,
     projector_rows: Annotated[
-        int | None, typer.Option(help="Projector rows spanned by the image (default: H).")
+        int | None, typer.Option(help="Projector rows spanned by the image (default: H; a store's own).")
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the scene textures and the camera noise.")] = 0,
     sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep: paper (85 images) or quick.")] = "paper",
@@ -66,17 +73,58 @@ def simulate(
     truth: Annotated[
         Path | None, typer.Option(help="Also write the scene's ground-truth transport store here.")
     ] = None,
+    spp: Annotated[int | None, typer.Option(help="mitsuba: scenes: camera paths per pixel (default 64).")] = None,
+    batch_spp: Annotated[int | None, typer.Option(help="mitsuba: scenes: paths per pixel per batch.")] = None,
+    max_depth: Annotated[
+        int | None, typer.Option(help="mitsuba: scenes: longest path (-1 unbounded; 2 direct only).")
+    ] = None,
+    caustics: Annotated[
+        bool | None,
+        typer.Option("--caustics/--no-caustics", help="mitsuba: scenes: the projector-side pass for caustics."),
+    ] = None,
+    band_rows: Annotated[
+        int | None, typer.Option(help="mitsuba: scenes: dense band of offsets -B..B (default 128).")
+    ] = None,
+    baseline: Annotated[float | None, typer.Option(help="mitsuba: scenes: projector baseline (scene units).")] = None,
+    projector_aspect: Annotated[float | None, typer.Option(help="mitsuba: scenes: projector width / height.")] = None,
+    projector_columns: Annotated[int | None, typer.Option(help="mitsuba: scenes: projector columns.")] = None,
+    projector_vfov: Annotated[
+        float | None, typer.Option(help="mitsuba: scenes: projector vertical field of view (degrees).")
+    ] = None,
+    variant: Annotated[
+        str | None, typer.Option(help="mitsuba: scenes: Mitsuba variant family, llvm or scalar.")
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
 ):
-    """Simulate a delay-exposure sweep of a built-in scene on the simulated Episcan."""
+    """Simulate a delay-exposure sweep of a scene (built-in, Mitsuba 3 file or transport store) on the simulated Episcan."""
     from ..acquire import acquire_sweep
     from ..camera import CameraModel
     from ..devices import SimulatedEpiscan
-    from ..io import write_stack, write_transport
+    from ..io import store_format, write_stack, write_transport
     from ..scenes import make_scene
+    from ..scenes.store_scene import scene_from_transport_store
     from ..timing import make_sweep
 
     _check_outputs((out_path, "stack"), (truth, "transport"), overwrite=overwrite)
+    render_options = {
+        "--spp": ("spp", spp),
+        "--batch-spp": ("batch_spp", batch_spp),
+        "--max-depth": ("max_depth", max_depth),
+        "--caustics": ("caustics", caustics),
+        "--band-rows": ("band_rows", band_rows),
+        "--baseline": ("baseline", baseline),
+        "--projector-aspect": ("projector_aspect", projector_aspect),
+        "--projector-columns": ("projector_columns", projector_columns),
+        "--projector-vfov": ("projector_vfov_deg", projector_vfov),
+        "--variant": ("variant", variant),
+    }
+    given = {option: pair for option, pair in render_options.items() if pair[1] is not None}
+    is_store = store_format(Path(scene)) is not None
+    if given and not scene.startswith("mitsuba:"):
+        first = next(iter(given))
+        raise ValueError(f"{first} is a rendering option of mitsuba:FILE.xml scenes; {scene} is not one")
+    if is_store and store_format(Path(scene)) != "transport":
+        raise ValueError(f"{scene}: a stack, not a transport store (simulate sweeps a scene or a transport)")
     camera = CameraModel(
         bit_depth=bit_depth,
         black_level=black_level,
@@ -89,8 +137,14 @@ def simulate(
         row_jitter_us=row_jitter_us,
     )
     sw = make_sweep(sweep)
-    with console.status(f"building scene {scene} {size[0]}x{size[1]}"):
-        sc = make_scene(scene, size, projector_rows=projector_rows, seed=seed)
+    if is_store:
+        with console.status(f"reading transport store {scene}"):
+            sc = scene_from_transport_store(scene, shape=size, projector_rows=projector_rows)
+    else:
+        shape = size or (128, 128)
+        with console.status(f"building scene {scene} {shape[0]}x{shape[1]}"):
+            sc = make_scene(scene, shape, projector_rows=projector_rows, seed=seed, **dict(given.values()))
+    H, W = sc.shape
     device = SimulatedEpiscan(sc, camera=camera, lines_per_second=lines_per_second, seed=seed, noise=noise)
     with progress_bar() as bar:
         task = bar.add_task(f"capturing {len(sw)} images", total=len(sw))
@@ -102,5 +156,5 @@ def simulate(
         write_transport(sc.transport, truth, attrs=attrs, overwrite=overwrite)
         out.print(f"ground-truth transport: {truth}")
     out.print(
-        f"stack: {out_path}  ({len(stack)} images, {size[0]}x{size[1]}, {int((~stack.excluded).sum())} used for demultiplexing)"
+        f"stack: {out_path}  ({len(stack)} images, {H}x{W}, {int((~stack.excluded).sum())} used for demultiplexing)"
     )

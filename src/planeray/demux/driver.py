@@ -582,7 +582,7 @@ def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, schedul
                 f"({type(exc).__name__}: {' '.join(str(exc).split())})"
             ) from None
     else:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0")
         client = Client(cluster)
     try:
         shared = client.scatter(problem, broadcast=True)

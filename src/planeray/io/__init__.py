@@ -99,7 +99,11 @@ consecutive integer offsets ``u = v - t``, in projector rows), ``lines_per_secon
 ``format_version = 1``, plus free-form attributes (``alpha``, ``beta``,
 ``method``...).  Sparse long-range entries, when there are any, are stored as the
 1-D arrays ``sparse_row``, ``sparse_col``, ``sparse_offset`` (int32) and
-``sparse_value`` (float32) of equal length.
+``sparse_value`` (float32) of equal length.  Offset ``u`` is the bin
+``[u - 1/2, u + 1/2)`` of ``u = v - p_t`` (``p_t = (t + 1/2) P / H - 1/2``), and
+``T`` holds the light of the part of that bin on the projector,
+``[-1/2, P - 1/2)``: the binning and edge rules of
+:meth:`planeray.timing.RowGeometry.row_bins` and :meth:`~planeray.timing.RowGeometry.bin_parts`.
 
 Complete chunks (both stores)
 -----------------------------
@@ -114,7 +118,16 @@ naming the store, the array, the chunk and the cause.  Writers that fill a
 store of their own use :func:`create_array` and :func:`writable`.
 """
 
-from ._common import FORMAT_VERSION, STACK_FORMAT, TRANSPORT_FORMAT, LazyArray, create_array, jsonable, writable
+from ._common import (
+    FORMAT_VERSION,
+    STACK_FORMAT,
+    TRANSPORT_FORMAT,
+    LazyArray,
+    create_array,
+    jsonable,
+    store_format,
+    writable,
+)
 from .atomic import atomic_directory, atomic_file
 from .folder import export_folder, import_folder
 from .images import write_image
@@ -127,6 +140,7 @@ __all__ = [
     "FORMAT_VERSION",
     "LazyArray",
     "jsonable",
+    "store_format",
     "create_array",
     "writable",
     "atomic_directory",

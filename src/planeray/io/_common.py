@@ -59,6 +59,30 @@ AXES = {
 }
 
 
+def store_format(path) -> str | None:
+    """``"stack"``, ``"transport"`` or None: what planeray store (or import folder) ``path`` is.
+
+    Read from the Zarr group's ``format`` attribute (``zarr.json``) without opening
+    the arrays; a folder with a ``manifest.csv`` is a stack import folder.
+    """
+    import json
+
+    path = Path(path)
+    if not path.is_dir():
+        return None
+    if (path / "manifest.csv").is_file():
+        return "stack"
+    meta = path / "zarr.json"
+    if meta.is_file():
+        try:
+            attrs = json.loads(meta.read_text(encoding="utf-8")).get("attributes") or {}
+        except (OSError, ValueError, AttributeError):
+            return None
+        if isinstance(attrs, dict):
+            return {STACK_FORMAT: "stack", TRANSPORT_FORMAT: "transport"}.get(attrs.get("format"))
+    return None
+
+
 def planeray_version() -> str:
     """The installed planeray version (``"unknown"`` in a bare source checkout)."""
     try:

@@ -32,6 +32,7 @@ parameters, the variant and Mitsuba's version are identical.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -42,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validate import check_integer
+from .._validate import check_integer, check_number, check_positive
 from ..errors import InputError
 from ..timing import RowGeometry
 from ..transport import SparseEntries, Transport, bin_projector_rows
@@ -176,6 +177,8 @@ def _setup(
     rgb,
     baseline,
     projector_aspect,
+    projector_columns,
+    projector_vfov_deg,
     variant,
     max_sparse,
     camera,
@@ -190,8 +193,20 @@ def _setup(
     check_integer(spp, "spp", minimum=1)
     check_integer(batch_spp, "batch_spp", minimum=1)
     check_integer(band_rows, "band_rows", minimum=0)
+    check_integer(max_sparse, "max_sparse", minimum=0)
     if max_depth != -1 and max_depth < 1:
         raise InputError(f"max_depth must be -1 (unbounded) or at least 1, got {max_depth}")
+    if projector_columns is not None:
+        check_integer(projector_columns, "projector_columns", minimum=1)
+        if projector_aspect is not None:
+            raise InputError("give the projector's columns or its aspect, not both")
+        projector_aspect = int(projector_columns) / int(projector_rows)
+    if projector_aspect is not None:
+        check_positive(projector_aspect, "projector_aspect")
+    if projector_vfov_deg is not None:
+        check_number(projector_vfov_deg, "projector_vfov_deg")
+        if not 0 < projector_vfov_deg < 180:
+            raise InputError(f"projector_vfov_deg must be in (0, 180) degrees, got {projector_vfov_deg}")
     chosen = choose_variant(rgb=rgb, prefer=variant)
     mi = mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
@@ -199,11 +214,21 @@ def _setup(
     loaded = load_scene_file(scene_file)
     digest = scene_file_digest(scene_file)
     defaults = loaded.defaults
+    sources = {
+        "baseline": "argument" if baseline is not None else None,
+        "projector_aspect": "argument" if projector_aspect is not None else None,
+        "vfov_deg": "argument (projector)" if projector_vfov_deg is not None else None,
+    }
     try:
         if baseline is None and "planeray_baseline" in defaults:
             baseline = float(defaults["planeray_baseline"])
+            sources["baseline"] = "scene file default planeray_baseline"
         if projector_aspect is None and "planeray_projector_aspect" in defaults:
             projector_aspect = float(defaults["planeray_projector_aspect"])
+            sources["projector_aspect"] = "scene file default planeray_projector_aspect"
+        if projector_vfov_deg is None and "planeray_projector_vfov" in defaults:
+            projector_vfov_deg = float(defaults["planeray_projector_vfov"])
+            sources["vfov_deg"] = "scene file default planeray_projector_vfov"
         from_file = caustics is None
         if from_file:
             caustics = str(defaults.get("planeray_caustics", "false")).strip().lower() in ("true", "1", "yes")
@@ -228,20 +253,29 @@ def _setup(
 
     def make_rig(b):
         if camera is None:
-            return Rig.from_sensor(
-                loaded.sensor, baseline=b, projector_rows=projector_rows, projector_aspect=projector_aspect
+            rig = Rig.from_sensor(
+                loaded.sensor,
+                baseline=b,
+                projector_rows=projector_rows,
+                projector_aspect=projector_aspect,
+                path=scene_file,
             )
-        origin, target, up = (np.asarray(c, dtype=np.float64).reshape(3) for c in camera)
-        fov = 40.0 if vfov_deg is None else float(vfov_deg)
-        return Rig.look_at(
-            origin,
-            target,
-            up,
-            vfov_deg=fov,
-            baseline=b,
-            projector_rows=projector_rows,
-            projector_aspect=projector_aspect,
-        )
+        else:
+            origin, target, up = (np.asarray(c, dtype=np.float64).reshape(3) for c in camera)
+            fov = 40.0 if vfov_deg is None else float(vfov_deg)
+            rig = Rig.look_at(
+                origin,
+                target,
+                up,
+                vfov_deg=fov,
+                baseline=b,
+                projector_rows=projector_rows,
+                projector_aspect=projector_aspect,
+            )
+        if projector_vfov_deg is not None:
+            # a rectified camera image spans the projector's rows: the camera takes the projector's vertical field
+            rig = dataclasses.replace(rig, vfov_deg=float(projector_vfov_deg))
+        return rig
 
     distance = _reference_distance(mi, loaded, make_rig(0.0))
     if baseline is None:
@@ -270,6 +304,12 @@ def _setup(
         "variant": chosen,
         "mitsuba_version": mi.__version__,
         "rig": rig.describe(),
+        "rig_sources": {
+            "baseline": sources["baseline"] or "planeray default: a tenth of the working distance",
+            "projector_aspect": sources["projector_aspect"] or "planeray default: 16:9 (the PicoPro)",
+            "vfov_deg": sources["vfov_deg"]
+            or ("argument (--vfov)" if camera is not None else "the scene file's sensor"),
+        },
     }
     fingerprint = hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()
     return _Setup(loaded, rig, sensor, projector, (H, W), chosen, params, fingerprint, distance, white)
@@ -402,6 +442,8 @@ def _common_kwargs(kw):
         "rgb": kw.get("rgb", False),
         "baseline": kw.get("baseline"),
         "projector_aspect": kw.get("projector_aspect"),
+        "projector_columns": kw.get("projector_columns"),
+        "projector_vfov_deg": kw.get("projector_vfov_deg"),
         "variant": kw.get("variant"),
         "max_sparse": kw.get("max_sparse", 4_000_000),
         "camera": kw.get("camera"),
@@ -425,6 +467,8 @@ def render_transport(
     rgb=False,
     baseline=None,
     projector_aspect=None,
+    projector_columns=None,
+    projector_vfov_deg=None,
     variant=None,
     max_sparse=4_000_000,
     camera=None,
@@ -459,8 +503,16 @@ def render_transport(
     rgb : bool
         Render three channels; ``T`` is then their luminance and ``rgb`` the colour band.
     baseline, projector_aspect : float, optional
-        The rig (:mod:`planeray.render.rig`); default: the file's ``planeray_*``
-        defaults, else a tenth of the working distance and 16:9.
+        The rig (:mod:`planeray.render.rig`): projector to the camera's right (scene
+        units) and its width / height; default: the file's ``planeray_baseline`` /
+        ``planeray_projector_aspect`` defaults, else a tenth of the working distance and 16:9.
+    projector_columns : int, optional
+        The projector's columns, instead of ``projector_aspect`` (aspect = columns / rows).
+    projector_vfov_deg : float, optional
+        The projector's vertical field of view (degrees; default: the file's
+        ``planeray_projector_vfov``, else the camera's).  A rectified camera image
+        spans the projector's rows, so the camera takes this vertical field of view
+        too (its horizontal one follows from ``shape``).
     variant : {"llvm", "scalar"}, optional
         Force a variant family (default: llvm where its runtime loads).
     max_sparse : int

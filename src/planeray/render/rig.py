@@ -16,15 +16,20 @@ projector row ``v`` lights exactly the scene points seen by camera rows near
   parallel to the rows of both: rectified by construction.  It has ``P`` rows
   (``projector_rows``) and ``round(P * projector_aspect)`` columns (16:9 like
   the paper's PicoPro by default, so its light covers the camera's view
-  beside the baseline); its row 0 is at the top, like the camera's.
+  beside the baseline; ``--projector-aspect`` / ``--projector-columns`` set
+  yours); its row 0 is at the top, like the camera's.  A projector whose
+  vertical field of view differs from the camera's (``--projector-vfov``)
+  makes the camera take it: a rectified Episcan image spans the projector's
+  rows.
 * Camera row ``t`` then sees projector coordinate ``p_t = (t + 1/2) P / H -
   1/2`` on its own epipolar plane (:class:`planeray.timing.RowGeometry`), and
   the offset ``u = v - p_t`` is the row distance between where the light
   entered the scene and where the camera sees it.
 
 A scene file can carry planeray's rig parameters as Mitsuba defaults
-(``<default name="planeray_baseline" value="0.2"/>``, ``planeray_projector_aspect``);
-command-line values win.  Light sources in the file are ignored: the
+(``<default name="planeray_baseline" value="0.2"/>``, ``planeray_projector_aspect``,
+``planeray_projector_vfov``); command-line values win, and the store records
+where each value came from (``rig_sources``).  Light sources in the file are ignored: the
 projector is the only light of the transport (ambient light is the camera
 model's business).
 
@@ -124,13 +129,21 @@ class Rig:
         return cls(m, float(vfov_deg), float(baseline), int(projector_rows), aspect)
 
     @classmethod
-    def from_sensor(cls, sensor, *, baseline, projector_rows=720, projector_aspect=None):
-        """The rig of a loaded Mitsuba ``perspective`` sensor (its pose and vertical field of view)."""
+    def from_sensor(cls, sensor, *, baseline, projector_rows=720, projector_aspect=None, path=None):
+        """The rig of a loaded Mitsuba ``perspective`` sensor (its pose and vertical field of view).
+
+        ``path`` (the scene file) is named in the error a sensor of another kind gives.
+        """
         import mitsuba as mi
 
         params = mi.traverse(sensor)
         if "x_fov" not in params:
-            raise InputError(f"the scene's camera must be a 'perspective' sensor, got {type(sensor).__name__}")
+            kind = str(sensor).split("[", 1)[0].strip() or type(sensor).__name__
+            raise InputError(
+                f"the scene's first sensor is a {kind}, but planeray's camera is a pinhole: give the file a "
+                "'perspective' sensor, or place the camera with --look-from X Y Z --look-at X Y Z (camera= in Python)",
+                path,
+            )
         x_fov = float(np.asarray(params["x_fov"]).ravel()[0])
         to_world = np.asarray(params["to_world"].matrix, dtype=np.float64).reshape(4, 4)
         width, height = (int(s) for s in sensor.film().size())

@@ -38,44 +38,32 @@ def resolve_scene_file(argument: str) -> Path:
 @register_scene(
     "mitsuba", "any Mitsuba 3 scene file rendered to its transport (or a shipped example)", argument="FILE.xml"
 )
-def build(
-    shape,
-    projector_rows,
-    seed,
-    *,
-    argument,
-    spp=64,
-    max_depth=-1,
-    caustics=None,
-    band_rows=DEFAULT_BAND_ROWS,
-    baseline=None,
-    rgb=False,
-) -> Scene:
+def build(shape, projector_rows, seed, *, argument, spp=64, band_rows=DEFAULT_BAND_ROWS, **render_options) -> Scene:
+    """Render ``argument`` (a scene file or a shipped example's name) into a :class:`Scene`.
+
+    ``render_options`` are those of :func:`planeray.render.render_transport`
+    (``batch_spp``, ``max_depth``, ``caustics``, ``caustic_paths``, ``baseline``,
+    ``projector_aspect``, ``projector_columns``, ``projector_vfov_deg``, ``rgb``,
+    ``variant``, ``max_sparse``, ``camera``, ``vfov_deg``...).
+    """
     from ..render import render_transport
 
     path = resolve_scene_file(argument)
     P = int(shape[0]) if projector_rows is None else int(projector_rows)
     result = render_transport(
-        path,
-        shape=shape,
-        projector_rows=P,
-        spp=spp,
-        max_depth=max_depth,
-        caustics=caustics,
-        seed=seed,
-        band_rows=band_rows,
-        baseline=baseline,
-        rgb=rgb,
+        path, shape=shape, projector_rows=P, spp=spp, seed=seed, band_rows=band_rows, **render_options
     )
+    a = result.attrs
     params = {
         "scene_file": str(path),
-        "scene_digest": result.attrs["scene_digest"],
+        "scene_digest": a["scene_digest"],
         "spp": int(spp),
-        "max_depth": int(max_depth),
-        "caustics": bool(result.attrs["caustics"]),
+        "max_depth": int(a["max_depth"]),
+        "caustics": bool(a["caustics"]),
         "band_rows": int(band_rows),
-        "baseline": result.attrs["rig"]["baseline"],
-        "variant": result.attrs["variant"],
+        "baseline": a["rig"]["baseline"],
+        "rig": a["rig"],
+        "variant": a["variant"],
     }
     maps = {f"light_{k}": result.classes[i] for i, k in enumerate(("direct", "subsurface", "diffuse", "specular"))}
     return Scene("mitsuba", result.transport, result.direct, result.albedo, result.labels, params, maps)
