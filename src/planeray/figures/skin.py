@@ -240,16 +240,23 @@ def enhancement_figure(single, single_delay_us, result, truth, numbers, *, valid
     return finish(fig, out)
 
 
-def headline_figure(images: dict, *, metrics=None, valid=None, out=None):
-    """The demo's headline: photo, direct and short-range indirect images side by side."""
-    keys = [k for k in ("photo", "direct", "delay") if k in images]
-    fig = new_figure((3.0 * len(keys), 3.3))
+def headline_figure(images: dict, *, labels=None, metrics=None, valid=None, title=None, out=None):
+    """Images side by side, each titled with what it is (``labels``: key -> text) and its CNR.
+
+    The demo's headline (photo, direct and short-range indirect images of the forearm) and
+    ``planeray skin veins``'s figure (its band images, each named for its band).
+    """
+    import textwrap
+
+    keys = list(images)
+    fig = new_figure((3.0 * len(keys), 3.6))
     axes = np.atleast_1d(fig.subplots(1, len(keys)))
     for ax, k in zip(axes, keys):
-        t = _LABELS[k]
+        t = (labels or {}).get(k) or _LABELS.get(k, k)
+        t = "\n".join(textwrap.wrap(t, 44))
         if metrics is not None:
             t += f"\nCNR {_fmt(metrics[k]['cnr'])}, {metrics[k]['n_detected']}/{metrics[k]['n_veins']} veins"
         show_image(ax, images[k], valid=valid, title=t)
-    fig.suptitle("Forearm: veins through skin (Sec. 10), office light", fontsize=9)
+    fig.suptitle(title or "Forearm: veins through skin (Sec. 10), office light", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.94))
     return finish(fig, out)
