@@ -63,10 +63,15 @@ def _skin_headline(out_dir, size, seed, console):
     valid = valid_rows(scene, DEFAULT_DELAY_US, DEFAULT_EXPOSURE_US)
     metrics = measure(images, scene, valid)
     band = dict(mm_per_row=mm_per_row(scene), geometry=scene.geometry)
+    direct = band_record(0.0, info["direct_exposure_us"], **band)
+    delay = band_record(DEFAULT_DELAY_US, DEFAULT_EXPOSURE_US, **band)
+    epi = 0.5 * scene.geometry.rows_per_camera_row
     labels = {  # each image named for the band it shows
         "photo": "photo (every row lit, one 16.7 ms frame)",
-        "direct": "direct: " + band_record(0.0, info["direct_exposure_us"], **band)["label"],
-        "delay": "short-range indirect: " + band_record(DEFAULT_DELAY_US, DEFAULT_EXPOSURE_US, **band)["label"],
+        "direct": f"direct: t_d = 0, rows {direct['band_rows'][0]:+.1f} to {direct['band_rows'][1]:+.1f} "
+        f"(epipolar: +-{epi:.1f})",
+        "delay": f"short-range indirect: t_d = {DEFAULT_DELAY_US:g} us, t_e = {DEFAULT_EXPOSURE_US:g} us "
+        f"(entered {delay['band_mm'][0]:.1f}-{delay['band_mm'][1]:.1f} mm away)",
     }
     path = out_dir / "skin_veins.png"
     headline_figure(images, labels=labels, metrics=metrics, valid=valid, out=path)

@@ -26,7 +26,7 @@ __all__ = [
 _LABELS = {
     "photo": "photo",
     "flood": "flood + stretch",
-    "direct": "direct (epipolar)",
+    "direct": "direct (t_d = 0, one camera row)",
     "global": "global (Nayar)",
     "non_epipolar": "non-epipolar",
     "delay": "short-range indirect",

@@ -306,6 +306,11 @@ def band_name(delay_us: float, exposure_us: float) -> str:
     return f"td{float(delay_us):g}us_te{float(exposure_us):g}us"
 
 
+def _us(x: float) -> str:
+    """A time in us for a label: at most one decimal (122.685 -> 122.7, 562.5, 600)."""
+    return f"{float(x):.1f}".rstrip("0").rstrip(".")
+
+
 def band_record(
     delay_us: float,
     exposure_us: float,
@@ -334,7 +339,7 @@ def band_record(
     near, far = float(near), float(far)
     if near <= 0.0 <= far:
         label = (
-            f"t_d = {delay_us:g}{' us' if delay_us else ''} band image (t_e = {exposure_us:g} us): rows {near:+.1f} "
+            f"t_d = {_us(delay_us)}{' us' if delay_us else ''} band image (t_e = {_us(exposure_us)} us): rows {near:+.1f} "
             f"to {far:+.1f} around the epipolar plane"
         )
         if geometry is not None:
@@ -343,7 +348,7 @@ def band_record(
     else:
         lo, hi = sorted((abs(near), abs(far)))
         label = (
-            f"t_d = {delay_us:g} us band image (t_e = {exposure_us:g} us): light that entered {near:+.1f} to "
+            f"t_d = {_us(delay_us)} us band image (t_e = {_us(exposure_us)} us): light that entered {near:+.1f} to "
             f"{far:+.1f} rows ({lo * mm_per_row:.1f}-{hi * mm_per_row:.1f} mm) away"
         )
     return {

@@ -15,11 +15,11 @@ from the centre of the nearest pixel of vein ``k`` (Euclidean distance between p
 its shadow never count as background) and minus every excluded pixel (hair, pixels off the
 skin, unusable rows).  Defaults :data:`BAND_GAP_MM` = 5 mm and :data:`BAND_WIDTH_MM` = 10 mm:
 
-* the gap is where the short-range indirect shadow of a vein has faded (a 3 mm vein whose
-  top is 1.5 mm deep: 2 % left 5 mm beyond its pixels in the 500 us / 600 us band image of
-  the skin scene), and more than the diagonal of a pixel of a 64-row image of the paper's
-  216 mm field (4.8 mm), so a one-pixel hole in a coarse vein mask never puts the vein
-  itself in its band;
+* the gap is where most of the short-range indirect shadow of a vein has faded (a 3 mm vein
+  whose top is 1.5 mm deep, in the 500 us / 600 us band image of the skin scene: 3-6 % below
+  the far skin 5 mm from its pixels, 50 % on the vein), and more than the diagonal of a pixel
+  of a 64-row image of the paper's 216 mm field (4.8 mm), so a one-pixel hole in a coarse vein
+  mask never puts the vein itself in its band;
 * the width holds two to three rings of pixels at 64 rows (3.4 mm pixels) and stays the skin
   right next to the vein, where an observer judges it.
 
