@@ -541,12 +541,15 @@ def run_skin_compare(
 
     if out_dir is not None:
         step("figures")
+        labels = {"delay": f"short-range (t_d/t_e {delay_us:g}/{exposure_us:g} us)"}
         figures_out = {
-            "fig16_skin_methods.png": lambda p: figs.methods_figure(panels, out=p),
+            "fig16_skin_methods.png": lambda p: figs.methods_figure(panels, labels=labels, out=p),
             "fig16_skin_depth.png": lambda p: figs.vein_depth_figure(
                 [{**r, "condition": "depth ladder"} for r in ladder_rows], out=p
             ),
-            "fig13_skin_ambient.png": lambda p: figs.ambient_figure(amb_rows, strongest, valid=valid0, out=p),
+            "fig13_skin_ambient.png": lambda p: figs.ambient_figure(
+                amb_rows, strongest, valid=valid0, labels=labels, out=p
+            ),
             "skin_best_delay.png": lambda p: figs.best_delay_figure(best, out=p),
             "fig14_skin_enhance.png": lambda p: figs.enhancement_figure(
                 sweeps[0][list(sweep).index(numbers["enhancement"]["best_single_delay_us"])],
