@@ -32,9 +32,9 @@ def _two_depth_stack(seed=0, noise=0.01):
 
 def test_enhancement_beats_the_best_single_delay_image():
     imgs, delays, ids = _two_depth_stack()
-    single = [vein_metrics(im, ids) for im in imgs]
+    single = [vein_metrics(im, ids, mm_per_px=1.0) for im in imgs]
     res = enhance_contrast(imgs, delays)
-    enh = vein_metrics(res.image, ids)
+    enh = vein_metrics(res.image, ids, mm_per_px=1.0)
     assert max(s["n_detected"] for s in single) == 1
     assert enh["n_detected"] == 2
     assert enh["cnr"] > 1.5 * max(s["cnr"] for s in single)
@@ -50,7 +50,9 @@ def test_plain_gradient_argmax_prefers_the_noisiest_image():
     weighted = enhance_contrast(imgs, delays)
     off = ids == 0
     assert np.mean(plain.raw_delay_map_us[off] == 1000.0) > 0.8
-    assert vein_metrics(weighted.image, ids)["cnr"] > vein_metrics(plain.image, ids)["cnr"]
+    assert (
+        vein_metrics(weighted.image, ids, mm_per_px=1.0)["cnr"] > vein_metrics(plain.image, ids, mm_per_px=1.0)["cnr"]
+    )
 
 
 def test_compose_is_eq7_on_the_delays_and_linear_between():

@@ -20,6 +20,7 @@ from planeray.skin.imaging import (
     delay_sweep_images,
     device_images,
     stack_images,
+    transport_images,
     truth_images,
 )
 
@@ -73,14 +74,37 @@ def test_too_deep_a_vein_is_reported_not_detected(scene):
         assert deep["detected"] is False, meth
 
 
-def test_stack_images_pick_the_delay_and_the_epipolar_image(scene):
+def test_stack_images_name_each_band_and_skip_excluded_images(scene):
     stack = pr.simulate_stack(scene, pr.timing.quick_sweep(), seed=0)
-    imgs, info = stack_images(stack, delay_us=500.0)
-    assert info["delay_us"] == 375.0 and info["exposure_us"] == 600.0 and info["direct_delay_us"] == 0.0
-    assert np.array_equal(imgs["delay"], np.asarray(stack.images[info["delay_index"]]))
+    # 500 us: nearest is 375 us at 600 us, a boundary image the stack excludes -> refused, or used on request
+    with pytest.raises(InputError, match=r"\(375 us\) is excluded"):
+        stack_images(stack, delay_us=500.0)
+    imgs, info = stack_images(stack, delay_us=500.0, include_excluded=True)
+    assert info["delay_us"] == 375.0 and info["requested_delay_us"] == 500.0
+    imgs, info = stack_images(stack, delay_us=700.0)
+    assert (info["requested_delay_us"], info["delay_us"], info["exposure_us"]) == (700.0, 750.0, 600.0)
+    assert list(imgs) == ["td750us_te600us", "td0us_te600us"] and info["delay_image"] == "td750us_te600us"
+    assert np.array_equal(imgs["td750us_te600us"], np.asarray(stack.images[info["delay_index"]]))
+    rec = info["images"]["td0us_te600us"]
+    # the t_d = 0 band is +-t_e/2 = +-16.2 rows wide at 54,000 lines/s: 5.8x the camera row's +-2.8 rows
+    assert rec["band_rows"] == pytest.approx([-16.2, 16.2]) and not stack.excluded[rec["stack_index"]]
+    assert "5.8x the epipolar image" in rec["label"]
+    assert info["images"]["td750us_te600us"]["band_rows"] == pytest.approx([24.3, 56.7])
     with pytest.raises(InputError, match="no image near delay 5000"):
         stack_images(stack, delay_us=5000.0)
     with pytest.raises(InputError, match="no image at exposure 700"):
         stack_images(stack, exposure_us=700.0)
-    sweep, delays = delay_sweep_images(stack)
-    assert delays.tolist() == [375.0, 750.0, 1125.0, 1500.0] and sweep.shape == (4, 48, 48)
+    sweep, delays, sel = delay_sweep_images(stack)
+    assert delays.tolist() == [750.0, 1125.0, 1500.0] and sweep.shape == (3, 48, 48)
+    assert sel["excluded_delays_us"] == [375.0] and not stack.excluded[sel["indices"]].any()
+    _, delays, _ = delay_sweep_images(stack, include_excluded=True)
+    assert delays.tolist() == [375.0, 750.0, 1125.0, 1500.0]
+
+
+def test_transport_images_give_the_epipolar_image_and_the_exact_delay(scene):
+    imgs, info = transport_images(scene.transport, delay_us=480.0, exposure_us=300.0)
+    assert list(imgs) == ["td480us_te300us", "epipolar"] and info["delay_us"] == 480.0
+    assert np.allclose(imgs["epipolar"], scene.transport.epipolar_image())
+    assert np.allclose(imgs["td480us_te300us"], pr.band_image(scene.transport, 480.0, 300.0))
+    half = 0.5 * scene.geometry.rows_per_camera_row
+    assert info["images"]["epipolar"]["band_rows"] == pytest.approx([-half, half])

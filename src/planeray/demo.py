@@ -54,16 +54,27 @@ def _skin_headline(out_dir, size, seed, console):
     """Sec. 10's headline: photo, direct and short-range indirect images of the forearm, veins only in the last."""
     from .experiments.skin import ROOM_LIGHT, camera_at, measure, valid_rows
     from .figures.skin import headline_figure
-    from .skin.imaging import DEFAULT_DELAY_US, DEFAULT_EXPOSURE_US, device_images
+    from .skin.imaging import DEFAULT_DELAY_US, DEFAULT_EXPOSURE_US, band_record, device_images, mm_per_row
 
     t0 = time.perf_counter()
     scene = pr.make_scene("skin", (size, size), projector_rows=pr.PAPER_PROJECTOR_ROWS, seed=seed)
     camera = camera_at(ROOM_LIGHT, float(scene.params.get("wavelength_nm", 638)))
-    images, _ = device_images(scene, camera, seed=seed, methods=("photo", "direct", "delay"))
+    images, info = device_images(scene, camera, seed=seed, methods=("photo", "direct", "delay"))
     valid = valid_rows(scene, DEFAULT_DELAY_US, DEFAULT_EXPOSURE_US)
     metrics = measure(images, scene, valid)
+    band = dict(mm_per_row=mm_per_row(scene), geometry=scene.geometry)
+    direct = band_record(0.0, info["direct_exposure_us"], **band)
+    delay = band_record(DEFAULT_DELAY_US, DEFAULT_EXPOSURE_US, **band)
+    epi = 0.5 * scene.geometry.rows_per_camera_row
+    labels = {  # each image named for the band it shows
+        "photo": "photo (every row lit, one 16.7 ms frame)",
+        "direct": f"direct: t_d = 0, rows {direct['band_rows'][0]:+.1f} to {direct['band_rows'][1]:+.1f} "
+        f"(epipolar: +-{epi:.1f})",
+        "delay": f"short-range indirect: t_d = {DEFAULT_DELAY_US:g} us, t_e = {DEFAULT_EXPOSURE_US:g} us "
+        f"(entered {delay['band_mm'][0]:.1f}-{delay['band_mm'][1]:.1f} mm away)",
+    }
     path = out_dir / "skin_veins.png"
-    headline_figure(images, metrics=metrics, valid=valid, out=path)
+    headline_figure(images, labels=labels, metrics=metrics, valid=valid, out=path)
     summary = ", ".join(
         f"{k} CNR {m['cnr']:.1f} ({m['n_detected']}/{m['n_veins']} veins)"
         for k, m in metrics.items()

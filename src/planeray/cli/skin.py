@@ -2,7 +2,9 @@
 
 ``simulate`` (a capture of the skin scene with its ground truth beside it), ``validate`` (the
 fast vein model against brute-force Monte Carlo, the layers against adding-doubling), ``veins``
-(the short-range indirect delay image of a stack, and its metrics on a vein mask), ``enhance``
+(the short-range indirect delay image of a stack or transport store, its t_d = 0 band image and
+the epipolar image where a transport is given, each named for its band, and their metrics on a
+vein mask), ``enhance``
 (Eq. 7's contrast enhancement over a stack's delay images), ``compare`` (the whole study on the
 simulated skin scene: methods, ambient light, best delay against depth, Eq. 7).
 """
@@ -131,8 +133,8 @@ MaskOpt = Annotated[
 ]
 
 
-def _truth_for(stack, stack_path: Path, mask: Path | None):
-    """Ground truth for the metrics: ``--mask``, else the truth ``planeray skin simulate`` wrote beside the stack.
+def _truth_for(shape, source_path: Path, mask: Path | None):
+    """Ground truth for the metrics: ``--mask``, else the truth ``planeray skin simulate`` wrote beside the source.
 
     Returns None (no metrics), or a dict with ``vein_id`` and, from a simulated capture,
     ``exclude`` (hair, off the skin), ``depth_mm``, ``diameter_mm`` and ``source``.
@@ -140,37 +142,54 @@ def _truth_for(stack, stack_path: Path, mask: Path | None):
     if mask is not None:
         from ..skin.masks import read_vein_mask
 
-        return {"vein_id": read_vein_mask(mask, stack.shape), "source": str(mask)}
+        return {"vein_id": read_vein_mask(mask, shape), "source": str(mask)}
     from ..experiments.skin_capture import read_skin_truth, truth_paths
 
-    if not truth_paths(stack_path)["veins"].is_file():
+    if not truth_paths(source_path)["veins"].is_file():
         return None
-    _, maps = read_skin_truth(stack_path)
+    _, maps = read_skin_truth(source_path)
     exclude = maps.get("hair")
     if "skin" in maps:
         off = ~np.asarray(maps["skin"], bool)
         exclude = off if exclude is None else np.asarray(exclude, bool) | off
-    if tuple(maps["vein_id"].shape) != tuple(stack.shape):
-        raise ValueError(f"{truth_paths(stack_path)['maps']}: ground truth of another image size than the stack")
+    if tuple(maps["vein_id"].shape) != tuple(shape):
+        raise ValueError(f"{truth_paths(source_path)['maps']}: ground truth of another image size than the images")
     return {
         "vein_id": maps["vein_id"],
         "exclude": exclude,
         "depth_mm": maps.get("vein_depth_mm"),
         "diameter_mm": maps.get("vein_diameter_mm"),
-        "source": str(truth_paths(stack_path)["maps"]),
+        "source": str(truth_paths(source_path)["maps"]),
     }
 
 
-def _metrics(image, truth):
+def _metrics(image, truth, mm_per_px):
     from ..skin.metrics import vein_metrics
 
     return vein_metrics(
         image,
         truth["vein_id"],
+        mm_per_px=mm_per_px,
         exclude=truth.get("exclude"),
         depth_mm=truth.get("depth_mm"),
         diameter_mm=truth.get("diameter_mm"),
     )
+
+
+def _scale(option: float | None, *records) -> tuple[float, str]:
+    """``mm_per_row`` and where it came from: ``--mm-per-row``, a stack's or store's record, or the default."""
+    from ..scenes.base import DEFAULT_MM_PER_ROW
+    from ..skin.imaging import recorded_mm_per_row
+
+    if option is not None:
+        if not (np.isfinite(option) and option > 0):
+            raise ValueError(f"--mm-per-row must be a positive number of mm, got {option:g}")
+        return float(option), "--mm-per-row"
+    for what, meta in records:
+        value = recorded_mm_per_row(meta)
+        if value is not None:
+            return value, what
+    return float(DEFAULT_MM_PER_ROW), "assumed (the simulator's default; set --mm-per-row for a real capture)"
 
 
 def _write_png(path: Path, image, valid=None) -> None:
@@ -220,61 +239,146 @@ def _summary(m) -> dict:
     return {k: m[k] for k in ("cnr", "weber", "n_veins", "n_detected")}
 
 
+MmPerRowOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--mm-per-row",
+        help="Size of a projector row on the skin (mm), for the metrics' band in mm; default: what the stack "
+        "or store records, else 0.3 (assumed).",
+    ),
+]
+IncludeExcludedOpt = Annotated[
+    bool,
+    typer.Option(
+        "--include-excluded",
+        help="Also use images the stack flags as excluded (boundary images with row artefacts); off by default.",
+    ),
+]
+
+
+def _read_transport_arg(path: Path, option: str):
+    from ..io import read_transport
+    from ..io.atomic import planeray_output_kind
+
+    if planeray_output_kind(path) != "transport":
+        raise ValueError(f"{option} {path}: not a planeray transport store")
+    return read_transport(path)
+
+
 @skin_app.command("veins")
 @_friendly_errors
 def veins(
-    stack_path: StackArg,
+    source: Annotated[
+        Path, typer.Argument(help="Stack (Zarr or import folder), or a transport store (Zarr, e.g. from demux).")
+    ],
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (images, metrics, figure).")],
     delay_us: Annotated[float, typer.Option("--delay-us", "--delay", help="Delay of the vein image (us).")] = 500.0,
     exposure_us: Annotated[
-        float | None, typer.Option("--exposure-us", "--exposure", help="Exposure (us); default the stack's shortest.")
+        float | None,
+        typer.Option(
+            "--exposure-us", "--exposure", help="Exposure (us); default the stack's shortest (600 from a transport)."
+        ),
+    ] = None,
+    transport_path: Annotated[
+        Path | None,
+        typer.Option(
+            "--transport",
+            help="Transport store of the same scene (e.g. `planeray demux` of the stack): adds the epipolar image.",
+        ),
     ] = None,
     mask: MaskOpt = None,
+    mm_per_row: MmPerRowOpt = None,
+    include_excluded: IncludeExcludedOpt = False,
     overwrite: Annotated[bool, typer.Option(help="Replace an output folder planeray wrote.")] = False,
 ):
-    """The short-range indirect vein image of a stack (+ the epipolar image), and CNR per vein with a mask."""
+    """The short-range indirect vein image, the t_d = 0 band image and (from a transport) the epipolar image.
+
+    Every image is named for its band (``td562.5us_te600us``, ``td0us_te600us``, ``epipolar``);
+    with a vein mask (or the ground truth beside a simulated stack), CNR per vein.
+    """
+    from ..experiments._report import jsonable
     from ..figures.skin import headline_figure
     from ..io import atomic_directory
-    from ..io.atomic import MARKER
-    from ..skin.imaging import delay_band_mm, stack_images
+    from ..io.atomic import MARKER, planeray_output_kind
+    from ..skin.imaging import pixel_mm, stack_images, transport_images
+    from ..timing import PAPER_LINES_PER_SECOND
 
     _check_outputs((out_dir, "skin veins"), overwrite=overwrite)
-    stack = _load_stack(stack_path)
-    truth = _truth_for(stack, stack_path, mask)
-    images, info = stack_images(stack, delay_us=delay_us, exposure_us=exposure_us)
-    mpr = float(stack.metadata.get("scene", {}).get("mm_per_row", 0.3)) if isinstance(stack.metadata, dict) else 0.3
-    near, far = delay_band_mm(
-        info["delay_us"], info["exposure_us"], lines_per_second=stack.lines_per_second, mm_per_row=mpr
-    )
+    from_transport = planeray_output_kind(source) == "transport"
+    if from_transport and transport_path is not None:
+        raise ValueError(f"--transport: {source} is already a transport store; give a stack with --transport")
+    if from_transport:
+        T, attrs = _read_transport_arg(source, "SOURCE")
+        lps = float(attrs.get("lines_per_second") or PAPER_LINES_PER_SECOND)
+        mpr, mpr_source = _scale(mm_per_row, ("transport store", attrs))
+        geometry, shape = T.geometry, tuple(T.dense.shape[:2])
+        truth = _truth_for(shape, source, mask)
+        images, info = transport_images(
+            T, delay_us=delay_us, exposure_us=exposure_us, lines_per_second=lps, mm_per_row=mpr
+        )
+    else:
+        stack = _load_stack(source)
+        geometry, shape = stack.geometry, tuple(stack.shape)
+        attrs = None
+        if transport_path is not None:
+            T, attrs = _read_transport_arg(transport_path, "--transport")
+            if tuple(T.dense.shape[:2]) != shape:
+                raise ValueError(
+                    f"--transport {transport_path}: images of {T.dense.shape[0]}x{T.dense.shape[1]}, "
+                    f"the stack's are {shape[0]}x{shape[1]}"
+                )
+        mpr, mpr_source = _scale(mm_per_row, ("stack metadata", stack.metadata), ("transport store", attrs))
+        truth = _truth_for(shape, source, mask)
+        images, info = stack_images(
+            stack, delay_us=delay_us, exposure_us=exposure_us, include_excluded=include_excluded, mm_per_row=mpr
+        )
+        if transport_path is not None:
+            epi, epi_info = transport_images(T, delay=False, mm_per_row=mpr)
+            images.update(epi)
+            info["images"].update(epi_info["images"])
+            info["images"]["epipolar"]["source"] = f"transport {transport_path}"
+    mm_px = pixel_mm(geometry, mpr)
+    served = info["images"][info["delay_image"]]
     result = {
         "format": "planeray-skin-veins",
-        "format_version": 1,
-        "stack": str(stack_path),
+        "format_version": 2,
+        "source": str(source),
+        "source_kind": "transport" if from_transport else "stack",
+        "transport": None if transport_path is None else str(transport_path),
         **info,
-        "band_mm": [float(near), float(far)],
+        "band_mm": served["band_mm"],
         "mm_per_row": mpr,
+        "mm_per_row_source": mpr_source,
+        "mm_per_px": mm_px,
     }
     metrics = None
     if truth is not None:
-        metrics = {k: _metrics(v, truth) for k, v in images.items()}
+        metrics = {k: _metrics(v, truth, mm_px) for k, v in images.items()}
+        result["metric"] = next(iter(metrics.values()))["band"]
         result["metrics"] = {k: _summary(m) for k, m in metrics.items()}
         result["ground_truth"] = truth["source"]
+    labels = {k: r["label"] for k, r in info["images"].items()}
     with atomic_directory(out_dir, overwrite=overwrite, kind="skin veins") as tmp:
         for k, img in images.items():
             _write_png(tmp / f"{k}.png", img)
             _write_tiff(tmp / f"{k}.tif", img)
         if metrics is not None:
             _write_csv(tmp / "veins.csv", [r for k, m in metrics.items() for r in _metrics_rows(k, m)])
-        headline_figure(images, metrics=metrics, out=tmp / "veins_figure.png")
-        (tmp / MARKER).write_text(json.dumps(result, indent=1))
+        headline_figure(
+            images, labels=labels, metrics=metrics, title=f"Veins: {source.name}", out=tmp / "veins_figure.png"
+        )
+        (tmp / MARKER).write_text(json.dumps(jsonable(result), indent=1))
+    asked = f"{delay_us:g} us" + ("" if exposure_us is None else f", {exposure_us:g} us")
     out.print(
-        f"{out_dir}: delay image at {info['delay_us']:g} us, exposure {info['exposure_us']:g} us "
-        f"(light that entered {near:.1f}-{far:.1f} mm away)"
+        f"{out_dir}: {info['delay_image']} (asked {asked}; served t_d {info['delay_us']:g} us, "
+        f"t_e {info['exposure_us']:g} us)"
     )
-    if metrics is not None:
-        for k, m in metrics.items():
-            cnr = "n/a" if m["cnr"] is None else f"{m['cnr']:.2f}"
-            out.print(f"  {k}: CNR {cnr}, {m['n_detected']}/{m['n_veins']} veins detected (per-vein CNR >= 1)")
+    for k in images:
+        line = f"  {k}: {labels[k]}"
+        if metrics is not None:
+            m = metrics[k]
+            line += f"; CNR {_num(m['cnr'])}, {m['n_detected']}/{m['n_veins']} veins detected (per-vein CNR >= 1)"
+        out.print(line)
 
 
 @skin_app.command("enhance")
@@ -293,44 +397,69 @@ def enhance(
         bool, typer.Option("--plain", help="The paper's plain gradient argmax (no noise weighting).")
     ] = False,
     mask: MaskOpt = None,
+    mm_per_row: MmPerRowOpt = None,
+    include_excluded: IncludeExcludedOpt = False,
     overwrite: Annotated[bool, typer.Option(help="Replace an output folder planeray wrote.")] = False,
 ):
-    """Contrast enhancement from the stack's delay images (Eq. 7, Fig. 14)."""
+    """Contrast enhancement from the stack's delay images (Eq. 7, Fig. 14), never from images the stack excludes."""
+    from ..experiments._report import jsonable
     from ..io import atomic_directory
     from ..io.atomic import MARKER
     from ..skin.enhance import enhance_contrast
-    from ..skin.imaging import delay_sweep_images
+    from ..skin.imaging import band_name, delay_sweep_images, pixel_mm
 
     _check_outputs((out_dir, "skin enhance"), overwrite=overwrite)
     stack = _load_stack(stack_path)
-    truth = _truth_for(stack, stack_path, mask)
+    truth = _truth_for(stack.shape, stack_path, mask)
+    mpr, mpr_source = _scale(mm_per_row, ("stack metadata", stack.metadata))
     with console.status("reading the delay images"):
-        imgs, delays = delay_sweep_images(stack, exposure_us=exposure_us, min_delay_us=min_delay_us)
+        imgs, delays, sel = delay_sweep_images(
+            stack, exposure_us=exposure_us, min_delay_us=min_delay_us, include_excluded=include_excluded
+        )
+    t_e = sel["exposure_us"]
     with console.status(f"enhancing ({len(delays)} delay images)"):
         res = enhance_contrast(imgs, delays, patch_px=patch_px, noise_normalize=not plain)
     result = {
         "format": "planeray-skin-enhance",
-        "format_version": 1,
+        "format_version": 2,
         "stack": str(stack_path),
+        "exposure_us": t_e,
         "delays_us": [float(d) for d in delays],
+        "images": [band_name(d, t_e) for d in delays],
+        "excluded_delays_us": sel["excluded_delays_us"],
+        "include_excluded": sel["include_excluded"],
+        "mm_per_row": mpr,
+        "mm_per_row_source": mpr_source,
         "params": res.params,
     }
     if truth is not None:
-        single = {f"{d:g}": _metrics(im, truth) for d, im in zip(delays, imgs)}
+        mm_px = pixel_mm(stack.geometry, mpr)
+        single = {band_name(d, t_e): _metrics(im, truth, mm_px) for d, im in zip(delays, imgs)}
         best = max(single, key=lambda k: -np.inf if single[k]["cnr"] is None else single[k]["cnr"])
-        em = _metrics(res.image, truth)
+        em = _metrics(res.image, truth, mm_px)
         result["ground_truth"] = truth["source"]
+        result["metric"] = em["band"]
         result["metrics"] = {
             "enhanced": _summary(em),
-            "best_single": {"delay_us": float(best), **_summary(single[best])},
+            "best_single": {
+                "image": best,
+                "delay_us": float(delays[list(single).index(best)]),
+                "exposure_us": t_e,
+                **_summary(single[best]),
+            },
+            "single": {k: _summary(m) for k, m in single.items()},
         }
     with atomic_directory(out_dir, overwrite=overwrite, kind="skin enhance") as tmp:
         _write_png(tmp / "enhanced.png", res.image)
         _write_tiff(tmp / "enhanced.tif", res.image)
         _write_tiff(tmp / "delay_map_us.tif", res.delay_map_us)
         _write_png(tmp / "delay_map.png", res.delay_map_us)
-        (tmp / MARKER).write_text(json.dumps(result, indent=1))
-    out.print(f"{out_dir}: enhanced from {len(delays)} delay images ({delays[0]:g}-{delays[-1]:g} us)")
+        (tmp / MARKER).write_text(json.dumps(jsonable(result), indent=1))
+    left = sel["excluded_delays_us"]
+    out.print(
+        f"{out_dir}: enhanced from {len(delays)} delay images ({delays[0]:g}-{delays[-1]:g} us, t_e {t_e:g} us)"
+        + (f"; left out the stack's excluded {', '.join(f'{d:g}' for d in left)} us" if left else "")
+    )
     if truth is not None:
         e, b = result["metrics"]["enhanced"], result["metrics"]["best_single"]
         out.print(

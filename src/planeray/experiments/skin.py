@@ -46,13 +46,17 @@ from ..skin.imaging import (
     DEFAULT_DELAY_US,
     DEFAULT_EXPOSURE_US,
     METHODS,
+    band_record,
     delay_band_mm,
     delay_band_rows,
     device_images,
+    direct_exposure_us,
+    epipolar_record,
     mm_per_row,
+    pixel_mm,
     truth_images,
 )
-from ..skin.metrics import vein_metrics
+from ..skin.metrics import band_definition, vein_metrics
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
 from ._report import jsonable
 
@@ -68,6 +72,7 @@ __all__ = [
     "camera_at",
     "scene_truth",
     "valid_rows",
+    "scene_pixel_mm",
     "measure",
     "capture_delay_sweep",
     "best_delay_by_depth",
@@ -153,12 +158,23 @@ def valid_rows(scene, max_delay_us: float, exposure_us: float, *, lines_per_seco
     return np.broadcast_to(rows[:, None], scene.shape).copy()
 
 
+def scene_pixel_mm(scene) -> float:
+    """Size of the scene's camera pixels on the skin, mm (:func:`~planeray.skin.imaging.pixel_mm`)."""
+    return pixel_mm(scene.geometry, mm_per_row(scene))
+
+
 def measure(images: dict, scene, valid=None) -> dict:
-    """:func:`~planeray.skin.metrics.vein_metrics` of every image on the scene's veins."""
+    """:func:`~planeray.skin.metrics.vein_metrics` of every image on the scene's veins (band in mm on its skin)."""
     t = scene_truth(scene)
     return {
         k: vein_metrics(
-            v, t["vein_id"], exclude=t["exclude"], depth_mm=t["depth_mm"], diameter_mm=t["diameter_mm"], valid=valid
+            v,
+            t["vein_id"],
+            mm_per_px=scene_pixel_mm(scene),
+            exclude=t["exclude"],
+            depth_mm=t["depth_mm"],
+            diameter_mm=t["diameter_mm"],
+            valid=valid,
         )
         for k, v in images.items()
     }
@@ -208,7 +224,13 @@ def best_delay_by_depth(images, delays_us, scene, valid=None) -> dict:
 
     def metrics(im):
         return vein_metrics(
-            im, t["vein_id"], exclude=t["exclude"], depth_mm=t["depth_mm"], diameter_mm=t["diameter_mm"], valid=valid
+            im,
+            t["vein_id"],
+            mm_per_px=scene_pixel_mm(scene),
+            exclude=t["exclude"],
+            depth_mm=t["depth_mm"],
+            diameter_mm=t["diameter_mm"],
+            valid=valid,
         )
 
     runs = [[metrics(im) for im in sweep] for sweep in stacks]  # [repeat][delay]
@@ -414,6 +436,15 @@ def run_skin_compare(
     near, far = delay_band_mm(delay_us, exposure_us, lines_per_second=lps, mm_per_row=mpr)
     numbers["delay_band_mm"] = [float(near), float(far)]
     numbers["mm_per_row"] = mpr
+    numbers["metric"] = band_definition(scene_pixel_mm(base_scene))
+    g = base_scene.geometry
+    numbers["method_bands"] = {
+        "direct": band_record(
+            0.0, direct_exposure_us(g, lines_per_second=lps), lines_per_second=lps, mm_per_row=mpr, geometry=g
+        ),
+        "delay": band_record(delay_us, exposure_us, lines_per_second=lps, mm_per_row=mpr, geometry=g),
+        "direct_truth": epipolar_record(g, mm_per_row=mpr, source="truth_weber of the direct method (noise-free)"),
+    }
 
     # 2. ambient light (Fig. 13)
     wl0 = float(conditions[first].get("wavelength_nm", 638))
@@ -510,12 +541,15 @@ def run_skin_compare(
 
     if out_dir is not None:
         step("figures")
+        labels = {"delay": f"short-range (t_d/t_e {delay_us:g}/{exposure_us:g} us)"}
         figures_out = {
-            "fig16_skin_methods.png": lambda p: figs.methods_figure(panels, out=p),
+            "fig16_skin_methods.png": lambda p: figs.methods_figure(panels, labels=labels, out=p),
             "fig16_skin_depth.png": lambda p: figs.vein_depth_figure(
                 [{**r, "condition": "depth ladder"} for r in ladder_rows], out=p
             ),
-            "fig13_skin_ambient.png": lambda p: figs.ambient_figure(amb_rows, strongest, valid=valid0, out=p),
+            "fig13_skin_ambient.png": lambda p: figs.ambient_figure(
+                amb_rows, strongest, valid=valid0, labels=labels, out=p
+            ),
             "skin_best_delay.png": lambda p: figs.best_delay_figure(best, out=p),
             "fig14_skin_enhance.png": lambda p: figs.enhancement_figure(
                 sweeps[0][list(sweep).index(numbers["enhancement"]["best_single_delay_us"])],

@@ -26,7 +26,7 @@ __all__ = [
 _LABELS = {
     "photo": "photo",
     "flood": "flood + stretch",
-    "direct": "direct (epipolar)",
+    "direct": "direct (t_d = 0, one camera row)",
     "global": "global (Nayar)",
     "non_epipolar": "non-epipolar",
     "delay": "short-range indirect",
@@ -63,12 +63,14 @@ def show_image(ax, image, *, valid=None, title=None):
         ax.set_title(title, fontsize=8)
 
 
-def methods_figure(panels, *, methods=None, out=None):
+def methods_figure(panels, *, methods=None, labels=None, out=None):
     """Fig. 16 analogue: one row per condition, one column per method (+ the true vein mask).
 
     ``panels``: list of dicts with ``condition``, ``images`` (method -> image), ``metrics``
-    (method -> :func:`~planeray.skin.metrics.vein_metrics`), ``valid`` and ``truth``.
+    (method -> :func:`~planeray.skin.metrics.vein_metrics`), ``valid`` and ``truth``;
+    ``labels``: method -> column title (default: the method's name).
     """
+    names = {**_LABELS, **(labels or {})}
     methods = list(methods or panels[0]["images"])
     n, m = len(panels), len(methods) + 1
     fig = new_figure((1.75 * m, 2.1 * n + 0.4))
@@ -85,7 +87,7 @@ def methods_figure(panels, *, methods=None, out=None):
                 axes[i, j],
                 p["images"][meth],
                 valid=p["valid"],
-                title=f"{_LABELS.get(meth, meth)}\nCNR {_fmt(mt['cnr'])}, {mt['n_detected']}/{mt['n_veins']} veins",
+                title=f"{names.get(meth, meth)}\nCNR {_fmt(mt['cnr'])}, {mt['n_detected']}/{mt['n_veins']} veins",
             )
     fig.suptitle("Veins through skin: methods (Fig. 16 analogue; per-vein CNR >= 1 counts as detected)", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
@@ -120,11 +122,13 @@ def vein_depth_figure(vein_rows, *, condition=None, ax=None, out=None):
     return finish(fig, out)
 
 
-def ambient_figure(amb_rows, strongest=None, *, valid=None, out=None):
+def ambient_figure(amb_rows, strongest=None, *, valid=None, labels=None, out=None):
     """Fig. 13 analogue: pooled CNR against ambient illuminance per method, and the images at the brightest level.
 
-    ``strongest``: ``(level name, images, metrics)`` of the brightest level, or None.
+    ``strongest``: ``(level name, images, metrics)`` of the brightest level, or None;
+    ``labels``: method -> name (default: the method's name).
     """
+    names = {**_LABELS, **(labels or {})}
     shown = ["photo", "global", "delay"]
     ncol = 1 + (len(shown) if strongest is not None else 0)
     fig = new_figure((3.6 + 2.3 * (ncol - 1), 3.4))
@@ -134,7 +138,7 @@ def ambient_figure(amb_rows, strongest=None, *, valid=None, out=None):
         pts = sorted((max(r["lux"], 10.0), r["cnr"] or 0.0) for r in amb_rows if r["method"] == meth)
         if pts:
             x, y = zip(*pts)
-            ax.plot(x, np.maximum(y, 1e-2), "o-", color=col, label=_LABELS[meth], ms=3)
+            ax.plot(x, np.maximum(y, 1e-2), "o-", color=col, label=names[meth].replace("\n", " "), ms=3)
     ax.axhline(1.0, color="k", ls="--", lw=0.8)
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -146,7 +150,7 @@ def ambient_figure(amb_rows, strongest=None, *, valid=None, out=None):
         level, imgs, m = strongest
         for j, meth in enumerate(shown, start=1):
             a = fig.add_subplot(gs[0, j])
-            show_image(a, imgs[meth], valid=valid, title=f"{_LABELS[meth]}\n{level}: CNR {_fmt(m[meth]['cnr'])}")
+            show_image(a, imgs[meth], valid=valid, title=f"{names[meth]}\n{level}: CNR {_fmt(m[meth]['cnr'])}")
     fig.tight_layout()
     return finish(fig, out)
 
@@ -240,16 +244,23 @@ def enhancement_figure(single, single_delay_us, result, truth, numbers, *, valid
     return finish(fig, out)
 
 
-def headline_figure(images: dict, *, metrics=None, valid=None, out=None):
-    """The demo's headline: photo, direct and short-range indirect images side by side."""
-    keys = [k for k in ("photo", "direct", "delay") if k in images]
-    fig = new_figure((3.0 * len(keys), 3.3))
+def headline_figure(images: dict, *, labels=None, metrics=None, valid=None, title=None, out=None):
+    """Images side by side, each titled with what it is (``labels``: key -> text) and its CNR.
+
+    The demo's headline (photo, direct and short-range indirect images of the forearm) and
+    ``planeray skin veins``'s figure (its band images, each named for its band).
+    """
+    import textwrap
+
+    keys = list(images)
+    fig = new_figure((3.0 * len(keys), 3.6))
     axes = np.atleast_1d(fig.subplots(1, len(keys)))
     for ax, k in zip(axes, keys):
-        t = _LABELS[k]
+        t = (labels or {}).get(k) or _LABELS.get(k, k)
+        t = "\n".join(textwrap.wrap(t, 44))
         if metrics is not None:
             t += f"\nCNR {_fmt(metrics[k]['cnr'])}, {metrics[k]['n_detected']}/{metrics[k]['n_veins']} veins"
         show_image(ax, images[k], valid=valid, title=t)
-    fig.suptitle("Forearm: veins through skin (Sec. 10), office light", fontsize=9)
+    fig.suptitle(title or "Forearm: veins through skin (Sec. 10), office light", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.94))
     return finish(fig, out)

@@ -28,8 +28,11 @@ Methods (keys of :data:`METHODS`):
 From a scene's transport (:func:`truth_images`) every method is noise-free and free of
 ambient light; from the simulated device (:func:`device_images`) every capture goes through
 the camera model (shot and read noise, ambient light, saturation, 12 bits, 8 frames).  From a
-captured stack (:func:`stack_images`) only what a delay-exposure sweep holds: the delay image
-and the epipolar image.
+captured stack (:func:`stack_images`) only what a delay-exposure sweep holds: the delay band
+image and the ``t_d = 0`` band image (``+-t_e / 2`` around the epipolar plane: +-16 projector
+rows at 600 us, far wider than the epipolar image), both named for their band
+(:func:`band_name`, :func:`band_record`) and never an image the stack excludes; from a
+transport store (:func:`transport_images`) the true epipolar image and any band image.
 
 References
 ----------
@@ -58,11 +61,17 @@ __all__ = [
     "delay_band_mm",
     "delay_for_offset_mm",
     "mm_per_row",
+    "recorded_mm_per_row",
+    "pixel_mm",
+    "band_name",
+    "band_record",
+    "epipolar_record",
     "direct_exposure_us",
     "contrast_stretch",
     "truth_images",
     "device_images",
     "stack_images",
+    "transport_images",
     "delay_sweep_images",
 ]
 
@@ -70,7 +79,7 @@ __all__ = [
 METHODS = {
     "photo": "photo (full illumination)",
     "flood": "flood + stretch (vein viewer)",
-    "direct": "direct (epipolar)",
+    "direct": "direct (t_d = 0, t_e = one camera row + 1 row: epipolar)",
     "global": "global (Nayar)",
     "non_epipolar": "non-epipolar",
     "delay": "short-range indirect (delay)",
@@ -288,65 +297,264 @@ def device_images(
     return images, info
 
 
-def stack_images(stack, *, delay_us: float = DEFAULT_DELAY_US, exposure_us: float | None = None) -> tuple[dict, dict]:
-    """The delay image and the epipolar image of a captured (or simulated) stack.
+def band_name(delay_us: float, exposure_us: float) -> str:
+    """Name of a band image that says its band: ``td{t_d}us_te{t_e}us``.
+
+    >>> band_name(562.5, 600.0), band_name(0.0, 600.0)
+    ('td562.5us_te600us', 'td0us_te600us')
+    """
+    return f"td{float(delay_us):g}us_te{float(exposure_us):g}us"
+
+
+def _us(x: float) -> str:
+    """A time in us for a label: at most one decimal (122.685 -> 122.7, 562.5, 600)."""
+    return f"{float(x):.1f}".rstrip("0").rstrip(".")
+
+
+def band_record(
+    delay_us: float,
+    exposure_us: float,
+    *,
+    lines_per_second: float = PAPER_LINES_PER_SECOND,
+    mm_per_row: float = DEFAULT_MM_PER_ROW,
+    geometry=None,
+    source: str = "",
+) -> dict:
+    """What a band image is, for a result file: delay, exposure, its rows and mm, and a label.
+
+    The band of ``(t_d, t_e)`` lights projector rows ``u`` in ``v_p (t_d -+ t_e / 2)`` from the
+    pixel's own epipolar plane (Eq. 2).  A band that holds ``u = 0`` is labelled with its rows
+    around the epipolar plane and, given the ``geometry``, how much wider it is than the
+    epipolar image (the camera row's own footprint, :meth:`planeray.transport.Transport.epipolar_image`,
+    Eq. 5): the ``t_d = 0``, ``t_e = 600 us`` band of a stack is +-16.2 rows, the epipolar image
+    of a 128-row image of a 720-row projector +-2.8.
+
+    >>> from planeray.timing import RowGeometry
+    >>> band_record(0.0, 600.0, geometry=RowGeometry(128, 720))["label"]
+    't_d = 0 band image (t_e = 600 us): rows -16.2 to +16.2 around the epipolar plane, 5.8x the epipolar image (+-2.8 rows)'
+    >>> band_record(562.5, 600.0)["label"]
+    't_d = 562.5 us band image (t_e = 600 us): light that entered +14.2 to +46.6 rows (4.3-14.0 mm) away'
+    """
+    near, far = delay_band_rows(delay_us, exposure_us, lines_per_second=lines_per_second)
+    near, far = float(near), float(far)
+    if near <= 0.0 <= far:
+        label = (
+            f"t_d = {_us(delay_us)}{' us' if delay_us else ''} band image (t_e = {_us(exposure_us)} us): rows {near:+.1f} "
+            f"to {far:+.1f} around the epipolar plane"
+        )
+        if geometry is not None:
+            half = 0.5 * float(geometry.rows_per_camera_row)
+            label += f", {0.5 * (far - near) / half:.1f}x the epipolar image (+-{half:.1f} rows)"
+    else:
+        lo, hi = sorted((abs(near), abs(far)))
+        label = (
+            f"t_d = {_us(delay_us)} us band image (t_e = {_us(exposure_us)} us): light that entered {near:+.1f} to "
+            f"{far:+.1f} rows ({lo * mm_per_row:.1f}-{hi * mm_per_row:.1f} mm) away"
+        )
+    return {
+        "kind": "band",
+        "label": label,
+        "delay_us": float(delay_us),
+        "exposure_us": float(exposure_us),
+        "band_rows": [near, far],
+        "band_mm": [near * float(mm_per_row), far * float(mm_per_row)],
+        "source": source,
+    }
+
+
+def epipolar_record(geometry, *, mm_per_row: float = DEFAULT_MM_PER_ROW, source: str = "") -> dict:
+    """What the epipolar image (Eq. 5) is: the camera row's own footprint, +-``P / 2H`` rows."""
+    half = 0.5 * float(geometry.rows_per_camera_row)
+    return {
+        "kind": "epipolar",
+        "label": f"epipolar image (Eq. 5): the camera row's own footprint, rows {-half:+.1f} to {half:+.1f}",
+        "band_rows": [-half, half],
+        "band_mm": [-half * float(mm_per_row), half * float(mm_per_row)],
+        "source": source,
+    }
+
+
+def recorded_mm_per_row(metadata) -> float | None:
+    """``mm_per_row`` a stack's metadata or a transport store's attributes record (``scene``), or None."""
+    if not isinstance(metadata, dict):
+        return None
+    for where in (metadata.get("scene"), metadata):
+        if isinstance(where, dict) and isinstance(where.get("mm_per_row"), (int, float)):
+            value = float(where["mm_per_row"])
+            if np.isfinite(value) and value > 0:
+                return value
+    return None
+
+
+def pixel_mm(geometry, mm_per_row: float = DEFAULT_MM_PER_ROW) -> float:
+    """Size of a camera pixel on the skin, mm: ``rows_per_camera_row * mm_per_row`` (square pixels).
+
+    >>> from planeray.timing import RowGeometry
+    >>> pixel_mm(RowGeometry(128, 720), 0.3), pixel_mm(RowGeometry(64, 720), 0.3)
+    (1.6875, 3.375)
+    """
+    return float(geometry.rows_per_camera_row) * float(mm_per_row)
+
+
+def _usable(stack, include_excluded: bool) -> np.ndarray:
+    return np.ones(len(stack), bool) if include_excluded else ~np.asarray(stack.excluded, bool)
+
+
+def stack_images(
+    stack,
+    *,
+    delay_us: float = DEFAULT_DELAY_US,
+    exposure_us: float | None = None,
+    include_excluded: bool = False,
+    mm_per_row: float = DEFAULT_MM_PER_ROW,
+) -> tuple[dict, dict]:
+    """The delay band image of a captured (or simulated) stack and its ``t_d = 0`` band image.
 
     Picks, at ``exposure_us`` (default: the stack's shortest exposure), the image whose delay is
-    nearest ``delay_us`` and the one nearest 0.  A delay farther than half the stack's delay
-    step from any image is refused (one line naming the delays the stack has).
+    nearest ``delay_us`` and the one nearest 0, among the images the stack does not exclude
+    (its ``excluded`` flags: boundary images with row artefacts; ``include_excluded`` uses them
+    too).  A delay farther than half the stack's delay step from any usable image is refused
+    (one line naming the delays the stack has).  The ``t_d = 0`` image is a band of
+    ``+-t_e / 2``, not the epipolar image (:func:`transport_images` gives that one).
 
     Returns
     -------
-    images : dict
-        ``delay`` and, when the stack has a delay within its step of 0, ``direct`` (normalized).
+    images : dict of str to ndarray (H, W)
+        Keyed by :func:`band_name` (``td562.5us_te600us``, ``td0us_te600us``): the delay image
+        first, then the ``t_d = 0`` band image when the stack has one within its step of 0.
     info : dict
-        The delays, exposure and image indices used.
+        ``requested_delay_us``, ``requested_exposure_us`` (None: the shortest), the
+        ``delay_us`` and ``exposure_us`` that served them, ``delay_index``, ``delay_image``
+        (its name) and ``images``: name -> :func:`band_record` (with the stack index).
     """
     exp = np.asarray(stack.exposure_us, np.float64)
     dl = np.asarray(stack.delay_us, np.float64)
-    t_e = float(exp.min()) if exposure_us is None else float(exposure_us)
-    at = np.flatnonzero(np.isclose(exp, t_e, atol=0.5))
-    if at.size == 0:
+    usable = _usable(stack, include_excluded)
+    t_e = float(exp[usable].min() if usable.any() else exp.min()) if exposure_us is None else float(exposure_us)
+    at_all = np.flatnonzero(np.isclose(exp, t_e, atol=0.5))
+    if at_all.size == 0:
         raise InputError(f"the stack has no image at exposure {t_e:g} us (it has {sorted(set(exp.tolist()))})")
-    delays = dl[at]
-    uniq = np.unique(delays)
+    at = at_all[usable[at_all]]
+    uniq = np.unique(dl[at_all])
     step = float(np.min(np.diff(uniq))) if uniq.size > 1 else np.inf
     tol = 0.5 * step if np.isfinite(step) else 1.0
 
-    def pick(target):
-        j = int(np.argmin(np.abs(delays - target)))
-        return (int(at[j]), float(delays[j])) if abs(delays[j] - target) <= tol + 1e-6 else (None, None)
+    def pick(target, among):
+        if among.size == 0:
+            return None, None
+        j = int(np.argmin(np.abs(dl[among] - target)))
+        return (int(among[j]), float(dl[among[j]])) if abs(dl[among[j]] - target) <= tol + 1e-6 else (None, None)
 
-    i, d = pick(float(delay_us))
+    i, d = pick(float(delay_us), at)
     if i is None:
+        flagged, fd = pick(float(delay_us), at_all)
+        if flagged is not None:
+            raise InputError(
+                f"the stack's image nearest delay {delay_us:g} us at exposure {t_e:g} us ({fd:g} us) is excluded "
+                f"(a boundary image, flagged in the stack; usable delays {', '.join(f'{x:g}' for x in np.unique(dl[at]))} "
+                "us); pass --include-excluded (include_excluded=True) to use it"
+            )
         raise InputError(
             f"the stack has no image near delay {delay_us:g} us at exposure {t_e:g} us "
-            f"(delays {', '.join(f'{x:g}' for x in uniq)})"
+            f"(delays {', '.join(f'{x:g}' for x in np.unique(dl[at]))})"
         )
-    images = {"delay": np.asarray(stack.images[i], np.float64)}
-    info = {"exposure_us": t_e, "delay_us": d, "delay_index": i}
-    j, d0 = pick(0.0)
-    if j is not None:
-        images["direct"] = np.asarray(stack.images[j], np.float64)
-        info.update(direct_delay_us=d0, direct_index=j)
+    lps = float(stack.lines_per_second)
+    name = band_name(d, t_e)
+    images = {name: np.asarray(stack.images[i], np.float64)}
+    rec = dict(lines_per_second=lps, mm_per_row=mm_per_row, geometry=stack.geometry, source="stack")
+    records = {name: {**band_record(d, t_e, **rec), "stack_index": i}}
+    j, d0 = pick(0.0, at)
+    if j is not None and j != i:
+        name0 = band_name(d0, t_e)
+        images[name0] = np.asarray(stack.images[j], np.float64)
+        records[name0] = {**band_record(d0, t_e, **rec), "stack_index": j}
+    info = {
+        "requested_delay_us": float(delay_us),
+        "requested_exposure_us": None if exposure_us is None else float(exposure_us),
+        "delay_us": d,
+        "exposure_us": t_e,
+        "delay_index": i,
+        "delay_image": name,
+        "include_excluded": bool(include_excluded),
+        "images": records,
+    }
     return images, info
 
 
-def delay_sweep_images(stack, *, exposure_us: float | None = None, min_delay_us: float = 0.0):
-    """Delay images of one exposure with ``t_d > min_delay_us`` and the band off the epipolar plane.
+def transport_images(
+    transport,
+    *,
+    delay_us: float = DEFAULT_DELAY_US,
+    exposure_us: float | None = None,
+    lines_per_second: float = PAPER_LINES_PER_SECOND,
+    mm_per_row: float = DEFAULT_MM_PER_ROW,
+    delay: bool = True,
+) -> tuple[dict, dict]:
+    """The delay band image synthesized from a transport (exactly the delay asked) and the epipolar image.
 
-    Returns ``(images (N, H, W), delays_us (N,))`` sorted by delay: the input of
+    Returns ``(images, info)`` as :func:`stack_images`: ``td{t_d}us_te{t_e}us`` (with
+    ``delay``; :func:`planeray.synthesis.band_image`, ``t_e`` default 600 us) and
+    ``epipolar`` (:meth:`~planeray.transport.Transport.epipolar_image`, Eq. 5).
+    """
+    from ..synthesis import band_image
+
+    t_e = DEFAULT_EXPOSURE_US if exposure_us is None else float(exposure_us)
+    images, records = {}, {}
+    if delay:
+        name = band_name(delay_us, t_e)
+        images[name] = band_image(transport, delay_us, t_e, lines_per_second=lines_per_second).astype(np.float64)
+        records[name] = band_record(
+            delay_us,
+            t_e,
+            lines_per_second=lines_per_second,
+            mm_per_row=mm_per_row,
+            geometry=transport.geometry,
+            source="transport (synthesized)",
+        )
+    images["epipolar"] = transport.epipolar_image().astype(np.float64)
+    records["epipolar"] = epipolar_record(transport.geometry, mm_per_row=mm_per_row, source="transport")
+    info = {
+        "requested_delay_us": float(delay_us),
+        "requested_exposure_us": None if exposure_us is None else float(exposure_us),
+        "images": records,
+    }
+    if delay:
+        info.update(delay_us=float(delay_us), exposure_us=t_e, delay_image=band_name(delay_us, t_e))
+    return images, info
+
+
+def delay_sweep_images(
+    stack, *, exposure_us: float | None = None, min_delay_us: float = 0.0, include_excluded: bool = False
+):
+    """Delay images of one exposure with ``t_d > min_delay_us``, the band off the epipolar plane, not excluded.
+
+    Returns ``(images (N, H, W), delays_us (N,), info)`` sorted by delay: the input of
     :func:`planeray.skin.enhance.enhance_contrast`.  Images whose band touches the epipolar
-    plane (``|t_d| <= t_e / 2``) are left out.
+    plane (``|t_d| <= t_e / 2``) are left out, and so are the images the stack excludes (its
+    ``excluded`` flags: boundary images, whose row artefacts would stripe Eq. 7's composite)
+    unless ``include_excluded``.  ``info``: ``exposure_us``, ``indices`` (stack images used),
+    ``excluded_delays_us`` (flagged images left out), ``include_excluded``.
     """
     exp = np.asarray(stack.exposure_us, np.float64)
     dl = np.asarray(stack.delay_us, np.float64)
-    t_e = float(exp.min()) if exposure_us is None else float(exposure_us)
-    sel = np.flatnonzero(np.isclose(exp, t_e, atol=0.5) & (dl > min_delay_us) & (np.abs(dl) > 0.5 * t_e))
+    usable = _usable(stack, include_excluded)
+    t_e = float(exp[usable].min() if usable.any() else exp.min()) if exposure_us is None else float(exposure_us)
+    cand = np.isclose(exp, t_e, atol=0.5) & (dl > min_delay_us) & (np.abs(dl) > 0.5 * t_e)
+    sel = np.flatnonzero(cand & usable)
+    left_out = np.flatnonzero(cand & ~usable)
     if sel.size < 2:
+        flagged = (
+            f" ({left_out.size} more excluded by the stack; --include-excluded uses them)" if left_out.size else ""
+        )
         raise InputError(
-            f"the stack has {sel.size} non-epipolar delay images at exposure {t_e:g} us with delay > "
-            f"{min_delay_us:g} us; contrast enhancement needs at least 2"
+            f"the stack has {sel.size} usable non-epipolar delay images at exposure {t_e:g} us with delay > "
+            f"{min_delay_us:g} us{flagged}; contrast enhancement needs at least 2"
         )
     sel = sel[np.argsort(dl[sel])]
-    return np.stack([np.asarray(stack.images[int(i)], np.float64) for i in sel]), dl[sel]
+    info = {
+        "exposure_us": t_e,
+        "indices": [int(i) for i in sel],
+        "excluded_delays_us": sorted(float(dl[i]) for i in left_out),
+        "include_excluded": bool(include_excluded),
+    }
+    return np.stack([np.asarray(stack.images[int(i)], np.float64) for i in sel]), dl[sel], info

@@ -8,13 +8,28 @@ with ``mu`` the mean of the image over the vein's pixels and over its **backgrou
 and ``sigma_bg`` the standard deviation over the band (ddof = 1).  Weber contrast is
 ``(mu_vein - mu_bg) / mu_bg`` (negative for a vein darker than the skin around it).
 
-Background band of a vein ``k``: the pixels whose Euclidean distance to vein ``k`` lies in
-``(gap_px, gap_px + width_px]``, minus every pixel within ``gap_px`` of *any* vein (so another
-vein and its blurred shadow never count as background) and minus every excluded pixel (hair,
-pixels off the skin).  The gap keeps the band out of the vein's own blur; the band is the
-skin right next to the vein, where an observer judges it.  Vein pixels under hair are left
-out of the vein region as well.  The pooled (all-veins) CNR uses the union of the vein
-regions against the union of the bands.
+Background band of a vein ``k``, in **millimetres on the skin** (the same skin at every image
+size): the pixels whose centre lies more than ``gap_mm`` and at most ``gap_mm + width_mm``
+from the centre of the nearest pixel of vein ``k`` (Euclidean distance between pixel centres,
+``mm_per_px`` apart), minus every pixel within ``gap_mm`` of *any* vein (so another vein and
+its shadow never count as background) and minus every excluded pixel (hair, pixels off the
+skin, unusable rows).  Defaults :data:`BAND_GAP_MM` = 5 mm and :data:`BAND_WIDTH_MM` = 10 mm:
+
+* the gap is where most of the short-range indirect shadow of a vein has faded (a 3 mm vein
+  whose top is 1.5 mm deep, in the 500 us / 600 us band image of the skin scene: 3-6 % below
+  the far skin 5 mm from its pixels, 50 % on the vein), and more than the diagonal of a pixel
+  of a 64-row image of the paper's 216 mm field (4.8 mm), so a one-pixel hole in a coarse vein
+  mask never puts the vein itself in its band;
+* the width holds two to three rings of pixels at 64 rows (3.4 mm pixels) and stays the skin
+  right next to the vein, where an observer judges it.
+
+A camera pixel of the simulated skin is ``rows_per_camera_row * mm_per_row`` mm on a side
+(:func:`planeray.skin.imaging.pixel_mm`): 1.69 mm at 128 rows of the paper's 720-row
+projector at 0.3 mm per row, so the band is 2.96-8.89 pixels there, 1.48-4.44 at 64 rows and
+5.93-17.8 at 256.  Every result states the definition and the values used
+(:func:`band_definition`, the ``band`` entry of :func:`vein_metrics`).  Vein pixels under
+hair are left out of the vein region as well.  The pooled (all-veins) CNR uses the union of
+the vein regions against the union of the bands.
 
 A vein counts as **detected** when its CNR is at least ``min_cnr`` (1 by default, the issue's
 rule) *and* it is darker than its band (veins absorb: a brighter "vein" is not a vein seen).
@@ -35,29 +50,66 @@ import numpy as np
 from scipy import ndimage
 
 __all__ = [
+    "BAND_GAP_MM",
+    "BAND_WIDTH_MM",
+    "band_definition",
     "background_bands",
     "cnr",
     "weber_contrast",
     "vein_metrics",
     "vein_ids_from_mask",
-    "default_band_px",
 ]
 
+#: Background band of a vein: from this distance (mm on the skin, pixel centre to the vein's
+#: nearest pixel centre) ...
+BAND_GAP_MM = 5.0
+#: ... over this width (mm).
+BAND_WIDTH_MM = 10.0
 
-def default_band_px(shape) -> tuple[float, float]:
-    """Default ``(gap_px, width_px)`` of the background band for an image of ``shape``.
 
-    2 and 6 pixels at 128 rows (3.4 and 10.1 mm at the simulator's 0.3 mm per projector row and
-    5.6 projector rows per camera row), scaled with the image height: a band of the same size
-    on the skin whatever the resolution.
+def _pitch(mm_per_px) -> tuple[float, float]:
+    """``(row, column)`` pixel pitch in mm from a number or a pair; positive and finite."""
+    p = np.broadcast_to(np.asarray(mm_per_px, dtype=np.float64), (2,))
+    if not np.all(np.isfinite(p)) or np.any(p <= 0):
+        raise ValueError(f"mm_per_px must be positive (mm on the skin per pixel), got {mm_per_px!r}")
+    return float(p[0]), float(p[1])
 
-    >>> default_band_px((128, 128))
-    (2.0, 6.0)
-    >>> default_band_px((256, 256))
-    (4.0, 12.0)
+
+def band_definition(mm_per_px, *, gap_mm: float = BAND_GAP_MM, width_mm: float = BAND_WIDTH_MM) -> dict:
+    """The background band's definition and values, for a result file (JSON-ready).
+
+    Parameters
+    ----------
+    mm_per_px : float or (float, float)
+        Size of a pixel on the skin, mm (rows, columns).
+    gap_mm, width_mm : float
+        Start of the band and its width, mm.
+
+    Returns
+    -------
+    dict
+        ``definition`` (text), ``gap_mm``, ``width_mm``, ``mm_per_px`` and the band in pixels
+        (``gap_px``, ``width_px``; along the rows).
+
+    Examples
+    --------
+    >>> b = band_definition(1.6875)
+    >>> b["gap_mm"], b["width_mm"], round(b["gap_px"], 2), round(b["width_px"], 2)
+    (5.0, 10.0, 2.96, 5.93)
     """
-    s = float(shape[0]) / 128.0
-    return 2.0 * s, 6.0 * s
+    rows, cols = _pitch(mm_per_px)
+    return {
+        "definition": (
+            "CNR = |mu_bg - mu_vein| / sigma_bg (ddof 1); background band of a vein: pixels whose centre lies "
+            "more than gap_mm and at most gap_mm + width_mm from the centre of the vein's nearest pixel, minus "
+            "pixels within gap_mm of any vein, hair, pixels off the skin and unusable pixels"
+        ),
+        "gap_mm": float(gap_mm),
+        "width_mm": float(width_mm),
+        "mm_per_px": rows if rows == cols else [rows, cols],
+        "gap_px": float(gap_mm) / rows,
+        "width_px": float(width_mm) / rows,
+    }
 
 
 def vein_ids_from_mask(mask) -> np.ndarray:
@@ -69,16 +121,20 @@ def vein_ids_from_mask(mask) -> np.ndarray:
     return labels.astype(np.int32)
 
 
-def background_bands(vein_id, *, gap_px=None, width_px=None, exclude=None) -> dict[int, np.ndarray]:
+def background_bands(
+    vein_id, *, mm_per_px, gap_mm: float = BAND_GAP_MM, width_mm: float = BAND_WIDTH_MM, exclude=None
+) -> dict[int, np.ndarray]:
     """Background band of each vein (see the module notes for the definition).
 
     Parameters
     ----------
     vein_id : array_like (H, W) int
         0 off veins, ``k >= 1`` on vein ``k``.
-    gap_px, width_px : float, optional
-        Distance from the vein at which the band starts, and its width (pixels); default
-        :func:`default_band_px`.
+    mm_per_px : float or (float, float)
+        Size of a pixel on the skin, mm (rows, columns): pixel centres are this far apart.
+    gap_mm, width_mm : float
+        Distance from the vein's pixels at which the band starts, and its width, mm
+        (:data:`BAND_GAP_MM`, :data:`BAND_WIDTH_MM`).
     exclude : array_like (H, W) bool, optional
         Pixels never used (hair, off the skin).
 
@@ -90,24 +146,26 @@ def background_bands(vein_id, *, gap_px=None, width_px=None, exclude=None) -> di
     --------
     >>> ids = np.zeros((9, 9), int)
     >>> ids[:, 4] = 1
-    >>> band = background_bands(ids, gap_px=1, width_px=2)[1]
+    >>> band = background_bands(ids, mm_per_px=0.5, gap_mm=0.5, width_mm=1.0)[1]
     >>> band[0].astype(int).tolist()
     [0, 1, 1, 0, 0, 0, 1, 1, 0]
     """
     ids = np.asarray(vein_id)
     if ids.ndim != 2:
         raise ValueError(f"vein ids must be an image (H, W), got shape {ids.shape}")
-    dg, dw = default_band_px(ids.shape)
-    gap = dg if gap_px is None else float(gap_px)
-    width = dw if width_px is None else float(width_px)
-    if gap < 0 or width <= 0:
-        raise ValueError(f"background band needs gap_px >= 0 and width_px > 0, got {gap}, {width}")
+    pitch = _pitch(mm_per_px)
+    gap, width = float(gap_mm), float(width_mm)
+    if not (np.isfinite(gap) and np.isfinite(width)) or gap < 0 or width <= 0:
+        raise ValueError(f"background band needs gap_mm >= 0 and width_mm > 0, got {gap_mm}, {width_mm}")
     any_vein = ids > 0
-    near_any = ndimage.distance_transform_edt(~any_vein) <= gap if any_vein.any() else np.zeros(ids.shape, bool)
+    if any_vein.any():
+        near_any = ndimage.distance_transform_edt(~any_vein, sampling=pitch) <= gap
+    else:
+        near_any = np.zeros(ids.shape, bool)
     blocked = near_any | (np.zeros(ids.shape, bool) if exclude is None else np.asarray(exclude, bool))
     bands = {}
     for k in np.unique(ids[any_vein]):
-        d = ndimage.distance_transform_edt(ids != k)
+        d = ndimage.distance_transform_edt(ids != k, sampling=pitch)
         bands[int(k)] = (d > gap) & (d <= gap + width) & ~blocked
     return bands
 
@@ -153,9 +211,10 @@ def vein_metrics(
     image,
     vein_id,
     *,
+    mm_per_px,
     exclude=None,
-    gap_px=None,
-    width_px=None,
+    gap_mm: float = BAND_GAP_MM,
+    width_mm: float = BAND_WIDTH_MM,
     min_cnr: float = 1.0,
     min_pixels: int = 5,
     depth_mm=None,
@@ -169,10 +228,12 @@ def vein_metrics(
     image : array_like (H, W)
     vein_id : array_like (H, W) int
         Ground-truth vein ids (0 off veins); a boolean mask is split into connected components.
+    mm_per_px : float or (float, float)
+        Size of a pixel on the skin, mm (:func:`planeray.skin.imaging.pixel_mm`).
     exclude : array_like (H, W) bool, optional
         Pixels left out of veins and bands (hair).
-    gap_px, width_px : float, optional
-        Background band (see :func:`background_bands`).
+    gap_mm, width_mm : float
+        Background band, mm on the skin (see :func:`background_bands`).
     min_cnr : float
         Detection threshold on the per-vein CNR (1).
     min_pixels : int
@@ -187,7 +248,8 @@ def vein_metrics(
     dict
         ``cnr``, ``weber`` (pooled), ``n_veins``, ``n_detected``, ``veins``: one dict per vein
         with ``id``, ``pixels``, ``band_pixels``, ``mu_vein``, ``mu_bg``, ``sigma_bg``, ``cnr``,
-        ``weber``, ``detected`` and, where given, ``depth_mm`` and ``diameter_mm``.
+        ``weber``, ``detected`` and, where given, ``depth_mm`` and ``diameter_mm``; ``band``:
+        the band's definition and values (:func:`band_definition`).
 
     Examples
     --------
@@ -199,7 +261,7 @@ def vein_metrics(
     >>> ids[:, 10:12] = 1
     >>> ids[:, 28:30] = 2
     >>> img[:, 10:12] -= 0.05
-    >>> m = vein_metrics(img, ids)
+    >>> m = vein_metrics(img, ids, mm_per_px=1.0)
     >>> [v["detected"] for v in m["veins"]], m["n_detected"]
     ([True, False], 1)
     """
@@ -214,7 +276,7 @@ def vein_metrics(
         usable &= ~np.asarray(exclude, bool)
     if valid is not None:
         usable &= np.asarray(valid, bool)
-    bands = background_bands(ids, gap_px=gap_px, width_px=width_px, exclude=~usable)
+    bands = background_bands(ids, mm_per_px=mm_per_px, gap_mm=gap_mm, width_mm=width_mm, exclude=~usable)
     veins, all_v, all_b = [], np.zeros(ids.shape, bool), np.zeros(ids.shape, bool)
     for k, band in bands.items():
         vein = (ids == k) & usable
@@ -242,4 +304,5 @@ def vein_metrics(
         "n_veins": len(veins),
         "n_detected": int(sum(v["detected"] for v in veins)),
         "veins": veins,
+        "band": band_definition(mm_per_px, gap_mm=gap_mm, width_mm=width_mm),
     }
