@@ -51,13 +51,13 @@ def _as_typed(text: str, options: dict) -> str:
     """Rename the library's parameters to the options the user typed, where a message names them.
 
     Only a parameter that a message is *about* is renamed: ``NAME must ...``, ``NAME = ...``,
-    ``NAME[0] must ...`` (one element of a tuple option such as ``shape`` -> ``--size``),
-    ``NAME (...)`` and ``NAME:`` -- never a word inside other text.
+    ``NAME=...`` and ``NAME[0] must ...`` (one element of a tuple option such as ``shape`` ->
+    ``--size``) -- never a word of other text ("cannot read the vein mask: ...").
     """
     import re
 
     for name in sorted(options, key=len, reverse=True):
-        pattern = rf"(?<![\w\-.]){re.escape(name)}(\[\d+\])?(?=( must\b| =| \(|:| is\b| and\b))"
+        pattern = rf"(?<![\w\-.]){re.escape(name)}(\[\d+\])?(?=( must\b| = |=))"
         text = re.sub(pattern, options[name], text)
     return text
 
