@@ -563,10 +563,10 @@ def test_a_failing_render_or_a_vanishing_page_never_stops_the_server(truth_store
     source = open_source(truth_store)
     original = source._render
 
-    def flaky(settings):
+    def flaky(settings, buffers):
         if settings.delay_us == 13.0:
             raise RuntimeError("the renderer broke")
-        return original(settings)
+        return original(settings, buffers)
 
     source._render = flaky
     with ViewerServer(source) as srv:
