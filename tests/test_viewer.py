@@ -691,7 +691,7 @@ def test_a_freshly_started_server_reuses_its_memory_frame_after_frame(tmp_path):
     process faults in (almost) no new memory per frame.  Each frame computes megabytes of temporaries
     (here, as in a 512-row scene, the (H, U) = (512, 257) float64 illumination weights and what is made
     of them); by default glibc returned them to the system and faulted them in again page by page,
-    every frame (740 page faults per frame here, 2000 for the 512x512 wax scene)."""
+    every frame (740 page faults per frame here, 1000 for the 512x512 wax scene)."""
     from websockets.sync.client import connect
 
     H, W, U = 512, 8, 257

@@ -167,14 +167,17 @@ def keep_freed_memory(*, mmap_threshold_bytes: int = 32 << 20, trim_threshold_by
     """Ask glibc's allocator to keep freed memory for reuse instead of returning it at once (the serving
     process only: :meth:`ViewerServer.run`).  Returns whether it was set (False off glibc).
 
-    By default glibc maps every block above 128 KiB afresh and returns the top of its heap as soon as
-    more than twice that is free, unless a large block has been freed before (then it adapts). A
-    freshly started server therefore got several megabytes per 512x512 frame -- the illumination
-    weights, the WebSocket library's copies of each 1 MiB message -- from the system and faulted them
-    in page by page, every frame: about 2000 page faults and twice the time per frame of a process
-    that had once freed a large block.  With blocks up to ``mmap_threshold_bytes`` (32 MiB, glibc's
-    largest) served from the heap and up to ``trim_threshold_bytes`` of free heap kept, every frame
-    reuses the memory of the one before.
+    By default glibc maps every block above 128 KiB afresh and returns the top of its heap once more
+    than twice that is free (it raises both limits only after a large block has been freed).  The
+    frame buffers are the source's own (:class:`~planeray.viewer.session.FrameBuffers`), but each
+    frame still computes temporaries outside the viewer: the ``(H, U)`` float64 illumination weights
+    of the band and what the renderer makes of them, 1 MiB each at 512 rows and 257 offsets.  A
+    freshly started server returned them to the system and faulted them in again page by page, every
+    frame (1000 page faults per 512x512 wax frame, 2000 before the frame buffers were reused; twice
+    the time per frame of a process that had once freed a large block).  With blocks up to
+    ``mmap_threshold_bytes`` (32 MiB, glibc's largest) served from the heap and up to
+    ``trim_threshold_bytes`` of free heap kept, every frame reuses the memory of the one before:
+    0 page faults per frame from the first.
     """
     import ctypes
     import platform
