@@ -50,6 +50,24 @@ def test_saturation_is_flagged_and_clipped():
     np.testing.assert_allclose(img[3:5], 1.0)
 
 
+def test_expected_image_in_given_buffers():
+    """The noise-free image written into reused buffers (the live viewer): the camera's expected response,
+    computed here from its definition, and the bytes of ``expose(noise=False)``."""
+    cam = CameraModel(ambient_e_per_us=2.0)
+    rng = np.random.default_rng(4)
+    signal = (rng.random((12, 9)) * 2.2 - 0.1).astype(np.float32)  # some saturate, some below zero
+    albedo = rng.random((12, 9)).astype(np.float32)
+    out, work = np.full((12, 9), np.nan, np.float32), np.full((12, 9), np.nan)
+    for amb in (None, albedo):
+        e = cam.laser_electrons * signal.astype(float) + (0.0 if amb is None else 2.0 * 750.0 * amb.astype(float))
+        want = np.clip(e, 0.0, cam.full_well_e) * cam.gain_adu_per_e / (cam.max_code - cam.black_level)
+        image, n_sat = cam.expected_image(signal, 750.0, ambient_albedo=amb, out=out, work=work)
+        assert image is out and n_sat == int((e >= cam.full_well_e).sum()) > 0
+        np.testing.assert_allclose(image, want, rtol=1e-6, atol=1e-9)
+        plain, sat = cam.expose(signal, 750.0, None, ambient_albedo=amb, noise=False)
+        assert np.array_equal(plain, image) and int(sat.sum()) == n_sat
+
+
 def test_ambient_integrates_over_row_exposure_only():
     """Ambient grows with the row exposure; the laser's direct light does not."""
     cam = CameraModel(ambient_e_per_us=2.0)

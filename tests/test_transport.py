@@ -93,6 +93,24 @@ def test_bands_tiling_the_support_conserve_energy():
     np.testing.assert_allclose(total, T.full_image(), rtol=1e-5)
 
 
+def test_render_into_a_given_buffer():
+    """``out=`` (the live viewer reuses one frame buffer): the same image, written over whatever was there."""
+    wide = _random_transport(K=60, seed=4)
+    rows, cols, ks = np.nonzero(wide.dense > 0.98)
+    T = Transport.from_entries(wide.shape, np.arange(-20, 21), rows, cols, wide.offsets_rows[ks], np.ones(rows.size))
+    assert len(T.sparse) > 0
+    out = np.full(T.shape, np.nan, np.float32)
+    pattern = RowPattern(np.random.default_rng(5).random(T.shape[0]))  # the dense weighted-sum path
+    for illum in (Band(-187.5, 750.0, 54000), Band(900.0, 900.0, 54000), pattern):
+        image = T.render(illum, out=out)
+        assert image is out
+        np.testing.assert_allclose(out, _reference_render(T, illum), rtol=1e-5, atol=1e-4)
+        out[:] = np.nan
+    for bad in (np.zeros(T.shape, np.float64), np.zeros((3, 3), np.float32), np.zeros(T.shape[::-1], np.float32).T):
+        with pytest.raises(ValueError, match="out must be"):
+            T.render(Band(0.0, 600.0, 54000), out=bad)
+
+
 def test_epipolar_plus_non_epipolar_is_full():
     T = _random_transport()
     np.testing.assert_allclose(T.epipolar_image() + T.non_epipolar_image(), T.full_image(), rtol=1e-5)

@@ -24,6 +24,7 @@ from planeray.io import write_stack, write_transport
 from planeray.profiles import measured_delay_profiles
 from planeray.scenes import make_scene
 from planeray.timing import PAPER_LINES_PER_SECOND, Band, Sweep, quick_sweep
+from planeray.transport import Transport
 from planeray.viewer import display
 from planeray.viewer.server import ViewerServer, decode_frame, encode_frame
 from planeray.viewer.session import (
@@ -313,6 +314,20 @@ def test_server_needs_the_token_and_serves_only_its_assets(server):
     info = json.loads(body)
     assert status == 200 and info["source"]["kind"] == "transport" and "gray" in info["colormaps"]
     assert _get(f"{base}/api/info")[0] == 403
+    assert _get(f"{base}/api/reports")[0] == 403
+
+    async def report():  # what a page opened with ?bench= sends (no answer); the ping's answer follows it
+        import websockets
+
+        async with websockets.connect(_ws_url(server), compression=None) as ws:
+            await ws.recv()
+            await ws.send(json.dumps({"type": "report", "stats": {"fps": 12.5, "frames": 25}}))
+            await ws.send(json.dumps({"type": "ping", "id": 1}))
+            await asyncio.wait_for(ws.recv(), 20)
+
+    asyncio.run(report())
+    status, body, _ = _get(f"{base}/api/reports?token={server.token}")
+    assert status == 200 and json.loads(body)[-1] == {"fps": 12.5, "frames": 25}
     assert _get(f"{base}/static/app.js")[0] == 200
     for path in [
         "/static/../session.py",
@@ -563,10 +578,10 @@ def test_a_failing_render_or_a_vanishing_page_never_stops_the_server(truth_store
     source = open_source(truth_store)
     original = source._render
 
-    def flaky(settings):
+    def flaky(settings, buffers):
         if settings.delay_us == 13.0:
             raise RuntimeError("the renderer broke")
-        return original(settings)
+        return original(settings, buffers)
 
     source._render = flaky
     with ViewerServer(source) as srv:
@@ -592,3 +607,125 @@ def test_a_failing_render_or_a_vanishing_page_never_stops_the_server(truth_store
     assert error["message"] == "internal error (RuntimeError: the renderer broke)"
     header, image = decode_frame(answers[1])
     assert header["id"] == 2 and np.array_equal(image, scene.transport.render(Band(14.0, 600.0, LPS)))
+
+
+# ----------------------------------------------------------------------------- a fresh server is a warm one
+def test_frames_are_rendered_into_the_sources_reused_buffers(truth_store):
+    """The server's path (``ViewSource.frame``) renders every frame into the same buffers, with the bytes of
+    ``render`` (whose arrays stay the caller's: a later frame never overwrites them)."""
+    for src in (open_source("wax", size=16, projector_rows=90), open_source(truth_store)):
+        src.warm()
+        pointers = set()
+        band = [ViewSettings(delay_us=d, exposure_us=e) for d, e in ((0.0, 600.0), (375.0, 900.0), (-750.0, 600.0))]
+        others = [ViewSettings(mode="non_epipolar"), ViewSettings(mode="long_range", max_rows=5.0)]
+        for s in band + others:
+            want, want_info = src.render(s)
+            with src.frame(s) as (image, info):
+                assert np.array_equal(image, want) and info == want_info, s
+                assert not np.shares_memory(image, want)
+                if s.mode == "band":
+                    pointers.add(image.__array_interface__["data"][0])
+        assert len(pointers) == 1, "every band frame in one buffer"
+        kept, _ = src.render(ViewSettings(delay_us=0.0))
+        copy = kept.copy()
+        with src.frame(ViewSettings(delay_us=900.0)) as (image, _):
+            assert not np.array_equal(image, copy)
+        assert np.array_equal(kept, copy)
+
+
+def test_a_warm_frame_allocates_nothing_the_size_of_a_frame():
+    """After warm-up a frame of the virtual Episcan (band render, camera response) allocates no
+    frame-sized array: tracemalloc's peak while rendering it stays below half the frame's bytes,
+    where ``render`` (new arrays: the image, the float64 electrons) peaks at several frames."""
+    import tracemalloc
+
+    H, W = 32, 2048  # wide rows, few offsets: the (H, U) illumination weights are tiny next to a frame
+    rng = np.random.default_rng(0)
+    T = Transport(rng.random((H, W, 9), dtype=np.float32) * 0.2, np.arange(-4, 5))
+    src = TransportSource(T, name="wide", kind="scene", camera=CameraModel())
+    src.warm()
+    frame_bytes = H * W * 4
+    tracemalloc.start()
+    try:
+        for d in (-80.0, 0.0, 45.0, 90.0):
+            tracemalloc.reset_peak()
+            base = tracemalloc.get_traced_memory()[0]
+            with src.frame(ViewSettings(delay_us=d, exposure_us=150.0)) as (image, info):
+                assert image.shape == (H, W) and info["saturated"] >= 0
+            peak = tracemalloc.get_traced_memory()[1] - base
+            assert peak < frame_bytes / 2, f"a warm frame allocated {peak} bytes (a frame is {frame_bytes})"
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        src.render(ViewSettings(delay_us=0.0, exposure_us=150.0))
+        assert tracemalloc.get_traced_memory()[1] - base >= 3 * frame_bytes  # the measurement sees new frames
+    finally:
+        tracemalloc.stop()
+
+
+def test_server_renders_in_one_thread_and_is_warm_before_serving(truth_store):
+    src = open_source(truth_store)
+    with ViewerServer(src) as srv:
+        assert len(src._buffers) > 0  # warmed: the first frame's buffers exist before any page asked
+        threads = set()
+        original = src._render
+
+        def spy(settings, buffers):
+            import threading
+
+            threads.add(threading.current_thread().name)
+            return original(settings, buffers)
+
+        src._render = spy
+        messages = [{"type": "render", "panel": i % 2, "id": i, "settings": {"delay_us": 40.0 * i}} for i in range(6)]
+        _, answers = asyncio.run(_session(srv, messages))
+        assert [decode_frame(a)[0]["id"] for a in answers] == list(range(6))
+        assert len(threads) == 1 and threads.pop().startswith("planeray-render")
+
+
+@pytest.mark.skipif(
+    not Path("/proc/self/stat").exists() or __import__("platform").libc_ver()[0] != "glibc",
+    reason="page faults read from /proc; the allocator setting is glibc's",
+)
+def test_a_freshly_started_server_reuses_its_memory_frame_after_frame(tmp_path):
+    """`planeray view` as a user starts it, asked for a drag of frames: after the first few, the server
+    process faults in (almost) no new memory per frame.  Each frame computes megabytes of temporaries
+    (here, as in a 512-row scene, the (H, U) = (512, 257) float64 illumination weights and what is made
+    of them); by default glibc returned them to the system and faulted them in again page by page,
+    every frame (740 page faults per frame here, 1000 for the 512x512 wax scene)."""
+    from websockets.sync.client import connect
+
+    H, W, U = 512, 8, 257
+    rng = np.random.default_rng(1)
+    T = Transport(rng.random((H, W, U), dtype=np.float32), np.arange(U) - U // 2)
+    store = write_transport(T, tmp_path / "tall.zarr", attrs={"lines_per_second": LPS})
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")}
+    env.pop("DISPLAY", None)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planeray.cli", "view", str(store), "--port", "0", "--no-browser"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        env=env,
+    )
+
+    def faults() -> int:
+        with open(f"/proc/{proc.pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[7])
+
+    try:
+        url = proc.stdout.readline().strip()
+        host, token = url.split("//")[1].split("/")[0], url.split("token=")[1]
+        per_frame = []
+        with connect(f"ws://{host}/ws?token={token}", max_size=None, compression=None) as ws:
+            ws.recv()
+            for i in range(40):
+                f0 = faults()
+                ws.send(json.dumps({"type": "render", "panel": 0, "id": i, "settings": {"delay_us": 7.0 * i}}))
+                header, image = decode_frame(ws.recv())
+                per_frame.append(faults() - f0)
+                assert header["id"] == i and image.shape == (H, W)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)
+    weight_pages = H * U * 8 // 4096  # one (H, U) float64 array
+    assert np.mean(per_frame[10:]) < weight_pages / 8, per_frame

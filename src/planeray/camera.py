@@ -104,12 +104,46 @@ class CameraModel:
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def mean_electrons(self, signal, exposure_us, *, ambient_albedo=None):
-        """Expected electrons per frame: laser signal plus ambient over the row exposure."""
-        e = self.laser_electrons * np.asarray(signal, dtype=np.float64)
+    def mean_electrons(self, signal, exposure_us, *, ambient_albedo=None, out=None):
+        """Expected electrons per frame: laser signal plus ambient over the row exposure.
+
+        ``out``: a float64 array of the signal's shape written and returned instead of a new one.
+        """
+        e = np.multiply(signal, self.laser_electrons, out=out, dtype=np.float64)
         if ambient_albedo is not None and self.ambient_e_per_us > 0:
-            e = e + self.ambient_e_per_us * float(exposure_us) * np.asarray(ambient_albedo, dtype=np.float64)
-        return np.maximum(e, 0.0)
+            ambient = self.ambient_e_per_us * float(exposure_us) * np.asarray(ambient_albedo, dtype=np.float64)
+            e = np.add(e, ambient, out=out)
+        return np.maximum(e, 0.0, out=out)
+
+    def expected_image(self, signal, exposure_us, *, ambient_albedo=None, out=None, work=None):
+        """The noise-free image (what :meth:`expose` returns with ``noise=False``) and its number of
+        saturated pixels.
+
+        Expected electrons clipped at full well, through the ADC gain, normalized.  ``out`` (float32)
+        receives the image and ``work`` (float64, the signal's shape) is scratch; given both, nothing of
+        the image's size is allocated but a mask of its saturated pixels (the live viewer reuses them
+        for every frame).
+
+        Returns
+        -------
+        image : ndarray (H, W) float32
+            ``out`` when given.
+        n_saturated : int
+            Pixels at full well.
+        """
+        e = self.mean_electrons(signal, exposure_us, ambient_albedo=ambient_albedo, out=work)
+        n_saturated = int(np.count_nonzero(e >= self.full_well_e))
+        return self._normalized_expected(e, out), n_saturated
+
+    def _normalized_expected(self, e_mean, out=None):
+        """Normalized image of expected electrons (clipped at full well); overwrites ``e_mean``."""
+        np.minimum(e_mean, self.full_well_e, out=e_mean)
+        e_mean *= self.gain_adu_per_e
+        e_mean /= self.max_code - self.black_level
+        if out is None:
+            return e_mean.astype(np.float32)
+        np.copyto(out, e_mean, casting="same_kind")
+        return out
 
     def expose(self, signal, exposure_us, rng: np.random.Generator, *, ambient_albedo=None, noise=True):
         """Capture one stack image: ``frames_averaged`` noisy frames, averaged and normalized.
@@ -136,8 +170,8 @@ class CameraModel:
         e_mean = self.mean_electrons(signal, exposure_us, ambient_albedo=ambient_albedo)
         span = self.max_code - self.black_level
         if not noise:
-            clipped = np.minimum(e_mean, self.full_well_e)
-            return (clipped * self.gain_adu_per_e / span).astype(np.float32), e_mean >= self.full_well_e
+            saturated = e_mean >= self.full_well_e
+            return self._normalized_expected(e_mean), saturated
         n = self.frames_averaged
         g = self.gain_adu_per_e
         # Frames of pixels that cannot reach full well are summed in one draw: the

@@ -232,7 +232,7 @@ class Transport:
         rows = np.arange(self.shape[0])[:, None]
         return illumination.weights(self.geometry, rows, self.offsets_rows[None, :])
 
-    def render(self, illumination) -> np.ndarray:
+    def render(self, illumination, *, out=None) -> np.ndarray:
         """Image ``I(s, t) = sum_v L(v) T(v, s, t)`` under an illumination, Eq. 4.
 
         Parameters
@@ -240,12 +240,15 @@ class Transport:
         illumination : object with ``weights(geometry, rows, offsets)``
             A :class:`planeray.timing.Band`, :class:`planeray.timing.RowPattern` or
             any object returning illumination weights per (camera row, offset bin).
+        out : ndarray of float32, shape (H, W), optional
+            Written and returned instead of a new image (a caller rendering many
+            frames reuses one buffer).
 
         Returns
         -------
         image : ndarray of float32, shape (H, W)
         """
-        image = self.render_weights(self.illumination_weights(illumination))
+        image = self.render_weights(self.illumination_weights(illumination), out=out)
         if len(self.sparse):
             sp = self.sparse
             w = illumination.weights(self.geometry, sp.row, sp.offset)
@@ -253,16 +256,21 @@ class Transport:
             image += np.bincount(flat, w * sp.value, minlength=image.size).reshape(image.shape).astype(np.float32)
         return image
 
-    def render_weights(self, weights) -> np.ndarray:
+    def render_weights(self, weights, *, out=None) -> np.ndarray:
         """Dense part of Eq. 4 for per-row weights ``(H, U)`` over ``offsets_rows``.
 
         Band-like weights (a plateau of ones plus a few edge bins) take the O(pixels)
         prefix-sum path; any other pattern a dense weighted sum over offsets.
+        ``out``: a float32 ``(H, W)`` array written and returned instead of a new image.
         """
         weights = np.asarray(weights, dtype=np.float64)
         H, W, U = self.dense.shape
         if weights.shape != (H, U):
             raise ValueError(f"weights must be (H, U) = {(H, U)}, got {weights.shape}")
+        if out is None:
+            out = np.empty((H, W), np.float32)
+        elif out.shape != (H, W) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous float32 array of shape {(H, W)}")
         full = weights >= 1.0 - _PLATEAU_TOL
         has = full.any(axis=1)
         k0 = np.where(has, np.argmax(full, axis=1), 0)
@@ -276,10 +284,11 @@ class Transport:
         nonzero = residual != 0.0
         n_edge = int(nonzero.sum(axis=1).max(initial=0))
         if n_edge > max(8, U // 3):
-            return np.matmul(self.dense, weights.astype(np.float32)[:, :, None])[..., 0]
+            np.matmul(self.dense, weights.astype(np.float32)[:, :, None], out=out[..., None])
+            return out
         from ._bandsum import band_rows  # compiled (Numba): plateau + edge bins in one pass per row
 
-        return band_rows(self._prefix_sums(), self._offset_major(), k0, k1, residual)
+        return band_rows(self._prefix_sums(), self._offset_major(), k0, k1, residual, out)
 
     def _offset_major(self) -> np.ndarray:
         if self._by_offset is None:

@@ -2,12 +2,13 @@
 
 Routes (every one but the page's own assets needs the access token, ``?token=...``):
 
-=================  ===========================================================
-``GET /``          the page (``static/index.html``)
-``GET /static/X``  the page's assets, from a fixed list shipped in the package
-``GET /api/info``  what is shown (:meth:`~planeray.viewer.session.ViewSource.describe`) and the colormaps
-``WS  /ws``        the live protocol (below)
-=================  ===========================================================
+====================  ===========================================================
+``GET /``             the page (``static/index.html``)
+``GET /static/X``     the page's assets, from a fixed list shipped in the package
+``GET /api/info``     what is shown (:meth:`~planeray.viewer.session.ViewSource.describe`) and the colormaps
+``GET /api/reports``  the frame-rate reports of pages opened with ``?bench=SECONDS`` (the last 20, JSON)
+``WS  /ws``           the live protocol (below)
+====================  ===========================================================
 
 Protocol on ``/ws`` (JSON text messages from the page; the server answers JSON text
 or binary frames):
@@ -60,7 +61,15 @@ from ..errors import InputError
 from .display import auto_white, colormap_tables
 from .session import ViewSettings, ViewSource
 
-__all__ = ["make_app", "ViewerServer", "encode_frame", "decode_frame", "STATIC_FILES"]
+__all__ = [
+    "make_app",
+    "ViewerServer",
+    "encode_frame",
+    "decode_frame",
+    "render_frame",
+    "keep_freed_memory",
+    "STATIC_FILES",
+]
 
 log = logging.getLogger("planeray.viewer")
 
@@ -140,13 +149,60 @@ def _gone_errors() -> tuple[type[BaseException], ...]:
 _GONE = _gone_errors()
 
 
+def render_frame(source: ViewSource, settings: ViewSettings, header: dict) -> bytes:
+    """One binary frame of ``settings`` (:func:`encode_frame`), rendered in the source's reused frame
+    buffers and encoded while they are held; ``header`` gets the frame's ``auto_white``, ``render_ms``,
+    ``encode_ms``, ``sent_at_ms`` and what the source says about the image."""
+    t0 = time.perf_counter()
+    with source.frame(settings) as (image, info):
+        t1 = time.perf_counter()
+        header = {**header, "auto_white": auto_white(image), "render_ms": (t1 - t0) * 1e3, **info}
+        pixels = np.ascontiguousarray(image, dtype="<f4").tobytes()
+        header["encode_ms"] = (time.perf_counter() - t1) * 1e3
+        header["sent_at_ms"] = time.time() * 1000
+        return encode_frame(image, header, pixels=pixels)
+
+
+def keep_freed_memory(*, mmap_threshold_bytes: int = 32 << 20, trim_threshold_bytes: int = 256 << 20) -> bool:
+    """Ask glibc's allocator to keep freed memory for reuse instead of returning it at once (the serving
+    process only: :meth:`ViewerServer.run`).  Returns whether it was set (False off glibc).
+
+    By default glibc maps every block above 128 KiB afresh and returns the top of its heap once more
+    than twice that is free (it raises both limits only after a large block has been freed).  The
+    frame buffers are the source's own (:class:`~planeray.viewer.session.FrameBuffers`), but each
+    frame still computes temporaries outside the viewer: the ``(H, U)`` float64 illumination weights
+    of the band and what the renderer makes of them, 1 MiB each at 512 rows and 257 offsets.  A
+    freshly started server returned them to the system and faulted them in again page by page, every
+    frame (1000 page faults per 512x512 wax frame, 2000 before the frame buffers were reused; twice
+    the time per frame of a process that had once freed a large block).  With blocks up to
+    ``mmap_threshold_bytes`` (32 MiB, glibc's largest) served from the heap and up to
+    ``trim_threshold_bytes`` of free heap kept, every frame reuses the memory of the one before:
+    0 page faults per frame from the first.
+    """
+    import ctypes
+    import platform
+
+    if platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # pragma: no cover - glibc always has it
+        return False
+    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+    M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # <malloc.h>
+    return bool(mallopt(M_MMAP_THRESHOLD, int(mmap_threshold_bytes))) and bool(
+        mallopt(M_TRIM_THRESHOLD, int(trim_threshold_bytes))
+    )
+
+
 class _Connection:
     """One page: a receiver that keeps the newest request per panel and a worker that answers."""
 
-    def __init__(self, websocket, source: ViewSource, reports: list):
+    def __init__(self, websocket, source: ViewSource, reports: list, executor):
         self.ws = websocket
         self.source = source
         self.reports = reports
+        self.executor = executor
         self.latest: dict[int, dict] = {}
         self.others: list[dict] = []
         self.wake = asyncio.Event()
@@ -228,27 +284,16 @@ class _Connection:
                 await self.send_text({"type": "pong", "id": mid, "server_ms": time.time() * 1000})
                 return
             settings = ViewSettings.from_dict(req.get("settings"))
+            loop = asyncio.get_running_loop()
             if kind == "pixel":
-                data = await asyncio.to_thread(self.source.pixel, req.get("row"), req.get("col"), settings)
+                row, col = req.get("row"), req.get("col")
+                data = await loop.run_in_executor(self.executor, self.source.pixel, row, col, settings)
                 await self.send_text({"type": "pixel", "id": mid, "panel": panel, "data": data})
                 return
-            t0 = time.perf_counter()
-            image, info = await asyncio.to_thread(self.source.render, settings)
-            t1 = time.perf_counter()
-            header = {
-                "type": "frame",
-                "panel": panel,
-                "id": mid,
-                "settings": settings.to_dict(),
-                "auto_white": auto_white(image),
-                "render_ms": (t1 - t0) * 1e3,
-                "queue_ms": (t0 - req["_received"]) * 1e3,
-                **info,
-            }
-            pixels = np.ascontiguousarray(image, dtype="<f4").tobytes()
-            header["encode_ms"] = (time.perf_counter() - t1) * 1e3
-            header["sent_at_ms"] = time.time() * 1000
-            await self._send(data=encode_frame(image, header, pixels=pixels))
+            header = {"type": "frame", "panel": panel, "id": mid, "settings": settings.to_dict()}
+            header["queue_ms"] = (time.perf_counter() - req["_received"]) * 1e3
+            frame = await loop.run_in_executor(self.executor, render_frame, self.source, settings, header)
+            await self._send(data=frame)
         except InputError as exc:
             await self.send_error(str(exc), mid=mid, panel=panel)
         except Exception as exc:  # never let one request take the server down
@@ -256,7 +301,7 @@ class _Connection:
             await self.send_error(f"internal error ({type(exc).__name__}: {exc})", mid=mid, panel=panel)
 
 
-def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, reports: list | None = None):
+def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, reports: list | None = None, executor=None):
     """The ASGI application showing ``source``.
 
     Parameters
@@ -268,7 +313,14 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, repo
         Accept only loopback ``Host`` headers (the server is bound to a loopback address).
     reports : list, optional
         Receives the frame-rate reports of pages opened with ``?bench=SECONDS`` (the last 20).
+    executor : concurrent.futures.Executor, optional
+        Runs the renders (the source renders one at a time); default: one thread of its own, so
+        every frame is rendered by the thread that rendered the one before (and reuses its memory).
     """
+    if executor is None:
+        executor = _render_executor()
+    if reports is None:
+        reports = []
     from starlette.applications import Starlette
     from starlette.exceptions import HTTPException
     from starlette.responses import JSONResponse, PlainTextResponse, Response
@@ -321,6 +373,9 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, repo
     async def info(request):
         return refuse(request) or JSONResponse(hello)
 
+    async def bench_reports(request):
+        return refuse(request) or JSONResponse(list(reports))
+
     async def ws_endpoint(websocket):
         origin = websocket.headers.get("origin")
         host = websocket.headers.get("host", "")
@@ -331,7 +386,7 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, repo
             await websocket.close(code=1008, reason="cross-origin connection refused")
             return
         await websocket.accept()
-        conn = _Connection(websocket, source, reports if reports is not None else [])
+        conn = _Connection(websocket, source, reports, executor)
         try:
             await websocket.send_text(json.dumps(hello, separators=(",", ":")))
             worker = asyncio.create_task(conn.work_loop())
@@ -381,12 +436,19 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, repo
             Route("/", index),
             Route("/static/{name}", asset),
             Route("/api/info", info),
+            Route("/api/reports", bench_reports),
             Route("/favicon.ico", favicon),
             WebSocketRoute("/ws", ws_endpoint),
         ],
         exception_handlers={HTTPException: not_found, Exception: server_error},
     )
     return _Headers(app)
+
+
+def _render_executor():
+    from concurrent.futures import ThreadPoolExecutor
+
+    return ThreadPoolExecutor(max_workers=1, thread_name_prefix="planeray-render")
 
 
 class ViewerServer:
@@ -419,9 +481,19 @@ class ViewerServer:
         self.port = self.sock.getsockname()[1]
         #: Frame-rate reports of pages opened with ``?bench=SECONDS`` (benchmarks).
         self.reports: list[dict] = []
-        self.app = make_app(source, token=self.token, loopback_only=self.loopback, reports=self.reports)
+        self.executor = _render_executor()
+        self.app = make_app(
+            source, token=self.token, loopback_only=self.loopback, reports=self.reports, executor=self.executor
+        )
         self._server = None
         self._thread = None
+
+    def warm(self) -> None:
+        """Render and encode the page's first frame once in the render thread (its buffers allocated,
+        compiled kernels loaded), so that the first frames a page asks for are as fast as the later ones."""
+        self.executor.submit(self.source.warm).result()
+        settings = ViewSettings.from_dict(self.source.describe()["defaults"])
+        self.executor.submit(render_frame, self.source, settings, {"type": "frame"}).result()
 
     def _bind(self, host: str, port: int) -> socket.socket:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -460,9 +532,12 @@ class ViewerServer:
         )
 
     def run(self) -> None:
-        """Serve in the foreground until interrupted (Ctrl-C)."""
+        """Serve in the foreground until interrupted (Ctrl-C); this process serves and nothing else, so
+        its allocator keeps freed memory for the next frame (:func:`keep_freed_memory`)."""
         import uvicorn
 
+        keep_freed_memory()
+        self.warm()
         self._server = uvicorn.Server(self._config())
         self._server.run(sockets=[self.sock])
 
@@ -470,6 +545,7 @@ class ViewerServer:
         """Serve in a background thread; returns once the server accepts connections."""
         import uvicorn
 
+        self.warm()
         self._server = uvicorn.Server(self._config())
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [self.sock]}, daemon=True)
         self._thread.start()
@@ -487,6 +563,7 @@ class ViewerServer:
         if self._thread is not None:
             self._thread.join(timeout=10)
             self._thread = None
+        self.executor.shutdown(wait=False, cancel_futures=True)
         self.sock.close()
 
     def __enter__(self):

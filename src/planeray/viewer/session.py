@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import threading
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
@@ -44,6 +45,7 @@ __all__ = [
     "StackSource",
     "open_source",
     "pattern_rows",
+    "FrameBuffers",
 ]
 
 #: Display modes: name -> label.  A stack shows only ``band`` (its captured images).
@@ -196,7 +198,8 @@ class ViewSource:
     def __init__(self, name: str, shape):
         self.name = str(name)
         self.shape = (int(shape[0]), int(shape[1]))
-        self._lock = threading.Lock()  # renders share caches; one at a time
+        self._lock = threading.Lock()  # renders share caches and frame buffers; one at a time
+        self._buffers = FrameBuffers(self.shape)
 
     def describe(self) -> dict:
         """What the page needs to build its controls (JSON)."""
@@ -216,7 +219,26 @@ class ViewSource:
         """The image of ``settings`` (float32, ``shape``) and what it shows (JSON)."""
         settings = self.check(settings)
         with self._lock:
-            return self._render(settings)
+            return self._render(settings, None)
+
+    @contextmanager
+    def frame(self, settings: ViewSettings):
+        """``with source.frame(settings) as (image, info):`` the image of ``settings`` in the source's
+        reused frame buffers (the server's path: no frame-sized allocation once warm).
+
+        The image is valid, and the source locked, inside the ``with`` block only: the next frame
+        overwrites it.  Read it there (encode, copy), never keep it.
+        """
+        settings = self.check(settings)
+        with self._lock:
+            yield self._render(settings, self._buffers)
+
+    def warm(self) -> None:
+        """Render the page's first frame once (buffers allocated, compiled kernels loaded): call it
+        in the thread that will render, before the first request, so the first drag is as fast as the
+        hundredth."""
+        with self.frame(ViewSettings.from_dict(self.describe()["defaults"])) as (image, _):
+            np.count_nonzero(image)
 
     def pixel(self, row: int, col: int, settings: ViewSettings) -> dict:
         """The plot data of one pixel (JSON)."""
@@ -230,11 +252,44 @@ class ViewSource:
         with self._lock:
             return self._pixel(row, col, settings)
 
-    def _render(self, settings):  # pragma: no cover - abstract
+    def _render(self, settings, buffers):  # pragma: no cover - abstract
+        """``(image, info)``; ``buffers`` (a :class:`FrameBuffers`, or None: new arrays) may hold the image."""
         raise NotImplementedError
 
     def _pixel(self, row, col, settings):  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+class FrameBuffers:
+    """Frame-sized arrays a source renders into, allocated on first use and reused for every frame.
+
+    A fresh process would otherwise allocate (and the C allocator map, fault in and return to the
+    system) several megabytes of temporaries per 512x512 frame; reusing them makes a fresh server's
+    first frames as fast as its hundredth.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Image ``(H, W)``.
+    """
+
+    def __init__(self, shape):
+        self.shape = (int(shape[0]), int(shape[1]))
+        self._arrays: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, dtype=np.float32) -> np.ndarray:
+        """The buffer ``name`` (``shape``, ``dtype``), the same array every call; its contents are stale."""
+        a = self._arrays.get(name)
+        if a is None:
+            a = self._arrays[name] = np.empty(self.shape, dtype)
+        return a
+
+    def __len__(self) -> int:
+        return len(self._arrays)
+
+
+def _out(buffers: FrameBuffers | None, name: str, dtype=np.float32) -> np.ndarray | None:
+    return None if buffers is None else buffers.get(name, dtype)
 
 
 def _round_up(x: float, step: float) -> float:
@@ -387,57 +442,67 @@ class TransportSource(ViewSource):
             shifts = row_shifts_rows(rng, cam.frames_averaged, self.shape[0], cam.row_jitter_us, self.lines_per_second)
         return Band(float(delay_us), float(exposure_us), self.lines_per_second, cam.jitter_us, 0.0, shifts)
 
-    def _band_image(self, s: ViewSettings) -> tuple[np.ndarray, dict]:
+    def _band_image(self, s: ViewSettings, buffers: FrameBuffers | None) -> tuple[np.ndarray, dict]:
         T = self.transport
         info = {"label": f"band  t_d {s.delay_us:g} us  t_e {s.exposure_us:g} us"}
         if self.camera is None:
-            return T.render(self.band(s.delay_us, s.exposure_us)), info
+            return T.render(self.band(s.delay_us, s.exposure_us), out=_out(buffers, "image")), info
         cam = self.camera
         albedo = self.ambient_albedo if s.ambient else None
         if not s.noise:
-            image, saturated = cam.expose(T.render(self.band(s.delay_us, s.exposure_us)), s.exposure_us,
-                                          None, ambient_albedo=albedo, noise=False)  # fmt: skip
+            signal = T.render(self.band(s.delay_us, s.exposure_us), out=_out(buffers, "signal"))
+            image, n_saturated = cam.expected_image(
+                signal,
+                s.exposure_us,
+                ambient_albedo=albedo,
+                out=_out(buffers, "image"),
+                work=_out(buffers, "work", np.float64),
+            )
         else:
             # The first grab of the simulated device at these settings (same seed, same bytes).
             key = (int(round(s.delay_us * 1000)), int(round(s.exposure_us * 1000)))
             rng = np.random.default_rng([self.seed, key[0] + 2**40, key[1], 0])
-            signal = T.render(self.band(s.delay_us, s.exposure_us, rng))
+            signal = T.render(self.band(s.delay_us, s.exposure_us, rng), out=_out(buffers, "signal"))
             image, saturated = cam.expose(signal, s.exposure_us, rng, ambient_albedo=albedo, noise=True)
-        info["saturated"] = int(saturated.sum())
+            n_saturated = int(saturated.sum())
+        info["saturated"] = n_saturated
         return image, info
 
-    def _short_range(self, max_rows: float) -> np.ndarray:
+    def _short_range(self, max_rows: float, buffers: FrameBuffers | None) -> np.ndarray:
         """Short-range indirect light (as :func:`planeray.synthesis.short_long_range`) with two
         O(pixels) plateau renders (the offsets below and above the epipolar bins)."""
         T = self.transport
         u = T.offsets_rows
         short = (np.abs(u) <= max_rows) & ~self._epi_bins
-        image = np.zeros(self.shape, np.float32)
+        image = _out(buffers, "short")
+        image = np.zeros(self.shape, np.float32) if image is None else image
+        image[...] = 0.0
         for side in (u < 0, u > 0):
             w = (short & side).astype(np.float64)
             if w.any():
-                image += T.render_weights(np.broadcast_to(w, (self.shape[0], u.size)))
+                image += T.render_weights(np.broadcast_to(w, (self.shape[0], u.size)), out=_out(buffers, "part"))
         return image
 
-    def _render(self, s: ViewSettings) -> tuple[np.ndarray, dict]:
+    def _render(self, s: ViewSettings, buffers: FrameBuffers | None) -> tuple[np.ndarray, dict]:
         T = self.transport
         info: dict = {}
         if s.mode == "band":
-            image, info = self._band_image(s)
-            return np.asarray(image, np.float32), info
+            return self._band_image(s, buffers)
+        out = _out(buffers, "image")
         if s.mode == "epipolar":
             image, info["label"] = self._epipolar, "epipolar (Eq. 5)"
         elif s.mode == "non_epipolar":
-            image, info["label"] = self._full - self._epipolar, "non-epipolar (Eq. 6)"
+            image, info["label"] = np.subtract(self._full, self._epipolar, out=out), "non-epipolar (Eq. 6)"
         elif s.mode == "sharpened":
             image = syn.sharpened_epipolar(T, width_rows=s.width_rows)
             info["label"] = f"sharpened epipolar  {s.width_rows:g} rows"
         elif s.mode in ("short_range", "long_range"):
-            short = self._short_range(s.max_rows)
+            short = self._short_range(s.max_rows, buffers)
             if s.mode == "short_range":
                 image, info["label"] = short, f"short-range indirect  |u| <= {s.max_rows:g} rows"
             else:
-                image = self._full - self._epipolar - short
+                image = np.subtract(self._full, self._epipolar, out=out)
+                image -= short
                 info["label"] = f"long-range indirect  |u| > {s.max_rows:g} rows"
         elif s.mode == "relight_row":
             image = syn.relight(T, syn.single_line_pattern(T.geometry.projector_rows, s.row))
@@ -446,7 +511,7 @@ class TransportSource(ViewSource):
             image = syn.relight(T, self.pattern(s))
             info["label"] = f"relit by pattern {s.pattern}"
         if self.scale != 1.0:
-            image = image * np.float32(self.scale)
+            image = np.multiply(image, np.float32(self.scale), out=out)
         return np.asarray(image, np.float32), info
 
     def pattern(self, s: ViewSettings) -> np.ndarray:
@@ -483,7 +548,7 @@ class TransportSource(ViewSource):
         }
 
     def _pixel(self, row, col, s) -> dict:
-        image, _ = self._render(s)
+        image, _ = self._render(s, self._buffers)
         data = {
             "kind": self.kind,
             "row": row,
@@ -565,7 +630,7 @@ class StackSource(ViewSource):
         d = have[np.argmin(np.abs(self.delays[have] - delay_us))]
         return int(self._index[e, d])
 
-    def _render(self, s: ViewSettings) -> tuple[np.ndarray, dict]:
+    def _render(self, s: ViewSettings, buffers: FrameBuffers | None) -> tuple[np.ndarray, dict]:
         n = self.nearest_index(s.delay_us, s.exposure_us)
         d, e = float(self.stack.delay_us[n]), float(self.stack.exposure_us[n])
         info = {
