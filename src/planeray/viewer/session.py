@@ -726,22 +726,6 @@ def pixel_band_profile(
 
 
 # ============================================================================ opening a PATH
-def _store_format(path: Path) -> str | None:
-    """``"stack"``, ``"transport"`` or None, from a Zarr group's ``format`` attribute or an import folder."""
-    import json
-
-    if (path / "manifest.csv").is_file():
-        return "stack"
-    meta = path / "zarr.json"
-    if meta.is_file():
-        try:
-            attrs = json.loads(meta.read_text(encoding="utf-8")).get("attributes") or {}
-        except (OSError, ValueError):
-            return None
-        return {"planeray-stack": "stack", "planeray-transport": "transport"}.get(attrs.get("format"))
-    return None
-
-
 def open_source(
     path,
     *,
@@ -788,7 +772,7 @@ def open_source(
     >>> image.dtype, info["label"]
     (dtype('float32'), 'band  t_d 0 us  t_e 600 us')
     """
-    from ..io import read_stack, read_transport
+    from ..io import read_stack, read_transport, store_format
     from ..scenes import is_scene_name, list_scenes, make_scene
 
     text = str(path)
@@ -800,7 +784,7 @@ def open_source(
     if truth is not None:
         truth_T, _ = read_transport(truth)
     if p.exists():
-        fmt = _store_format(p) if p.is_dir() else None
+        fmt = store_format(p)
         if fmt is None:
             raise InputError("not a planeray stack, import folder or transport store", p)
         loaded = {}
