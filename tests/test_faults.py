@@ -326,11 +326,17 @@ def test_messages_name_command_line_options(tmp_path):
         ),
         (("demux", "{S}", "--tol", -1, "--out", "{d}/T.zarr"), "tol must be"),
         (("demux", "{S}", "--alpha", "nan", "--out", "{d}/T.zarr"), "alpha"),
-        (("demux", "{S}", "--chunk-rows", 0, "--out", "{d}/T.zarr"), "chunk_rows"),
-        (("simulate", "wax", "--size", 16, 16, "--ambient", "nan", "--out", "{d}/w.zarr"), "ambient_e_per_us"),
-        (("simulate", "wax", "--size", 16, 16, "--frames", 0, "--out", "{d}/w.zarr"), "frames_averaged"),
+        (("demux", "{S}", "--chunk-rows", 0, "--out", "{d}/T.zarr"), "--chunk-rows must be"),
+        (
+            ("simulate", "wax", "--size", 16, 16, "--ambient", "nan", "--out", "{d}/w.zarr"),
+            "--ambient-e-per-us must be",
+        ),
+        (("simulate", "wax", "--size", 16, 16, "--frames", 0, "--out", "{d}/w.zarr"), "--frames must be"),
         (("emulate", "wax", "--size", 16, 16, "--delay-us", "nan", "--exposure-us", 600, "--out", "{d}/e"), "delay"),
-        (("mc", "profile", "--sigma-s", "nan", "--sigma-a", 0.1, "--g", 0.5, "--out", "{d}/m.csv"), "sigma_s"),
+        (
+            ("mc", "profile", "--sigma-s", "nan", "--sigma-a", 0.1, "--g", 0.5, "--out", "{d}/m.csv"),
+            "--sigma-s must be",
+        ),
         (("study", "demux", "--out", "{d}/st", "--seeds", 0, "--quick"), "seeds"),
     ],
 )

@@ -441,3 +441,57 @@ def test_export_import_round_trip_still_works(tmp_path):
     for fmt in ("tiff", "png"):
         back = io.import_folder(io.export_folder(stack, tmp_path / fmt, fmt=fmt))
         np.testing.assert_allclose(back.images, stack.images, atol=0.5 / (65535 - 256) + 1e-7)
+
+
+# ------------------------------------------------------------------ single files: planeray's mark
+def test_single_files_planeray_writes_carry_a_mark_and_only_those_are_replaced(tmp_path):
+    """--overwrite replaces a single file only when its own metadata says planeray wrote it."""
+    import json
+
+    import tifffile
+    from PIL import Image
+
+    from planeray.errors import InputError
+    from planeray.figures._common import new_figure, save_png
+    from planeray.io import write_image
+    from planeray.io.atomic import check_replaceable
+    from planeray.io.marks import file_mark
+
+    img = np.linspace(0, 1, 16).reshape(4, 4)
+    ours = {
+        "a.tif": lambda p: write_image(p, img),
+        "a.png": lambda p: write_image(p, img),
+        "fig.png": lambda p: save_png(new_figure((2, 2)), p),
+    }
+    for name, write in ours.items():
+        path = tmp_path / name
+        write(path)
+        check_replaceable(path, overwrite=True)  # planeray's: may be replaced
+        with pytest.raises(InputError, match="already exists"):
+            check_replaceable(path, overwrite=False)
+    assert file_mark(tmp_path / "fig.png") == "figure" and file_mark(tmp_path / "a.tif") == "image"
+    # the mark is plain metadata, readable by any tool
+    with Image.open(tmp_path / "a.png") as im:
+        assert im.info["Software"].startswith("planeray:image:")
+    with tifffile.TiffFile(tmp_path / "a.tif") as t:
+        assert t.pages[0].tags[305].value.startswith("planeray:image:")
+    # the same kinds of files written by someone else are never replaced
+    theirs = {
+        "b.tif": lambda p: tifffile.imwrite(p, np.zeros((4, 4), np.uint16)),
+        "b.png": lambda p: Image.fromarray(np.zeros((4, 4), np.uint8)).save(p),
+        "b.json": lambda p: p.write_text(json.dumps({"format": "mine"})),
+        "b.npz": lambda p: np.savez(p, x=np.zeros(3)),
+        "b.csv": lambda p: p.write_text("a,b\n1,2\n"),
+        "b.mp4": lambda p: p.write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(64)),
+        "b.txt": lambda p: p.write_text("notes"),
+    }
+    for name, write in theirs.items():
+        path = tmp_path / name
+        write(path)
+        before = path.read_bytes()
+        with pytest.raises(InputError, match="planeray did not write"):
+            check_replaceable(path, overwrite=True)
+        assert path.read_bytes() == before
+    # a forged-looking but wrong mark is not enough
+    (tmp_path / "c.json").write_text(json.dumps({"planeray_mark": "planeray"}))
+    assert file_mark(tmp_path / "c.json") is None

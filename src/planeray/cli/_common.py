@@ -73,6 +73,8 @@ def option_spellings(fn) -> dict:
             decls = getattr(meta, "param_decls", None)
             if decls is None or type(meta).__name__ != "OptionInfo":
                 continue
+            first = getattr(meta, "default", None)  # typer keeps the first spelling of Option("--a", "--b") here
+            decls = ([first] if isinstance(first, str) and first.startswith("-") else []) + list(decls)
             longs = [d.split("/")[0] for d in decls if d.startswith("--")]
             names[param] = longs[0] if longs else "--" + param.replace("_", "-")
     return names
@@ -170,10 +172,13 @@ def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
 
         from ..figures._common import display_scale
         from ..io import atomic_file
+        from ..io.marks import png_mark_info
 
         shown = np.clip(image * (scale_to or display_scale([image], percentile=99.5)), 0, 1)
         with atomic_file(path) as tmp:
-            Image.fromarray((shown * 255 + 0.5).astype(np.uint8)).save(tmp, format="PNG")
+            Image.fromarray((shown * 255 + 0.5).astype(np.uint8)).save(
+                tmp, format="PNG", pnginfo=png_mark_info("image")
+            )
         return path
     if path.suffix.lower() in (".tif", ".tiff"):
         return write_image(path, image, bit_depth=16)

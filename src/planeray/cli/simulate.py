@@ -25,7 +25,12 @@ def scenes():
 
 
 #: What ``simulate`` calls by the library's names.
-SIMULATE_OPTIONS = {"shape": "--size", "projector_vfov_deg": "--projector-vfov", "prefer": "--variant"}
+SIMULATE_OPTIONS = {
+    "shape": "--size",
+    "projector_vfov_deg": "--projector-vfov",
+    "prefer": "--variant",
+    "frames_averaged": "--frames",
+}
 
 
 @_friendly_errors(options=SIMULATE_OPTIONS)

@@ -58,8 +58,11 @@ def save_png(fig, path, dpi=100) -> Path:
     The figure is not closed: figures built with :func:`new_figure` are not held by
     pyplot and go away with their last reference.
     """
+    from ..io.marks import mark_text
+
     path = Path(path)
     root = fig.figure  # the Figure itself, or the Figure that holds a SubFigure
     with atomic_file(path) as tmp:
-        root.savefig(tmp, format="png", dpi=dpi)
+        # the mark (PNG Software text) lets a later --overwrite recognize the file as planeray's
+        root.savefig(tmp, format="png", dpi=dpi, metadata={"Software": mark_text("figure")})
     return path

@@ -57,10 +57,18 @@ def planeray_output_kind(path) -> str | None:
     written by :func:`planeray.io.export_folder` (its ``acquisition.json`` carries
     ``planeray_version``); ``"materials capture"`` / ``"materials report"``: a folder
     whose ``planeray.json`` has that ``format`` (``planeray-materials-capture`` /
-    ``planeray-materials-report``).  Symbolic links and plain files are never recognized.
+    ``planeray-materials-report``); a single file: the kind in its mark
+    (:func:`planeray.io.marks.file_mark`: ``"image"``, ``"figure"``, ``"video"``...).
+    Symbolic links and unmarked files are never recognized.
     """
     p = Path(path)
-    if p.is_symlink() or not p.is_dir():
+    if p.is_symlink():
+        return None
+    if p.is_file():
+        from .marks import file_mark
+
+        return file_mark(p)
+    if not p.is_dir():
         return None
     try:
         zarr_json = p / "zarr.json"
@@ -122,8 +130,8 @@ def check_replaceable(path, *, overwrite: bool, kind: str | None = None, error=I
     if found is None:
         what = "a file" if path.is_file() else "a folder"
         raise error(
-            f"is {what} planeray did not write (no planeray format attributes); planeray never deletes what it "
-            "did not write: choose another output or remove it yourself",
+            f"is {what} planeray did not write (no planeray format attributes or file mark); planeray never "
+            "deletes what it did not write: choose another output or remove it yourself",
             path,
         )
     if kind is not None and found != kind:

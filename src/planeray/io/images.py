@@ -29,11 +29,14 @@ def quantize(image, max_code: int, black_level: float) -> np.ndarray:
     return np.clip(raw, 0, max_code).astype(np.uint16)
 
 
-def write_raw(path: Path, raw: np.ndarray, kind: str) -> None:
+def write_raw(path: Path, raw: np.ndarray, kind: str, *, mark: str = "image") -> None:
+    """Write raw codes as TIFF or PNG, carrying planeray's file mark (:mod:`planeray.io.marks`)."""
+    from .marks import mark_text, png_mark_info
+
     if kind == "tiff":
-        tifffile.imwrite(path, raw, photometric="minisblack")
+        tifffile.imwrite(path, raw, photometric="minisblack", software=mark_text(mark))
     else:
-        Image.fromarray(raw.astype(np.uint16)).save(path, format="PNG")
+        Image.fromarray(raw).save(path, format="PNG", pnginfo=png_mark_info(mark))
 
 
 def read_raw_image(path: Path, manifest_line: int) -> tuple[np.ndarray, str, str]:
