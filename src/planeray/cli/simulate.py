@@ -130,6 +130,11 @@ def simulate(
         raise ValueError(f"{first} is a rendering option of mitsuba:FILE.xml scenes; {scene} is not one")
     if is_store and store_format(Path(scene)) != "transport":
         raise ValueError(f"{scene}: a stack, not a transport store (simulate sweeps a scene or a transport)")
+    if not is_store and Path(scene).exists():
+        raise ValueError(
+            f"{scene}: not a transport store (no planeray-transport format attribute); simulate sweeps a built-in "
+            "scene (`planeray scenes`), mitsuba:FILE.xml or a transport store"
+        )
     camera = CameraModel(
         bit_depth=bit_depth,
         black_level=black_level,
