@@ -8,7 +8,8 @@ changed and nothing was left behind.  Cases of other commands are in ``tests/tes
 from __future__ import annotations
 
 import pytest
-from tests._new_user import run_bad, user_files
+
+from _new_user import run_bad, user_files
 
 
 @pytest.fixture
