@@ -104,22 +104,29 @@ def _tail_floor(S, valid, offsets, tail_rows, clip=5.0):
     A tail's level is its mean with values above ``clip`` x its median clipped
     there: noise averages out, while a specular spot covering less than half
     the tail barely moves it.  The smaller side ignores one-sided light that
-    fills a tail.
+    fills a tail.  A tail that the end of the projector cuts to less than half
+    the valid samples of the other one does not count: a few samples of a
+    sparse estimate are often all zero, and a floor of 0 turned the whole
+    ambient floor into "indirect light" (two camera rows near each end of the
+    projector read as subsurface, issue 23).
     """
-    floor = np.full(S.shape[0], np.inf)
+    N = S.shape[0]
+    levels, counts = [], []
     for side in (offsets <= -tail_rows, offsets >= tail_rows):
-        if not side.any():
-            continue
-        vals = np.where(valid[:, side], S[:, side], np.nan)
-        has = np.isfinite(vals).any(axis=1)
-        if not has.any():
-            continue
-        v = vals[has]
-        med = np.nanmedian(v, axis=1)
-        cap = np.where(med > 0, clip * med, 0.0)[:, None]
-        level = np.full(S.shape[0], np.inf)
-        level[has] = np.nanmean(np.minimum(v, cap), axis=1)
-        floor = np.minimum(floor, level)
+        level = np.full(N, np.inf)
+        count = valid[:, side].sum(axis=1) if side.any() else np.zeros(N, np.int64)
+        has = count > 0
+        if has.any():
+            v = np.where(valid[:, side], S[:, side], np.nan)[has]
+            med = np.nanmedian(v, axis=1)
+            cap = np.where(med > 0, clip * med, 0.0)[:, None]
+            level[has] = np.nanmean(np.minimum(v, cap), axis=1)
+        levels.append(level)
+        counts.append(count)
+    most = np.maximum(counts[0], counts[1])
+    floor = np.full(N, np.inf)
+    for level, count in zip(levels, counts):
+        floor = np.where((count > 0) & (2 * count >= most), np.minimum(floor, level), floor)
     return np.where(np.isfinite(floor), floor, 0.0)
 
 
