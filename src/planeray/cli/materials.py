@@ -187,6 +187,7 @@ def predict(
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
 ):
     """Segment a capture pixel by pixel with a trained model (refused if the sweep differs)."""
+    from ..experiments._report import jsonable
     from ..experiments.materials import score
     from ..materials import load_model, read_label_image, write_label_image
 
@@ -213,9 +214,10 @@ def predict(
             truth,
             near_wall=near,
             classes=sorted(set(model.classes) | {int(c) for c in set(truth.ravel().tolist()) if c}),
+            model_classes=sorted(model.classes),
         )
     if json_out:
-        out.print_json(json.dumps(numbers))
+        out.print_json(json.dumps(jsonable(numbers), allow_nan=False))
         return
     out.print(f"segmentation: {out_png}")
     for name, n in counts.items():
@@ -223,6 +225,9 @@ def predict(
     if "score" in numbers:
         sc = numbers["score"]
         for name, acc in sc["accuracy"].items():
+            if name in sc["not_scored"]:
+                out.print(f"  accuracy {name}: not scored ({sc['not_scored'][name]})")
+                continue
             extra = ""
             if "accuracy_near_wall" in sc:
                 extra = (
