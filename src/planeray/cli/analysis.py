@@ -186,12 +186,14 @@ def figure(
     Prints one JSON line per figure on stdout: its name ("figure"), the JSON file written ("json")
     and the numbers measured ("numbers").
     """
-    from ..experiments.paper import FIGURES, figure_work
+    from ..experiments.paper import FIGURES, check_figure_size, figure_work
 
     names = list(FIGURES) if name == "all" else [name]
     unknown = [n for n in names if n not in FIGURES]
     if unknown:
         raise ValueError(f"unknown figure {unknown[0]!r}; choose one of {sorted(FIGURES)} or all")
+    for n in names:  # before running anything
+        check_figure_size(n, size, option="--size")
     for n in names:
         with progress_bar() as bar:
             task = bar.add_task(n, total=figure_work(n, size=size))

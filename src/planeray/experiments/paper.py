@@ -23,6 +23,7 @@ from ..acquire import simulate_stack
 from ..camera import CameraModel
 from ..demux import demultiplex
 from ..devices import SimulatedEpiscan
+from ..errors import InputError
 from ..figures._common import display_scale, new_figure, save_png
 from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
@@ -38,7 +39,17 @@ from ..synthesis import (
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, paper_sweep, sweep_support_rows
 from ._report import jsonable
 
-__all__ = ["FIGURES", "figure_work", "fig8", "fig9", "fig11", "fig12", "effects"]
+__all__ = [
+    "FIGURES",
+    "EFFECTS_SIZES",
+    "check_figure_size",
+    "figure_work",
+    "fig8",
+    "fig9",
+    "fig11",
+    "fig12",
+    "effects",
+]
 
 PROJECTOR_ROWS = PAPER_PROJECTOR_ROWS  # the paper's PicoPro
 
@@ -330,6 +341,30 @@ def fig12(out_dir, *, size: int = 128, seed: int = 0, line_row: int | None = Non
     return _write_numbers(out_dir, "fig12", numbers)
 
 
+#: Image sizes (camera pixels, square) at which ``effects`` is validated against every
+#: scene's ground truth (``tests/test_classify.py``): a camera row spans 2.8 to 11.25
+#: rows of the 720-row projector.  At 32 it spans 22.5, wider than the sweep can
+#: tell a broadened peak from a direct one (skin reads as diffuse).
+EFFECTS_SIZES = (64, 256)
+
+
+def check_figure_size(name: str, size: int, *, option: str = "size") -> None:
+    """Refuse a ``size`` figure ``name`` is not validated at (one line naming ``option``).
+
+    Raises
+    ------
+    InputError
+        ``effects`` outside :data:`EFFECTS_SIZES`.
+    """
+    lo, hi = EFFECTS_SIZES
+    if name == "effects" and not lo <= int(size) <= hi:
+        raise InputError(
+            f"{option} {size}: the effects figure is validated at {lo} to {hi} camera pixels "
+            f"({PROJECTOR_ROWS / hi:g} to {PROJECTOR_ROWS / lo:g} projector rows per camera row); "
+            f"choose a size in that range"
+        )
+
+
 #: The scene whose demultiplexed transport gives every scene of ``effects`` the width of
 #: a direct peak (a white plane: the calibration target of the same sweep, size and camera).
 EFFECTS_REFERENCE_SCENE = "diffuse_plane"
@@ -350,7 +385,7 @@ def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     out_dir : path
         Folder for the PNGs and ``effects.json``.
     size : int
-        Image size (square, camera pixels).
+        Image size (square, camera pixels), within :data:`EFFECTS_SIZES`.
     seed : int
         Scene and noise seed.
     progress : callable, optional
@@ -370,6 +405,7 @@ def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     from ..classify import classify_transport, label_agreement, visible_effect_mask
     from ..figures.labels import label_map_figure
 
+    check_figure_size("effects", size)
     out_dir = Path(out_dir)
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
     names = list(list_scenes())
