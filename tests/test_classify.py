@@ -363,13 +363,14 @@ def _columns(scene, cols):
 _DEMUXED = {}
 
 
-def _demuxed(name, size):
-    """(scene, demultiplexing result) of a built-in scene at ``size`` x ``size`` (a column subset), cached."""
+def _demuxed(name, size, *, with_stack=False):
+    """(scene, demultiplexing result[, stack]) of a built-in scene at ``size`` x ``size`` (a column subset), cached."""
     if (name, size) not in _DEMUXED:
         cols = np.unique(np.linspace(0, size - 1, COLUMNS[size]).round().astype(int))
         scene = _columns(make_scene(name, (size, size), projector_rows=720, seed=0), cols)
-        _DEMUXED[name, size] = (scene, demultiplex(simulate_stack(scene, paper_sweep(), seed=0)))
-    return _DEMUXED[name, size]
+        stack = simulate_stack(scene, paper_sweep(), seed=0)
+        _DEMUXED[name, size] = (scene, demultiplex(stack), stack)
+    return _DEMUXED[name, size] if with_stack else _DEMUXED[name, size][:2]
 
 
 def test_every_scene_says_its_effects():
@@ -413,6 +414,35 @@ def test_without_a_reference_an_all_skin_image_has_no_direct_width():
     _, plane = _demuxed("diffuse_plane", 64)
     with_plane = classify_transport(result.transport, resolution_rows=res, direct_reference=plane.transport)
     assert np.mean(alone == 2) < 0.1 < 0.95 < np.mean(with_plane == 2)
+
+
+def test_cli_labels_skin_with_a_white_reference(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+    from planeray.io import write_stack, write_transport
+
+    _, skin, stack = _demuxed("skin", 64, with_stack=True)
+    _, plane = _demuxed("diffuse_plane", 64)
+    write_stack(stack, tmp_path / "skin.zarr")
+    write_transport(skin.transport, tmp_path / "T.zarr", attrs=skin.attrs)
+    write_transport(plane.transport, tmp_path / "white.zarr", attrs=plane.attrs)
+    small = demultiplex(simulate_stack(make_scene("diffuse_plane", (32, 32), projector_rows=720), paper_sweep()))
+    write_transport(small.transport, tmp_path / "small.zarr", attrs=small.attrs)
+
+    def run(*extra):
+        args = ["profiles", tmp_path / "skin.zarr", "--out", tmp_path / "p.png", "--transport", tmp_path / "T.zarr"]
+        return CliRunner().invoke(app, [str(a) for a in [*args, "--classify", tmp_path / "labels.png", *extra]])
+
+    res = run("--direct-reference", tmp_path / "white.zarr")
+    assert res.exit_code == 0, res.output
+    share = float(res.output.split("subsurface ")[1].split(" %")[0])
+    assert share > 95.0, res.output
+    res = run()  # no reference: skin's own pixels are the "direct" width
+    assert res.exit_code == 0 and "diffuse " in res.output
+    res = run("--direct-reference", tmp_path / "small.zarr")
+    assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1, res.output
+    assert "--direct-reference" in res.output and "32 camera rows" in res.output
 
 
 def _no_constant(name):

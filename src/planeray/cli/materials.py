@@ -116,8 +116,13 @@ def train(
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Model file to write (a zip: JSON + skops).")],
     features: Annotated[str, typer.Option(help="stack (measured profiles) or transport (demultiplexed).")] = "stack",
     floor: Annotated[
-        str, typer.Option(help="min: subtract each curve's minimum (ambient); none: the paper's.")
-    ] = "min",
+        str,
+        typer.Option(
+            help="Per-curve floor removed before area-normalizing: edge (the mean of the outermost delays: "
+            "ambient light, black level; measured best on held-out captures), min (each curve's minimum) "
+            "or none (the paper's plain normalization)."
+        ),
+    ] = "edge",
     class_name: Annotated[
         list[str] | None, typer.Option("--class-name", help="ID=NAME for classes beyond the documented list.")
     ] = None,
@@ -132,10 +137,13 @@ def train(
     """Train the per-pixel RBF-SVM on labelled captures (hyper-parameters by grouped cross-validation)."""
     from ..io.atomic import ALREADY_EXISTS
     from ..materials import read_label_image, train_model
+    from ..materials.features import FLOORS
     from ..materials.model import _is_model_file
 
     if out_path.exists() and (not overwrite or not _is_model_file(out_path)):
         raise ValueError(f"{out_path}: {ALREADY_EXISTS}" if not overwrite else f"{out_path}: is not a planeray model")
+    if floor not in FLOORS:
+        raise ValueError(f"--floor {floor!r}: choose one of {', '.join(FLOORS)}")
     if len(labels) != len(stacks):
         raise ValueError(f"{len(stacks)} stacks but {len(labels)} --labels: give one label image per stack, in order")
     names = _parse_class_names(class_name)
