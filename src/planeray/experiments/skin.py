@@ -218,20 +218,11 @@ def best_delay_by_depth(images, delays_us, scene, valid=None) -> dict:
     veins detected (mean CNR >= 1, darker than their band in most realizations) at their best
     delay enter the fit.
     """
-    t = scene_truth(scene)
     stacks = np.asarray(images)
     stacks = stacks[None] if stacks.ndim == 3 else stacks
 
     def metrics(im):
-        return vein_metrics(
-            im,
-            t["vein_id"],
-            mm_per_px=scene_pixel_mm(scene),
-            exclude=t["exclude"],
-            depth_mm=t["depth_mm"],
-            diameter_mm=t["diameter_mm"],
-            valid=valid,
-        )
+        return measure({0: im}, scene, valid)[0]
 
     runs = [[metrics(im) for im in sweep] for sweep in stacks]  # [repeat][delay]
     per_delay = runs[0]
