@@ -42,11 +42,17 @@ def projector_rows(value: int, option: str = "--projector-rows") -> int:
     return check_integer(value, option, minimum=1, maximum=PAPER_PROJECTOR_ROWS)
 
 
-def scene_memory(shape, option: str = "--size", *, copies: float = 1.0, extra_bytes: float = 0.0) -> None:
-    """Refuse an image size whose scene(s) cannot fit in memory (``copies`` scenes held at once)."""
+def scene_memory(
+    shape, option: str = "--size", *, copies: float = 1.0, extra_bytes: float = 0.0, square: bool = False
+) -> None:
+    """Refuse an image size whose scene(s) cannot fit in memory (``copies`` scenes held at once).
+
+    ``square``: the option is one number (``--size 128``), not ``H W``.
+    """
     h, w = shape
     need = BASE_BYTES + copies * h * w * SCENE_BYTES_PER_PIXEL + extra_bytes
-    check_memory(need, f"{option} {h} {w}", advice=f"choose a smaller {option}")
+    typed = f"{option} {h}" if square else f"{option} {h} {w}"
+    check_memory(need, f"{typed} ({h}x{w} pixels)", advice=f"choose a smaller {option}")
 
 
 def frequency_band(text: str, option: str) -> tuple[float, float]:

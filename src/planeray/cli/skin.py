@@ -677,7 +677,7 @@ def compare(
         "stay inside the skin scene's 64-row kernel)",
     )
     _bounds.seed(seed)
-    _bounds.scene_memory((size, size), copies=4)
+    _bounds.scene_memory((size, size), copies=4, square=True)
     _check_outputs((out_dir, "skin report"), overwrite=overwrite)
     with progress_bar() as bar:
         task = bar.add_task("skin study", total=compare_steps(quick))
