@@ -290,6 +290,7 @@ def _write_png(path: Path, image, valid=None) -> None:
     from PIL import Image
 
     from ..io import atomic_file
+    from ..io.marks import png_mark_info
 
     img = np.asarray(image, np.float64)
     vals = img[valid] if valid is not None else img.ravel()
@@ -297,16 +298,19 @@ def _write_png(path: Path, image, valid=None) -> None:
     lo, hi = np.percentile(vals, [1, 99]) if vals.size else (0.0, 1.0)
     shown = np.clip((img - lo) / (hi - lo if hi > lo else 1.0), 0, 1)
     with atomic_file(path) as tmp:
-        Image.fromarray((np.nan_to_num(shown) * 255 + 0.5).astype(np.uint8)).save(tmp, format="PNG")
+        Image.fromarray((np.nan_to_num(shown) * 255 + 0.5).astype(np.uint8)).save(
+            tmp, format="PNG", pnginfo=png_mark_info("image")
+        )
 
 
 def _write_tiff(path: Path, image) -> None:
     import tifffile
 
     from ..io import atomic_file
+    from ..io.marks import mark_text
 
     with atomic_file(path) as tmp:
-        tifffile.imwrite(tmp, np.asarray(image, np.float32), photometric="minisblack")
+        tifffile.imwrite(tmp, np.asarray(image, np.float32), photometric="minisblack", software=mark_text("image"))
 
 
 def _metrics_rows(name, m):
@@ -559,6 +563,7 @@ def enhance(
     """Contrast enhancement from the stack's delay images (Eq. 7, Fig. 14), never from images the stack excludes."""
     from .._validate import check_integer
     from ..experiments._report import jsonable
+    from ..figures.skin import delay_map_figure
     from ..io import atomic_directory
     from ..io.atomic import MARKER
     from ..skin.enhance import enhance_contrast, enhance_steps
@@ -624,7 +629,14 @@ def enhance(
         _write_png(tmp / "enhanced.png", res.image)
         _write_tiff(tmp / "enhanced.tif", res.image)
         _write_tiff(tmp / "delay_map_us.tif", res.delay_map_us)
-        _write_png(tmp / "delay_map.png", res.delay_map_us)
+        delay_map_figure(
+            res.delay_map_us,
+            vein_id=None if truth is None else truth["vein_id"],
+            used_us=res.delays_us,
+            title=f"Eq. 7 delay map: {stack_path.name}, t_e {t_e:g} us"
+            + ("" if truth is None else " (white: true veins)"),
+            out=tmp / "delay_map.png",
+        )
         (tmp / MARKER).write_text(json.dumps(jsonable(result), indent=1))
     left = sel["excluded_delays_us"]
     out.print(

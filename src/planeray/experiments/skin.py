@@ -575,7 +575,9 @@ def run_skin_compare(
         figures_out = {
             "fig16_skin_methods.png": lambda p: figs.methods_figure(panels, labels=labels, out=p),
             "fig16_skin_depth.png": lambda p: figs.vein_depth_figure(
-                [{**r, "condition": "depth ladder"} for r in ladder_rows], out=p
+                [{**r, "condition": "depth ladder"} for r in ladder_rows],
+                light=f"{ROOM_LIGHT} light, {AMBIENT_LEVELS[ROOM_LIGHT][0]:g} lx",
+                out=p,
             ),
             "fig13_skin_ambient.png": lambda p: figs.ambient_figure(
                 amb_rows, strongest, valid=valid0, labels=labels, out=p
