@@ -42,7 +42,7 @@ def _check_bands_against(video, bands: dict, rate_option: str = "--rate-band") -
     if video.duration_s < need:
         raise ValueError(
             f"{rate_option} starts at {lo:g} Hz: a rate that slow needs two of its periods, {need:.3g} s of video; "
-            f"the video is {video.n_frames} frames at {video.fps:g} fps = {video.duration_s:.3g} s"
+            f"the video is {video.n_frames} frames at {video.fps:g} frames per second, {video.duration_s:.3g} s"
             + (" (is --fps right?)" if video.meta.get("fps_from") == "argument" else "")
         )
 
@@ -271,6 +271,7 @@ def video(
             f"--delay-us must put the band on the skin's kernel (|delay| < {reach_us:.0f} us at --exposure-us "
             f"{exposure_us:g}: 64 rows + half the band), got {delay_us:g}"
         )
+    _bounds.scene_memory(shape, copies=4)
     fr = settings.frame_rate()
     n = int(round(seconds * fr))
     if n < 8:
@@ -369,6 +370,7 @@ def pulse_report(
             f"--seconds must be at least {need:.3g} (two periods of the slowest rate searched, "
             f"{RATE_BAND_HZ[0]:g} Hz), got {seconds:g}"
         )
+    _bounds.scene_memory(shape, copies=4)
     n = int(round(seconds * fps))
     check_memory(
         _bounds.BASE_BYTES

@@ -387,11 +387,11 @@ def _source_kind(path: Path, name: str) -> str:
     from ..io import store_format
 
     if not (path.exists() or path.is_symlink()):
-        raise InputError(f"{name}: no such file or folder", path)
+        raise InputError(f"no such file or folder ({name})", path)
     kind = store_format(path)
     if kind is None:
         raise InputError(
-            f"{name}: not a planeray stack, import folder (manifest.csv + images) or transport store", path
+            f"not a planeray stack, import folder (manifest.csv + images) or transport store ({name})", path
         )
     return kind
 
@@ -567,7 +567,7 @@ def enhance(
     from ..io import atomic_directory
     from ..io.atomic import MARKER
     from ..skin.enhance import enhance_contrast, enhance_steps
-    from ..skin.imaging import band_name, delay_sweep_images, pixel_mm
+    from ..skin.imaging import band_name, delay_sweep_images, delay_sweep_selection, pixel_mm
 
     _exposure_option(exposure_us)
     _delay_option(min_delay_us, "--min-delay-us")
@@ -580,8 +580,11 @@ def enhance(
         check_integer(patch_px, "--patch-px", minimum=2, maximum=min(stack.shape))
     truth = _truth_for(stack.shape, stack_path, mask)
     mpr, mpr_source = _scale(mm_per_row, ("stack metadata", stack.metadata))
+    chosen, _, _ = delay_sweep_selection(  # refuses a selection of fewer than 2 images before reading any
+        stack, exposure_us=exposure_us, min_delay_us=min_delay_us, include_excluded=include_excluded
+    )
     with progress_bar() as bar:
-        task = bar.add_task("reading the delay images", total=None)
+        task = bar.add_task("reading the delay images", total=len(chosen))
         imgs, delays, sel = delay_sweep_images(
             stack,
             exposure_us=exposure_us,
@@ -590,7 +593,6 @@ def enhance(
             progress=lambda k: bar.advance(task, k),
         )
         t_e = sel["exposure_us"]
-        bar.update(task, total=len(delays), completed=len(delays))
         task = bar.add_task(f"enhancing ({len(delays)} delay images)", total=enhance_steps(len(delays)))
         res = enhance_contrast(
             imgs, delays, patch_px=patch_px, noise_normalize=not plain, progress=lambda k: bar.advance(task, k)

@@ -73,6 +73,7 @@ __all__ = [
     "stack_images",
     "transport_images",
     "delay_sweep_images",
+    "delay_sweep_selection",
 ]
 
 #: Method key -> label for tables and figures (the order of the panels).
@@ -526,23 +527,12 @@ def transport_images(
     return images, info
 
 
-def delay_sweep_images(
-    stack,
-    *,
-    exposure_us: float | None = None,
-    min_delay_us: float = 0.0,
-    include_excluded: bool = False,
-    progress=None,
-):
-    """Delay images of one exposure with ``t_d > min_delay_us``, the band off the epipolar plane, not excluded.
+def delay_sweep_selection(
+    stack, *, exposure_us: float | None = None, min_delay_us: float = 0.0, include_excluded: bool = False
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Which images :func:`delay_sweep_images` reads, without reading them: ``(indices, delays_us, info)``.
 
-    Returns ``(images (N, H, W), delays_us (N,), info)`` sorted by delay: the input of
-    :func:`planeray.skin.enhance.enhance_contrast`.  Images whose band touches the epipolar
-    plane (``|t_d| <= t_e / 2``) are left out, and so are the images the stack excludes (its
-    ``excluded`` flags: boundary images, whose row artefacts would stripe Eq. 7's composite)
-    unless ``include_excluded``.  ``info``: ``exposure_us``, ``indices`` (stack images used),
-    ``excluded_delays_us`` (flagged images left out), ``include_excluded``.  ``progress``, if
-    given, is called with 1 after each image read.
+    Refuses (one line naming ``exposure_us`` or ``min_delay_us``) a selection of fewer than 2 images.
     """
     exp = np.asarray(stack.exposure_us, np.float64)
     dl = np.asarray(stack.delay_us, np.float64)
@@ -571,9 +561,33 @@ def delay_sweep_images(
         "excluded_delays_us": sorted(float(dl[i]) for i in left_out),
         "include_excluded": bool(include_excluded),
     }
+    return sel, dl[sel], info
+
+
+def delay_sweep_images(
+    stack,
+    *,
+    exposure_us: float | None = None,
+    min_delay_us: float = 0.0,
+    include_excluded: bool = False,
+    progress=None,
+):
+    """Delay images of one exposure with ``t_d > min_delay_us``, the band off the epipolar plane, not excluded.
+
+    Returns ``(images (N, H, W), delays_us (N,), info)`` sorted by delay: the input of
+    :func:`planeray.skin.enhance.enhance_contrast`.  Images whose band touches the epipolar
+    plane (``|t_d| <= t_e / 2``) are left out, and so are the images the stack excludes (its
+    ``excluded`` flags: boundary images, whose row artefacts would stripe Eq. 7's composite)
+    unless ``include_excluded``.  ``info``: ``exposure_us``, ``indices`` (stack images used),
+    ``excluded_delays_us`` (flagged images left out), ``include_excluded``.  ``progress``, if
+    given, is called with 1 after each image read.
+    """
+    sel, delays, info = delay_sweep_selection(
+        stack, exposure_us=exposure_us, min_delay_us=min_delay_us, include_excluded=include_excluded
+    )
     images = np.empty((sel.size, *stack.shape), np.float64)
     for k, i in enumerate(sel):
         images[k] = np.asarray(stack.images[int(i)], np.float64)
         if progress is not None:
             progress(1)
-    return images, dl[sel], info
+    return images, delays, info
