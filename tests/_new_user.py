@@ -14,11 +14,10 @@ JSON record, a calibration file, notes -- each written by "someone else" (no pla
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from pathlib import Path
-
-import functools
 
 import numpy as np
 from click.testing import CliRunner
@@ -34,6 +33,7 @@ def _command():
     import typer.main
 
     return typer.main.get_command(app)
+
 
 #: The library's names that a message must never show instead of the option (a message may quote
 #: neither; these are checked only when a case says which option it is about).

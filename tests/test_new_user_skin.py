@@ -194,6 +194,7 @@ CASES = [
     (("skin", "video", "--out", "{d}/arm.tif", "--overwrite"), None, ("arm_video_vein_mask.png", THEIRS)),
     # ---------------------------------------------------------------- skin pulse-report
     (("skin", "pulse-report", "--out", "{d}/r", "--size", 0, 0), "--size", ()),
+    (("skin", "pulse-report", "--out", "{d}/r", "--size", 8, 8), "--size", ("pyramid levels",)),
     (("skin", "pulse-report", "--out", "{d}/r", "--size", 100000, 100000), "--size", ("of memory",)),
     (("skin", "pulse-report", "--out", "{d}/r", "--projector-rows", 0), "--projector-rows", ()),
     (("skin", "pulse-report", "--out", "{d}/r", "--seconds", 0), "--seconds", ()),

@@ -317,7 +317,7 @@ def _write_videos(cap, paths: dict, mask_path: Path, *, overwrite: bool, progres
 
     from ..io import atomic_file
     from ..io.marks import png_mark_info
-    from ..pulse.video_io import write_video
+    from ..pulse.video_io import encode_video
 
     vein = cap.model.scene.maps.get("vein_mask")
     with contextlib.ExitStack() as files:
@@ -327,7 +327,7 @@ def _write_videos(cap, paths: dict, mask_path: Path, *, overwrite: bool, progres
             tmps[m] = files.enter_context(atomic_file(p, overwrite=overwrite))
             v = cap.videos[m]
             v.meta = {**v.meta, "true_mean_rate_bpm": cap.truth["mean_rate_bpm"]}
-            write_video(tmps[m], v, overwrite=True)
+            encode_video(tmps[m], v)
             progress()
         if vein is not None:
             tmp = files.enter_context(atomic_file(mask_path, overwrite=overwrite))
@@ -359,7 +359,16 @@ def pulse_report(
     from ..pulse.rate import RATE_BAND_HZ
     from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes
 
+    from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
+
     shape = _bounds.image_size(size)
+    try:  # the report magnifies with the paper's pyramid levels
+        _pyramid_sizes(shape, DEFAULT_LEVELS)
+    except ValueError:
+        raise ValueError(
+            f"--size must be large enough for {DEFAULT_LEVELS} pyramid levels (at least 12x12), "
+            f"got {shape[0]}x{shape[1]}"
+        ) from None
     _bounds.projector_rows(projector_rows)
     kw = {"rates_bpm": (50, 80, 110), "seeds": (0,), "null_seeds": range(3), "null_runs": 100} if quick else {}
     rates = kw.get("rates_bpm", REPORT_RATES_BPM)
@@ -393,9 +402,13 @@ def pulse_report(
             **kw,
         )
     acc = rep["accuracy"]
+
+    def bpm(x):
+        return "n/a" if x is None else f"{x:.2f}"
+
     out.print(
-        f"rate: {acc['detected']}/{acc['total']} detected, mean |error| {acc['mean_abs_error_bpm']:.2f} bpm, "
-        f"max {acc['max_abs_error_bpm']:.2f} bpm; SNR (dB) "
+        f"rate: {acc['detected']}/{acc['total']} detected, mean |error| {bpm(acc['mean_abs_error_bpm'])} bpm, "
+        f"max {bpm(acc['max_abs_error_bpm'])} bpm; SNR (dB) "
         + ", ".join(f"{m} {v['snr_db']:.1f}" for m, v in rep["methods"].items())
         + f"; pulse-free false alarms {rep['pulse_free']['false_alarms']}/{len(rep['pulse_free']['runs'])}; {out_dir}",
         highlight=False,

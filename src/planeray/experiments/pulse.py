@@ -92,7 +92,7 @@ def write_pulse_analysis(video, out_dir, *, overwrite: bool = False, truth_bpm=N
     from ..figures.pulse import pulse_signal_figure
     from ..io import atomic_file
     from ..io.atomic import check_replaceable
-    from ..pulse.video_io import VIDEO_KIND, Video, check_video_path, write_video
+    from ..pulse.video_io import VIDEO_KIND, Video, check_video_path, encode_video
 
     check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
     if magnified is not None:
@@ -113,7 +113,7 @@ def write_pulse_analysis(video, out_dir, *, overwrite: bool = False, truth_bpm=N
         if magnified is not None:  # renamed into place after the folder
             mag_tmp = outputs.enter_context(atomic_file(magnified, overwrite=overwrite))
             mag = Video(result.magnified, video.fps, str(video.source), {"magnified": result.settings})
-            write_video(mag_tmp, mag, overwrite=True, white=float(np.percentile(video.frames, 99.9)))
+            encode_video(mag_tmp, mag, white=float(np.percentile(video.frames, 99.9)))
         tmp = outputs.enter_context(atomic_directory(out_dir, overwrite=overwrite, kind="pulse report"))
         _write_analysis_folder(tmp, video, result, meta, truth_bpm, pulse_signal_figure)
     return result

@@ -42,6 +42,7 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "read_video",
     "write_video",
+    "encode_video",
     "check_video",
     "check_video_path",
     "video_bytes",
@@ -295,50 +296,66 @@ def write_video(path, video: Video, *, overwrite: bool = False, white: float | N
     its mark says planeray wrote it as a video.
     """
     from ..io.atomic import check_replaceable
-    from ..io.marks import mark_text
 
     path = check_video_path(path)
-    suffix = path.suffix.lower()
     check_replaceable(path, overwrite=overwrite, kind=VIDEO_KIND)
-    frames = np.asarray(video.frames, np.float32)
     with atomic_file(path, overwrite=overwrite) as tmp:
-        if suffix in (".tif", ".tiff"):
-            import tifffile
+        encode_video(tmp, video, white=white, suffix=path.suffix)
+    return path
 
-            info = json.dumps({"planeray_video": {"fps": video.fps, **video.meta}})
-            tifffile.imwrite(
-                tmp,
-                frames,
-                imagej=True,
-                software=mark_text(VIDEO_KIND),
-                metadata={"axes": "TYX", "finterval": 1.0 / video.fps, "Info": info},
-            )
-        else:
-            import imageio_ffmpeg
 
-            top = float(np.percentile(frames, 99.9)) if white is None else float(white)
-            scale = 255.0 / top if top > 0 else 1.0
-            H, W = frames.shape[1:]
-            gray = np.clip(frames * scale + 0.5, 0, 255).astype(np.uint8)
-            gray = np.pad(gray, ((0, 0), (0, H % 2), (0, W % 2)), mode="edge")
-            codec = VIDEO_SUFFIXES[suffix]
-            extra = {"pix_fmt_out": "yuvj420p"} if codec == "mjpeg" else {}
-            if codec == "ffv1":
-                extra = {"pix_fmt_out": "gray"}
-            writer = imageio_ffmpeg.write_frames(
-                str(tmp),
-                (gray.shape[2], gray.shape[1]),
-                pix_fmt_in="gray",
-                fps=video.fps,
-                codec=codec,
-                macro_block_size=1,
-                quality=None if codec == "ffv1" else 10,
-                ffmpeg_log_level="error",
-                output_params=["-metadata", f"title={mark_text(VIDEO_KIND)}"],
-                **extra,
-            )
+def encode_video(path, video: Video, *, white: float | None = None, suffix: str | None = None) -> Path:
+    """Write ``video`` to ``path`` as it is, not atomically: for a caller that holds a temporary
+    (:func:`write_video` and the commands that write several files together).
+
+    ``suffix`` picks the format (default: ``path``'s own).
+    """
+    from ..io.marks import mark_text
+
+    path = Path(path)
+    suffix = (suffix or path.suffix).lower()
+    if suffix not in WRITE_SUFFIXES:
+        raise InputError(f"video files end in {', '.join(WRITE_SUFFIXES)}, got {path.name!r}")
+    frames = np.asarray(video.frames, np.float32)
+    if suffix in (".tif", ".tiff"):
+        import tifffile
+
+        info = json.dumps({"planeray_video": {"fps": video.fps, **video.meta}})
+        tifffile.imwrite(
+            path,
+            frames,
+            imagej=True,
+            software=mark_text(VIDEO_KIND),
+            metadata={"axes": "TYX", "finterval": 1.0 / video.fps, "Info": info},
+        )
+    else:
+        import imageio_ffmpeg
+
+        top = float(np.percentile(frames, 99.9)) if white is None else float(white)
+        scale = 255.0 / top if top > 0 else 1.0
+        H, W = frames.shape[1:]
+        gray = np.clip(frames * scale + 0.5, 0, 255).astype(np.uint8)
+        gray = np.pad(gray, ((0, 0), (0, H % 2), (0, W % 2)), mode="edge")
+        codec = VIDEO_SUFFIXES[suffix]
+        extra = {"pix_fmt_out": "yuvj420p"} if codec == "mjpeg" else {}
+        if codec == "ffv1":
+            extra = {"pix_fmt_out": "gray"}
+        writer = imageio_ffmpeg.write_frames(
+            str(path),
+            (gray.shape[2], gray.shape[1]),
+            pix_fmt_in="gray",
+            fps=video.fps,
+            codec=codec,
+            macro_block_size=1,
+            quality=None if codec == "ffv1" else 10,
+            ffmpeg_log_level="error",
+            output_params=["-metadata", f"title={mark_text(VIDEO_KIND)}"],
+            **extra,
+        )
+        try:
             writer.send(None)
             for f in gray:
                 writer.send(np.ascontiguousarray(f))
+        finally:
             writer.close()
     return path
