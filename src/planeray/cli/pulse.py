@@ -356,10 +356,9 @@ def pulse_report(
     """The simulated pulse study: Fig. 15a/b, rate accuracy over rates and seeds, SNR per method, false alarms."""
     from .._validate import check_memory
     from ..experiments.pulse import REPORT_RATES_BPM, pulse_report_steps, run_pulse_report
+    from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
     from ..pulse.rate import RATE_BAND_HZ
     from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes
-
-    from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
 
     shape = _bounds.image_size(size)
     try:  # the report magnifies with the paper's pyramid levels
