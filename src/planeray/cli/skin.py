@@ -341,8 +341,8 @@ MmPerRowOpt = Annotated[
     float | None,
     typer.Option(
         "--mm-per-row",
-        help="Size of a projector row on the skin (mm), for the metrics' band in mm; default: what the stack "
-        "or store records, else 0.3 (assumed).",
+        help="Size of a projector row on the skin (mm, > 0 and <= 10), for the metrics' band in mm; default: what "
+        "the stack or store records, else 0.3 (assumed).",
     ),
 ]
 IncludeExcludedOpt = Annotated[
@@ -421,11 +421,18 @@ def veins(
         Path, typer.Argument(help="Stack (Zarr or import folder), or a transport store (Zarr, e.g. from demux).")
     ],
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (images, metrics, figure).")],
-    delay_us: Annotated[float, typer.Option("--delay-us", "--delay", help="Delay of the vein image (us).")] = 500.0,
+    delay_us: Annotated[
+        float,
+        typer.Option(
+            "--delay-us", "--delay", help="Delay of the vein image (us, within +-13,333: one projector sweep)."
+        ),
+    ] = 500.0,
     exposure_us: Annotated[
         float | None,
         typer.Option(
-            "--exposure-us", "--exposure", help="Exposure (us); default the stack's shortest (600 from a transport)."
+            "--exposure-us",
+            "--exposure",
+            help="Exposure (us, > 0 and <= 13,333); default the stack's shortest (600 from a transport).",
         ),
     ] = None,
     transport_path: Annotated[
@@ -546,11 +553,15 @@ def enhance(
     stack_path: StackArg,
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (enhanced image, delay map).")],
     exposure_us: Annotated[
-        float | None, typer.Option("--exposure-us", "--exposure", help="Exposure of the delay images (us).")
+        float | None,
+        typer.Option("--exposure-us", "--exposure", help="Exposure of the delay images (us, > 0 and <= 13,333)."),
     ] = None,
-    min_delay_us: Annotated[float, typer.Option("--min-delay-us", help="Use only delays above this (us).")] = 0.0,
+    min_delay_us: Annotated[
+        float, typer.Option("--min-delay-us", help="Use only delays above this (us, within +-13,333).")
+    ] = 0.0,
     patch_px: Annotated[
-        int | None, typer.Option("--patch-px", help="Patch size (default 200 px per 720 rows).")
+        int | None,
+        typer.Option("--patch-px", help="Patch size (2 up to the image's smaller side; default 200 px per 720 rows)."),
     ] = None,
     plain: Annotated[
         bool, typer.Option("--plain", help="The paper's plain gradient argmax (no noise weighting).")
