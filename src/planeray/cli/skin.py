@@ -170,7 +170,12 @@ MAX_PHOTONS = 10_000_000
 @_friendly_errors
 def validate(
     out_dir: Annotated[
-        Path, typer.Option("--out", "-o", help="Folder to write (skin_validation.json and .png); must not exist.")
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Folder to write (skin_validation.json and .png): a new one, or one planeray wrote with --overwrite.",
+        ),
     ],
     n_photons: Annotated[
         int,
