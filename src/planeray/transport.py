@@ -97,14 +97,14 @@ def bin_projector_rows(per_row, geometry: RowGeometry, offsets_rows, *, far: boo
     Examples
     --------
     Two camera rows of a three-row projector: camera row 0 sits at ``p_0 = 0.25``,
-    so projector row 0 gives 3/4 of its light to bin 0 and 1/4 to bin 1 (the
-    same energy, in the cells it covers):
+    so projector row 0 (offsets -0.75 to 0.25) gives 3/4 of its light to bin 0 and
+    1/4 to bin -1 (the same energy, in the cells it covers):
 
     >>> per_row = np.zeros((3, 2, 1))
-    ... per_row[0, 0, 0] = 1.0
+    >>> per_row[0, 0, 0] = 1.0
     >>> dense, _ = bin_projector_rows(per_row, RowGeometry(2, 3), [-1, 0, 1])
     >>> dense[0, 0].tolist()
-    [0.0, 0.75, 0.25]
+    [0.25, 0.75, 0.0]
     """
     per_row = np.asarray(per_row)
     offsets = np.asarray(offsets_rows).astype(np.int64)
