@@ -57,7 +57,7 @@ def _as_typed(text: str, options: dict) -> str:
     import re
 
     for name in sorted(options, key=len, reverse=True):
-        pattern = rf"(?<![\w\-.]){re.escape(name)}(\[\d+\])?(?=( must\b| = |=))"
+        pattern = rf"(?<![\w\-.])(?<!-O ){re.escape(name)}(\[\d+\])?(?=( must\b| = |=))"
         text = re.sub(pattern, options[name], text)
     return text
 
