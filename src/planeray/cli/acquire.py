@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-
 from rich.text import Text
 
 from .._console import console, out, progress_bar

@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND
 from . import _limits as lim
 from ._common import _check_outputs, _friendly_errors, _load_stack
-from ._devices import CalibrationArg, DeviceOptionArg, close_device, device_options_from_cli, open_device_from_cli
+from ._devices import CalibrationArg, DeviceOptionArg, close_device, open_device_from_cli
 
 calibrate_app = typer.Typer(help="Calibration (Sec. 6): line velocity v_p and delay zero.", no_args_is_help=True)
 
