@@ -112,13 +112,22 @@ def test_figure_rejects_an_unknown_name_before_running_anything(tmp_path, bars):
     assert not bars and not tmp_path.joinpath("fig13.json").exists()
 
 
+def test_effects_figure_refuses_a_size_it_is_not_validated_at_before_running_anything(tmp_path, bars):
+    for name in ("effects", "all"):
+        res = runner.invoke(app, ["figure", name, "--out", str(tmp_path), "--size", "32"])
+        assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1, res.output
+        assert "--size 32" in res.output and "64 to 256" in res.output
+    assert not bars and not any(tmp_path.iterdir())
+
+
 @pytest.mark.slow
 def test_figure_all_reports_all_its_work(tmp_path, bars):
-    res = runner.invoke(app, ["figure", "all", "--out", str(tmp_path), "--size", "24"])
+    # 64: the smallest size the effects figure is validated at (README "Delay profiles")
+    res = runner.invoke(app, ["figure", "all", "--out", str(tmp_path), "--size", "64"])
     assert res.exit_code == 0, res.output
     tasks = _finished(bars)
     assert [t["description"] for t in tasks] == list(FIGURES)
-    assert [t["total"] for t in tasks] == [figure_work(n, size=24) for n in FIGURES]
+    assert [t["total"] for t in tasks] == [figure_work(n, size=64) for n in FIGURES]
     lines = [json.loads(line) for line in res.stdout.splitlines()]
     assert [x["figure"] for x in lines] == list(FIGURES)
     for x in lines:

@@ -1,11 +1,12 @@
 """Effect labels from delay profiles (Sec. 8): characterize each transport profile and label it.
 
 :func:`characterize` measures a transport profile (peak count, FWHM of the main
-peak, asymmetry and share of the light outside the cell the sweep cannot split,
-offset of a displaced peak) after removing the ambient floor, and labels it:
-specular interreflection (a displaced peak), diffuse interreflection (indirect
-light, one-sided), subsurface scattering (indirect light, symmetric or
-broadened), else direct/diffuse.  :func:`classify_transport` does it for every
+peak, width of its core, asymmetry and share of the light outside the cell the
+sweep cannot split, offset of a displaced peak) after removing the ambient
+floor, and labels it: specular interreflection (a displaced peak), diffuse
+interreflection (indirect light, one-sided), subsurface scattering (indirect
+light, symmetric or broadened, or a core wider than a direct peak's), else
+direct/diffuse.  :func:`classify_transport` does it for every
 pixel of a transport, :func:`visible_effect_mask` and :func:`label_agreement`
 score labels against a scene's ground truth.
 """
@@ -30,16 +31,20 @@ __all__ = [
 #: Rule thresholds of :func:`characterize` and :func:`classify_transport`, by
 #: keyword (tuned on demultiplexed transports of the built-in scenes: 64x64
 #: camera rows of a 360-row projector, the paper's sweep, the default camera,
-#: four seeds; checked at 128x128 of 720 rows and on the ground truth).
+#: four seeds; the strong-peak contrast, the displaced share and the core
+#: broadening re-tuned for issue 23 on every built-in scene at 64, 128 and 256
+#: camera rows of 720, seeds 0 and 1; checked on the ground truth).
 CLASSIFY_THRESHOLDS = {
     "smooth_bins": 5,  # box smoothing over offsets before floor and peak finding
     "peak_prominence": 0.15,  # a peak counts if its prominence >= this x the main peak's height
-    "strong_peak_prominence": 0.3,  # a displaced peak this prominent is specular outright
+    "strong_peak_prominence": 0.3,  # a displaced peak this prominent is specular ...
+    "strong_peak_contrast": 1.5,  # ... if its prominence is also >= this x the level beside it
     "peak_contrast": 6.0,  # else its prominence must be >= this x the level beside it
     "indirect_fraction_min": 0.07,  # significant light outside the unresolved cell
     "asymmetry_min": 0.75,  # |asymmetry| at or above: one-sided (diffuse interreflection)
     "broadening": 1.3,  # main peak this many times wider than a direct one: broadened
-    "displaced_share_min": 0.05,  # a displaced peak must hold this share of the pixel's light
+    "core_broadening": 1.25,  # core (cell + resolution) this many times wider than a direct one: subsurface
+    "displaced_share_min": 0.04,  # a displaced peak must add this share of the pixel's light
 }
 
 
@@ -66,6 +71,10 @@ class ProfileCharacter:
         out (see :func:`characterize`) -- or NaN; may be the main peak itself.
     spread_rows : ndarray float32
         RMS width of the profile about its centroid, in rows.
+    core_spread_rows : ndarray float32
+        RMS distance from ``u = 0`` of the light near the epipolar plane (within
+        the unresolved cell and one more resolution width), in rows; NaN where
+        the projector's end cuts both sides (see :func:`characterize`).
     peak_offset_rows : ndarray float32
         Offset of the main peak.
     label : ndarray uint8
@@ -81,6 +90,7 @@ class ProfileCharacter:
     second_peak_offset_rows: np.ndarray
     displaced_peak_offset_rows: np.ndarray
     spread_rows: np.ndarray
+    core_spread_rows: np.ndarray
     peak_offset_rows: np.ndarray
     label: np.ndarray
     cell_rows: float
@@ -98,28 +108,60 @@ def _smooth_valid(P, valid, bins):
     return np.where(valid & (den > 0), num / np.where(den > 0, den, 1.0), 0.0)
 
 
+def _core_width(W, valid, offsets, half_rows):
+    """RMS distance from ``u = 0`` of the light within ``|u| <= half_rows`` (``W`` non-negative).
+
+    Over both sides where both lie on the projector, else over the side that
+    does (a camera row near the end of the projector sees a cut profile); NaN
+    where neither does or there is no light.
+    """
+    out = np.full(W.shape[0], np.nan)
+    sides = {}
+    for name, side in (
+        ("neg", (offsets <= 0) & (offsets >= -half_rows)),
+        ("pos", (offsets >= 0) & (offsets <= half_rows)),
+    ):
+        ok = valid[:, side].all(axis=1)
+        m = W[:, side].sum(axis=1)
+        m2 = (W[:, side] * offsets[side] ** 2).sum(axis=1)
+        sides[name] = (ok, m, m2)
+    (okn, mn, m2n), (okp, mp, m2p) = sides["neg"], sides["pos"]
+    both = okn & okp
+    for sel, m, m2 in ((okp & ~okn, mp, m2p), (okn & ~okp, mn, m2n), (both, mn + mp, m2n + m2p)):
+        good = sel & (m > 0)
+        out[good] = np.sqrt(m2[good] / m[good])
+    return out
+
+
 def _tail_floor(S, valid, offsets, tail_rows, clip=5.0):
     """Per-profile floor: the smaller of the robust mean levels of the two tails ``|u| >= tail_rows``.
 
     A tail's level is its mean with values above ``clip`` x its median clipped
     there: noise averages out, while a specular spot covering less than half
     the tail barely moves it.  The smaller side ignores one-sided light that
-    fills a tail.
+    fills a tail.  A tail that the end of the projector cuts to less than half
+    the valid samples of the other one does not count: a few samples of a
+    sparse estimate are often all zero, and a floor of 0 turned the whole
+    ambient floor into "indirect light" (two camera rows near each end of the
+    projector read as subsurface, issue 23).
     """
-    floor = np.full(S.shape[0], np.inf)
+    N = S.shape[0]
+    levels, counts = [], []
     for side in (offsets <= -tail_rows, offsets >= tail_rows):
-        if not side.any():
-            continue
-        vals = np.where(valid[:, side], S[:, side], np.nan)
-        has = np.isfinite(vals).any(axis=1)
-        if not has.any():
-            continue
-        v = vals[has]
-        med = np.nanmedian(v, axis=1)
-        cap = np.where(med > 0, clip * med, 0.0)[:, None]
-        level = np.full(S.shape[0], np.inf)
-        level[has] = np.nanmean(np.minimum(v, cap), axis=1)
-        floor = np.minimum(floor, level)
+        level = np.full(N, np.inf)
+        count = valid[:, side].sum(axis=1) if side.any() else np.zeros(N, np.int64)
+        has = count > 0
+        if has.any():
+            v = np.where(valid[:, side], S[:, side], np.nan)[has]
+            med = np.nanmedian(v, axis=1)
+            cap = np.where(med > 0, clip * med, 0.0)[:, None]
+            level[has] = np.nanmean(np.minimum(v, cap), axis=1)
+        levels.append(level)
+        counts.append(count)
+    most = np.maximum(counts[0], counts[1])
+    floor = np.full(N, np.inf)
+    for level, count in zip(levels, counts):
+        floor = np.where((count > 0) & (2 * count >= most), np.minimum(floor, level), floor)
     return np.where(np.isfinite(floor), floor, 0.0)
 
 
@@ -213,6 +255,7 @@ def characterize(
     footprint_rows=0.0,
     valid=None,
     direct_fwhm_rows=None,
+    direct_core_rows=None,
     subtract_floor=True,
     **thresholds,
 ) -> ProfileCharacter:
@@ -239,7 +282,13 @@ def characterize(
         FWHM of a direct (diffuse) peak in these profiles.  When given, a
         one-sided profile whose main peak is ``broadening`` times wider is
         subsurface, not diffuse interreflection (see :func:`classify_transport`,
-        which measures it on the image).
+        which measures it on a reference or the image).
+    direct_core_rows : float, optional
+        ``core_spread_rows`` of a direct (diffuse) peak in these profiles.  When
+        given, a profile otherwise labelled diffuse whose core is
+        ``core_broadening`` times wider is subsurface: scattering that stays
+        within a few rows of the cell (skin, whole milk) widens the peak
+        without putting light beyond it.
     subtract_floor : bool
         Subtract a per-profile floor (ambient light spreads a constant over all
         offsets of a demultiplexed transport) before anything else.
@@ -274,7 +323,11 @@ def characterize(
        cell, ``E+`` (``u > cell``) and ``E-`` (``u < -cell``) clipped at 0.
        ``indirect_fraction = (E+ + E-) / (E0 + E+ + E-)``, ``asymmetry = (E+ -
        E-) / (E+ + E-)`` (0 without light outside the cell), ``spread_rows`` the
-       RMS width of the positive part about its centroid.
+       RMS width of the positive part about its centroid, ``core_spread_rows``
+       the RMS distance from ``u = 0`` of the positive part within ``|u| <= cell
+       + resolution_rows`` (the cell and one more resolution width, where the
+       shoulders of a demultiplexed peak lie), over one side only where the
+       projector's end cuts the other (NaN where it cuts both).
     3. **Peaks** of the smoothed profile, with scipy's prominence (bases within
        the profile, a peak at the end of the offsets included).  The main peak
        is the highest; another counts if its prominence is at least
@@ -282,14 +335,17 @@ def characterize(
        width of the main peak at half its height (linear interpolation).  A
        counted peak beyond the cell is *displaced* if it is the main peak, or
        its prominence is at least ``strong_peak_prominence`` [0.3] x the main
-       peak's height, or at least ``peak_contrast`` [6] x the mean level beside
-       it (offsets 3..4 ``core`` away on both sides, outside the main peak's
-       flanks, floor included; ``core = smooth_bins // 2 + footprint_rows / 2 +
-       1``): a sparse estimate of a broad subsurface skirt is spiky, and its
-       spikes stand only a few times above their surroundings, a specular spot
-       far more.  A displaced peak that is not the main one must also hold
-       ``displaced_share_min`` [0.05] of the pixel's light within ``core`` of
-       it (the 5 % of :func:`visible_effect_mask`).
+       peak's height and ``strong_peak_contrast`` [1.5] x the mean level beside
+       it (offsets ``core``..``4 core`` away on both sides, outside the main
+       peak's flanks, floor included; ``core = smooth_bins // 2 +
+       footprint_rows / 2 + 1``), or its prominence is at least
+       ``peak_contrast`` [6] x that level: a sparse estimate of a broad
+       subsurface skirt is spiky, and its spikes stand only a few times above
+       their surroundings, a specular spot far more.  A displaced peak that is
+       not the main one must also *add* ``displaced_share_min`` [0.04] of the
+       pixel's light within ``core`` of it, above the level beside it (a
+       visible effect holds 5 %, :func:`visible_effect_mask`; a spike on a
+       broad skirt adds little to the skirt's own light).
     4. **Label**, first rule that applies:
 
        * 0 ``none``: no light above the floor;
@@ -301,7 +357,9 @@ def characterize(
          (``fwhm_rows >= broadening`` [1.3] ``x direct_fwhm_rows``, only when
          ``direct_fwhm_rows`` is given);
        * 2 ``subsurface``: ``indirect_fraction >= indirect_fraction_min``,
-         symmetric or broadened;
+         symmetric or broadened; or a core broadened to ``core_spread_rows >=
+         core_broadening`` [1.25] ``x direct_core_rows`` (only when
+         ``direct_core_rows`` is given);
        * 1 ``diffuse``: otherwise (narrow, unimodal).
 
     On demultiplexed transports of the built-in scenes, noise gives diffuse
@@ -351,6 +409,7 @@ def characterize(
     safe = np.where(mass > 0, mass, 1.0)
     mean = (pos * offsets).sum(axis=1) / safe
     spread = np.where(mass > 0, np.sqrt(np.clip((pos * offsets**2).sum(axis=1) / safe - mean**2, 0.0, None)), np.nan)
+    core_spread = _core_width(pos, V, offsets, cell + float(resolution_rows))
     # Peaks: the main one is the highest of each profile; others count when
     # prominent enough; a counted peak beyond the cell is specular when it is
     # strong or stands out of its own surroundings (``contrast``): the spikes a
@@ -377,13 +436,19 @@ def characterize(
     direct_peak = np.bincount(pix[in_cell], minlength=N) > 0
     apart = direct_peak | ~((left <= zero) & (right >= zero))
     beyond = (np.abs(offsets[k]) > cell) & (~is_main | apart[pix])
-    # The light within +-core of a displaced peak must be a real share of the pixel's
-    # (a visible specular effect holds >= 5 %, see visible_effect_mask); the comb a
-    # weakly regularized estimate makes of a broad subsurface skirt holds ~2-4 %.
+    # The light a displaced peak adds within +-core of it, above the level around it,
+    # must be a real share of the pixel's (a visible specular effect holds >= 5 %, see
+    # visible_effect_mask): the comb of spikes a sparse estimate makes of a broad
+    # subsurface skirt stands on the skirt, whose own light is not the spike's.
     csum = np.concatenate([np.zeros((N, 1)), np.cumsum(pos, axis=1)], axis=1)
     lo_k = np.clip(k - core, 0, U)
     hi_k = np.clip(k + core + 1, 0, U)
-    share = (csum[pix, hi_k] - csum[pix, lo_k]) / safe[pix] if pix.size else np.zeros(0)
+    if pix.size:
+        under = _local_level(np.clip(S, 0.0, None), beside, pix, k, core, 4 * core) * (hi_k - lo_k)
+        share = (csum[pix, hi_k] - csum[pix, lo_k] - under) / safe[pix]
+    else:
+        share = np.zeros(0)
+    strong &= contrast >= float(th["strong_peak_contrast"])
     far = counted & beyond & (is_main | strong | (contrast >= float(th["peak_contrast"])))
     far &= is_main | (share >= float(th["displaced_share_min"]))
     count = np.bincount(pix[counted], minlength=N).astype(np.int16)
@@ -407,6 +472,8 @@ def characterize(
     if direct_fwhm_rows is not None:  # a broadened main peak is subsurface even if one-sided
         one_sided &= ~(fwhm >= float(th["broadening"]) * float(direct_fwhm_rows))
     label[one_sided] = 3
+    if direct_core_rows is not None:  # scattering within a few rows: a broadened core
+        label[(label == 1) & (core_spread >= float(th["core_broadening"]) * float(direct_core_rows))] = 2
     label[np.isfinite(displaced)] = 4
     label[~has_light] = 0
 
@@ -421,6 +488,7 @@ def characterize(
         second_peak_offset_rows=out(second),
         displaced_peak_offset_rows=out(displaced),
         spread_rows=out(spread),
+        core_spread_rows=out(core_spread),
         peak_offset_rows=out(peak_at),
         label=out(label, np.uint8),
         cell_rows=cell,
@@ -447,49 +515,8 @@ def _inside_projector(geometry, rows, offsets, margin=EDGE_MARGIN_BINS) -> np.nd
     return full
 
 
-def classify_transport(
-    transport, *, resolution_rows=0.0, support_rows=None, chunk_rows=32, return_character=False, **thresholds
-):
-    """Effect label of every pixel of a transport from its profile ``T(u)``.
-
-    Parameters
-    ----------
-    transport : Transport
-        Ground-truth or demultiplexed transport (dense band; sparse long-range
-        entries lie beyond it and are not used).
-    resolution_rows : float
-        Half-width of the cell the data cannot split: a demultiplexing result's
-        ``attrs["epipolar_resolution_rows"]`` (6.075 for the paper's sweep), 0
-        for an exact transport.
-    support_rows : int, optional
-        Use only offsets ``|u| <= support_rows`` (e.g. the sweep's support, 114
-        rows for the paper's sweep, to see a ground truth as the sweep does).
-    chunk_rows : int
-        Camera rows processed at once (bounds memory).
-    return_character : bool
-        Also return the :class:`ProfileCharacter` of every pixel.
-    **thresholds
-        Any key of :data:`CLASSIFY_THRESHOLDS`, passed to :func:`characterize`.
-
-    Returns
-    -------
-    labels : ndarray (H, W) uint8
-        Keys of :data:`planeray.scenes.EFFECTS`.
-    character : ProfileCharacter
-        Only with ``return_character``; arrays of shape (H, W).
-
-    Notes
-    -----
-    The camera-row footprint ``P / H`` is part of the unresolved cell; offsets
-    off the projector (and the :data:`EDGE_MARGIN_BINS` bins at its ends) are
-    ignored.  The width of a direct peak -- needed to call a main peak
-    *broadened* -- is measured on the image itself: the median main-peak FWHM of
-    the pixels first labelled diffuse (the rule is skipped when fewer than
-    :data:`MIN_DIRECT_PIXELS` are).  One-sided pixels whose main peak is
-    ``broadening`` (1.3) times wider are subsurface (light scattered inside an
-    object whose boundary cuts the kernel on one side), not diffuse
-    interreflection.
-    """
+def _characterize_transport(transport, resolution_rows, support_rows, chunk_rows, thresholds) -> ProfileCharacter:
+    """:func:`characterize` of every pixel of a transport, ``chunk_rows`` camera rows at a time."""
     offsets = transport.offsets_rows
     keep = np.ones(offsets.size, bool) if support_rows is None else np.abs(offsets) <= float(support_rows)
     offsets = offsets[keep]
@@ -511,15 +538,105 @@ def classify_transport(
             )
         )
     fields = [f for f in ProfileCharacter.__dataclass_fields__ if f != "cell_rows"]
-    ch = ProfileCharacter(
+    return ProfileCharacter(
         **{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}, cell_rows=parts[0].cell_rows
     )
-    direct = (ch.label == 1) & np.isfinite(ch.fwhm_rows)
-    if direct.sum() >= MIN_DIRECT_PIXELS:
-        broadening = thresholds.get("broadening")
-        broadening = float(CLASSIFY_THRESHOLDS["broadening"] if broadening is None else broadening)
-        width = float(np.median(ch.fwhm_rows[direct]))
-        ch.label[(ch.label == 3) & (ch.fwhm_rows >= broadening * width)] = 2
+
+
+def _direct_width(character: ProfileCharacter, field: str) -> float | None:
+    """Median ``field`` of the pixels labelled diffuse (None if fewer than :data:`MIN_DIRECT_PIXELS`)."""
+    values = getattr(character, field)
+    direct = (character.label == 1) & np.isfinite(values)
+    return float(np.median(values[direct])) if direct.sum() >= MIN_DIRECT_PIXELS else None
+
+
+def classify_transport(
+    transport,
+    *,
+    resolution_rows=0.0,
+    support_rows=None,
+    direct_reference=None,
+    chunk_rows=32,
+    return_character=False,
+    **thresholds,
+):
+    """Effect label of every pixel of a transport from its profile ``T(u)``.
+
+    Parameters
+    ----------
+    transport : Transport
+        Ground-truth or demultiplexed transport (dense band; sparse long-range
+        entries lie beyond it and are not used).
+    resolution_rows : float
+        Half-width of the cell the data cannot split: a demultiplexing result's
+        ``attrs["epipolar_resolution_rows"]`` (6.075 for the paper's sweep), 0
+        for an exact transport.
+    support_rows : int, optional
+        Use only offsets ``|u| <= support_rows`` (e.g. the sweep's support, 114
+        rows for the paper's sweep, to see a ground truth as the sweep does).
+    direct_reference : Transport, optional
+        A transport of a diffuse target (a white plane) obtained the same way:
+        same sweep, camera, image height and projector (so the same
+        ``rows_per_camera_row`` and offsets), demultiplexed alike.  The width of
+        a direct peak is measured on it; by default it is measured on the
+        image's own pixels first labelled diffuse, which fails when there are
+        none (a close-up of skin: every pixel is broadened alike).
+    chunk_rows : int
+        Camera rows processed at once (bounds memory).
+    return_character : bool
+        Also return the :class:`ProfileCharacter` of every pixel.
+    **thresholds
+        Any key of :data:`CLASSIFY_THRESHOLDS`, passed to :func:`characterize`.
+
+    Returns
+    -------
+    labels : ndarray (H, W) uint8
+        Keys of :data:`planeray.scenes.EFFECTS`.
+    character : ProfileCharacter
+        Only with ``return_character``; arrays of shape (H, W).
+
+    Raises
+    ------
+    InputError
+        A ``direct_reference`` of another geometry or other offsets.
+
+    Notes
+    -----
+    The camera-row footprint ``P / H`` is part of the unresolved cell; offsets
+    off the projector (and the :data:`EDGE_MARGIN_BINS` bins at its ends) are
+    ignored.  The widths of a direct peak -- its main-peak FWHM and its
+    ``core_spread_rows``, medians over the pixels of ``direct_reference`` (or of
+    the image) first labelled diffuse; a rule is skipped when fewer than
+    :data:`MIN_DIRECT_PIXELS` are -- decide two labels: one-sided pixels whose
+    main peak is ``broadening`` (1.3) times wider are subsurface (light
+    scattered inside an object whose boundary cuts the kernel on one side), not
+    diffuse interreflection; pixels first labelled diffuse whose core is
+    ``core_broadening`` (1.25) times wider are subsurface (scattering within a
+    few rows of the epipolar plane: skin, whole milk).
+    """
+    ch = _characterize_transport(transport, resolution_rows, support_rows, chunk_rows, thresholds)
+    reference = ch
+    if direct_reference is not None:
+        same = (
+            direct_reference.geometry.rows_per_camera_row == transport.geometry.rows_per_camera_row
+            and np.array_equal(direct_reference.offsets_rows, transport.offsets_rows)
+        )
+        if not same:
+            raise InputError(
+                "direct_reference must be a transport of the same geometry and offsets "
+                f"({transport.geometry.rows_per_camera_row:g} projector rows per camera row, "
+                f"{transport.offsets_rows.size} offsets); got "
+                f"{direct_reference.geometry.rows_per_camera_row:g} and {direct_reference.offsets_rows.size}"
+            )
+        reference = _characterize_transport(direct_reference, resolution_rows, support_rows, chunk_rows, thresholds)
+    th = {**CLASSIFY_THRESHOLDS, **{key: val for key, val in thresholds.items() if val is not None}}
+    fwhm = _direct_width(reference, "fwhm_rows")
+    core = _direct_width(reference, "core_spread_rows")
+    first = ch.label.copy()
+    if fwhm is not None:
+        ch.label[(first == 3) & (ch.fwhm_rows >= float(th["broadening"]) * fwhm)] = 2
+    if core is not None:
+        ch.label[(first == 1) & (ch.core_spread_rows >= float(th["core_broadening"]) * core)] = 2
     return (ch.label, ch) if return_character else ch.label
 
 
@@ -530,13 +647,20 @@ def visible_effect_mask(scene, *, support_rows=114, resolution_rows=6.075, min_f
     the light that the sweep can split from the direct peak -- offsets
     ``resolution_rows + P/H < |u| <= support_rows``: beyond the unresolved cell
     widened by one camera-row footprint, inside the sweep's support -- is at
-    least ``min_fraction`` of its light within the support.  Diffuse pixels
-    (label 1, nothing to see) are always visible; label 0 never.
+    least ``min_fraction`` of its light within the support.  Subsurface
+    scattering is also visible as a *broadened* peak: a subsurface pixel is
+    visible when the light beyond the camera-row footprint by half the
+    resolution -- ``P/(2H) + 1/2 + resolution_rows / 2 < |u| <= support_rows``,
+    the outer half of the cell, where it widens the shoulders of the
+    demultiplexed peak -- holds ``min_fraction``.  Diffuse pixels (label 1,
+    nothing to see) are always visible; label 0 never.
 
     This excludes, e.g., mirror-ball page pixels whose specular light is a few
     percent of their direct light (below the noise of a demultiplexed profile),
     disco-ball pixels whose reflection lies beyond the support or next to the
-    epipolar plane, and pixels labelled from light the sweep never reaches.
+    epipolar plane, toothpaste (its light leaves within the camera row's
+    footprint: 1-2 % beyond it), and pixels labelled from light the sweep never
+    reaches.
 
     Parameters
     ----------
@@ -555,13 +679,18 @@ def visible_effect_mask(scene, *, support_rows=114, resolution_rows=6.075, min_f
     """
     T = scene.transport
     u = np.abs(T.offsets_rows)
+    F = T.geometry.rows_per_camera_row
     support = u <= float(support_rows)
-    zone = support & (u > float(resolution_rows) + T.geometry.rows_per_camera_row)
     total = T.dense[:, :, support].sum(axis=2, dtype=np.float64)
-    effect = T.dense[:, :, zone].sum(axis=2, dtype=np.float64)
+    floor = float(min_fraction) * np.where(total > 0, total, np.inf)
+
+    def holds(zone):
+        return T.dense[:, :, zone].sum(axis=2, dtype=np.float64) >= floor
+
     labels = np.asarray(scene.labels)
-    seen = effect >= float(min_fraction) * np.where(total > 0, total, np.inf)
-    return (labels == 1) | ((labels > 1) & seen)
+    split = holds(support & (u > float(resolution_rows) + F))
+    broadened = holds(support & (u > 0.5 * F + 0.5 + 0.5 * float(resolution_rows)))
+    return (labels == 1) | ((labels > 1) & split) | ((labels == 2) & broadened)
 
 
 def label_agreement(pred, truth_labels, *, mask=None, n_labels=5) -> dict:

@@ -47,6 +47,13 @@ def profiles(
     classify: Annotated[
         Path | None, typer.Option(help="With --transport: write the per-pixel effect label map PNG.")
     ] = None,
+    direct_reference: Annotated[
+        Path | None,
+        typer.Option(
+            help="With --classify: transport store of a white (diffuse) target demultiplexed from the same "
+            "sweep, size and camera; the width of a direct peak is measured on it (default: on the image)."
+        ),
+    ] = None,
 ):
     """Plot area-normalized delay profiles of pixels (the paper's Fig. 9); classify effects from a transport."""
     from ..classify import classify_transport
@@ -59,6 +66,8 @@ def profiles(
 
     if classify is not None and transport is None:
         raise ValueError("--classify needs --transport (the labels come from the transport's profiles)")
+    if direct_reference is not None and classify is None:
+        raise ValueError("--direct-reference needs --classify (it calibrates the effect labels)")
     if not pixel and classify is None:
         raise ValueError("give at least one --pixel ROW COL (or --classify with --transport)")
     st = _load_stack(stack_path)
@@ -88,7 +97,23 @@ def profiles(
     if classify is not None:
         from ..scenes import EFFECTS
 
-        labels = classify_transport(T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0))
+        white = None
+        if direct_reference is not None:
+            from ..io import read_transport
+
+            white, _ = read_transport(direct_reference)
+            if white.geometry.rows_per_camera_row != T.geometry.rows_per_camera_row or not np.array_equal(
+                white.offsets_rows, T.offsets_rows
+            ):
+                raise ValueError(
+                    f"--direct-reference {direct_reference}: {white.geometry.camera_rows} camera rows of "
+                    f"{white.geometry.projector_rows} projector rows and {white.offsets_rows.size} offsets; the "
+                    f"transport has {T.geometry.camera_rows} of {T.geometry.projector_rows} and "
+                    f"{T.offsets_rows.size}: demultiplex the white target from the same sweep and size"
+                )
+        labels = classify_transport(
+            T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0), direct_reference=white
+        )
         ref = st.image(st.index_of(delay_us=0.0, exposure_us=float(st.exposures().min())) or 0)
         label_map_figure(labels, out=classify, reference=ref)
         counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
@@ -186,12 +211,14 @@ def figure(
     Prints one JSON line per figure on stdout: its name ("figure"), the JSON file written ("json")
     and the numbers measured ("numbers").
     """
-    from ..experiments.paper import FIGURES, figure_work
+    from ..experiments.paper import FIGURES, check_figure_size, figure_work
 
     names = list(FIGURES) if name == "all" else [name]
     unknown = [n for n in names if n not in FIGURES]
     if unknown:
         raise ValueError(f"unknown figure {unknown[0]!r}; choose one of {sorted(FIGURES)} or all")
+    for n in names:  # before running anything
+        check_figure_size(n, size, option="--size")
     for n in names:
         with progress_bar() as bar:
             task = bar.add_task(n, total=figure_work(n, size=size))

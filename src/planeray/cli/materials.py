@@ -116,8 +116,13 @@ def train(
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Model file to write (a zip: JSON + skops).")],
     features: Annotated[str, typer.Option(help="stack (measured profiles) or transport (demultiplexed).")] = "stack",
     floor: Annotated[
-        str, typer.Option(help="min: subtract each curve's minimum (ambient); none: the paper's.")
-    ] = "min",
+        str,
+        typer.Option(
+            help="Per-curve floor removed before area-normalizing: edge (the mean of the outermost delays: "
+            "ambient light, black level; measured best on held-out captures), min (each curve's minimum) "
+            "or none (the paper's plain normalization)."
+        ),
+    ] = "edge",
     class_name: Annotated[
         list[str] | None, typer.Option("--class-name", help="ID=NAME for classes beyond the documented list.")
     ] = None,
@@ -132,10 +137,13 @@ def train(
     """Train the per-pixel RBF-SVM on labelled captures (hyper-parameters by grouped cross-validation)."""
     from ..io.atomic import ALREADY_EXISTS
     from ..materials import read_label_image, train_model
+    from ..materials.features import FLOORS
     from ..materials.model import _is_model_file
 
     if out_path.exists() and (not overwrite or not _is_model_file(out_path)):
         raise ValueError(f"{out_path}: {ALREADY_EXISTS}" if not overwrite else f"{out_path}: is not a planeray model")
+    if floor not in FLOORS:
+        raise ValueError(f"--floor {floor!r}: choose one of {', '.join(FLOORS)}")
     if len(labels) != len(stacks):
         raise ValueError(f"{len(stacks)} stacks but {len(labels)} --labels: give one label image per stack, in order")
     names = _parse_class_names(class_name)
@@ -187,6 +195,7 @@ def predict(
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
 ):
     """Segment a capture pixel by pixel with a trained model (refused if the sweep differs)."""
+    from ..experiments._report import jsonable
     from ..experiments.materials import score
     from ..materials import load_model, read_label_image, write_label_image
 
@@ -213,9 +222,10 @@ def predict(
             truth,
             near_wall=near,
             classes=sorted(set(model.classes) | {int(c) for c in set(truth.ravel().tolist()) if c}),
+            model_classes=sorted(model.classes),
         )
     if json_out:
-        out.print_json(json.dumps(numbers))
+        out.print_json(json.dumps(jsonable(numbers), allow_nan=False))
         return
     out.print(f"segmentation: {out_png}")
     for name, n in counts.items():
@@ -223,6 +233,9 @@ def predict(
     if "score" in numbers:
         sc = numbers["score"]
         for name, acc in sc["accuracy"].items():
+            if name in sc["not_scored"]:
+                out.print(f"  accuracy {name}: not scored ({sc['not_scored'][name]})")
+                continue
             extra = ""
             if "accuracy_near_wall" in sc:
                 extra = (

@@ -237,7 +237,7 @@ def write_capture(cap: Capture, out, *, overwrite=False, scene_params=None) -> P
 DISTANCE_BINS_MM = (0.0, 2.0, 4.0, 7.0, 10.0, 15.0, np.inf)
 
 
-def score(pred, truth, *, near_wall=None, wall_distance_mm=None, classes=None) -> dict:
+def score(pred, truth, *, near_wall=None, wall_distance_mm=None, classes=None, model_classes=None) -> dict:
     """Per-class accuracy (recall) of a segmentation against ground truth, and where the errors are.
 
     Parameters
@@ -250,6 +250,13 @@ def score(pred, truth, *, near_wall=None, wall_distance_mm=None, classes=None) -
         Distance to the wall: accuracy of the materials by distance bin.
     classes : sequence of int, optional
         Classes of the confusion matrix (default: those in ``truth``).
+    model_classes : sequence of int, optional
+        The classes the model can predict.  A class of ``classes`` outside them
+        is *not scored*: its accuracies are ``None`` (not 0: the model never had
+        the chance), it is named under ``not_scored`` with the reason, and its
+        pixels are left out of ``overall``, ``min_material_accuracy``, ``errors``
+        and ``by_distance_mm`` (its row of the confusion matrix still shows what
+        they were taken for).
 
     Returns
     -------
@@ -258,30 +265,40 @@ def score(pred, truth, *, near_wall=None, wall_distance_mm=None, classes=None) -
         ``pixels`` (per class, all / near wall), ``confusion`` (``classes``, ``matrix``
         counts, rows true, columns predicted; a last column for 0 = no prediction),
         ``overall`` (material pixels), ``min_material_accuracy``, ``errors`` (material
-        pixels misclassified, and the share of them near a wall), ``by_distance_mm``.
+        pixels misclassified, and the share of them near a wall), ``by_distance_mm``;
+        with ``model_classes``, ``not_scored`` (class name -> reason, empty if none).
     """
     pred = np.asarray(pred)
     truth = np.asarray(truth)
     scored = truth > 0
     classes = sorted(int(c) for c in np.unique(truth[scored])) if classes is None else [int(c) for c in classes]
     names = {c: CLASS_NAMES.get(c, f"class {c}") for c in classes}
+    unknown = set() if model_classes is None else set(classes) - {int(c) for c in model_classes}
     out = {"accuracy": {}, "pixels": {}}
+    if model_classes is not None:
+        out["not_scored"] = {names[c]: "the model was trained without this class" for c in classes if c in unknown}
     if near_wall is not None:
         out["accuracy_near_wall"], out["accuracy_interior"], out["pixels_near_wall"] = {}, {}, {}
+
+    def accuracy(c, m):
+        if c in unknown:
+            return None
+        return float((pred[m] == c).mean()) if m.any() else float("nan")
+
     for c in classes:
         m = truth == c
         out["pixels"][names[c]] = int(m.sum())
-        out["accuracy"][names[c]] = float((pred[m] == c).mean()) if m.any() else float("nan")
+        out["accuracy"][names[c]] = accuracy(c, m)
         if near_wall is not None:
             for key, mm in (("accuracy_near_wall", m & near_wall), ("accuracy_interior", m & ~near_wall)):
-                out[key][names[c]] = float((pred[mm] == c).mean()) if mm.any() else float("nan")
+                out[key][names[c]] = accuracy(c, mm)
             out["pixels_near_wall"][names[c]] = int((m & near_wall).sum())
     cols = classes + [0]
     matrix = np.array([[int(((truth == c) & (pred == p)).sum()) for p in cols] for c in classes])
     out["confusion"] = {"classes": classes, "names": [names[c] for c in classes], "matrix": matrix.tolist()}
-    mat = np.isin(truth, list(MATERIAL_CLASSES))
+    mat = np.isin(truth, [c for c in MATERIAL_CLASSES if c not in unknown])
     out["overall"] = float((pred[mat] == truth[mat]).mean()) if mat.any() else float("nan")
-    accs = [out["accuracy"][names[c]] for c in classes if c in MATERIAL_CLASSES]
+    accs = [out["accuracy"][names[c]] for c in classes if c in MATERIAL_CLASSES and c not in unknown]
     out["min_material_accuracy"] = float(min(accs)) if accs else float("nan")
     wrong = mat & (pred != truth)
     out["errors"] = {"material_pixels": int(mat.sum()), "misclassified": int(wrong.sum())}

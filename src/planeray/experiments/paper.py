@@ -23,6 +23,7 @@ from ..acquire import simulate_stack
 from ..camera import CameraModel
 from ..demux import demultiplex
 from ..devices import SimulatedEpiscan
+from ..errors import InputError
 from ..figures._common import display_scale, new_figure, save_png
 from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
@@ -36,8 +37,19 @@ from ..synthesis import (
     single_line_pattern,
 )
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, paper_sweep, sweep_support_rows
+from ._report import jsonable
 
-__all__ = ["FIGURES", "figure_work", "fig8", "fig9", "fig11", "fig12", "effects"]
+__all__ = [
+    "FIGURES",
+    "EFFECTS_SIZES",
+    "check_figure_size",
+    "figure_work",
+    "fig8",
+    "fig9",
+    "fig11",
+    "fig12",
+    "effects",
+]
 
 PROJECTOR_ROWS = PAPER_PROJECTOR_ROWS  # the paper's PicoPro
 
@@ -78,8 +90,10 @@ def _per_image(progress):
 
 
 def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
+    """Write ``NAME.json`` as strict JSON (a non-finite number becomes ``null``) and return what was written."""
+    numbers = jsonable(numbers)
     with atomic_file(out_dir / f"{name}.json") as tmp:
-        tmp.write_text(json.dumps(numbers, indent=2, default=float))
+        tmp.write_text(json.dumps(numbers, indent=2, allow_nan=False))
     return numbers
 
 
@@ -327,16 +341,51 @@ def fig12(out_dir, *, size: int = 128, seed: int = 0, line_row: int | None = Non
     return _write_numbers(out_dir, "fig12", numbers)
 
 
+#: Image sizes (camera pixels, square) at which ``effects`` is validated against every
+#: scene's ground truth (``tests/test_classify.py``): a camera row spans 2.8 to 11.25
+#: rows of the 720-row projector.  At 32 it spans 22.5, wider than the sweep can
+#: tell a broadened peak from a direct one (skin reads as diffuse).
+EFFECTS_SIZES = (64, 256)
+
+
+def check_figure_size(name: str, size: int, *, option: str = "size") -> None:
+    """Refuse a ``size`` figure ``name`` is not validated at (one line naming ``option``).
+
+    Raises
+    ------
+    InputError
+        ``effects`` outside :data:`EFFECTS_SIZES`.
+    """
+    lo, hi = EFFECTS_SIZES
+    if name == "effects" and not lo <= int(size) <= hi:
+        raise InputError(
+            f"{option} {size}: the effects figure is validated at {lo} to {hi} camera pixels "
+            f"({PROJECTOR_ROWS / hi:g} to {PROJECTOR_ROWS / lo:g} projector rows per camera row); "
+            f"choose a size in that range"
+        )
+
+
+#: The scene whose demultiplexed transport gives every scene of ``effects`` the width of
+#: a direct peak (a white plane: the calibration target of the same sweep, size and camera).
+EFFECTS_REFERENCE_SCENE = "diffuse_plane"
+
+
 def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     """Effect classification from demultiplexed delay profiles on every built-in scene,
     with its agreement with the scenes' ground-truth labels (Sec. 8).
+
+    The width of a direct peak -- which tells a peak broadened by subsurface
+    scattering from a direct one -- is measured on the demultiplexed
+    :data:`EFFECTS_REFERENCE_SCENE` of the same size, sweep, camera and seed, as a
+    white target would be captured beside the scene (``direct_reference`` of
+    :func:`planeray.classify.classify_transport`).
 
     Parameters
     ----------
     out_dir : path
         Folder for the PNGs and ``effects.json``.
     size : int
-        Image size (square, camera pixels).
+        Image size (square, camera pixels), within :data:`EFFECTS_SIZES`.
     seed : int
         Scene and noise seed.
     progress : callable, optional
@@ -346,20 +395,31 @@ def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
     Returns
     -------
     dict
-        The measured numbers (also written as ``effects.json``).
+        The measured numbers (also written as ``effects.json``, strict JSON: a
+        recall with no pixel to score is ``null``), per scene:
+        ``recall_visible``, ``pixels_visible`` (see
+        :func:`planeray.classify.visible_effect_mask`), ``recall_all_labelled``,
+        ``overall_visible`` and ``direct_reference`` (the scene the width of a
+        direct peak came from).
     """
     from ..classify import classify_transport, label_agreement, visible_effect_mask
     from ..figures.labels import label_map_figure
 
+    check_figure_size("effects", size)
     out_dir = Path(out_dir)
     support = sweep_support_rows(paper_sweep(), PAPER_LINES_PER_SECOND)
+    names = list(list_scenes())
+    order = [EFFECTS_REFERENCE_SCENE] + [n for n in names if n != EFFECTS_REFERENCE_SCENE]
     numbers = {}
-    for name in list_scenes():
+    reference = None
+    for name in order:
         scene = make_scene(name, (size, size), projector_rows=PROJECTOR_ROWS, seed=seed)
         stack = simulate_stack(scene, paper_sweep(), seed=seed, progress=_per_image(progress))
         result = demultiplex(stack, progress=progress)
+        if reference is None:
+            reference = result.transport
         res = result.attrs["epipolar_resolution_rows"]
-        labels = classify_transport(result.transport, resolution_rows=res)
+        labels = classify_transport(result.transport, resolution_rows=res, direct_reference=reference)
         visible = visible_effect_mask(scene, support_rows=support, resolution_rows=res)
         agree = label_agreement(labels, scene.labels, mask=visible)
         agree_all = label_agreement(labels, scene.labels)
@@ -367,7 +427,8 @@ def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
             "recall_visible": {EFFECTS[k]: float(v) for k, v in agree["recall"].items()},
             "pixels_visible": {EFFECTS[k]: int(v) for k, v in agree["counts"].items()},
             "recall_all_labelled": {EFFECTS[k]: float(v) for k, v in agree_all["recall"].items()},
-            "overall_visible": float(agree["overall"]),
+            "overall_visible": float(agree["overall"]) if agree["n"] else None,
+            "direct_reference": EFFECTS_REFERENCE_SCENE,
         }
         label_map_figure(
             labels,
@@ -376,7 +437,7 @@ def effects(out_dir, *, size: int = 128, seed: int = 0, progress=None) -> dict:
             title=f"{name}: effect from demultiplexed delay profiles",
         )
         _done(progress)
-    return _write_numbers(out_dir, "effects", numbers)
+    return _write_numbers(out_dir, "effects", {name: numbers[name] for name in names})
 
 
 #: Figures by name for ``planeray figure``.
