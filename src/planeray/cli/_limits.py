@@ -86,6 +86,20 @@ def lines_per_second(value, option: str = "--lines-per-second") -> float | None:
     return optional(number, value, option, minimum=MIN_LINES_PER_SECOND, maximum=MAX_LINES_PER_SECOND)
 
 
+def folder(path, option: str = "--out") -> None:
+    """An output folder: it may exist (and hold other files) but must be a folder, not a file."""
+    from pathlib import Path
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise InputError(f"{option} {p}: is a file; name a folder (it may exist and hold other files)")
+    for parent in p.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise InputError(f"{option} {p}: {parent} is a file, not a folder")
+            break
+
+
 def available_memory() -> int:
     """Bytes of memory available to a new allocation (``MemAvailable``; else the physical memory)."""
     try:
