@@ -66,15 +66,16 @@ def test_run_study_quick_writes_files(tmp_path, provider):
         "fig6c_mse_vs_g.csv",
         "study.json",
     } <= names
-    assert json.loads((tmp_path / "study.json").read_text()) == r
+    saved = json.loads((tmp_path / "study.json").read_text())
+    assert saved.pop("planeray_mark").startswith("planeray:record:") and saved == r
     assert r["files"][-1] == str(tmp_path / "study.json") and len(r["files"]) == 11
     report = study_report(r)
     first = {m: r["noise_sweep"][m]["mean"][0] for m in study.METHODS}  # eta 0.005
     assert report[4].split() == ["0.005", *(f"{v:.1e}" for v in first.values()), min(first, key=first.get)]
     assert not any(n.startswith(".") for n in names)  # no temporaries left
-    header = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()[0]
-    assert header == "noise,seed,pinv,nnls,full"
-    assert len((tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()) == 1 + 3 * 2
+    mark, header, *rows = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()
+    assert mark.startswith("# planeray_mark: planeray:table:") and header == "noise,seed,pinv,nnls,full"
+    assert len(rows) == 3 * 2
     assert set(r["example_mse"]) == set(study.METHODS)
     assert np.array(r["regularization"]["mse"]).shape == (3, 3)
 

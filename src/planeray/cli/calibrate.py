@@ -87,7 +87,9 @@ def calibrate_lines(
         out.print(
             f"lines_per_second = {result.lines_per_second:,.0f} +- {result.uncertainty:,.0f} (1 sigma, "
             f"{result.relative_uncertainty * 100:.2f} %) from {result.n_lines:.2f} lines in {result.exposure_us:g} us"
-            + (f"; written to {write}" if write else "")
+            + (f"; written to {write}" if write else ""),
+            markup=False,
+            highlight=False,
         )
 
 
@@ -130,7 +132,7 @@ def calibrate_simulate_lines(
             f"{size[1]} and --projector-rows {projector_rows}: {exc}"
         ) from None
     path = write_line_sweep(sweep, out_path, overwrite=overwrite)
-    out.print(f"line sweep: {path}  (true lines_per_second {lines_per_second:,.0f})")
+    out.print(f"line sweep: {path}  (true lines_per_second {lines_per_second:,.0f})", markup=False, highlight=False)
 
 
 @calibrate_app.command("delay-zero")

@@ -219,7 +219,9 @@ def simulate(
     if truth is not None:
         attrs = {"lines_per_second": lines_per_second, "method": "ground_truth", "scene": sc.params}
         write_transport(sc.transport, truth, attrs=attrs, overwrite=overwrite)
-        out.print(f"ground-truth transport: {truth}")
+        out.print(f"ground-truth transport: {truth}", markup=False, highlight=False)
     out.print(
-        f"stack: {out_path}  ({len(stack)} images, {H}x{W}, {int((~stack.excluded).sum())} used for demultiplexing)"
+        f"stack: {out_path}  ({len(stack)} images, {H}x{W}, {int((~stack.excluded).sum())} used for demultiplexing)",
+        markup=False,
+        highlight=False,
     )

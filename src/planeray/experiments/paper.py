@@ -28,6 +28,7 @@ from ..figures._common import display_scale, new_figure, save_png
 from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
 from ..io import atomic_file
+from ..io.marks import MARK_KEY, mark_text
 from ..profiles import measured_delay_profiles
 from ..scenes import EFFECTS, list_scenes, make_scene, representative_pixels
 from ..synthesis import (
@@ -115,8 +116,6 @@ def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
 
     The file carries planeray's mark (key ``planeray_mark``), so ``--overwrite`` may replace it.
     """
-    from ..io.marks import MARK_KEY, mark_text
-
     numbers = jsonable(numbers)
     with atomic_file(out_dir / f"{name}.json") as tmp:
         tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **numbers}, indent=2, allow_nan=False))

@@ -70,17 +70,25 @@ def profile_summary(prof: MCProfile) -> dict:
 
 
 def write_profile(prof: MCProfile, path) -> tuple[Path, Path]:
-    """Write ``path`` (CSV, see the module docstring) and its ``.json`` sidecar atomically."""
+    """Write ``path`` (CSV, see the module docstring) and its ``.json`` sidecar atomically.
+
+    Both carry planeray's mark: the CSV's first line is the comment
+    ``# planeray_mark: planeray:table:VERSION`` (pandas: ``read_csv(path, comment="#")``),
+    the JSON the key ``planeray_mark``.
+    """
+    from ..io.marks import MARK_KEY, mark_text
+
     path = Path(path)
     cols = profile_columns(prof)
     names = _columns(prof)
     with atomic_file(path) as tmp:
         with open(tmp, "w", newline="") as f:
+            f.write(f"# {MARK_KEY}: {mark_text('table')}\n")
             w = csv.writer(f)
             w.writerow(names)
             for i in range(cols[names[0]].size):
                 w.writerow([int(cols[names[0]][i])] + [repr(float(cols[c][i])) for c in names[1:]])
     side = path.with_suffix(".json")
     with atomic_file(side) as tmp:
-        tmp.write_text(json.dumps(profile_summary(prof), indent=2, sort_keys=True))
+        tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **profile_summary(prof)}, indent=2, sort_keys=True))
     return path, side
