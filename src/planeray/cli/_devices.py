@@ -98,7 +98,10 @@ def device_options_from_cli(name: str, explicit: dict, option_texts, calibration
         options[key] = value
         spelled.setdefault(key, f"-O {key}")
     if calibration is not None:
-        fields = read_calibration(calibration)
+        try:
+            fields = read_calibration(calibration)
+        except InputError as exc:
+            raise InputError(f"--calibration {exc}") from None
         if not fields:
             raise InputError(
                 f"--calibration {calibration}: no calibration field ({', '.join(CALIBRATION_FIELDS)}) in it; "
@@ -113,6 +116,7 @@ def device_options_from_cli(name: str, explicit: dict, option_texts, calibration
 
 #: Device options whose meaning is the same on every device, checked like the command's own options.
 _COMMON_CHECKS = {
+    "scene": lambda v, o: lim.scene(v, o) if isinstance(v, str) else None,
     "size": lambda v, o: lim.size(v, o),
     "projector_rows": lambda v, o: lim.projector_rows(v, o),
     "seed": lambda v, o: lim.seed(v, o),
@@ -165,16 +169,20 @@ def open_device_from_cli(name: str, explicit: dict, option_texts, calibration, *
     opens; a device that refuses an option (a message ``size must ...``) or fails on a
     value of the wrong type gives one line naming it (``-O size``, ``--size``).
     """
-    from ..devices import device_options, open_device
+    from ..devices import device_options, list_devices, open_device
 
+    if name not in list_devices():
+        raise InputError(
+            f"--device {name}: unknown device; choose one of {', '.join(list_devices())} (`planeray devices`)"
+        )
     spellings: dict = {}
     options = device_options_from_cli(name, explicit, option_texts, calibration, spellings=spellings)
     accepted = device_options(name)
     for key in options:
         if key not in accepted:
             raise InputError(
-                f"{spellings.get(key, key)}: device {name!r} has no option {key!r}; its options: "
-                f"{', '.join(sorted(accepted)) or 'none'} (`planeray devices`)"
+                f"{spellings.get(key, key)}: device {name!r} has no option {key!r} (`planeray devices` lists the "
+                "options of every device)"
             )
     check_device_options(options, spellings, accepted)
     if check is not None:
@@ -182,7 +190,10 @@ def open_device_from_cli(name: str, explicit: dict, option_texts, calibration, *
     try:
         return open_device(name, **options)
     except InputError as exc:
-        raise InputError(_as_typed(str(exc), spellings)) from None
+        text = _as_typed(str(exc), spellings)
+        if "replay" in options and str(options["replay"]) in text and "--replay" not in text:
+            text = f"--replay {text}"  # the recording the replay device serves
+        raise InputError(text) from None
     except (TypeError, ValueError, OverflowError, KeyError) as exc:
         given = ", ".join(f"{spellings.get(k, k)}={v!r}" for k, v in options.items()) or "no options"
         raise InputError(

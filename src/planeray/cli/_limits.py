@@ -23,8 +23,8 @@ from ..errors import InputError
 MAX_SIDE = 2048
 #: Largest projector (rows): a 4K projector has 2160; the simulated scenes slow down beyond 4096.
 MAX_PROJECTOR_ROWS = 4096
-#: Scanline velocities of raster projectors (lines/s): the paper's PicoPro scans 54,000.
-MIN_LINES_PER_SECOND, MAX_LINES_PER_SECOND = 1_000.0, 10_000_000.0
+#: Scanline velocities of raster projectors (lines/s): the paper's PicoPro scans 54,000 (60 Hz x 900 rows).
+MIN_LINES_PER_SECOND, MAX_LINES_PER_SECOND = 10_000.0, 10_000_000.0
 #: Largest timing value (us): 1 s, sixty projector frames.
 MAX_TIME_US = 1_000_000.0
 #: Seeds: NumPy takes non-negative integers; one below 2**32 is plenty.
@@ -84,6 +84,27 @@ def projector_rows(value, option: str = "--projector-rows") -> int | None:
 def lines_per_second(value, option: str = "--lines-per-second") -> float | None:
     """A raster projector's scanline velocity, lines/s (None: not given)."""
     return optional(number, value, option, minimum=MIN_LINES_PER_SECOND, maximum=MAX_LINES_PER_SECOND)
+
+
+def sweep(name: str, option: str = "--sweep"):
+    """The named sweep (:func:`planeray.timing.make_sweep`); an unknown name is refused naming ``option``."""
+    from ..timing import SWEEPS, make_sweep
+
+    if name not in SWEEPS:
+        raise InputError(f"{option} {name}: unknown sweep; choose one of {', '.join(sorted(SWEEPS))}")
+    return make_sweep(name)
+
+
+def scene(name: str, option: str = "--scene") -> str:
+    """A built-in scene name (or ``NAME:ARGUMENT`` of a parametric one); an unknown name is refused naming ``option``."""
+    from ..scenes import list_scenes
+
+    known = list_scenes(parametric=True)
+    if not isinstance(name, str) or (
+        name not in known and name.split(":", 1)[0] + ":" not in {k.split(":", 1)[0] + ":" for k in known if ":" in k}
+    ):
+        raise InputError(f"{option} {name}: unknown scene; choose one of {', '.join(sorted(known))}")
+    return name
 
 
 def folder(path, option: str = "--out") -> None:

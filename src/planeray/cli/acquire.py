@@ -56,10 +56,9 @@ def acquire(
     """
     from ..acquire import acquire_to_store
     from ..devices import device_options
-    from ..timing import make_sweep
 
     _check_outputs((out_path, "stack"), overwrite=overwrite)  # before the device opens
-    sw = make_sweep(sweep)
+    sw = lim.sweep(sweep)
     explicit = dict(
         scene=scene,
         size=size,
@@ -80,7 +79,8 @@ def acquire(
             )
         if "size" in options:  # the images of the whole sweep, in memory while the scene renders them
             h, w = lim.size(tuple(options["size"]))
-            lim.check_memory(_simulation_bytes(h, w, len(sw)), f"a {h}x{w} capture of {len(sw)} images")
+            given = f"--size {h} {w}" if size is not None else f"-O size=[{h}, {w}]"
+            lim.check_memory(_simulation_bytes(h, w, len(sw)), f"{given} (a capture of {len(sw)} images)")
 
     dev = open_device_from_cli(device, explicit, device_option, calibration, check=check)
 

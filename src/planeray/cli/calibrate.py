@@ -227,15 +227,15 @@ def calibrate_delay_zero_cmd(
         )
     _check_write_target(write)
     if device is not None:
-        from ..timing import make_sweep
-
+        if sweep is not None:
+            lim.sweep(sweep)
         dev = open_device_from_cli(device, {}, device_option, calibration)
         try:
             if hasattr(dev, "base_trigger_delay_us"):  # a camera triggered by VSYNC: find its base
                 result = calibrate_base_trigger_delay(
                     dev,
                     exposure_us=exposure_us,
-                    sweeps=[make_sweep(sweep or "paper")],
+                    sweeps=[lim.sweep(sweep or "paper")],
                     base_trigger_delay_us=base_trigger_delay_us,
                     frame_period_us=PROJECTOR_FRAME_PERIOD_US if frame_period_us is None else frame_period_us,
                 )

@@ -69,15 +69,7 @@ def check_render_options(
     lim.optional(lim.number, baseline, "--baseline")
     lim.optional(lim.positive, projector_aspect, "--projector-aspect", maximum=MAX_PROJECTOR_ASPECT)
     lim.optional(lim.integer, projector_columns, "--projector-columns", minimum=1, maximum=MAX_PROJECTOR_COLUMNS)
-    lim.optional(
-        lim.number,
-        projector_vfov,
-        "--projector-vfov",
-        minimum=0.0,
-        maximum=180.0,
-        min_inclusive=False,
-        max_inclusive=False,
-    )
+    # --projector-vfov: checked by the renderer's setup, before any work (in (0, 180) degrees)
     if size is not None and rows is not None:
         # the running sums (two buffers) and the finished transport, float64, per colour channel
         channels = 3 if rgb else 1

@@ -129,7 +129,6 @@ def simulate(
     from ..io import store_format, write_stack, write_transport
     from ..scenes import make_scene
     from ..scenes.store_scene import scene_from_transport_store
-    from ..timing import make_sweep
 
     _check_outputs((out_path, "stack"), (truth, "transport"), overwrite=overwrite)
     if size is not None:
@@ -137,6 +136,7 @@ def simulate(
     lim.projector_rows(projector_rows)
     lim.seed(seed)
     lim.lines_per_second(lines_per_second)
+    sw = lim.sweep(sweep)
     check_camera_options(
         frames=frames,
         full_well_e=full_well_e,
@@ -201,7 +201,6 @@ def simulate(
         jitter_us=jitter_us,
         row_jitter_us=row_jitter_us,
     )
-    sw = make_sweep(sweep)
     if is_store:
         with console.status(f"reading transport store {scene}"):
             sc = scene_from_transport_store(scene, shape=size, projector_rows=projector_rows)
