@@ -45,7 +45,7 @@ def test_saturated_pixels_agree_with_cvxpy_on_the_remaining_observations(saturat
         assert dropped.size >= 3
         assert res.converged[dropped].all()
         for p in dropped[:6]:
-            sub = RowGroup(group.rows, group.A[mask[p]], group.valid)
+            sub = RowGroup(group.rows, group.A[mask[p]], group.valid, group.on_projector)
             ref = solve_cvxpy(sub, B[p : p + 1, mask[p]]).X
             f_ref = problem.objective(sub, ref, B[p : p + 1, mask[p]])[0]
             f_fast = problem.objective(group, res.X[p : p + 1], B[p : p + 1], mask[p : p + 1])[0]
@@ -66,7 +66,7 @@ def test_woodbury_update_equals_refactorizing_the_pixels_rows(saturated_stack):
     X, conv = batch[0], batch[2]
     for p in np.flatnonzero(~mask.all(axis=1))[:3]:
         own = AdmmRowSolver(group.A[mask[p]], problem.alpha, problem.beta).solve(B[p : p + 1, mask[p]], 1e-5)
-        sub = RowGroup(group.rows, group.A[mask[p]], group.valid)
+        sub = RowGroup(group.rows, group.A[mask[p]], group.valid, group.on_projector)
         f_batch = problem.objective(sub, X[p : p + 1], B[p : p + 1, mask[p]])[0]
         f_own = problem.objective(sub, own[0], B[p : p + 1, mask[p]])[0]
         assert conv[p] and own[2][0]

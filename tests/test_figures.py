@@ -258,8 +258,11 @@ def test_out_writes_the_same_png_as_savefig_and_takes_a_str(cases, tmp_path):
     draw, _, dpi = cases["label_map_reference"]
     (tmp_path / "a.png").write_bytes(b"old")
     fig = draw(out=str(tmp_path / "a.png"))  # a str path works too, and replaces the file
-    fig.savefig(tmp_path / "b.png", format="png", dpi=dpi)
+    from planeray.io.marks import file_mark, mark_text
+
+    fig.savefig(tmp_path / "b.png", format="png", dpi=dpi, metadata={"Software": mark_text("figure")})
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+    assert file_mark(tmp_path / "a.png") == "figure"  # planeray's mark: a later --overwrite may replace it
 
 
 # --------------------------------------------------------------------- ax=

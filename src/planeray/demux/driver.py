@@ -243,7 +243,7 @@ def _assemble(problem: DemuxProblem, rows: slice, W: int, tasks, results) -> Chu
     for task, (X, pix_maps) in zip(tasks, results):
         # the task's pixels: row-major over its group's rows inside the chunk
         where = (task.local[:, None] * W + np.arange(W)[None, :]).reshape(-1)[task.pixels]
-        flatT[where, task.group.valid] = X
+        flatT[where, task.group.valid] = task.group.transport(X)
         for name, value in pix_maps.items():
             flat[name][where] = value
     return ChunkResult(rows, T, maps)
@@ -262,7 +262,7 @@ def _solve_masked_one_by_one(solve, problem, group, B, mask, tol):
         keep = mask[p]
         if not keep.any():
             continue
-        sub = RowGroup(group.rows, group.A[keep], group.valid)
+        sub = RowGroup(group.rows, group.A[keep], group.valid, group.on_projector)
         res = solve(sub, B[p : p + 1, keep], problem.alpha, problem.beta, tol)
         X[p], iters[p], conv[p] = res.X[0], res.iterations[0], res.converged[0]
     return X, iters, conv

@@ -10,7 +10,9 @@ For every camera pixel ``(s, t)`` the transport over offset bins is
 (the paper's optimization problem after Eq. 6; ``alpha = beta = 0.01`` on images
 normalized to [0, 1]).  The illumination matrix ``A[i, u] = L_i(u)`` comes from
 the stack's own metadata through :mod:`planeray.timing` -- the same
-discretization and sign convention as the simulator.  It is shared by every
+discretization, sign convention and edge rule as the simulator; in the top and
+bottom rows the unknown of a bin the projector's end cuts is its light per
+projector row (:attr:`RowGroup.on_projector`).  It is shared by every
 pixel of a camera row, and by most rows: it differs only where the projector
 ends (rows near the top and bottom have fewer valid offsets).  Rows with equal
 matrices form a :class:`RowGroup`; solvers work group by group.
@@ -63,11 +65,22 @@ class RowGroup:
     valid : slice
         The contiguous valid offsets (indices into ``DemuxProblem.offsets_rows``);
         offsets outside it fall off the projector and stay 0.
+    on_projector : ndarray (V,) float64, optional
+        Fraction of each valid bin that lies on the projector
+        (:meth:`planeray.timing.RowGeometry.coverage`; None: all 1).  The unknowns
+        ``x`` are the light *per projector row* of each bin, so that smoothness and
+        sparsity weigh every bin alike; the transport is ``T = x * on_projector``
+        (a bin the projector's end cuts to a sliver holds the light of the sliver).
     """
 
     rows: np.ndarray
     A: np.ndarray
     valid: slice
+    on_projector: np.ndarray | None = None
+
+    def transport(self, X) -> np.ndarray:
+        """The light of each bin, ``T = x * on_projector``, from the unknowns ``X`` (``(P, V)``)."""
+        return X if self.on_projector is None else X * self.on_projector
 
     def hessian(self, alpha: float) -> np.ndarray:
         """``A^T A + alpha D^T D`` (half the QP's ``Q``), shared by the group's pixels."""
@@ -190,8 +203,12 @@ class DemuxProblem:
             t0 = members[0]
             nz = np.flatnonzero(lit[t0])
             valid = slice(int(nz[0]), int(nz[-1]) + 1) if nz.size else slice(0, 0)
-            A = np.stack([b.weights(geometry, t0, offsets) for b in bands])  # the edge rule at the projector's ends
-            groups.append(RowGroup(members, A[:, valid].astype(np.float64), valid))
+            # the edge rule: a band lights the fraction of a bin's part on the projector that it covers
+            # (Band.weights); the unknown is the light per row, so A carries the part's length too
+            W_lit = np.stack([b.weights(geometry, t0, offsets) for b in bands])
+            on = coverage[t0][valid].astype(np.float64)
+            partial = None if np.all(on == 1.0) else on
+            groups.append(RowGroup(members, (W_lit[:, valid] * on).astype(np.float64), valid, partial))
         problem = cls(
             offsets, used, groups, row_group, alpha, beta, stack.shape, stack.lines_per_second, stack.projector_rows
         )
