@@ -432,6 +432,7 @@ def test_cli_labels_skin_with_a_white_reference(tmp_path):
 
     def run(*extra):
         args = ["profiles", tmp_path / "skin.zarr", "--out", tmp_path / "p.png", "--transport", tmp_path / "T.zarr"]
+        extra = (*extra, "--overwrite")  # each run replaces the label map the previous one wrote
         return CliRunner().invoke(app, [str(a) for a in [*args, "--classify", tmp_path / "labels.png", *extra]])
 
     res = run("--direct-reference", tmp_path / "white.zarr")

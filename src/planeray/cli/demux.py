@@ -51,7 +51,7 @@ def demux(
     lim.nonnegative(alpha, "--alpha", maximum=MAX_WEIGHT)
     lim.nonnegative(beta, "--beta", maximum=MAX_WEIGHT)
     if method not in METHODS:
-        raise InputError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
+        raise InputError(f"--method {method}: unknown demultiplexing method; choose one of {', '.join(METHODS)}")
     lim.optional(lim.integer, workers, "--workers", minimum=1, maximum=MAX_WORKERS)
     lim.integer(chunk_rows, "--chunk-rows", minimum=1, maximum=lim.MAX_SIDE)
     lim.optional(lim.number, tol, "--tol", minimum=0.0, maximum=1.0, min_inclusive=False, max_inclusive=False)
