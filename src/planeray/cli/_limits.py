@@ -14,7 +14,9 @@ command needs against what the machine has (:func:`check_memory`).
 
 from __future__ import annotations
 
+import contextlib
 import os
+from pathlib import Path
 
 from .._validate import check_integer, check_number
 from ..errors import InputError
@@ -109,8 +111,6 @@ def scene(name: str, option: str = "--scene") -> str:
 
 def folder(path, option: str = "--out") -> None:
     """An output folder: it may exist (and hold other files) but must be a folder, not a file."""
-    from pathlib import Path
-
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise InputError(f"{option} {p}: is a file; name a folder (it may exist and hold other files)")
@@ -150,3 +150,24 @@ def check_memory(nbytes: float, what: str) -> None:
 
 def _gib(nbytes: float) -> str:
     return f"{nbytes / 2**30:.1f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.0f} MiB"
+
+
+@contextlib.contextmanager
+def written_together(*paths):
+    """Files a command writes as one result: if the block fails (an error, Ctrl-C), the ones it created go.
+
+    Each file is written atomically by itself; this removes those of the set that did not
+    exist before the block, so a failed run leaves no partial set behind (a file it
+    replaced with ``--overwrite`` stays replaced, whole).
+    """
+    paths = [Path(p) for p in paths if p is not None]
+    existed = {p: p.exists() for p in paths}
+    try:
+        yield
+    except BaseException:
+        for p in paths:
+            if not existed[p]:
+                with contextlib.suppress(OSError):
+                    if p.is_file() and not p.is_symlink():
+                        p.unlink()
+        raise

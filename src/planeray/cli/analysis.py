@@ -117,44 +117,45 @@ def profiles(
         T, attrs = read_transport(transport)
         if T.shape != st.shape:
             raise ValueError(f"{transport}: transport is {T.shape[0]}x{T.shape[1]}, stack {st.shape[0]}x{st.shape[1]}")
-    if pixel:
-        prof = measured_delay_profiles(st, pixels)
-        continuous = None
-        if T is not None:
-            e = exposure_us if exposure_us is not None else float(prof.exposure_us.min())
-            continuous = transport_delay_profiles(
-                T, pixels=prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second
+    white = None
+    if direct_reference is not None:  # an input: checked before anything is written
+        from ..io import read_transport
+
+        white, _ = read_transport(direct_reference)
+        if white.geometry.rows_per_camera_row != T.geometry.rows_per_camera_row or not np.array_equal(
+            white.offsets_rows, T.offsets_rows
+        ):
+            raise ValueError(
+                f"--direct-reference {direct_reference}: {white.geometry.camera_rows} camera rows of "
+                f"{white.geometry.projector_rows} projector rows and {white.offsets_rows.size} offsets; the "
+                f"transport has {T.geometry.camera_rows} of {T.geometry.projector_rows} and "
+                f"{T.offsets_rows.size}: demultiplex the white target from the same sweep and size"
             )
-        delay_profiles_figure(st, prof, out=out_png, exposure_us=exposure_us, continuous=continuous)
-        if csv is not None:
-            write_profiles_csv(prof, csv)
-            _print(f"profiles CSV: {csv}")
-        _print(f"delay profiles: {out_png}")
-    if classify is not None:
-        from ..scenes import EFFECTS
-
-        white = None
-        if direct_reference is not None:
-            from ..io import read_transport
-
-            white, _ = read_transport(direct_reference)
-            if white.geometry.rows_per_camera_row != T.geometry.rows_per_camera_row or not np.array_equal(
-                white.offsets_rows, T.offsets_rows
-            ):
-                raise ValueError(
-                    f"--direct-reference {direct_reference}: {white.geometry.camera_rows} camera rows of "
-                    f"{white.geometry.projector_rows} projector rows and {white.offsets_rows.size} offsets; the "
-                    f"transport has {T.geometry.camera_rows} of {T.geometry.projector_rows} and "
-                    f"{T.offsets_rows.size}: demultiplex the white target from the same sweep and size"
+    with lim.written_together(out_png if pixel else None, csv, classify):  # all of them, or none
+        if pixel:
+            prof = measured_delay_profiles(st, pixels)
+            continuous = None
+            if T is not None:
+                e = exposure_us if exposure_us is not None else float(prof.exposure_us.min())
+                continuous = transport_delay_profiles(
+                    T, pixels=prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second
                 )
-        labels = classify_transport(
-            T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0), direct_reference=white
-        )
-        ref = st.image(st.index_of(delay_us=0.0, exposure_us=float(st.exposures().min())) or 0)
-        label_map_figure(labels, out=classify, reference=ref)
-        counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
-        summary = ", ".join(f"{EFFECTS[k]} {counts[k] / labels.size * 100:.1f} %" for k in EFFECTS if counts[k])
-        _print(f"label map: {classify}  ({summary})")
+            delay_profiles_figure(st, prof, out=out_png, exposure_us=exposure_us, continuous=continuous)
+            if csv is not None:
+                write_profiles_csv(prof, csv)
+                _print(f"profiles CSV: {csv}")
+            _print(f"delay profiles: {out_png}")
+        if classify is not None:
+            from ..scenes import EFFECTS
+
+            labels = classify_transport(
+                T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0), direct_reference=white
+            )
+            ref = st.image(st.index_of(delay_us=0.0, exposure_us=float(st.exposures().min())) or 0)
+            label_map_figure(labels, out=classify, reference=ref)
+            counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
+            summary = ", ".join(f"{EFFECTS[k]} {counts[k] / labels.size * 100:.1f} %" for k in EFFECTS if counts[k])
+            _print(f"label map: {classify}  ({summary})")
 
 
 @_friendly_errors

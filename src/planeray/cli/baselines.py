@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 from typing import Annotated
@@ -76,15 +77,24 @@ def _write_results(out_dir: Path, images: dict, numbers: dict, name: str):
     from ..io import atomic_file
     from ..io.marks import MARK_KEY, mark_text
 
+    created = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
     valid = [im for im in images.values() if im is not None]
     scale = display_scale(valid, percentile=99.5)  # one brightening for all, so they compare
-    for key, image in images.items():
-        if image is not None:
-            _save_image(np.nan_to_num(image), out_dir / f"{key}.png", scale_to=scale)
-            _save_image(np.clip(np.nan_to_num(image), 0, 1), out_dir / f"{key}.tif")
-    with atomic_file(out_dir / f"{name}.json") as tmp:
-        tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **numbers}, indent=2, default=float))
+    files = [path for path, _ in _outputs(out_dir, images, name)]
+    try:
+        with lim.written_together(*files):  # all of them, or none of those this run creates
+            for key, image in images.items():
+                if image is not None:
+                    _save_image(np.nan_to_num(image), out_dir / f"{key}.png", scale_to=scale)
+                    _save_image(np.clip(np.nan_to_num(image), 0, 1), out_dir / f"{key}.tif")
+            with atomic_file(out_dir / f"{name}.json") as tmp:
+                tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **numbers}, indent=2, default=float))
+    except BaseException:
+        if created:
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()  # the folder this run made, if nothing else is in it
+        raise
     out.print(f"{name}: {out_dir}  {json.dumps(numbers.get('n_captures', {}))}", markup=False, highlight=False)
     errors = numbers.get("errors", {})
     for key, value in errors.items():

@@ -131,7 +131,12 @@ def mc_profile(
                 progress=advance,
             )
     dt = time.perf_counter() - t0
-    csv_path, json_path = write_profile(prof, out_path)
+    with lim.written_together(out_path, out_path.with_suffix(".json"), plot):  # the three, or none of them
+        csv_path, json_path = write_profile(prof, out_path)
+        if plot is not None:
+            from ..figures.mc import mc_profile_figure
+
+            mc_profile_figure(prof, out=plot)
     print_verbatim(
         f"diffuse reflectance {prof.total_reflectance:.5f} +- {prof.total_reflectance_stderr:.5f}, "
         f"specular {prof.specular_reflectance:.5f}, transmitted {prof.transmittance:.5f}, "
@@ -140,7 +145,4 @@ def mc_profile(
     print_verbatim(f"{prof.n_interactions / max(prof.n_photons, 1):.0f} collisions per photon, {dt:.1f} s")
     print_verbatim(f"  {csv_path}\n  {json_path}")
     if plot is not None:
-        from ..figures.mc import mc_profile_figure
-
-        mc_profile_figure(prof, out=plot)
         print_verbatim(f"  {plot}")

@@ -79,6 +79,24 @@ def write_profile(prof: MCProfile, path) -> tuple[Path, Path]:
     from ..io.marks import MARK_KEY, mark_text
 
     path = Path(path)
+    side = path.with_suffix(".json")
+    existed = path.exists()
+    try:
+        _write_csv(prof, path)
+        with atomic_file(side) as tmp:
+            tmp.write_text(
+                json.dumps({MARK_KEY: mark_text("record"), **profile_summary(prof)}, indent=2, sort_keys=True)
+            )
+    except BaseException:
+        if not existed:  # the CSV without its sidecar is no result: a failed run leaves neither
+            path.unlink(missing_ok=True)
+        raise
+    return path, side
+
+
+def _write_csv(prof: MCProfile, path: Path) -> None:
+    from ..io.marks import MARK_KEY, mark_text
+
     cols = profile_columns(prof)
     names = _columns(prof)
     with atomic_file(path) as tmp:
@@ -88,7 +106,3 @@ def write_profile(prof: MCProfile, path) -> tuple[Path, Path]:
             w.writerow(names)
             for i in range(cols[names[0]].size):
                 w.writerow([int(cols[names[0]][i])] + [repr(float(cols[c][i])) for c in names[1:]])
-    side = path.with_suffix(".json")
-    with atomic_file(side) as tmp:
-        tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **profile_summary(prof)}, indent=2, sort_keys=True))
-    return path, side
