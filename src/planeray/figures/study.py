@@ -181,9 +181,15 @@ def plot_parameter_sweeps(sweeps: dict, *, noise, out=None):
 
 
 def _ink(im, value) -> str:
-    """Black on a light cell of ``im``'s colormap, white on a dark one (readable labels on viridis)."""
-    r, g, b, _ = im.cmap(im.norm(value))
-    return "k" if 0.2126 * r + 0.7152 * g + 0.0722 * b > 0.45 else "w"
+    """Black or white, whichever contrasts more with the cell of ``im`` showing ``value``.
+
+    The cell's relative luminance ``L`` (WCAG, linearized sRGB): black text has contrast
+    ``(L + 0.05) / 0.05``, white ``1.05 / (L + 0.05)``; they are equal at ``L = 0.179``, and
+    the better of the two is at least 4.58 on any colour.
+    """
+    c = np.asarray(im.cmap(im.norm(value))[:3], float)
+    c = np.where(c <= 0.03928, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return "k" if 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2] > 0.179 else "w"
 
 
 def _outline():  # a dark edge keeps a white marker visible on light cells
