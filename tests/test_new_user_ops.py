@@ -458,3 +458,15 @@ def test_the_cases_cover_every_command_of_the_area():
         assert command in first, command
     assert len(CASES) + len(MITSUBA_CASES) >= 120
     assert np.unique([_id(c) for c in CASES]).size > 0
+
+
+def test_messages_rename_library_names_but_not_device_options_or_python_flags():
+    from planeray.cli._common import _as_typed
+
+    names = {"size": "--size", "overwrite": "--overwrite", "projector_rows": "--projector-rows"}
+    assert _as_typed("projector_rows must be an integer", names) == "--projector-rows must be an integer"
+    assert (
+        _as_typed("-O size must be two integers H W, got (1,)", names) == "-O size must be two integers H W, got (1,)"
+    )
+    text = "x.png: already exists (pass --overwrite, or overwrite=True, to replace it)"
+    assert _as_typed(text, names) == text

@@ -52,12 +52,13 @@ def _as_typed(text: str, options: dict) -> str:
 
     Only a parameter that a message is *about* is renamed: ``NAME must ...``, ``NAME = ...``,
     ``NAME=...`` and ``NAME[0] must ...`` (one element of a tuple option such as ``shape`` ->
-    ``--size``) -- never a word of other text ("cannot read the vein mask: ...").
+    ``--size``) -- never a word of other text ("cannot read the vein mask: ..."), a device option
+    (``-O size must ...``) or the Python spelling of a flag (``overwrite=True``).
     """
     import re
 
     for name in sorted(options, key=len, reverse=True):
-        pattern = rf"(?<![\w\-.])(?<!-O ){re.escape(name)}(\[\d+\])?(?=( must\b| = |=))"
+        pattern = rf"(?<![\w\-.])(?<!-O ){re.escape(name)}(\[\d+\])?(?=( must\b| = |=(?!True\b|False\b)))"
         text = re.sub(pattern, options[name], text)
     return text
 
