@@ -328,6 +328,8 @@ MITSUBA_CASES = [
     ((*RENDER, "--max-depth", 0), "--max-depth", ()),
     ((*RENDER, "--max-depth", 100000), "--max-depth", ()),
     ((*RENDER, "--baseline", "nan"), "--baseline", ()),
+    ((*RENDER, "--baseline", "1e12"), "--baseline", ()),
+    ((*RENDER, "--look-from", "1e12", 0, 0, "--look-at", 0, 0, 0), "--look-from", ("float32",)),
     ((*RENDER, "--vfov", 10), "--vfov", ()),
     ((*RENDER, "--up", 0, 0, 1), "--up", ()),
     ((*RENDER, "--look-from", 1, 1, 1), "--look-at", ()),

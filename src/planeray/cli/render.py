@@ -27,6 +27,8 @@ RENDER_OPTIONS = {
 
 #: Most camera paths per pixel (a 128 x 128 render at this many takes days).
 MAX_SPP = 1_000_000
+#: Largest coordinate or baseline (scene units): Mitsuba computes in float32, which keeps no fraction beyond.
+MAX_COORDINATE = 1e6
 #: Most projector columns, and the widest projector (width / height).
 MAX_PROJECTOR_COLUMNS, MAX_PROJECTOR_ASPECT = 16_384, 10.0
 
@@ -66,7 +68,7 @@ def check_render_options(
     lim.optional(lim.integer, max_sparse, "--max-sparse", minimum=0, maximum=10**9)
     if max_depth is not None and max_depth != -1:
         lim.integer(max_depth, "--max-depth", minimum=1, maximum=1024)
-    lim.optional(lim.number, baseline, "--baseline")
+    lim.optional(lim.number, baseline, "--baseline", minimum=-MAX_COORDINATE, maximum=MAX_COORDINATE)
     lim.optional(lim.positive, projector_aspect, "--projector-aspect", maximum=MAX_PROJECTOR_ASPECT)
     lim.optional(lim.integer, projector_columns, "--projector-columns", minimum=1, maximum=MAX_PROJECTOR_COLUMNS)
     # --projector-vfov: checked by the renderer's setup, before any work (in (0, 180) degrees)
@@ -220,8 +222,11 @@ def _check_camera(look_from, look_at, up, vfov) -> None:
     import numpy as np
 
     for option, value in (("--look-from", look_from), ("--look-at", look_at), ("--up", up)):
-        if not np.all(np.isfinite(value)):
-            raise InputError(f"{option} must be three finite numbers X Y Z, got {' '.join(f'{v:g}' for v in value)}")
+        if not (np.all(np.isfinite(value)) and np.all(np.abs(value) <= MAX_COORDINATE)):
+            raise InputError(
+                f"{option} must be three finite numbers X Y Z within +-{MAX_COORDINATE:g} scene units (float32), "
+                f"got {' '.join(f'{v:g}' for v in value)}"
+            )
     view = np.subtract(look_at, look_from)
     if not np.any(view):
         raise InputError("--look-from and --look-at are the same point; the camera needs a direction")
