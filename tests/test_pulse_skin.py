@@ -102,11 +102,11 @@ def test_cli_video_writes_a_capture_that_skin_pulse_reads(tmp_path):
         assert v.fps == 20 and v.n_frames == 60 and v.shape == (24, 24)
     res = runner.invoke(app, ["skin", "video", "--out", str(out.with_name("arm_indirect.tif")), "--seconds", "3"])
     assert res.exit_code == 1 and "already exists" in res.output
-    assert (tmp_path / "arm_vein_mask.png").is_file()
-    (tmp_path / "mine_vein_mask.png").write_bytes(b"my notes")  # not planeray's: never replaced silently
+    assert (tmp_path / "arm_video_vein_mask.png").is_file()  # named after its own output
+    (tmp_path / "mine_video_vein_mask.png").write_bytes(b"my notes")  # not planeray's: never replaced silently
     res = runner.invoke(app, ["skin", "video", "--out", str(tmp_path / "mine.tif"), "--seconds", "3"])
-    assert res.exit_code == 1 and "mine_vein_mask.png: already exists" in res.output
-    assert (tmp_path / "mine_vein_mask.png").read_bytes() == b"my notes" and not (tmp_path / "mine.tif").exists()
+    assert res.exit_code == 1 and "mine_video_vein_mask.png: already exists" in res.output
+    assert (tmp_path / "mine_video_vein_mask.png").read_bytes() == b"my notes" and not (tmp_path / "mine.tif").exists()
     res = runner.invoke(app, ["skin", "video", "--out", str(tmp_path / "x.tif"), "--method", "sideways"])
     assert res.exit_code == 1 and "--method must be one of" in res.output
 

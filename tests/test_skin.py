@@ -228,9 +228,11 @@ def test_cli_skin_validate_writes_report_and_figure(tmp_path):
 
     from planeray.cli import app
 
-    res = CliRunner().invoke(app, ["skin", "validate", "--out", str(tmp_path), "--n-photons", "3200"])
+    out = tmp_path / "validation"
+    res = CliRunner().invoke(app, ["skin", "validate", "--out", str(out), "--n-photons", "3200"])
     assert res.exit_code == 0, res.output
-    rep = json.loads((tmp_path / "skin_validation.json").read_text())
+    rep = json.loads((out / "skin_validation.json").read_text())
     assert len(rep["cases"]) == 10 and len(rep["dark_skin_cases"]) == 2
     assert rep["adding_doubling"]["ad"] == pytest.approx(0.4116, abs=2e-3)
-    assert (tmp_path / "skin_validation.png").stat().st_size > 10_000
+    assert (out / "skin_validation.png").stat().st_size > 10_000
+    assert json.loads((out / "planeray.json").read_text())["format"] == "planeray-skin-validation"

@@ -130,7 +130,7 @@ def test_bad_inputs_give_one_line(capture, tmp_path):
     assert r.exit_code == 1 and "bad.png: cannot read the vein mask" in r.output
     assert len(r.output.strip().splitlines()) == 1
     r = _run("skin", "veins", capture / "s.zarr", "--out", tmp_path / "o2", "--delay-us", 9000)
-    assert r.exit_code == 1 and "no image near delay 9000" in r.output
+    assert r.exit_code == 1 and "--delay-us = 9000: the stack has no image near that delay" in r.output
     r = _run("skin", "enhance", capture / "s.zarr", "--out", tmp_path / "o3", "--min-delay-us", 1400)
     assert r.exit_code == 1 and "needs at least 2" in r.output
     assert not any(p.name.startswith("o") for p in tmp_path.iterdir() if p.name != "bad.png")

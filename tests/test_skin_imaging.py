@@ -90,9 +90,9 @@ def test_stack_images_name_each_band_and_skip_excluded_images(scene):
     assert rec["band_rows"] == pytest.approx([-16.2, 16.2]) and not stack.excluded[rec["stack_index"]]
     assert "5.8x the epipolar image" in rec["label"]
     assert info["images"]["td750us_te600us"]["band_rows"] == pytest.approx([24.3, 56.7])
-    with pytest.raises(InputError, match="no image near delay 5000"):
+    with pytest.raises(InputError, match="delay_us = 5000: the stack has no image near that delay"):
         stack_images(stack, delay_us=5000.0)
-    with pytest.raises(InputError, match="no image at exposure 700"):
+    with pytest.raises(InputError, match="exposure_us = 700: the stack has no image at that exposure"):
         stack_images(stack, exposure_us=700.0)
     sweep, delays, sel = delay_sweep_images(stack)
     assert delays.tolist() == [750.0, 1125.0, 1500.0] and sweep.shape == (3, 48, 48)

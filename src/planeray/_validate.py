@@ -26,7 +26,15 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_number", "check_positive", "check_nonnegative", "check_integer", "check_finite_array"]
+__all__ = [
+    "check_number",
+    "check_positive",
+    "check_nonnegative",
+    "check_integer",
+    "check_finite_array",
+    "available_memory_bytes",
+    "check_memory",
+]
 
 
 def _is_real(value) -> bool:
@@ -114,3 +122,62 @@ def check_finite_array(values, name: str, *, ndim: int | None = None, error=Inpu
     if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
         raise error(f"{name} contains NaN or infinite values")
     return a
+
+
+def available_memory_bytes() -> int | None:
+    """Memory the system can give a process without swapping, in bytes (None where unknown).
+
+    Linux: ``MemAvailable`` of ``/proc/meminfo``; elsewhere the physical pages ``sysconf`` reports
+    as available.
+    """
+    import os
+
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _bytes_text(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024.0
+    return f"{n:.3g} EiB"  # pragma: no cover
+
+
+def check_memory(nbytes: float, what: str, *, advice: str = "", available: int | None = None, error=InputError):
+    """Refuse, before allocating, work whose estimated peak memory ``nbytes`` exceeds what is available.
+
+    Parameters
+    ----------
+    nbytes : float
+        Estimated peak memory of the work, bytes.
+    what : str
+        The work, named by the options that size it (``"--seconds 1e+06 at --fps 75"``): the
+        message starts with it.
+    advice : str
+        What to change (``"shorten --seconds"``), appended after a semicolon.
+    available : int, optional
+        Bytes available (default :func:`available_memory_bytes`; unknown: nothing is refused).
+
+    Examples
+    --------
+    >>> check_memory(1e6, "--seconds 30", available=2**30)
+    >>> check_memory(2**41, "--seconds 1e+06", advice="shorten --seconds", available=2**34)
+    Traceback (most recent call last):
+    ...
+    planeray.errors.InputError: --seconds 1e+06 needs about 2 TiB of memory, more than the 16 GiB available; shorten --seconds
+    """
+    avail = available_memory_bytes() if available is None else available
+    if avail is None or not nbytes > avail:
+        return
+    text = f"{what} needs about {_bytes_text(float(nbytes))} of memory, more than the {_bytes_text(avail)} available"
+    raise error(text + (f"; {advice}" if advice else ""))

@@ -241,8 +241,10 @@ def band_interval_weights(lo_rows, hi_rows, centre_rows, width_rows, *, blur_sig
 
     Examples
     --------
-    >>> float(band_interval_weights(-0.25, 0.5, 0.0, 1.0))
-    0.5
+    A one-row band centred on the camera row lights 0.75 of the interval ``[-0.25, 0.75)``:
+
+    >>> float(band_interval_weights(-0.25, 0.75, 0.0, 1.0))
+    0.75
     """
     lo_e = np.asarray(lo_rows, dtype=float)
     hi_e = np.asarray(hi_rows, dtype=float)

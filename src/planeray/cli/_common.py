@@ -53,7 +53,7 @@ def _as_typed(text: str, options: dict) -> str:
     Only a parameter that a message is *about* is renamed: ``NAME must ...``, ``NAME = ...``,
     ``NAME=...`` and ``NAME[0] must ...`` (one element of a tuple option such as ``shape`` ->
     ``--size``) -- never a word of other text ("cannot read the vein mask: ..."), a device option
-    (``-O size must ...``) or the Python spelling of a flag (``overwrite=True``).
+    (``-O size must ...``) nor a Python keyword argument quoted as such ("or overwrite=True").
     """
     import re
 

@@ -1,4 +1,11 @@
-"""``planeray skin pulse | video | pulse-report``: the pulse from a video with Eulerian magnification (Sec. 10, Fig. 15)."""
+"""``planeray skin pulse | video | pulse-report``: the pulse from a video with Eulerian magnification (Sec. 10, Fig. 15).
+
+Every option is checked before any work (the video is read, but nothing magnified, simulated or
+written): bounds are physical (a heart beats 30-240 times a minute; the projector gives at most
+75 delay images a second; a pass band must stay below the video's Nyquist frequency) or what
+memory holds; every output -- result folder, magnified video, simulated videos and their vein
+mask -- is checked before the first frame is made.
+"""
 
 from __future__ import annotations
 
@@ -8,22 +15,47 @@ from typing import Annotated
 import typer
 
 from .._console import console, out, print_json, progress_bar
+from . import _bounds
+from ._common import _check_outputs
+
+#: The strongest amplification ``--alpha`` may ask for (Wu et al. use 10-150).
+MAX_ALPHA = 1000.0
+#: Kind of the mark of the vein mask ``skin video`` writes beside its video(s).
+VIDEO_MASK_KIND = "video vein mask"
 
 
 def _parse_band(text: str, name: str) -> tuple[float, float]:
-    parts = str(text).replace(",", " ").replace("-", " ").split()
-    try:
-        lo, hi = (float(p) for p in parts)
-    except ValueError:
-        raise ValueError(f"{name} expects LOW,HIGH in Hz (e.g. 0.5,2), got {text!r}") from None
-    return lo, hi
+    return _bounds.frequency_band(text, name)
+
+
+def _check_bands_against(video, bands: dict, rate_option: str = "--rate-band") -> None:
+    """Each pass band below the video's Nyquist frequency, and the video long enough for the rate band."""
+    nyquist = video.fps / 2.0
+    for option, (lo, hi) in bands.items():
+        if hi > nyquist:
+            raise ValueError(
+                f"{option} {lo:g},{hi:g} Hz reaches above the Nyquist frequency of the video, {nyquist:g} Hz "
+                f"({video.fps:g} fps)"
+            )
+    lo = bands[rate_option][0]
+    need = 2.0 / max(lo, 1e-9)
+    if video.duration_s < need:
+        raise ValueError(
+            f"{rate_option} starts at {lo:g} Hz: a rate that slow needs two of its periods, {need:.3g} s of video; "
+            f"the video is {video.n_frames} frames at {video.fps:g} frames per second, {video.duration_s:.3g} s"
+            + (" (is --fps right?)" if video.meta.get("fps_from") == "argument" else "")
+        )
 
 
 def pulse(
     video_path: Annotated[Path, typer.Argument(help="Video: multi-page TIFF, folder of frames, mp4/avi/mkv/mov.")],
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (pulse.json, CSVs, figures).")],
     fps: Annotated[
-        float | None, typer.Option(help="Frame rate (Hz); required when the file has none, overrides it otherwise.")
+        float | None,
+        typer.Option(
+            help="Frame rate (Hz, > 0); required when the file has none, overrides it otherwise. The video must "
+            "last two periods of the slowest --rate-band frequency (2.9 s by default)."
+        ),
     ] = None,
     region: Annotated[
         str | None,
@@ -31,58 +63,96 @@ def pulse(
     ] = None,
     mask: Annotated[
         Path | None,
-        typer.Option(help="PNG/TIFF mask (non-zero = search here, e.g. a vein mask) for the automatic region."),
+        typer.Option(
+            help="PNG/TIFF mask of the frames' size (non-zero = search here, e.g. a vein mask) for the automatic "
+            "region."
+        ),
     ] = None,
-    band: Annotated[str, typer.Option(help="Temporal pass band of the magnification, Hz.")] = "0.5,2",
-    alpha: Annotated[float, typer.Option(help="Amplification (gain applied to the band-passed video).")] = 50.0,
-    levels: Annotated[int, typer.Option(help="Spatial pyramid levels.")] = 4,
+    band: Annotated[
+        str, typer.Option(help="Temporal pass band of the magnification, LOW,HIGH Hz (0 <= LOW < HIGH <= fps/2).")
+    ] = "0.5,2",
+    alpha: Annotated[
+        float, typer.Option(help="Amplification (gain applied to the band-passed video; 0-1000, Wu et al. 10-150).")
+    ] = 50.0,
+    levels: Annotated[
+        int, typer.Option(help="Spatial pyramid levels (0 up to the frames' size allows: 6 at 48x48).")
+    ] = 4,
     pyramid: Annotated[str, typer.Option(help="gaussian (colour magnification) or laplacian.")] = "gaussian",
-    rate_band: Annotated[str, typer.Option(help="Where the heart rate is searched, Hz.")] = "0.7,2",
+    rate_band: Annotated[
+        str, typer.Option(help="Where the heart rate is searched, LOW,HIGH Hz (0 < LOW < HIGH <= fps/2).")
+    ] = "0.7,2",
     method: Annotated[str, typer.Option(help="Spectrum: periodogram or welch.")] = "periodogram",
     channel: Annotated[str, typer.Option(help="Colour videos: gray, red, green or blue.")] = "gray",
     magnified: Annotated[
-        Path | None, typer.Option(help="Also write the magnified video here (.mp4 to watch, .tif lossless).")
+        Path | None,
+        typer.Option(help="Also write the magnified video here (.mp4/.avi/.mkv/.mov to watch, .tif/.tiff lossless)."),
     ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")] = False,
-    overwrite: Annotated[bool, typer.Option(help="Replace a result folder planeray wrote.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace a result folder (and --magnified video) planeray wrote.")
+    ] = False,
 ):
     """Magnify a video (Eulerian, Wu et al. 2012) and measure the heart rate and its SNR (Fig. 15a)."""
     import numpy as np
 
+    from .._validate import check_number, check_positive
     from ..experiments.pulse import write_pulse_analysis
-    from ..io.atomic import check_replaceable
     from ..pulse.rate import parse_region
-    from ..pulse.video_io import read_video
+    from ..pulse.video_io import VIDEO_KIND, check_video_path, read_video
 
-    check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
-    if magnified is not None and magnified.exists() and not overwrite:
-        from ..errors import InputError
-        from ..io.atomic import ALREADY_EXISTS
-
-        raise InputError(ALREADY_EXISTS, magnified)
-    with console.status(f"reading {video_path}"):
-        video = read_video(video_path, fps=fps, channel=channel)
+    # every option and output before any work
+    if fps is not None:
+        check_positive(fps, "--fps")
     opts = {
         "band_hz": _parse_band(band, "--band"),
         "rate_band_hz": _parse_band(rate_band, "--rate-band"),
-        "alpha": alpha,
+        "alpha": check_number(alpha, "--alpha", minimum=0.0, maximum=MAX_ALPHA),
         "levels": levels,
         "pyramid": pyramid,
         "method": method,
     }
+    if opts["rate_band_hz"][0] <= 0:
+        raise ValueError(f"--rate-band must start above 0 Hz, got {rate_band!r}")
+    if levels < 0:
+        raise ValueError(f"--levels must be an integer >= 0, got {levels}")
+    if pyramid not in ("gaussian", "laplacian"):
+        raise ValueError(f"--pyramid must be gaussian or laplacian, got {pyramid!r}")
+    if method not in ("periodogram", "welch"):
+        raise ValueError(f"--method must be periodogram or welch, got {method!r}")
+    if channel not in ("gray", "red", "green", "blue"):
+        raise ValueError(f"--channel must be one of gray, red, green, blue, got {channel!r}")
+    if magnified is not None:
+        check_video_path(magnified, "--magnified")
+    _check_outputs((out_dir, "pulse report"), (magnified, VIDEO_KIND), overwrite=overwrite)
+    with console.status(f"reading {video_path}"):
+        video = read_video(video_path, fps=fps, channel=channel)
+    _check_bands_against(video, {"--band": opts["band_hz"], "--rate-band": opts["rate_band_hz"]})
+    from ..pulse.evm import _pyramid_sizes
+
+    try:
+        _pyramid_sizes(video.shape, levels)
+    except ValueError:
+        raise ValueError(
+            f"--levels {levels}: too many pyramid levels for {video.shape[0]}x{video.shape[1]} frames"
+        ) from None
     if region is not None:
         opts["region"] = parse_region(region, video.shape)
     if mask is not None:
-        from ..materials.labels import read_label_image
+        from ..errors import InputError
+        from ..skin.masks import read_vein_mask
 
-        opts["mask"] = np.asarray(read_label_image(mask, shape=video.shape)) > 0
+        try:
+            opts["mask"] = np.asarray(read_vein_mask(mask, video.shape)) > 0
+        except InputError as exc:
+            raise InputError(f"--mask {str(exc).replace('vein mask', 'mask')}") from None
     with console.status(f"magnifying {video.n_frames} frames of {video.shape[0]}x{video.shape[1]}"):
-        res = write_pulse_analysis(video, out_dir, overwrite=overwrite, keep_video=magnified is not None, **opts)
-    if magnified is not None:
-        from ..pulse.video_io import Video, write_video
-
-        mag = Video(res.magnified, video.fps, str(video_path), {"magnified": res.settings})
-        write_video(magnified, mag, overwrite=overwrite, white=float(np.percentile(video.frames, 99.9)))
+        res = write_pulse_analysis(
+            video,
+            out_dir,
+            overwrite=overwrite,
+            magnified=magnified,
+            **opts,
+        )
     if json_out:
         print_json(res.to_dict())
         return
@@ -101,55 +171,86 @@ def pulse(
         )
 
 
-def video(
-    out_path: Annotated[
-        Path, typer.Option("--out", "-o", help="Video to write: .tif (lossless float) or .mp4/.avi/.mkv.")
-    ],
-    bpm: Annotated[float, typer.Option(help="Mean heart rate, beats per minute.")] = 72.0,
-    seconds: Annotated[float, typer.Option(help="Length of the video.")] = 30.0,
-    method: Annotated[
-        str, typer.Option(help="indirect, regular, direct, global, or all (one file per method).")
-    ] = "indirect",
-    fps: Annotated[float | None, typer.Option(help="Camera frame rate (default: the projector's, 75 Hz).")] = None,
-    size: Annotated[tuple[int, int], typer.Option(help="Image size H W.")] = (48, 48),
-    projector_rows: Annotated[
-        int, typer.Option(help="Projector rows the image spans (0.3 mm each: 192 = a 58 mm patch of forearm).")
-    ] = 192,
-    seed: Annotated[int, typer.Option(help="Seed of the scene, the variability, motion and noise.")] = 0,
-    hrv: Annotated[float, typer.Option(help="Slow heart-rate variability, fraction of the rate (std).")] = 0.02,
-    rsa: Annotated[float, typer.Option(help="Respiratory sinus arrhythmia, fraction of the rate.")] = 0.03,
-    breaths_per_min: Annotated[float, typer.Option(help="Breathing rate.")] = 15.0,
-    pulse_amplitude: Annotated[
-        float, typer.Option(help="Vein blood-volume change diastole -> systole (fraction).")
-    ] = 0.02,
-    delay_us: Annotated[float, typer.Option(help="Delay of the short-range indirect image.")] = 450.0,
-    exposure_us: Annotated[float, typer.Option(help="Row exposure of the delay and direct images.")] = 600.0,
-    motion: Annotated[bool, typer.Option(help="Breathing and arm motion.")] = True,
-    ambient: Annotated[bool, typer.Option(help="Ambient light.")] = True,
-    noise: Annotated[bool, typer.Option(help="Camera noise.")] = True,
-    overwrite: Annotated[bool, typer.Option(help="Replace an existing file.")] = False,
-):
-    """Simulate a live capture of the pulse in the skin scene and write it as a video (Fig. 15).
+def video_outputs(out_path: Path, method: str, methods) -> tuple[dict, Path]:
+    """The videos ``skin video --out OUT --method M`` writes (method -> path) and its vein mask's path.
 
-    Also writes STEM_vein_mask.png, the scene's vein mask (for ``planeray skin pulse --mask``).
+    The mask is named after the video output, ``STEM_video_vein_mask.png``: never the
+    ``STEM_vein_mask.png`` ground truth ``skin simulate --out STEM.zarr`` writes beside a stack.
     """
-    import numpy as np
-
-    from ..errors import InputError
-    from ..io.atomic import ALREADY_EXISTS
-    from ..pulse.simulate import METHODS, LiveSettings, simulate_live, skin_builder
-    from ..pulse.video_io import write_video
-
-    methods = METHODS if method == "all" else (method,)
-    if method != "all" and method not in METHODS:
-        raise InputError(f"--method must be one of {', '.join(METHODS)} or all, got {method!r}")
     paths = {
         m: out_path if method != "all" else out_path.with_name(f"{out_path.stem}_{m}{out_path.suffix}") for m in methods
     }
-    mask_path = out_path.with_name(f"{out_path.stem}_vein_mask.png")
-    for p in [*paths.values(), mask_path]:
-        if p.exists() and not overwrite:
-            raise InputError(ALREADY_EXISTS, p)
+    return paths, out_path.with_name(f"{out_path.stem}_video_vein_mask.png")
+
+
+def video(
+    out_path: Annotated[
+        Path, typer.Option("--out", "-o", help="Video to write: .tif/.tiff (lossless float) or .mp4/.avi/.mkv/.mov.")
+    ],
+    bpm: Annotated[float, typer.Option(help="Mean heart rate, beats per minute (30-240).")] = 72.0,
+    seconds: Annotated[
+        float, typer.Option(help="Length of the video (s; at least 8 frames, at most what memory holds).")
+    ] = 30.0,
+    method: Annotated[
+        str, typer.Option(help="indirect, regular, direct, global, or all (one file per method).")
+    ] = "indirect",
+    fps: Annotated[
+        float | None,
+        typer.Option(
+            help="Camera frame rate (Hz; above twice the heart rate, at most the projector's 75 Hz: one delay "
+            "image per sweep; default 75)."
+        ),
+    ] = None,
+    size: Annotated[tuple[int, int], typer.Option(help="Image size H W (at least 8x8, at most what memory holds).")] = (
+        48,
+        48,
+    ),
+    projector_rows: Annotated[
+        int,
+        typer.Option(help="Projector rows the image spans (1-720; 0.3 mm each: 192 = a 58 mm patch of forearm)."),
+    ] = 192,
+    seed: Annotated[int, typer.Option(help="Seed of the scene, the variability, motion and noise (0 to 2^32-1).")] = 0,
+    hrv: Annotated[float, typer.Option(help="Slow heart-rate variability, fraction of the rate (std; 0-0.2).")] = 0.02,
+    rsa: Annotated[float, typer.Option(help="Respiratory sinus arrhythmia, fraction of the rate (0-0.3).")] = 0.03,
+    breaths_per_min: Annotated[float, typer.Option(help="Breathing rate (4-60 per minute).")] = 15.0,
+    pulse_amplitude: Annotated[
+        float, typer.Option(help="Vein blood-volume change diastole -> systole (fraction, 0-0.1).")
+    ] = 0.02,
+    delay_us: Annotated[
+        float,
+        typer.Option(
+            help="Delay of the short-range indirect image (us; its band must reach the skin's 64-row kernel: "
+            "|delay| < 1185 + exposure/2)."
+        ),
+    ] = 450.0,
+    exposure_us: Annotated[
+        float, typer.Option(help="Row exposure of the delay and direct images (us, > 0 and <= 13,333: one sweep).")
+    ] = 600.0,
+    motion: Annotated[bool, typer.Option(help="Breathing and arm motion.")] = True,
+    ambient: Annotated[bool, typer.Option(help="Ambient light.")] = True,
+    noise: Annotated[bool, typer.Option(help="Camera noise.")] = True,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace existing videos and their mask (only files planeray wrote).")
+    ] = False,
+):
+    """Simulate a live capture of the pulse in the skin scene and write it as a video (Fig. 15).
+
+    Also writes STEM_video_vein_mask.png, the scene's vein mask (for ``planeray skin pulse --mask``).
+    """
+    from .._validate import check_memory
+    from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes, simulate_live, skin_builder
+    from ..pulse.video_io import VIDEO_KIND, check_video_path
+    from ..scenes.skin import SKIN_BAND_ROWS
+    from ..timing import PAPER_LINES_PER_SECOND
+
+    # every option and output before any work
+    methods = METHODS if method == "all" else (method,)
+    if method != "all" and method not in METHODS:
+        raise ValueError(f"--method must be one of {', '.join(METHODS)} or all, got {method!r}")
+    check_video_path(out_path, "--out")
+    shape = _bounds.image_size(size)
+    _bounds.projector_rows(projector_rows)
+    _bounds.seed(seed)
     settings = LiveSettings(
         seconds=seconds,
         fps=fps,
@@ -164,66 +265,149 @@ def video(
         noise=noise,
         **({} if motion else {"breathing_px": 0.0, "breathing_gain": 0.0, "motion_px": 0.0}),
     )
+    reach_us = SKIN_BAND_ROWS / PAPER_LINES_PER_SECOND * 1e6 + exposure_us / 2.0
+    if abs(delay_us) >= reach_us:
+        raise ValueError(
+            f"--delay-us must put the band on the skin's kernel (|delay| < {reach_us:.0f} us at --exposure-us "
+            f"{exposure_us:g}: 64 rows + half the band), got {delay_us:g}"
+        )
+    _bounds.scene_memory(shape, copies=4)
+    fr = settings.frame_rate()
+    n = int(round(seconds * fr))
+    if n < 8:
+        raise ValueError(f"--seconds {seconds:g} at {fr:g} fps is {n} frames; a pulse video needs at least 8")
+    check_memory(
+        _bounds.BASE_BYTES
+        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
+        + live_capture_bytes(settings, shape, methods),
+        f"--seconds {seconds:g} at {fr:g} fps ({n:,} frames of {shape[0]}x{shape[1]}, {len(methods)} method(s))",
+        advice="shorten --seconds, lower --fps or --size",
+    )
+    paths, mask_path = video_outputs(out_path, method, methods)
+    _check_outputs(*((p, VIDEO_KIND) for p in paths.values()), (mask_path, VIDEO_MASK_KIND), overwrite=overwrite)
     with progress_bar() as bar:
         task = bar.add_task("building the skin scene, simulating", total=len(methods))
         cap = simulate_live(
             settings,
-            build=skin_builder(tuple(size), seed=seed, projector_rows=projector_rows),
+            build=skin_builder(shape, seed=seed, projector_rows=projector_rows),
             methods=methods,
             seed=seed,
             progress=lambda i: bar.advance(task),
         )
-    vein = cap.model.scene.maps.get("vein_mask")
-    if vein is not None:
-        from PIL import Image
-
-        from ..io import atomic_file
-
-        with atomic_file(mask_path, overwrite=overwrite) as tmp:
-            Image.fromarray((np.asarray(vein, bool) * 255).astype(np.uint8)).save(tmp, format="PNG")
+        task = bar.add_task("writing", total=len(paths) + 1)
+        _write_videos(cap, paths, mask_path, overwrite=overwrite, progress=lambda: bar.advance(task))
     for m, p in paths.items():
         v = cap.videos[m]
-        v.meta = {**v.meta, "true_mean_rate_bpm": cap.truth["mean_rate_bpm"]}
-        write_video(p, v, overwrite=overwrite)
         out.print(
             f"{p}  ({m}, {v.n_frames} frames at {v.fps:g} fps, {v.shape[0]}x{v.shape[1]}, "
             f"true mean rate {cap.truth['mean_rate_bpm']:.2f} bpm)",
             highlight=False,
         )
-    if vein is not None:
+    if mask_path.exists():
         out.print(f"{mask_path}  (vein mask)", highlight=False)
+
+
+def _write_videos(cap, paths: dict, mask_path: Path, *, overwrite: bool, progress) -> None:
+    """The videos and the vein mask, each into a temporary, renamed into place together at the end:
+    a failure (disk full, an interruption) leaves none of them behind."""
+    import contextlib
+
+    import numpy as np
+    from PIL import Image
+
+    from ..io import atomic_file
+    from ..io.marks import png_mark_info
+    from ..pulse.video_io import encode_video
+
+    vein = cap.model.scene.maps.get("vein_mask")
+    with contextlib.ExitStack() as files:
+        tmps = {}
+        for m, p in paths.items():
+            # each video into a hidden sibling first (same suffix: the writer picks its format by it)
+            tmps[m] = files.enter_context(atomic_file(p, overwrite=overwrite))
+            v = cap.videos[m]
+            v.meta = {**v.meta, "true_mean_rate_bpm": cap.truth["mean_rate_bpm"]}
+            encode_video(tmps[m], v)
+            progress()
+        if vein is not None:
+            tmp = files.enter_context(atomic_file(mask_path, overwrite=overwrite))
+            Image.fromarray((np.asarray(vein, bool) * 255).astype(np.uint8)).save(
+                tmp, format="PNG", pnginfo=png_mark_info(VIDEO_MASK_KIND)
+            )
+        progress()
 
 
 def pulse_report(
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (report.json + figures).")],
-    size: Annotated[tuple[int, int], typer.Option(help="Image size H W.")] = (48, 48),
-    projector_rows: Annotated[int, typer.Option(help="Projector rows the image spans (0.3 mm each).")] = 192,
-    seconds: Annotated[float, typer.Option(help="Length of each video.")] = 30.0,
-    fps: Annotated[float, typer.Option(help="Camera frame rate.")] = 30.0,
+    size: Annotated[tuple[int, int], typer.Option(help="Image size H W (at least 8x8, at most what memory holds).")] = (
+        48,
+        48,
+    ),
+    projector_rows: Annotated[int, typer.Option(help="Projector rows the image spans (1-720; 0.3 mm each).")] = 192,
+    seconds: Annotated[
+        float, typer.Option(help="Length of each video (s; at least 2.9: two periods of 42 bpm).")
+    ] = 30.0,
+    fps: Annotated[
+        float, typer.Option(help="Camera frame rate (Hz; above 7.4 = twice 110 bpm, at most the projector's 75).")
+    ] = 30.0,
     quick: Annotated[bool, typer.Option(help="Fewer rates, seeds and pulse-free videos.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a report folder planeray wrote.")] = False,
 ):
     """The simulated pulse study: Fig. 15a/b, rate accuracy over rates and seeds, SNR per method, false alarms."""
-    from ..experiments.pulse import run_pulse_report
-    from ..io.atomic import check_replaceable
+    from .._validate import check_memory
+    from ..experiments.pulse import REPORT_RATES_BPM, pulse_report_steps, run_pulse_report
+    from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
+    from ..pulse.rate import RATE_BAND_HZ
+    from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes
 
-    check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
+    shape = _bounds.image_size(size)
+    try:  # the report magnifies with the paper's pyramid levels
+        _pyramid_sizes(shape, DEFAULT_LEVELS)
+    except ValueError:
+        raise ValueError(
+            f"--size must be large enough for {DEFAULT_LEVELS} pyramid levels (at least 12x12), "
+            f"got {shape[0]}x{shape[1]}"
+        ) from None
+    _bounds.projector_rows(projector_rows)
     kw = {"rates_bpm": (50, 80, 110), "seeds": (0,), "null_seeds": range(3), "null_runs": 100} if quick else {}
-    with console.status("pulse report") as status:
+    rates = kw.get("rates_bpm", REPORT_RATES_BPM)
+    settings = LiveSettings(seconds=seconds, fps=fps, bpm=max(rates), hrv=0.02, rsa=0.03)
+    need = 2.0 / RATE_BAND_HZ[0]
+    if seconds < need:
+        raise ValueError(
+            f"--seconds must be at least {need:.3g} (two periods of the slowest rate searched, "
+            f"{RATE_BAND_HZ[0]:g} Hz), got {seconds:g}"
+        )
+    _bounds.scene_memory(shape, copies=4)
+    n = int(round(seconds * fps))
+    check_memory(
+        _bounds.BASE_BYTES
+        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
+        + live_capture_bytes(settings, shape, METHODS),
+        f"--seconds {seconds:g} at --fps {fps:g} ({n:,} frames of {shape[0]}x{shape[1]}, 4 methods)",
+        advice="shorten --seconds, lower --fps or --size",
+    )
+    _check_outputs((out_dir, "pulse report"), overwrite=overwrite)
+    with progress_bar() as bar:
+        task = bar.add_task("pulse report", total=pulse_report_steps(**kw))
         rep = run_pulse_report(
             out_dir,
-            size=size,
+            size=shape,
             projector_rows=projector_rows,
             seconds=seconds,
             fps=fps,
             overwrite=overwrite,
-            progress=status.update,
+            progress=lambda text: bar.update(task, advance=1, description=text),
             **kw,
         )
     acc = rep["accuracy"]
+
+    def bpm(x):
+        return "n/a" if x is None else f"{x:.2f}"
+
     out.print(
-        f"rate: {acc['detected']}/{acc['total']} detected, mean |error| {acc['mean_abs_error_bpm']:.2f} bpm, "
-        f"max {acc['max_abs_error_bpm']:.2f} bpm; SNR (dB) "
+        f"rate: {acc['detected']}/{acc['total']} detected, mean |error| {bpm(acc['mean_abs_error_bpm'])} bpm, "
+        f"max {bpm(acc['max_abs_error_bpm'])} bpm; SNR (dB) "
         + ", ".join(f"{m} {v['snr_db']:.1f}" for m, v in rep["methods"].items())
         + f"; pulse-free false alarms {rep['pulse_free']['false_alarms']}/{len(rep['pulse_free']['runs'])}; {out_dir}",
         highlight=False,

@@ -19,6 +19,7 @@ import numpy as np
 import typer
 
 from .._console import console, out, progress_bar
+from . import _bounds
 from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack
 
 skin_app = typer.Typer(
@@ -27,11 +28,48 @@ skin_app = typer.Typer(
 )
 
 
+#: Ambient light an option may ask for, electrons per us (full sunlight is ~11 at 638 nm; README, ambient light).
+MAX_AMBIENT_E_PER_US = 1000.0
+#: Size of a projector row on the skin an option may ask for, mm (the paper's PicoPro: 0.3 mm at 0.5 m).
+MAX_MM_PER_ROW = 10.0
+#: The wavelengths the skin optics are tabulated at, nm.
+WAVELENGTHS_NM = (638, 850)
+
+
 def _tone(text: str):
+    """``--tone``: a tone name or a melanosome fraction in [0, 0.5]."""
+    from ..optical_data_skin import SKIN_TONES
+
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
+        if text not in SKIN_TONES:
+            raise ValueError(
+                f"--tone must be one of {', '.join(SKIN_TONES)} or a melanosome fraction in [0, 0.5], got {text!r}"
+            ) from None
         return text
+    if not 0.0 <= value <= 0.5:
+        raise ValueError(f"--tone must be a melanosome fraction in [0, 0.5] (or a tone name), got {text!r}")
+    return value
+
+
+def _wavelength(value: int) -> int:
+    if value not in WAVELENGTHS_NM:
+        raise ValueError(f"--wavelength must be 638 (red) or 850 (nm), got {value}")
+    return value
+
+
+def _mm_per_row_option(value: float) -> float:
+    from .._validate import check_number
+
+    return check_number(
+        value,
+        "--mm-per-row",
+        minimum=0.0,
+        maximum=MAX_MM_PER_ROW,
+        min_inclusive=False,
+        requirement=f"a size in mm, > 0 and <= {MAX_MM_PER_ROW:g}",
+    )
 
 
 @skin_app.command("simulate")
@@ -39,36 +77,69 @@ def _tone(text: str):
 def simulate(
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Stack to write (Zarr directory); truth beside it.")],
     tone: Annotated[
-        str, typer.Option(help="Skin tone: very_fair, fair, medium, olive, brown, dark or a melanin fraction.")
+        str,
+        typer.Option(help="Skin tone: very_fair, fair, medium, olive, brown, dark or a melanosome fraction 0-0.5."),
     ] = "fair",
     wavelength: Annotated[int, typer.Option("--wavelength", "--wavelength-nm", help="638 (red) or 850 (nm).")] = 638,
     ambient_e_per_us: Annotated[
         float,
-        typer.Option("--ambient-e-per-us", "--ambient", help="Ambient light, electrons per us of exposure (albedo 1)."),
+        typer.Option(
+            "--ambient-e-per-us",
+            "--ambient",
+            help="Ambient light, electrons per us of exposure (albedo 1); 0-1000 (office light ~0.05, "
+            "full sunlight ~11).",
+        ),
     ] = 0.5,
     hair: Annotated[bool, typer.Option(help="Hair strands on the skin.")] = False,
     curved: Annotated[
         bool, typer.Option(help="A cylindrical forearm on a dark cloth instead of a flat patch.")
     ] = False,
-    size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
-    projector_rows: Annotated[int, typer.Option(help="Projector rows spanned by the image.")] = 720,
-    mm_per_row: Annotated[float, typer.Option(help="Size of a projector row on the skin (mm).")] = 0.3,
-    seed: Annotated[int, typer.Option(help="Seed of the veins, hair, textures and camera noise.")] = 0,
+    size: Annotated[
+        tuple[int, int], typer.Option(help="Image size H W (camera pixels; at least 8, at most what memory holds).")
+    ] = (128, 128),
+    projector_rows: Annotated[
+        int, typer.Option(help="Projector rows spanned by the image (1-720: the projector has 720).")
+    ] = 720,
+    mm_per_row: Annotated[
+        float,
+        typer.Option(help="Size of a projector row on the skin (mm, > 0 and <= 10; other than 0.3 traces tables)."),
+    ] = 0.3,
+    seed: Annotated[int, typer.Option(help="Seed of the veins, hair, textures and camera noise (0 to 2^32-1).")] = 0,
     sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep: paper (85 images) or quick.")] = "paper",
     noise: Annotated[bool, typer.Option(help="Simulate noise (--no-noise: expected images).")] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs (only ones planeray wrote).")] = False,
 ):
     """Simulate a delay-exposure sweep of the skin scene; writes STACK and STEM_vein_mask.png, STEM_veins.json, STEM_maps.npz."""
+    from .._validate import check_number
     from ..camera import CameraModel
-    from ..experiments.skin_capture import simulate_skin
-    from ..timing import make_sweep
+    from ..experiments.skin_capture import TRUTH_KIND, simulate_skin, truth_paths
+    from ..timing import SWEEPS, make_sweep
 
+    # every option and output, before any work
+    tone_value = _tone(tone)
+    _wavelength(wavelength)
+    check_number(ambient_e_per_us, "--ambient-e-per-us", minimum=0.0, maximum=MAX_AMBIENT_E_PER_US)
+    shape = _bounds.image_size(size)
+    _bounds.projector_rows(projector_rows)
+    _mm_per_row_option(mm_per_row)
+    _bounds.seed(seed)
+    if sweep not in SWEEPS:
+        raise ValueError(f"--sweep must be one of {', '.join(sorted(SWEEPS))}, got {sweep!r}")
     n = len(make_sweep(sweep))
+    _bounds.scene_memory(shape, extra_bytes=3 * n * shape[0] * shape[1] * 4)
+    truth = truth_paths(out_path)
+    _check_outputs(
+        (out_path, "stack"),
+        (truth["mask"], TRUTH_KIND),
+        (truth["veins"], TRUTH_KIND),
+        (truth["maps"], TRUTH_KIND),
+        overwrite=overwrite,
+    )
     with progress_bar() as bar:
         task = bar.add_task(f"skin {size[0]}x{size[1]}: capturing {n} images", total=n)
         cap = simulate_skin(
             out_path,
-            size=size,
+            size=shape,
             projector_rows=projector_rows,
             seed=seed,
             sweep=sweep,
@@ -76,7 +147,7 @@ def simulate(
             noise=noise,
             overwrite=overwrite,
             progress=lambda i: bar.advance(task),
-            tone=_tone(tone),
+            tone=tone_value,
             wavelength_nm=wavelength,
             hair=hair,
             curved=curved,
@@ -91,20 +162,46 @@ def simulate(
         out.print(f"{key}: {cap.paths[key]}")
 
 
+#: Photons per brute-force run an option may ask for (the default 200,000 takes ~6.5 min on 2 cores).
+MAX_PHOTONS = 10_000_000
+
+
 @skin_app.command("validate")
 @_friendly_errors
 def validate(
-    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for skin_validation.json and .png.")],
-    n_photons: Annotated[int, typer.Option(help="Photons per brute-force run.")] = 200_000,
+    out_dir: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Folder to write (skin_validation.json and .png): a new one, or one planeray wrote with --overwrite.",
+        ),
+    ],
+    n_photons: Annotated[
+        int,
+        typer.Option(
+            help="Photons per brute-force run (32 to 10,000,000; the default takes ~6.5 min on 2 cores, time grows "
+            "in proportion)."
+        ),
+    ] = 200_000,
     wavelength: Annotated[int, typer.Option("--wavelength", "--wavelength-nm", help="638 (red) or 850 (nm).")] = 638,
+    overwrite: Annotated[bool, typer.Option(help="Replace a validation folder planeray wrote.")] = False,
 ):
     """Check the fast vein model against brute-force Monte Carlo and the layers against adding-doubling."""
+    from .._validate import check_integer
     from ..experiments.skin_physics import DARK_CASES, VALIDATION_CASES, run_skin_validation
 
+    check_integer(n_photons, "--n-photons", minimum=32, maximum=MAX_PHOTONS)
+    _wavelength(wavelength)
+    _check_outputs((out_dir, "skin validation"), overwrite=overwrite)  # before ~6.5 minutes of Monte Carlo
     with progress_bar() as bar:
-        task = bar.add_task("brute-force Monte Carlo", total=len(VALIDATION_CASES) + len(DARK_CASES))
+        task = bar.add_task("brute-force Monte Carlo", total=len(VALIDATION_CASES) + len(DARK_CASES) + 1)
         rep = run_skin_validation(
-            out_dir, n_photons=n_photons, wavelength_nm=wavelength, progress=lambda k: bar.advance(task, k)
+            out_dir,
+            n_photons=n_photons,
+            wavelength_nm=wavelength,
+            overwrite=overwrite,
+            progress=lambda k: bar.advance(task, k),
         )
     for r in rep["cases"]:
         out.print(
@@ -140,9 +237,13 @@ def _truth_for(shape, source_path: Path, mask: Path | None):
     ``exclude`` (hair, off the skin), ``depth_mm``, ``diameter_mm`` and ``source``.
     """
     if mask is not None:
+        from ..errors import InputError
         from ..skin.masks import read_vein_mask
 
-        return {"vein_id": read_vein_mask(mask, shape), "source": str(mask)}
+        try:
+            return {"vein_id": read_vein_mask(mask, shape), "source": str(mask)}
+        except InputError as exc:
+            raise InputError(f"--mask {exc}") from None
     from ..experiments.skin_capture import read_skin_truth, truth_paths
 
     if not truth_paths(source_path)["veins"].is_file():
@@ -182,9 +283,7 @@ def _scale(option: float | None, *records) -> tuple[float, str]:
     from ..skin.imaging import recorded_mm_per_row
 
     if option is not None:
-        if not (np.isfinite(option) and option > 0):
-            raise ValueError(f"--mm-per-row must be a positive number of mm, got {option:g}")
-        return float(option), "--mm-per-row"
+        return _mm_per_row_option(option), "--mm-per-row"
     for what, meta in records:
         value = recorded_mm_per_row(meta)
         if value is not None:
@@ -196,6 +295,7 @@ def _write_png(path: Path, image, valid=None) -> None:
     from PIL import Image
 
     from ..io import atomic_file
+    from ..io.marks import png_mark_info
 
     img = np.asarray(image, np.float64)
     vals = img[valid] if valid is not None else img.ravel()
@@ -203,16 +303,19 @@ def _write_png(path: Path, image, valid=None) -> None:
     lo, hi = np.percentile(vals, [1, 99]) if vals.size else (0.0, 1.0)
     shown = np.clip((img - lo) / (hi - lo if hi > lo else 1.0), 0, 1)
     with atomic_file(path) as tmp:
-        Image.fromarray((np.nan_to_num(shown) * 255 + 0.5).astype(np.uint8)).save(tmp, format="PNG")
+        Image.fromarray((np.nan_to_num(shown) * 255 + 0.5).astype(np.uint8)).save(
+            tmp, format="PNG", pnginfo=png_mark_info("image")
+        )
 
 
 def _write_tiff(path: Path, image) -> None:
     import tifffile
 
     from ..io import atomic_file
+    from ..io.marks import mark_text
 
     with atomic_file(path) as tmp:
-        tifffile.imwrite(tmp, np.asarray(image, np.float32), photometric="minisblack")
+        tifffile.imwrite(tmp, np.asarray(image, np.float32), photometric="minisblack", software=mark_text("image"))
 
 
 def _metrics_rows(name, m):
@@ -243,8 +346,8 @@ MmPerRowOpt = Annotated[
     float | None,
     typer.Option(
         "--mm-per-row",
-        help="Size of a projector row on the skin (mm), for the metrics' band in mm; default: what the stack "
-        "or store records, else 0.3 (assumed).",
+        help="Size of a projector row on the skin (mm, > 0 and <= 10), for the metrics' band in mm; default: what "
+        "the stack or store records, else 0.3 (assumed).",
     ),
 ]
 IncludeExcludedOpt = Annotated[
@@ -254,6 +357,57 @@ IncludeExcludedOpt = Annotated[
         help="Also use images the stack flags as excluded (boundary images with row artefacts); off by default.",
     ),
 ]
+
+
+def _delay_option(value: float, option: str = "--delay-us") -> float:
+    """A delay on the projector: finite, within one projector sweep (+-13,333 us) of the epipolar plane."""
+    from .._validate import check_number
+
+    f = _bounds.PROJECTOR_FRAME_US
+    return check_number(
+        value, option, minimum=-f, maximum=f, requirement=f"a delay in us within +-{f:.0f} (one projector sweep)"
+    )
+
+
+def _exposure_option(value: float | None, option: str = "--exposure-us") -> float | None:
+    """A row exposure: > 0 and at most one projector sweep (13,333 us)."""
+    from .._validate import check_number
+
+    if value is None:
+        return None
+    f = _bounds.PROJECTOR_FRAME_US
+    return check_number(
+        value,
+        option,
+        minimum=0.0,
+        maximum=f,
+        min_inclusive=False,
+        requirement=f"an exposure in us, > 0 and <= {f:.0f} (one projector sweep)",
+    )
+
+
+def _source_kind(path: Path, name: str) -> str:
+    """``"stack"`` or ``"transport"``: what planeray store (or import folder) ``path`` is; one line otherwise."""
+    from ..errors import InputError
+    from ..io import store_format
+
+    if not (path.exists() or path.is_symlink()):
+        raise InputError(f"no such file or folder ({name})", path)
+    kind = store_format(path)
+    if kind is None:
+        raise InputError(
+            f"not a planeray stack, import folder (manifest.csv + images) or transport store ({name})", path
+        )
+    return kind
+
+
+def _ambient_title(metadata) -> str:
+    """What the stack's metadata says of the ambient light ("" when it says nothing)."""
+    camera = (metadata or {}).get("camera") if isinstance(metadata, dict) else None
+    amb = camera.get("ambient_e_per_us") if isinstance(camera, dict) else None
+    if not isinstance(amb, (int, float)) or isinstance(amb, bool):
+        return ""
+    return "; no ambient light" if amb == 0 else f"; ambient light {amb:g} e-/us (the stack's camera)"
 
 
 def _read_transport_arg(path: Path, option: str):
@@ -272,11 +426,18 @@ def veins(
         Path, typer.Argument(help="Stack (Zarr or import folder), or a transport store (Zarr, e.g. from demux).")
     ],
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (images, metrics, figure).")],
-    delay_us: Annotated[float, typer.Option("--delay-us", "--delay", help="Delay of the vein image (us).")] = 500.0,
+    delay_us: Annotated[
+        float,
+        typer.Option(
+            "--delay-us", "--delay", help="Delay of the vein image (us, within +-13,333: one projector sweep)."
+        ),
+    ] = 500.0,
     exposure_us: Annotated[
         float | None,
         typer.Option(
-            "--exposure-us", "--exposure", help="Exposure (us); default the stack's shortest (600 from a transport)."
+            "--exposure-us",
+            "--exposure",
+            help="Exposure (us, > 0 and <= 13,333); default the stack's shortest (600 from a transport).",
         ),
     ] = None,
     transport_path: Annotated[
@@ -299,16 +460,21 @@ def veins(
     from ..experiments._report import jsonable
     from ..figures.skin import headline_figure
     from ..io import atomic_directory
-    from ..io.atomic import MARKER, planeray_output_kind
+    from ..io.atomic import MARKER
     from ..skin.imaging import pixel_mm, stack_images, transport_images
     from ..timing import PAPER_LINES_PER_SECOND
 
+    _delay_option(delay_us)
+    _exposure_option(exposure_us)
+    if mm_per_row is not None:
+        _mm_per_row_option(mm_per_row)
     _check_outputs((out_dir, "skin veins"), overwrite=overwrite)
-    from_transport = planeray_output_kind(source) == "transport"
+    from_transport = _source_kind(source, "SOURCE") == "transport"
     if from_transport and transport_path is not None:
         raise ValueError(f"--transport: {source} is already a transport store; give a stack with --transport")
     if from_transport:
         T, attrs = _read_transport_arg(source, "SOURCE")
+        ambient = ""  # a transport has no ambient light
         lps = float(attrs.get("lines_per_second") or PAPER_LINES_PER_SECOND)
         mpr, mpr_source = _scale(mm_per_row, ("transport store", attrs))
         geometry, shape = T.geometry, tuple(T.dense.shape[:2])
@@ -319,6 +485,7 @@ def veins(
     else:
         stack = _load_stack(source)
         geometry, shape = stack.geometry, tuple(stack.shape)
+        ambient = _ambient_title(stack.metadata)
         attrs = None
         if transport_path is not None:
             T, attrs = _read_transport_arg(transport_path, "--transport")
@@ -365,7 +532,11 @@ def veins(
         if metrics is not None:
             _write_csv(tmp / "veins.csv", [r for k, m in metrics.items() for r in _metrics_rows(k, m)])
         headline_figure(
-            images, labels=labels, metrics=metrics, title=f"Veins: {source.name}", out=tmp / "veins_figure.png"
+            images,
+            labels=labels,
+            metrics=metrics,
+            title=f"Veins: {source.name}{ambient}",
+            out=tmp / "veins_figure.png",
         )
         (tmp / MARKER).write_text(json.dumps(jsonable(result), indent=1))
     asked = f"{delay_us:g} us" + ("" if exposure_us is None else f", {exposure_us:g} us")
@@ -387,11 +558,15 @@ def enhance(
     stack_path: StackArg,
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (enhanced image, delay map).")],
     exposure_us: Annotated[
-        float | None, typer.Option("--exposure-us", "--exposure", help="Exposure of the delay images (us).")
+        float | None,
+        typer.Option("--exposure-us", "--exposure", help="Exposure of the delay images (us, > 0 and <= 13,333)."),
     ] = None,
-    min_delay_us: Annotated[float, typer.Option("--min-delay-us", help="Use only delays above this (us).")] = 0.0,
+    min_delay_us: Annotated[
+        float, typer.Option("--min-delay-us", help="Use only delays above this (us, within +-13,333).")
+    ] = 0.0,
     patch_px: Annotated[
-        int | None, typer.Option("--patch-px", help="Patch size (default 200 px per 720 rows).")
+        int | None,
+        typer.Option("--patch-px", help="Patch size (2 up to the image's smaller side; default 200 px per 720 rows)."),
     ] = None,
     plain: Annotated[
         bool, typer.Option("--plain", help="The paper's plain gradient argmax (no noise weighting).")
@@ -402,23 +577,42 @@ def enhance(
     overwrite: Annotated[bool, typer.Option(help="Replace an output folder planeray wrote.")] = False,
 ):
     """Contrast enhancement from the stack's delay images (Eq. 7, Fig. 14), never from images the stack excludes."""
+    from .._validate import check_integer
     from ..experiments._report import jsonable
+    from ..figures.skin import delay_map_figure
     from ..io import atomic_directory
     from ..io.atomic import MARKER
-    from ..skin.enhance import enhance_contrast
-    from ..skin.imaging import band_name, delay_sweep_images, pixel_mm
+    from ..skin.enhance import enhance_contrast, enhance_steps
+    from ..skin.imaging import band_name, delay_sweep_images, delay_sweep_selection, pixel_mm
 
+    _exposure_option(exposure_us)
+    _delay_option(min_delay_us, "--min-delay-us")
+    if mm_per_row is not None:
+        _mm_per_row_option(mm_per_row)
     _check_outputs((out_dir, "skin enhance"), overwrite=overwrite)
+    _source_kind(stack_path, "STACK")
     stack = _load_stack(stack_path)
+    if patch_px is not None:  # bounded by the image: a patch larger than the image is the image
+        check_integer(patch_px, "--patch-px", minimum=2, maximum=min(stack.shape))
     truth = _truth_for(stack.shape, stack_path, mask)
     mpr, mpr_source = _scale(mm_per_row, ("stack metadata", stack.metadata))
-    with console.status("reading the delay images"):
+    chosen, _, _ = delay_sweep_selection(  # refuses a selection of fewer than 2 images before reading any
+        stack, exposure_us=exposure_us, min_delay_us=min_delay_us, include_excluded=include_excluded
+    )
+    with progress_bar() as bar:
+        task = bar.add_task("reading the delay images", total=len(chosen))
         imgs, delays, sel = delay_sweep_images(
-            stack, exposure_us=exposure_us, min_delay_us=min_delay_us, include_excluded=include_excluded
+            stack,
+            exposure_us=exposure_us,
+            min_delay_us=min_delay_us,
+            include_excluded=include_excluded,
+            progress=lambda k: bar.advance(task, k),
         )
-    t_e = sel["exposure_us"]
-    with console.status(f"enhancing ({len(delays)} delay images)"):
-        res = enhance_contrast(imgs, delays, patch_px=patch_px, noise_normalize=not plain)
+        t_e = sel["exposure_us"]
+        task = bar.add_task(f"enhancing ({len(delays)} delay images)", total=enhance_steps(len(delays)))
+        res = enhance_contrast(
+            imgs, delays, patch_px=patch_px, noise_normalize=not plain, progress=lambda k: bar.advance(task, k)
+        )
     result = {
         "format": "planeray-skin-enhance",
         "format_version": 2,
@@ -453,7 +647,14 @@ def enhance(
         _write_png(tmp / "enhanced.png", res.image)
         _write_tiff(tmp / "enhanced.tif", res.image)
         _write_tiff(tmp / "delay_map_us.tif", res.delay_map_us)
-        _write_png(tmp / "delay_map.png", res.delay_map_us)
+        delay_map_figure(
+            res.delay_map_us,
+            vein_id=None if truth is None else truth["vein_id"],
+            used_us=res.delays_us,
+            title=f"Eq. 7 delay map: {stack_path.name}, t_e {t_e:g} us"
+            + ("" if truth is None else " (white: true veins)"),
+            out=tmp / "delay_map.png",
+        )
         (tmp / MARKER).write_text(json.dumps(jsonable(result), indent=1))
     left = sel["excluded_delays_us"]
     out.print(
@@ -474,19 +675,40 @@ def compare(
     out_dir: Annotated[
         Path, typer.Option("--out", "-o", help="Folder for the figures (Figs. 13, 14, 16) and skin.json.")
     ],
-    size: Annotated[int, typer.Option(help="Image size (size x size of a 720-row projector).")] = 128,
+    size: Annotated[
+        int,
+        typer.Option(help="Image size (size x size of a 720-row projector; at least 16, at most what memory holds)."),
+    ] = 128,
     quick: Annotated[bool, typer.Option(help="Two conditions, four ambient levels, fewer delays.")] = False,
-    seed: Annotated[int, typer.Option(help="Seed of the scenes and the camera noise.")] = 0,
+    seed: Annotated[int, typer.Option(help="Seed of the scenes and the camera noise (0 to 2^32-1).")] = 0,
     delay_us: Annotated[
-        float, typer.Option("--delay-us", help="Delay of the short-range indirect image (us).")
+        float,
+        typer.Option(
+            "--delay-us",
+            help="Delay of the short-range indirect image (us; > 300 and <= 885: its 600 us band off the "
+            "epipolar plane, inside the skin's 64-row kernel).",
+        ),
     ] = 500.0,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing report folder planeray wrote.")] = False,
 ):
     """The Fig. 13/14/16 study end to end on the simulated skin scene: writes figures, CSV tables and skin.json."""
-    from ..experiments.skin import compare_steps, run_skin_compare
-    from ..io.atomic import check_replaceable
+    from .._validate import check_integer, check_number
+    from ..experiments.skin import MIN_SIZE, compare_delay_range_us, compare_steps, run_skin_compare
 
-    check_replaceable(out_dir, overwrite=overwrite, kind="skin report")
+    check_integer(size, "--size", minimum=MIN_SIZE)
+    lo, hi = compare_delay_range_us()
+    check_number(
+        delay_us,
+        "--delay-us",
+        minimum=lo,
+        maximum=hi,
+        min_inclusive=False,
+        requirement=f"a delay in us, > {lo:g} and <= {hi:.1f} (the 600 us band must leave the epipolar plane and "
+        "stay inside the skin scene's 64-row kernel)",
+    )
+    _bounds.seed(seed)
+    _bounds.scene_memory((size, size), copies=4, square=True)
+    _check_outputs((out_dir, "skin report"), overwrite=overwrite)
     with progress_bar() as bar:
         task = bar.add_task("skin study", total=compare_steps(quick))
 

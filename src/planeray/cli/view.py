@@ -16,17 +16,34 @@ from ._common import _friendly_errors
 PathArg = Annotated[
     str, typer.Argument(help="A scene name (a virtual Episcan: see `planeray scenes`), a transport store or a stack.")
 ]
-SizeOpt = Annotated[int, typer.Option(help="Scenes: image size (square, camera pixels).")]
-ProjectorRowsOpt = Annotated[int, typer.Option(help="Scenes: projector rows spanned by the image.")]
-SeedOpt = Annotated[int, typer.Option(help="Scenes: seed of the textures and the camera noise.")]
+SizeOpt = Annotated[
+    int, typer.Option(help="Scenes: image size (square, camera pixels; at least 8, at most what memory holds).")
+]
+ProjectorRowsOpt = Annotated[
+    int, typer.Option(help="Scenes: projector rows spanned by the image (1-720: the projector has 720).")
+]
+SeedOpt = Annotated[int, typer.Option(help="Scenes: seed of the textures and the camera noise (0 to 2^32-1).")]
 TruthOpt = Annotated[Path | None, typer.Option(help="Ground-truth transport store, overlaid in the pixel plots.")]
 TruthScaleOpt = Annotated[
     float | None,
     typer.Option(
-        help="Multiply the ground truth by this in the T(u) plot (a transport demultiplexed from a simulated "
-        "stack is signal_scale = 0.6 times the scene's); default: compare by area."
+        help="Multiply the ground truth by this (> 0) in the T(u) plot (a transport demultiplexed from a "
+        "simulated stack is signal_scale = 0.6 times the scene's); default: compare by area."
     ),
 ]
+
+
+def _check_scene_options(path, *, size, projector_rows, seed) -> None:
+    """The scene options, before anything is built (a path that exists is not a scene: they do not apply)."""
+    from . import _bounds
+
+    _bounds.seed(seed)
+    _bounds.projector_rows(projector_rows)
+    if not Path(str(path)).exists():
+        shape = _bounds.image_size((size, size))
+        _bounds.scene_memory(shape, square=True)
+
+
 PatternOpt = Annotated[
     list[Path] | None,
     typer.Option(help="Relighting pattern (.npy/.csv/.txt/image), offered by its file name (repeatable)."),
@@ -62,7 +79,9 @@ def view(
     host: Annotated[
         str, typer.Option(help="Address to serve on. 127.0.0.1 (default): this machine only.")
     ] = "127.0.0.1",
-    port: Annotated[int, typer.Option(help="Port (0: any free port; a port in use falls back to a free one).")] = 8765,
+    port: Annotated[
+        int, typer.Option(help="Port, 0-65535 (0: any free port; a port in use falls back to a free one).")
+    ] = 8765,
     browser: Annotated[
         bool, typer.Option(help="Open the page in the default browser (--no-browser: only print its URL).")
     ] = True,
@@ -75,7 +94,13 @@ def view(
 ):
     """Explore a scene, a transport or a stack live in the browser: delay and exposure sliders, epipolar,
     non-epipolar, sharpened, short/long range, relighting, pixel plots, snapshots (Ctrl-C stops)."""
+    from .._validate import check_integer, check_positive
     from ..viewer.server import ViewerServer
+
+    check_integer(port, "--port", minimum=0, maximum=65535)
+    if truth_scale is not None:
+        check_positive(truth_scale, "--truth-scale")
+    _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
 
     source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=truth, truth_scale=truth_scale,
                    pattern=pattern)  # fmt: skip
@@ -105,38 +130,74 @@ def video(
     path: PathArg,
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Video to write (.mp4, .mkv or .webm).")],
     sweep: Annotated[str, typer.Option(help="What changes over the video: delay or exposure.")] = "delay",
-    delay_us: Annotated[float, typer.Option("--delay-us", help="Delay of an exposure sweep (us).")] = 0.0,
-    exposure_us: Annotated[float, typer.Option("--exposure-us", help="Exposure of a delay sweep (us).")] = 600.0,
+    delay_us: Annotated[
+        float, typer.Option("--delay-us", help="Delay of an exposure sweep (us, within +-13,333: one sweep).")
+    ] = 0.0,
+    exposure_us: Annotated[
+        float, typer.Option("--exposure-us", help="Exposure of a delay sweep (us, > 0 and <= 13,333).")
+    ] = 600.0,
     start_us: Annotated[
-        float | None, typer.Option("--from", help="First delay/exposure (us; default -1500 / 100, a stack's first).")
+        float | None,
+        typer.Option(
+            "--from",
+            help="First delay/exposure (us, within one projector sweep; default -1500 / 100, a stack's first).",
+        ),
     ] = None,
     stop_us: Annotated[
-        float | None, typer.Option("--to", help="Last delay/exposure (us; default 1500 / 2400, a stack's last).")
+        float | None,
+        typer.Option("--to", help="Last delay/exposure (us, as --from; default 1500 / 2400, a stack's last)."),
     ] = None,
-    frames: Annotated[int | None, typer.Option(help="Frames (scenes, transports; default 121).")] = None,
-    fps: Annotated[float | None, typer.Option(help="Frames per second (default 30; 4 for a stack).")] = None,
+    frames: Annotated[int | None, typer.Option(help="Frames (scenes, transports; 2-100,000; default 121).")] = None,
+    fps: Annotated[float | None, typer.Option(help="Frames per second (0.1-240; default 30, 4 for a stack).")] = None,
     noise: Annotated[bool, typer.Option(help="Scenes: camera noise.")] = False,
     ambient: Annotated[bool, typer.Option(help="Scenes: ambient light.")] = False,
     white: Annotated[
-        float | None, typer.Option(help="Value shown white (default: 99.5th percentile over the sweep).")
+        float | None, typer.Option(help="Value shown white (> 0; default: 99.5th percentile over the sweep).")
     ] = None,
-    gamma: Annotated[float, typer.Option(help="Display gamma.")] = 1.0,
+    gamma: Annotated[float, typer.Option(help="Display gamma (0.05-20).")] = 1.0,
     colormap: Annotated[str, typer.Option(help="gray, magma, inferno, viridis, cividis or turbo.")] = "gray",
-    scale: Annotated[int | None, typer.Option(help="Whole-pixel upscaling (default: at least 512 rows).")] = None,
+    scale: Annotated[int | None, typer.Option(help="Whole-pixel upscaling (1-64; default: at least 512 rows).")] = None,
     size: SizeOpt = 128,
     projector_rows: ProjectorRowsOpt = 720,
     seed: SeedOpt = 0,
-    overwrite: Annotated[bool, typer.Option(help="Replace an existing video.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace a video planeray wrote.")] = False,
 ):
     """Write a delay (or exposure) sweep as a video: the paper's "sweeping the band"."""
-    from ..errors import InputError
+    from .._validate import check_integer, check_number, check_positive
+    from ..io.atomic import check_replaceable
+    from ..viewer.display import check_display
     from ..viewer.session import ViewSettings
-    from ..viewer.video import CODECS, sweep_values, write_sweep_video
+    from ..viewer.video import (
+        CODECS,
+        FPS_RANGE,
+        MAX_FRAMES,
+        VIDEO_KIND,
+        check_sweep_value,
+        sweep_values,
+        write_sweep_video,
+    )
 
+    # every option and the output before anything is built or rendered
     if out_path.suffix.lower() not in CODECS:
-        raise InputError(f"--out must end in {', '.join(CODECS)}, got {out_path.name!r}")
-    if out_path.exists() and not overwrite:
-        raise InputError("already exists (pass --overwrite to replace it)", out_path)
+        raise ValueError(f"--out must end in {', '.join(CODECS)}, got {out_path.name!r}")
+    if sweep not in ("delay", "exposure"):
+        raise ValueError(f"--sweep must be delay or exposure, got {sweep!r}")
+    check_sweep_value(delay_us, "delay", "--delay-us")
+    check_sweep_value(exposure_us, "exposure", "--exposure-us")
+    for name, value in (("--from", start_us), ("--to", stop_us)):
+        if value is not None:
+            check_sweep_value(value, sweep, name)
+    if frames is not None:
+        check_integer(frames, "--frames", minimum=2, maximum=MAX_FRAMES)
+    if fps is not None:
+        check_number(fps, "--fps", minimum=FPS_RANGE[0], maximum=FPS_RANGE[1])
+    if white is not None:
+        check_positive(white, "--white")
+    check_display(white=1.0 if white is None else white, gamma=gamma, colormap=colormap)
+    if scale is not None:
+        check_integer(scale, "--scale", minimum=1, maximum=64)
+    _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
+    check_replaceable(out_path, overwrite=overwrite, kind=VIDEO_KIND)
     source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=None, truth_scale=None,
                    pattern=None)  # fmt: skip
     settings = ViewSettings(delay_us=delay_us, exposure_us=exposure_us, noise=noise, ambient=ambient)

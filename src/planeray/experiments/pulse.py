@@ -33,11 +33,28 @@ __all__ = [
     "delay_study",
     "noise_study",
     "run_pulse_report",
+    "pulse_report_steps",
+    "REPORT_RATES_BPM",
 ]
 
 #: ``format`` of the ``planeray.json`` of an analysis folder / a report folder.
 ANALYSIS_FORMAT = "planeray-pulse-report"
 REPORT_FORMAT = "planeray-pulse-report"
+
+#: Conditions of :func:`noise_study`.
+NOISE_CONDITIONS = {
+    "camera noise only": {"motion_px": 0.0, "breathing_px": 0.0, "breathing_gain": 0.0, "laser_flicker": 0.0},
+    "defaults": {},
+    "laser flicker 0.2 %": {"laser_flicker": 0.002},
+}
+NOISE_SEEDS = (0, 1)
+#: Delays and exposures of :func:`delay_study`.
+DELAY_STUDY_US = (0, 150, 250, 350, 450, 550)
+DELAY_STUDY_EXPOSURES_US = (300, 600)
+#: Rates, seeds and pulse-free seeds of :func:`run_pulse_report`.
+REPORT_RATES_BPM = (50, 60, 70, 80, 90, 100, 110)
+REPORT_SEEDS = (0, 1, 2)
+REPORT_NULL_SEEDS = range(10)
 
 
 def _write_csv(path: Path, header, rows) -> None:
@@ -63,13 +80,25 @@ def _region_png(path: Path, frames, region) -> None:
     save_png(fig, path, dpi=110)
 
 
-def write_pulse_analysis(video, out_dir, *, overwrite: bool = False, truth_bpm=None, **options):
+def write_pulse_analysis(video, out_dir, *, overwrite: bool = False, truth_bpm=None, magnified=None, **options):
     """Analyse ``video`` (:func:`planeray.pulse.analysis.analyze_pulse` with ``options``) and write ``out_dir``.
 
-    Returns the :class:`~planeray.pulse.analysis.PulseAnalysis`.
+    ``magnified``: also write the magnified video to this file (:func:`planeray.pulse.video_io.write_video`).
+    Both outputs are checked before any work and go into place together at the end (a failure
+    leaves neither).  Returns the :class:`~planeray.pulse.analysis.PulseAnalysis`.
     """
-    from ..figures.pulse import pulse_signal_figure
+    import contextlib
 
+    from ..figures.pulse import pulse_signal_figure
+    from ..io import atomic_file
+    from ..io.atomic import check_replaceable
+    from ..pulse.video_io import VIDEO_KIND, Video, check_video_path, encode_video
+
+    check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
+    if magnified is not None:
+        check_video_path(magnified, "magnified")
+        check_replaceable(magnified, overwrite=overwrite, kind=VIDEO_KIND)
+        options["keep_video"] = True
     result = analyze_pulse(video, **options)
     meta = {
         "format": ANALYSIS_FORMAT,
@@ -80,25 +109,35 @@ def write_pulse_analysis(video, out_dir, *, overwrite: bool = False, truth_bpm=N
         "frames": video.n_frames,
         "size": list(video.shape),
     }
-    with atomic_directory(out_dir, overwrite=overwrite, kind="pulse report") as tmp:
-        (tmp / "pulse.json").write_text(json.dumps({**meta, **result.to_dict()}, indent=1, default=float))
-        _write_csv(
-            tmp / "signal.csv",
-            ["time_s", "raw", "magnified"],
-            [[f"{t:.6f}", f"{r:.8g}", f"{s:.8g}"] for t, r, s in zip(result.time_s, result.raw_signal, result.signal)],
-        )
-        est = result.estimate
-        _write_csv(
-            tmp / "spectrum.csv",
-            ["frequency_hz", "bpm", "power"],
-            [[f"{f:.6f}", f"{60 * f:.4f}", f"{p:.6g}"] for f, p in zip(est.freqs_hz, est.power)],
-        )
-        pulse_signal_figure(
-            result.time_s, result.signal, est, raw=result.raw_signal, truth_bpm=truth_bpm, out=tmp / "fig15a_pulse.png"
-        )
-        _region_png(tmp / "region.png", video.frames, result.region)
-        (tmp / MARKER).write_text(json.dumps(meta, indent=1))
+    with contextlib.ExitStack() as outputs:
+        if magnified is not None:  # renamed into place after the folder
+            mag_tmp = outputs.enter_context(atomic_file(magnified, overwrite=overwrite))
+            mag = Video(result.magnified, video.fps, str(video.source), {"magnified": result.settings})
+            encode_video(mag_tmp, mag, white=float(np.percentile(video.frames, 99.9)))
+        tmp = outputs.enter_context(atomic_directory(out_dir, overwrite=overwrite, kind="pulse report"))
+        _write_analysis_folder(tmp, video, result, meta, truth_bpm, pulse_signal_figure)
     return result
+
+
+def _write_analysis_folder(tmp, video, result, meta, truth_bpm, pulse_signal_figure) -> None:
+    """The files of a ``skin pulse`` result folder, written into ``tmp``."""
+    (tmp / "pulse.json").write_text(json.dumps({**meta, **result.to_dict()}, indent=1, default=float))
+    _write_csv(
+        tmp / "signal.csv",
+        ["time_s", "raw", "magnified"],
+        [[f"{t:.6f}", f"{r:.8g}", f"{s:.8g}"] for t, r, s in zip(result.time_s, result.raw_signal, result.signal)],
+    )
+    est = result.estimate
+    _write_csv(
+        tmp / "spectrum.csv",
+        ["frequency_hz", "bpm", "power"],
+        [[f"{f:.6f}", f"{60 * f:.4f}", f"{p:.6g}"] for f, p in zip(est.freqs_hz, est.power)],
+    )
+    pulse_signal_figure(
+        result.time_s, result.signal, est, raw=result.raw_signal, truth_bpm=truth_bpm, out=tmp / "fig15a_pulse.png"
+    )
+    _region_png(tmp / "region.png", video.frames, result.region)
+    (tmp / MARKER).write_text(json.dumps(meta, indent=1))
 
 
 def false_alarm_study(*, fps: float = 30.0, seconds=(16.0, 20.0, 30.0), runs: int = 1000, breathing: float = 3.0):
@@ -173,11 +212,14 @@ def _vein_region(scene, shape):
     return core if core.any() else np.asarray(mask, bool)
 
 
-def delay_study(build, *, delays_us=(0, 150, 250, 350, 450, 550), exposures_us=(300, 600), amplitude=0.02):
+def delay_study(
+    build, *, delays_us=DELAY_STUDY_US, exposures_us=DELAY_STUDY_EXPOSURES_US, amplitude=0.02, progress=None
+):
     """Per delay and exposure, on the veins' cores: the indirect image's level, its pulsatile fraction, ambient/laser.
 
     ``fom`` is the shot-noise-limited pulse figure of merit per sensor pixel of the default camera,
-    ``pulse electrons / sqrt(all electrons)`` (laser + ambient over the row exposure).
+    ``pulse electrons / sqrt(all electrons)`` (laser + ambient over the row exposure).  ``progress``:
+    called with a description after each scene linearized (``len(delays_us) * len(exposures_us) + 1``).
     """
     from ..camera import CameraModel
 
@@ -202,7 +244,11 @@ def delay_study(build, *, delays_us=(0, 150, 250, 350, 450, 550), exposures_us=(
                     "fom": abs(pulse) * cam.laser_electrons / np.sqrt(laser + amb),
                 }
             )
+            if progress is not None:
+                progress(f"delay study: {d:g} us, {te:g} us")
     m = linearize(build, check_amplitude=None)
+    if progress is not None:
+        progress("delay study: regular light")
     lvl = float(m.images["regular"][region].mean())
     laser = cam.laser_electrons * lvl
     amb = cam.ambient_e_per_us * 720 / 54000 * 1e6 * float(m.scene.ambient_albedo[region].mean())
@@ -216,24 +262,42 @@ def delay_study(build, *, delays_us=(0, 150, 250, 350, 450, 550), exposures_us=(
     return {"indirect": rows, "regular": regular}
 
 
-def noise_study(model, base, *, seeds=(0, 1)) -> dict:
-    """Pulse SNR of each method (veins' cores, mean over seeds) under shot noise only, the defaults, strong flicker."""
+def noise_study(model, base, *, seeds=NOISE_SEEDS, progress=None) -> dict:
+    """Pulse SNR of each method (veins' cores, mean over seeds) under shot noise only, the defaults, strong flicker.
+
+    ``progress``: called with a description after each capture (``len(NOISE_CONDITIONS) * len(seeds)``).
+    """
     region = _vein_region(model.scene, None)
-    conditions = {
-        "camera noise only": {"motion_px": 0.0, "breathing_px": 0.0, "breathing_gain": 0.0, "laser_flicker": 0.0},
-        "defaults": {},
-        "laser flicker 0.2 %": {"laser_flicker": 0.002},
-    }
     out = {}
-    for name, kw in conditions.items():
+    for name, kw in NOISE_CONDITIONS.items():
         snr = {m: [] for m in METHODS}
         for sd in seeds:
             c = simulate_live(LiveSettings(**{**asdict(base), **kw}), model=model, seed=int(sd))
             t = c.truth["mean_rate_bpm"]
             for m in METHODS:
                 snr[m].append(analyze_pulse(c.videos[m], region=region, reference_bpm=t).estimate.snr_db)
+            if progress is not None:
+                progress(f"noise study: {name}, seed {sd}")
         out[name] = {m: float(np.mean(v)) for m, v in snr.items()}
     return out
+
+
+def pulse_report_steps(
+    *, rates_bpm=REPORT_RATES_BPM, seeds=REPORT_SEEDS, null_seeds=REPORT_NULL_SEEDS, null_runs=None
+) -> int:
+    """Progress steps :func:`run_pulse_report` reports: the scene, Fig. 15, every rate x seed, every
+    pulse-free video, the noise and delay studies' captures, the synthetic studies, the figures."""
+    del null_runs  # the synthetic false-alarm study is one step whatever its runs
+    return (
+        2
+        + len(rates_bpm) * len(seeds)
+        + len(null_seeds)
+        + len(NOISE_CONDITIONS) * len(NOISE_SEEDS)
+        + len(DELAY_STUDY_US) * len(DELAY_STUDY_EXPOSURES_US)
+        + 1
+        + 2
+        + 1
+    )
 
 
 def run_pulse_report(
@@ -244,9 +308,9 @@ def run_pulse_report(
     seconds: float = 30.0,
     fps: float = 30.0,
     bpm: float = 72.0,
-    rates_bpm=(50, 60, 70, 80, 90, 100, 110),
-    seeds=(0, 1, 2),
-    null_seeds=range(10),
+    rates_bpm=REPORT_RATES_BPM,
+    seeds=REPORT_SEEDS,
+    null_seeds=REPORT_NULL_SEEDS,
     null_runs: int = 1000,
     seed: int = 0,
     scene_params: dict | None = None,
@@ -257,8 +321,12 @@ def run_pulse_report(
     """Simulate, magnify and measure; write the numbers (``report.json``) and figures to ``out_dir``.
 
     ``build``: ``build(blood_scale) -> Scene`` (default: the skin scene at ``size``, :func:`skin_builder`).
-    ``progress``: called with a short description after each step.
+    ``progress``: called with a short description after each step (:func:`pulse_report_steps` in all).
+    Checks ``out_dir`` before any work.
     """
+    from ..io.atomic import check_replaceable
+
+    check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
     from ..figures.pulse import pulse_methods_figure, pulse_signal_figure, rate_accuracy_figure
 
     def step(text):
@@ -311,7 +379,7 @@ def run_pulse_report(
             rows.append(
                 {"true_bpm": t, "seed": int(sd), "rate_bpm": res.estimate.rate_bpm, "snr_db": res.estimate.snr_db}
             )
-        step(f"rate {r} bpm")
+            step(f"rate {r} bpm, seed {sd}")
     errs = [abs(r["rate_bpm"] - r["true_bpm"]) for r in rows if r["rate_bpm"] is not None]
     report["accuracy"] = {
         "runs": rows,
@@ -327,19 +395,20 @@ def run_pulse_report(
         c = simulate_live(s, model=model, seed=1000 + int(sd), methods=("indirect",))
         res = analyze_pulse(c.videos["indirect"], mask=c.model.scene.maps.get("vein_mask"))
         null.append({"seed": int(sd), "rate_bpm": res.estimate.rate_bpm, "band_snr_db": res.estimate.band_snr_db})
+        step(f"pulse-free video {sd}")
     report["pulse_free"] = {
         "runs": null,
         "false_alarms": sum(r["rate_bpm"] is not None for r in null),
         "max_band_snr_db": float(max(r["band_snr_db"] for r in null)) if null else None,
     }
-    step("pulse-free videos")
-    report["noise_study"] = noise_study(model, base)
-    step("noise study")
-    report["delay_study"] = delay_study(build)
-    step("delay study")
-    report["resolution"] = {f"noise {nz:g}": resolution_study(fps=fps, noise=nz) for nz in (0.1, 0.5)}
+    report["noise_study"] = noise_study(model, base, progress=step)
+    report["delay_study"] = delay_study(build, progress=step)
+    report["resolution"] = {}
+    for nz in (0.1, 0.5):
+        report["resolution"][f"noise {nz:g}"] = resolution_study(fps=fps, noise=nz)
+        step(f"resolution study, noise {nz:g}")
     report["false_alarms_synthetic"] = false_alarm_study(fps=fps, runs=null_runs)
-    step("resolution and false-alarm studies")
+    step("false-alarm study")
     with atomic_directory(out_dir, overwrite=overwrite, kind="pulse report") as tmp:
         pulse_signal_figure(
             fig_a.time_s,
@@ -358,6 +427,7 @@ def run_pulse_report(
         )
         (tmp / "report.json").write_text(json.dumps(report, indent=1, default=_json_default))
         (tmp / MARKER).write_text(json.dumps({"format": REPORT_FORMAT, "format_version": 1, "kind": "report"}))
+    step("figures written")
     return report
 
 

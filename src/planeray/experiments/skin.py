@@ -79,6 +79,8 @@ __all__ = [
     "depth_from_delay_map",
     "run_skin_compare",
     "compare_steps",
+    "compare_delay_range_us",
+    "MIN_SIZE",
 ]
 
 REPORT_FORMAT = "planeray-skin-report"
@@ -218,20 +220,11 @@ def best_delay_by_depth(images, delays_us, scene, valid=None) -> dict:
     veins detected (mean CNR >= 1, darker than their band in most realizations) at their best
     delay enter the fit.
     """
-    t = scene_truth(scene)
     stacks = np.asarray(images)
     stacks = stacks[None] if stacks.ndim == 3 else stacks
 
     def metrics(im):
-        return vein_metrics(
-            im,
-            t["vein_id"],
-            mm_per_px=scene_pixel_mm(scene),
-            exclude=t["exclude"],
-            depth_mm=t["depth_mm"],
-            diameter_mm=t["diameter_mm"],
-            valid=valid,
-        )
+        return measure({0: im}, scene, valid)[0]
 
     runs = [[metrics(im) for im in sweep] for sweep in stacks]  # [repeat][delay]
     per_delay = runs[0]
@@ -301,6 +294,22 @@ def depth_from_delay_map(delay_map_us, scene, valid=None, *, veins=None) -> dict
     return {"pixels": pix, "veins": per_vein, "per_vein_fit": vein}
 
 
+#: The smallest image the study runs on (its metrics need a few pixels of background beside each vein).
+MIN_SIZE = 16
+
+
+def compare_delay_range_us(exposure_us: float = DEFAULT_EXPOSURE_US, *, lines_per_second=PAPER_LINES_PER_SECOND):
+    """Delays whose band of ``exposure_us`` leaves the epipolar plane and stays inside the skin scene's kernel.
+
+    ``(t_e / 2, K / v_p - t_e / 2]`` with ``K`` = :data:`planeray.scenes.skin.SKIN_BAND_ROWS` (64 rows,
+    where the kernel has fallen below 1e-6): ``(300, 885.2]`` us at 600 us and 54,000 lines/s.
+    """
+    from ..scenes.skin import SKIN_BAND_ROWS
+
+    half = 0.5 * float(exposure_us)
+    return half, SKIN_BAND_ROWS / float(lines_per_second) * 1e6 - half
+
+
 def compare_steps(quick: bool = False) -> int:
     """Progress steps of :func:`run_skin_compare` (conditions, ambient levels, sweep, enhancement, figures)."""
     n_cond = len(QUICK_CONDITIONS) if quick else len(CONDITIONS)
@@ -354,8 +363,20 @@ def run_skin_compare(
     dict
         The numbers written to ``skin.json``.
     """
+    from .._validate import check_integer, check_number
     from ..figures import skin as figs
 
+    check_integer(size, "size", minimum=MIN_SIZE)
+    lo, hi = compare_delay_range_us(exposure_us)
+    check_number(
+        delay_us,
+        "delay_us",
+        minimum=lo,
+        maximum=hi,
+        min_inclusive=False,
+        requirement=f"a delay in us, > {lo:g} and <= {hi:.1f} (the band of t_e = {exposure_us:g} us must leave "
+        "the epipolar plane and stay inside the skin scene's 64-row kernel)",
+    )
     if out_dir is not None:
         check_replaceable(Path(out_dir), overwrite=overwrite, kind="skin report")
     factory = scene_factory or skin_scene
@@ -545,7 +566,9 @@ def run_skin_compare(
         figures_out = {
             "fig16_skin_methods.png": lambda p: figs.methods_figure(panels, labels=labels, out=p),
             "fig16_skin_depth.png": lambda p: figs.vein_depth_figure(
-                [{**r, "condition": "depth ladder"} for r in ladder_rows], out=p
+                [{**r, "condition": "depth ladder"} for r in ladder_rows],
+                light=f"{ROOM_LIGHT} light, {AMBIENT_LEVELS[ROOM_LIGHT][0]:g} lx",
+                out=p,
             ),
             "fig13_skin_ambient.png": lambda p: figs.ambient_figure(
                 amb_rows, strongest, valid=valid0, labels=labels, out=p

@@ -13,8 +13,11 @@ native Zarr stack) with, beside it (``STEM`` is ``STACK``'s name without ``.zarr
 ``STEM_maps.npz``
     every ground-truth map of the scene (``vein_id``, ``vein_depth_mm``, ...), no pickle.
 
-:func:`read_skin_truth` reads them back.  The truth files are replaced (``overwrite``) only
-when ``STEM_veins.json`` says planeray wrote them.
+:func:`read_skin_truth` reads them back.  Each file carries planeray's mark of kind ``skin truth``
+(:mod:`planeray.io.marks`: the PNG's ``Software`` text, the JSON's ``planeray_mark``, the npz's
+``planeray_mark`` member), and each is replaced (``overwrite``) only if its own mark says planeray
+wrote it as ground truth -- never a user's file of the same name, nor another planeray file
+(a video's vein mask, a figure).
 """
 
 from __future__ import annotations
@@ -29,14 +32,25 @@ from ..acquire import simulate_stack
 from ..camera import CameraModel
 from ..errors import InputError
 from ..io import atomic_file, write_stack
-from ..io.atomic import ALREADY_EXISTS, check_replaceable
+from ..io.atomic import check_replaceable
+from ..io.marks import MARK_KEY, mark_text, png_mark_info
 from ..scenes import make_scene
 from ..scenes.skin import skin_veins
 from ..timing import PAPER_PROJECTOR_ROWS, make_sweep
 
-__all__ = ["TRUTH_FORMAT", "SkinCapture", "truth_paths", "simulate_skin", "write_skin_truth", "read_skin_truth"]
+__all__ = [
+    "TRUTH_FORMAT",
+    "TRUTH_KIND",
+    "SkinCapture",
+    "truth_paths",
+    "simulate_skin",
+    "write_skin_truth",
+    "read_skin_truth",
+]
 
 TRUTH_FORMAT = "planeray-skin-truth"
+#: Kind of the mark every ground-truth file carries (:func:`planeray.io.marks.mark_text`).
+TRUTH_KIND = "skin truth"
 
 
 def truth_paths(stack_path) -> dict:
@@ -59,22 +73,20 @@ def _ours(veins_json: Path) -> bool:
 
 
 def _check_truth(stack_path, overwrite: bool) -> None:
-    paths = truth_paths(stack_path)
-    if not any(p.exists() or p.is_symlink() for p in paths.values()):
-        return
-    if not overwrite:
-        existing = next(p for p in paths.values() if p.exists() or p.is_symlink())
-        raise InputError(ALREADY_EXISTS, existing)
-    if not _ours(paths["veins"]):
-        raise InputError(
-            "ground-truth files exist beside the stack that planeray did not write (no planeray-skin-truth "
-            f"{paths['veins'].name}); planeray never deletes what it did not write",
-            paths["veins"],
-        )
+    """Refuse ground-truth files beside the stack that exist (without ``overwrite``) or are not planeray's truth."""
+    for path in truth_paths(stack_path).values():
+        check_replaceable(path, overwrite=overwrite, kind=TRUTH_KIND)
 
 
-def write_skin_truth(scene, stack_path, *, overwrite: bool = False) -> dict:
-    """Write the ground truth of a skin ``scene`` beside ``stack_path`` (see the module docstring)."""
+def write_skin_truth(scene, stack_path, *, overwrite: bool = False, then=None) -> dict:
+    """Write the ground truth of a skin ``scene`` beside ``stack_path`` (see the module docstring).
+
+    The three files are written into temporaries and renamed into place together, after
+    ``then()`` (if given: :func:`simulate_skin` writes the stack there) has succeeded: a failure
+    anywhere leaves none of them behind.
+    """
+    import contextlib
+
     from PIL import Image
 
     _check_truth(stack_path, overwrite)
@@ -91,14 +103,25 @@ def write_skin_truth(scene, stack_path, *, overwrite: bool = False) -> dict:
         }
         for v in skin_veins(scene)
     ]
-    with atomic_file(paths["maps"]) as tmp:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, **{k: np.asarray(v) for k, v in scene.maps.items()})
-    with atomic_file(paths["mask"]) as tmp:
-        Image.fromarray(np.where(scene.maps["vein_mask"], 255, 0).astype(np.uint8), mode="L").save(tmp, format="PNG")
-    meta = {"format": TRUTH_FORMAT, "stack": Path(stack_path).name, "scene": scene.params, "veins": veins}
-    with atomic_file(paths["veins"]) as tmp:
-        Path(tmp).write_text(json.dumps(meta, indent=1), encoding="utf-8")
+    mark = mark_text(TRUTH_KIND)
+    meta = {
+        "format": TRUTH_FORMAT,
+        MARK_KEY: mark,
+        "stack": Path(stack_path).name,
+        "scene": scene.params,
+        "veins": veins,
+    }
+    with contextlib.ExitStack() as files:
+        tmp = {k: files.enter_context(atomic_file(p, overwrite=overwrite)) for k, p in paths.items()}
+        with open(tmp["maps"], "wb") as f:
+            maps = {k: np.asarray(v) for k, v in scene.maps.items() if k != MARK_KEY}
+            np.savez_compressed(f, **maps, **{MARK_KEY: np.asarray(mark)})
+        Image.fromarray(np.where(scene.maps["vein_mask"], 255, 0).astype(np.uint8), mode="L").save(
+            tmp["mask"], format="PNG", pnginfo=png_mark_info(TRUTH_KIND)
+        )
+        Path(tmp["veins"]).write_text(json.dumps(meta, indent=1), encoding="utf-8")
+        if then is not None:
+            then()
     return paths
 
 
@@ -110,7 +133,7 @@ def read_skin_truth(stack_path) -> tuple[dict, dict]:
     meta = json.loads(paths["veins"].read_text(encoding="utf-8"))
     try:
         with np.load(paths["maps"], allow_pickle=False) as z:
-            maps = {k: z[k] for k in z.files}
+            maps = {k: z[k] for k in z.files if k != MARK_KEY}
     except (OSError, ValueError) as exc:
         raise InputError(f"unreadable ground-truth maps ({exc})", paths["maps"]) from None
     return meta, maps
@@ -151,7 +174,9 @@ def simulate_skin(
     stack = simulate_stack(scene, make_sweep(sweep), camera=camera, seed=seed, noise=noise, progress=progress)
     paths = {}
     if out is not None:
-        write_stack(stack, out, overwrite=overwrite)
-        paths = write_skin_truth(scene, out, overwrite=overwrite)
+        # the truth files go into place only once the stack is written (a failure leaves neither)
+        paths = write_skin_truth(
+            scene, out, overwrite=overwrite, then=lambda: write_stack(stack, out, overwrite=overwrite)
+        )
         paths["stack"] = Path(out)
     return SkinCapture(scene, stack, paths)

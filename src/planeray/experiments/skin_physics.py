@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from ..figures.skin_physics import vein_validation_figure
-from ..io import atomic_file
 from ..mc.layered import mc_layered_profile, mc_vein_kernel_brute
 from ..optical_data_skin import skin_layers
 from ..scenes.skin import _table_slice, _vein_ratio, skin_tables
@@ -39,6 +38,7 @@ __all__ = [
     "layered_adding_doubling",
     "adding_doubling_stack",
     "run_skin_validation",
+    "VALIDATION_FORMAT",
 ]
 
 #: The paper's short-range indirect setting for veins (Sec. 10: delays 400-600 us).
@@ -191,21 +191,38 @@ def layered_adding_doubling(*, wavelength_nm=638, tone="fair", n_photons=200_000
     return dict(mc=mc.total_reflectance, mc_stderr=mc.total_reflectance_stderr, ad=ur1 - mc.specular_reflectance)
 
 
-def run_skin_validation(out=None, *, n_photons=200_000, wavelength_nm=638, progress=None) -> dict:
-    """Both checks; with ``out`` (a folder) writes ``skin_validation.json`` and ``skin_validation.png``."""
+#: ``format`` of the ``planeray.json`` of a validation folder (``planeray skin validate --out DIR``).
+VALIDATION_FORMAT = "planeray-skin-validation"
+
+
+def run_skin_validation(
+    out=None, *, n_photons=200_000, wavelength_nm=638, overwrite: bool = False, progress=None
+) -> dict:
+    """Both checks; with ``out`` (a folder) writes ``skin_validation.json`` and ``skin_validation.png``.
+
+    ``out`` is checked before any Monte Carlo: an existing folder is replaced only with
+    ``overwrite`` and only if it is a validation folder planeray wrote (its ``planeray.json``);
+    it is written atomically (a folder that appears meanwhile is refused, never merged into).
+    """
+    from ..io import atomic_directory
+    from ..io.atomic import MARKER, check_replaceable
+
+    if out is not None:
+        check_replaceable(out, overwrite=overwrite, kind="skin validation")
     rows = vein_validation(wavelength_nm=wavelength_nm, n_photons=n_photons, progress=progress)
     # Dark skin has its own vein table (melanin changes the contrast): check it too.
     dark = vein_validation(
         wavelength_nm=wavelength_nm, tone="dark", cases=DARK_CASES, n_photons=n_photons, progress=progress
     )
     ad = layered_adding_doubling(wavelength_nm=wavelength_nm, n_photons=n_photons)
+    if progress is not None:
+        progress(1)
     report = dict(
         wavelength_nm=wavelength_nm, n_photons=n_photons, adding_doubling=ad, cases=rows, dark_skin_cases=dark
     )
     if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        with atomic_file(out / "skin_validation.json") as tmp:
-            Path(tmp).write_text(json.dumps(report, indent=1))
-        vein_validation_figure(rows, out=out / "skin_validation.png")
+        with atomic_directory(Path(out), overwrite=overwrite, kind="skin validation") as tmp:
+            (tmp / "skin_validation.json").write_text(json.dumps(report, indent=1))
+            vein_validation_figure(rows, out=tmp / "skin_validation.png")
+            (tmp / MARKER).write_text(json.dumps({"format": VALIDATION_FORMAT, "format_version": 1}, indent=1))
     return report

@@ -21,6 +21,7 @@ __all__ = [
     "best_delay_figure",
     "enhancement_figure",
     "headline_figure",
+    "delay_map_figure",
 ]
 
 _LABELS = {
@@ -94,29 +95,56 @@ def methods_figure(panels, *, methods=None, labels=None, out=None):
     return finish(fig, out)
 
 
-def vein_depth_figure(vein_rows, *, condition=None, ax=None, out=None):
-    """Per-vein CNR against vein depth, one colour per method, threshold CNR = 1 dashed."""
-    fig, ax, own = figure_for(ax, (6.0, 4.0))
+def vein_depth_figure(vein_rows, *, condition=None, light=None, ax=None, out=None):
+    """Per-vein CNR against vein depth, one colour per method, threshold CNR = 1 dashed.
+
+    The legend lists only what is drawn: the methods with at least one vein, and the conditions
+    (marker shapes) only when there are several.  Methods are set side by side at each depth
+    (a small horizontal offset) so that none hides another; a CNR below 0.01 is drawn at 0.01
+    (marked ``v``), and veins with no number (too few usable pixels) are counted in the title.
+    ``light``: the ambient light the CNRs were measured under (the y label), if known.
+    """
+    fig, ax, own = figure_for(ax, (7.6, 4.0))
     rows = [r for r in vein_rows if condition is None or r["condition"] == condition]
     conds = sorted({r["condition"] for r in rows})
-    markers = dict(zip(conds, "os^Dvx<>"))
-    for meth in _COLORS:
-        sel = [r for r in rows if r["method"] == meth and r["depth_mm"] is not None]
+    markers = dict(zip(conds, "osDx<>^*"))
+    floor = 1e-2
+    drawn = [m for m in _COLORS if any(r["method"] == m and r["depth_mm"] is not None for r in rows)]
+    depths = sorted({r["depth_mm"] for r in rows if r["depth_mm"] is not None})
+    step = min(np.diff(depths)) if len(depths) > 1 else 1.0
+    dodge = {m: (i - (len(drawn) - 1) / 2) * 0.12 * step for i, m in enumerate(drawn)}
+    no_number, below = 0, False
+    for meth in drawn:
         for c in conds:
-            pts = [(r["depth_mm"], r["cnr"] if r["cnr"] is not None else 0.0) for r in sel if r["condition"] == c]
-            if pts:
-                x, y = zip(*pts)
-                ax.scatter(x, np.maximum(y, 1e-2), s=18, color=_COLORS[meth], marker=markers[c], alpha=0.75)
-    for meth, col in _COLORS.items():
-        ax.plot([], [], "o", color=col, label=_LABELS[meth])
-    for c, mk in markers.items():
-        ax.plot([], [], mk, color="k", label=c, markerfacecolor="none")
+            sel = [r for r in rows if r["method"] == meth and r["condition"] == c and r["depth_mm"] is not None]
+            no_number += sum(r["cnr"] is None for r in sel)
+            pts = [(r["depth_mm"] + dodge[meth], r["cnr"]) for r in sel if r["cnr"] is not None]
+            if not pts:
+                continue
+            x, y = (np.asarray(v, float) for v in zip(*pts))
+            low = y < floor
+            below |= bool(low.any())
+            ax.scatter(x[~low], y[~low], s=18, color=_COLORS[meth], marker=markers[c], alpha=0.85)
+            ax.scatter(x[low], np.full(low.sum(), floor), s=22, color=_COLORS[meth], marker="v", alpha=0.85)
+    for meth in drawn:
+        ax.plot([], [], "o", color=_COLORS[meth], label=_LABELS[meth])
+    if len(conds) > 1:
+        for c, mk in markers.items():
+            ax.plot([], [], mk, color="k", label=c, markerfacecolor="none")
+    if below:
+        ax.plot([], [], "v", color="k", label="CNR below 0.01 (drawn at 0.01)")
     ax.axhline(1.0, color="k", ls="--", lw=0.8)
     ax.set_yscale("log")
-    ax.set_xlabel("vein depth (mm, ground truth)")
-    ax.set_ylabel("per-vein CNR (office light)")
-    ax.set_title("Which veins each method shows, by depth (below the dashed line: not detected)", fontsize=9)
-    ax.legend(fontsize=6, ncol=2)
+    ax.set_xlabel("vein depth (mm, ground truth; methods side by side)")
+    ax.set_ylabel("per-vein CNR" + (f" ({light})" if light else ""))
+    title = "Which veins each method shows, by depth\n(below the dashed line: not detected)"
+    if len(conds) == 1:
+        title = f"{conds[0]}: " + title[0].lower() + title[1:]
+    if no_number:
+        title += f"\n{no_number} vein-method pair(s) without a number (too few usable pixels), not drawn"
+    ax.set_title(title, fontsize=9)
+    if drawn:
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     if own:
         fig.tight_layout()
     return finish(fig, out)
@@ -263,4 +291,31 @@ def headline_figure(images: dict, *, labels=None, metrics=None, valid=None, titl
         show_image(ax, images[k], valid=valid, title=t)
     fig.suptitle(title or "Forearm: veins through skin (Sec. 10), office light", fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.94))
+    return finish(fig, out)
+
+
+def delay_map_figure(delay_map_us, *, vein_id=None, used_us=None, title=None, out=None):
+    """Eq. 7's map of the best delay ``t_d*`` per pixel, with a colour bar in microseconds.
+
+    ``vein_id``: true veins outlined in white, if known; ``used_us``: the delays the composite
+    chose from (ticks of the colour bar).
+    """
+    img = np.asarray(delay_map_us, np.float64)
+    h, w = img.shape
+    fig = new_figure((4.6, 4.0 * h / max(w, 1) + 0.6))
+    ax = fig.subplots()
+    lo, hi = (float(np.nanmin(img)), float(np.nanmax(img))) if np.isfinite(img).any() else (0.0, 1.0)
+    im = ax.imshow(img, cmap="viridis", vmin=lo, vmax=hi if hi > lo else lo + 1.0, interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if vein_id is not None and np.any(np.asarray(vein_id) > 0):
+        ax.contour(np.asarray(vein_id) > 0, levels=[0.5], colors="w", linewidths=0.6)
+    bar = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
+    bar.set_label("delay t_d* (us)")
+    if used_us is not None and len(used_us):
+        ticks = [t for t in used_us if lo - 1e-9 <= t <= hi + 1e-9]
+        if 2 <= len(ticks) <= 12:
+            bar.set_ticks(ticks)
+    ax.set_title(title or "Eq. 7: delay of the strongest edge per pixel (blurred)", fontsize=8)
+    fig.tight_layout()
     return finish(fig, out)

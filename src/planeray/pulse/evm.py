@@ -68,8 +68,12 @@ DEFAULT_ALPHA = 50.0
 DEFAULT_LEVELS = 4
 
 
-def check_band(band_hz, fps: float, name: str = "band") -> tuple[float, float]:
-    """``(f_lo, f_hi)`` with ``0 <= f_lo < f_hi <= fps / 2``, or a one-line :class:`InputError`."""
+def check_band(band_hz, fps: float, name: str = "band", *, clip: bool = False) -> tuple[float, float]:
+    """``(f_lo, f_hi)`` with ``0 <= f_lo < f_hi <= fps / 2``, or a one-line :class:`InputError`.
+
+    A band reaching above the Nyquist frequency ``fps / 2`` is refused (``clip``: cut at it instead,
+    for a band that is a default rather than a request).
+    """
     try:
         lo, hi = (float(band_hz[0]), float(band_hz[1]))
     except (TypeError, ValueError, IndexError):
@@ -78,6 +82,8 @@ def check_band(band_hz, fps: float, name: str = "band") -> tuple[float, float]:
         raise InputError(f"{name} must be 0 <= low < high (Hz), got {lo:g}-{hi:g}")
     if lo >= fps / 2:
         raise InputError(f"{name} {lo:g}-{hi:g} Hz lies above the Nyquist frequency {fps / 2:g} Hz of {fps:g} fps")
+    if hi > fps / 2 and not clip:
+        raise InputError(f"{name} {lo:g}-{hi:g} Hz reaches above the Nyquist frequency {fps / 2:g} Hz of {fps:g} fps")
     return lo, min(hi, fps / 2)
 
 
@@ -130,7 +136,8 @@ def _pyramid_sizes(shape, levels: int) -> list[tuple[int, int]]:
         h, w = sizes[-1]
         if min(h, w) < 2:
             raise InputError(
-                f"{levels} pyramid levels are too many for {shape[0]}x{shape[1]} frames (at most {len(sizes) - 1})"
+                f"levels = {levels}: too many pyramid levels for {shape[0]}x{shape[1]} frames (at most "
+                f"{len(sizes) - 1})"
             )
         sizes.append(((h + 1) // 2, (w + 1) // 2))  # cv2.pyrDown's default size
     return sizes

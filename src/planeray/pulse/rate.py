@@ -220,7 +220,7 @@ def estimate_heart_rate(
     """
     fps = check_positive(fps, "fps")
     lo, hi = check_band(band_hz, fps, "rate band")
-    snr_band = check_band(snr_band_hz, fps, "SNR band")
+    snr_band = check_band(snr_band_hz, fps, "SNR band", clip=True)
     freqs, power = pulse_spectrum(signal, fps, method=method, pad=pad, segment_s=segment_s)
     sel = np.flatnonzero((freqs >= lo) & (freqs <= hi))
     if sel.size == 0:

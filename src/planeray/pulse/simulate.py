@@ -62,6 +62,9 @@ __all__ = [
     "DEFAULT_DELAY_US",
     "DEFAULT_EXPOSURE_US",
     "LiveSettings",
+    "LIMITS",
+    "BREATHS_PER_MIN",
+    "live_capture_bytes",
     "LinearModel",
     "LiveCapture",
     "method_images",
@@ -77,6 +80,23 @@ METHODS = ("regular", "direct", "global", "indirect")
 DEFAULT_DELAY_US = 450.0
 #: Row exposure of the delay images.
 DEFAULT_EXPOSURE_US = 600.0
+
+
+#: Upper bounds of the physiological settings (fractions): heart-rate variability (std of the rate;
+#: resting SDNN is ~5 %), respiratory sinus arrhythmia, blood-volume change of the veins per beat (the
+#: linear model is checked at 3 %, README Pulse).
+LIMITS = {"hrv": 0.2, "rsa": 0.3, "pulse_amplitude": 0.1}
+#: Breaths per minute (slow paced breathing to panting).
+BREATHS_PER_MIN = (4.0, 60.0)
+#: Bytes per frame pixel of :func:`simulate_live` at its peak (the capture's float64 temporaries:
+#: measured 86 at 48x48 and 96x96), plus 8 per method kept.
+BYTES_PER_FRAME_PIXEL = 96
+
+
+def live_capture_bytes(settings: LiveSettings, shape, methods=METHODS) -> int:
+    """Estimated peak memory of :func:`simulate_live` for ``shape`` (H, W) images, bytes."""
+    n = int(round(settings.seconds * settings.frame_rate()))
+    return int(n * int(shape[0]) * int(shape[1]) * (BYTES_PER_FRAME_PIXEL + 8 * len(methods)))
 
 
 @dataclass(frozen=True)
@@ -132,15 +152,44 @@ class LiveSettings:
 
     def __post_init__(self):
         check_positive(self.seconds, "seconds")
-        if self.fps is not None:
-            check_positive(self.fps, "fps")
-        check_number(self.bpm, "bpm", minimum=30.0, maximum=240.0)
-        for name in ("hrv", "rsa", "pulse_amplitude", "breathing_px", "breathing_gain", "motion_px", "laser_flicker"):
-            check_nonnegative(getattr(self, name), name)
-        check_positive(self.breaths_per_min, "breaths_per_min")
-        check_number(self.delay_us, "delay_us")
-        check_positive(self.exposure_us, "exposure_us")
         check_positive(self.lines_per_second, "lines_per_second")
+        frame_us = PAPER_PROJECTOR_ROWS / self.lines_per_second * 1e6  # one sweep of the projector
+        if self.fps is not None:
+            top = self.lines_per_second / PAPER_PROJECTOR_ROWS
+            check_number(
+                self.fps,
+                "fps",
+                minimum=0.0,
+                maximum=top,
+                min_inclusive=False,
+                requirement=f"a frame rate > 0 and <= {top:g} Hz (one delay image per sweep of the projector)",
+            )
+        check_number(self.bpm, "bpm", minimum=30.0, maximum=240.0)
+        if self.frame_rate() <= 2 * self.bpm / 60.0:
+            raise InputError(
+                f"fps must be above twice the heart rate (the Nyquist rate: {2 * self.bpm / 60:g} Hz at bpm "
+                f"{self.bpm:g}), got {self.frame_rate():g}"
+            )
+        for name, top in LIMITS.items():
+            check_number(getattr(self, name), name, minimum=0.0, maximum=top)
+        for name in ("breathing_px", "breathing_gain", "motion_px", "laser_flicker"):
+            check_nonnegative(getattr(self, name), name)
+        check_number(self.breaths_per_min, "breaths_per_min", minimum=BREATHS_PER_MIN[0], maximum=BREATHS_PER_MIN[1])
+        check_number(
+            self.delay_us,
+            "delay_us",
+            minimum=-frame_us,
+            maximum=frame_us,
+            requirement=f"a delay in us within +-{frame_us:.0f} (one projector sweep)",
+        )
+        check_number(
+            self.exposure_us,
+            "exposure_us",
+            minimum=0.0,
+            maximum=frame_us,
+            min_inclusive=False,
+            requirement=f"an exposure in us, > 0 and <= {frame_us:.0f} (one projector sweep)",
+        )
         check_number(self.fill, "fill", minimum=0.01, maximum=1.0)
         if self.sensor_rows is not None:
             check_positive(self.sensor_rows, "sensor_rows")

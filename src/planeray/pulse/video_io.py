@@ -33,9 +33,20 @@ import numpy as np
 from .._validate import check_positive
 from ..errors import InputError
 from ..io import atomic_file
-from ..io.atomic import ALREADY_EXISTS
 
-__all__ = ["Video", "MIN_FRAMES", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "read_video", "write_video", "check_video"]
+__all__ = [
+    "Video",
+    "MIN_FRAMES",
+    "VIDEO_SUFFIXES",
+    "WRITE_SUFFIXES",
+    "IMAGE_SUFFIXES",
+    "read_video",
+    "write_video",
+    "encode_video",
+    "check_video",
+    "check_video_path",
+    "video_bytes",
+]
 
 #: The fewest frames a pulse analysis accepts (one frame has no time axis).
 MIN_FRAMES = 8
@@ -256,52 +267,95 @@ def read_video(path, *, fps: float | None = None, channel: str = "gray") -> Vide
     return video
 
 
+#: Suffixes :func:`write_video` writes.
+WRITE_SUFFIXES = (".tif", ".tiff", *VIDEO_SUFFIXES)
+#: Kind of planeray's mark in the videos it writes (TIFF tag ``Software``, the container's ``title``).
+VIDEO_KIND = "video"
+
+
+def check_video_path(path, option: str = "path") -> Path:
+    """A path :func:`write_video` can write (by its suffix), or one line naming ``option``."""
+    path = Path(path)
+    if path.suffix.lower() not in WRITE_SUFFIXES:
+        raise InputError(f"{option} must end in {', '.join(WRITE_SUFFIXES)}, got {path.name!r}")
+    return path
+
+
+def video_bytes(n_frames: int, shape) -> int:
+    """Bytes of ``n_frames`` float32 frames of ``shape`` (H, W)."""
+    return int(n_frames) * int(shape[0]) * int(shape[1]) * 4
+
+
 def write_video(path, video: Video, *, overwrite: bool = False, white: float | None = None) -> Path:
     """Write a video atomically: TIFF (float32, lossless, with its rate) or 8-bit mp4/avi/mkv/mov.
 
     ``white`` (8-bit formats): the value shown as 255 (default: the 99.9th percentile).
-    ``video.meta`` goes into the TIFF as JSON (``planeray_video`` in the ImageJ ``Info``).
+    ``video.meta`` goes into the TIFF as JSON (``planeray_video`` in the ImageJ ``Info``).  Every
+    file carries planeray's mark (:mod:`planeray.io.marks`: the TIFF's ``Software`` tag, the
+    container's ``title``), and an existing file is replaced only with ``overwrite`` and only if
+    its mark says planeray wrote it as a video.
     """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".tif", ".tiff") and suffix not in VIDEO_SUFFIXES:
-        raise InputError(f"--out must end in .tif, .tiff or {', '.join(VIDEO_SUFFIXES)}, got {path.name!r}")
-    if path.exists() and not overwrite:
-        raise InputError(ALREADY_EXISTS, path)
-    frames = np.asarray(video.frames, np.float32)
+    from ..io.atomic import check_replaceable
+
+    path = check_video_path(path)
+    check_replaceable(path, overwrite=overwrite, kind=VIDEO_KIND)
     with atomic_file(path, overwrite=overwrite) as tmp:
-        if suffix in (".tif", ".tiff"):
-            import tifffile
+        encode_video(tmp, video, white=white, suffix=path.suffix)
+    return path
 
-            info = json.dumps({"planeray_video": {"fps": video.fps, **video.meta}})
-            tifffile.imwrite(
-                tmp, frames, imagej=True, metadata={"axes": "TYX", "finterval": 1.0 / video.fps, "Info": info}
-            )
-        else:
-            import imageio_ffmpeg
 
-            top = float(np.percentile(frames, 99.9)) if white is None else float(white)
-            scale = 255.0 / top if top > 0 else 1.0
-            H, W = frames.shape[1:]
-            gray = np.clip(frames * scale + 0.5, 0, 255).astype(np.uint8)
-            gray = np.pad(gray, ((0, 0), (0, H % 2), (0, W % 2)), mode="edge")
-            codec = VIDEO_SUFFIXES[suffix]
-            extra = {"pix_fmt_out": "yuvj420p"} if codec == "mjpeg" else {}
-            if codec == "ffv1":
-                extra = {"pix_fmt_out": "gray"}
-            writer = imageio_ffmpeg.write_frames(
-                str(tmp),
-                (gray.shape[2], gray.shape[1]),
-                pix_fmt_in="gray",
-                fps=video.fps,
-                codec=codec,
-                macro_block_size=1,
-                quality=None if codec == "ffv1" else 10,
-                ffmpeg_log_level="error",
-                **extra,
-            )
+def encode_video(path, video: Video, *, white: float | None = None, suffix: str | None = None) -> Path:
+    """Write ``video`` to ``path`` as it is, not atomically: for a caller that holds a temporary
+    (:func:`write_video` and the commands that write several files together).
+
+    ``suffix`` picks the format (default: ``path``'s own).
+    """
+    from ..io.marks import mark_text
+
+    path = Path(path)
+    suffix = (suffix or path.suffix).lower()
+    if suffix not in WRITE_SUFFIXES:
+        raise InputError(f"video files end in {', '.join(WRITE_SUFFIXES)}, got {path.name!r}")
+    frames = np.asarray(video.frames, np.float32)
+    if suffix in (".tif", ".tiff"):
+        import tifffile
+
+        info = json.dumps({"planeray_video": {"fps": video.fps, **video.meta}})
+        tifffile.imwrite(
+            path,
+            frames,
+            imagej=True,
+            software=mark_text(VIDEO_KIND),
+            metadata={"axes": "TYX", "finterval": 1.0 / video.fps, "Info": info},
+        )
+    else:
+        import imageio_ffmpeg
+
+        top = float(np.percentile(frames, 99.9)) if white is None else float(white)
+        scale = 255.0 / top if top > 0 else 1.0
+        H, W = frames.shape[1:]
+        gray = np.clip(frames * scale + 0.5, 0, 255).astype(np.uint8)
+        gray = np.pad(gray, ((0, 0), (0, H % 2), (0, W % 2)), mode="edge")
+        codec = VIDEO_SUFFIXES[suffix]
+        extra = {"pix_fmt_out": "yuvj420p"} if codec == "mjpeg" else {}
+        if codec == "ffv1":
+            extra = {"pix_fmt_out": "gray"}
+        writer = imageio_ffmpeg.write_frames(
+            str(path),
+            (gray.shape[2], gray.shape[1]),
+            pix_fmt_in="gray",
+            fps=video.fps,
+            codec=codec,
+            macro_block_size=1,
+            quality=None if codec == "ffv1" else 10,
+            ffmpeg_log_level="error",
+            output_params=["-metadata", f"title={mark_text(VIDEO_KIND)}"],
+            **extra,
+        )
+        try:
             writer.send(None)
             for f in gray:
                 writer.send(np.ascontiguousarray(f))
+        finally:
             writer.close()
     return path

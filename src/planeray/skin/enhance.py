@@ -66,6 +66,7 @@ __all__ = [
     "compose",
     "EnhanceResult",
     "enhance_contrast",
+    "enhance_steps",
 ]
 
 #: The paper's patch: 200 x 200 pixels of images whose rows follow the projector's 720 rows.
@@ -204,6 +205,12 @@ class EnhanceResult:
     params: dict
 
 
+def enhance_steps(n_images: int, *, noise_normalize: bool = True) -> int:
+    """Progress steps :func:`enhance_contrast` reports for ``n_images`` delay images (an upper bound:
+    images too noisy to use are left out after the first step, and the remaining steps skipped)."""
+    return int(n_images) * (4 if noise_normalize else 3) + 1
+
+
 def enhance_contrast(
     images,
     delays_us,
@@ -216,6 +223,7 @@ def enhance_contrast(
     noise_normalize: bool = True,
     min_significance: float = 3.0,
     max_relative_noise: float | None = 0.25,
+    progress=None,
 ) -> EnhanceResult:
     """Contrast-enhanced image from a sweep of delay images (Sec. 10, Eq. 7, Fig. 14).
 
@@ -238,6 +246,9 @@ def enhance_contrast(
     max_relative_noise : float or None
         Delay images whose noise (Immerkaer, relative to the local mean) exceeds this are left
         out (0.25: a vein of 25 % contrast would sit at one sigma); None keeps them all.
+    progress : callable, optional
+        Called with a number of steps done, :func:`enhance_steps` in all (each delay image
+        normalized, filtered, differentiated and weighed by its noise; the composite).
 
     Returns
     -------
@@ -266,22 +277,47 @@ def enhance_contrast(
     patch = paper_patch_px(imgs.shape[1:]) if patch_px is None else int(patch_px)
     if patch < 2:
         raise ValueError(f"patch_px must be at least 2, got {patch_px}")
+    if patch_px is not None and patch > min(imgs.shape[1:]):
+        raise ValueError(
+            f"patch_px must be at most the image's smaller side ({min(imgs.shape[1:])} px), got {patch_px}"
+        )
+    n_in = d.size
+
+    def step(k=1):
+        if progress is not None:
+            progress(k)
+
     s_bil = patch / 24.0 if bilateral_sigma_px is None else float(bilateral_sigma_px)
     s_grad = patch / 12.0 if gradient_sigma_px is None else float(gradient_sigma_px)
     s_map = patch / 6.0 if map_sigma_px is None else float(map_sigma_px)
-    relative = [local_normalize(im, patch / 2.0) for im in imgs]
-    noise = [noise_sigma(r) for r in relative]
+    relative, noise = [], []
+    for im in imgs:
+        relative.append(local_normalize(im, patch / 2.0))
+        noise.append(noise_sigma(relative[-1]))
+        step()
     all_delays, all_noise = d.copy(), list(noise)
     if max_relative_noise is not None:  # delays too dark to carry any contrast are left out
         keep = np.flatnonzero(np.asarray(noise) <= float(max_relative_noise))
         keep = keep if keep.size else np.array([int(np.argmin(noise))])
         imgs, d = imgs[keep], d[keep]
         relative, noise = [relative[i] for i in keep], [noise[i] for i in keep]
+        step((n_in - d.size) * (enhance_steps(1, noise_normalize=noise_normalize) - 2))  # the steps left out
     ranges = [2.0 * n if bilateral_sigma_range is None else float(bilateral_sigma_range) for n in noise]
-    normalized = np.stack([bilateral(r, sigma_range=sr, sigma_px=s_bil) for r, sr in zip(relative, ranges)])
-    grads = np.stack([ndimage.gaussian_filter(gradient_magnitude(n), s_grad) for n in normalized])
+    normalized, grads = [], []
+    for r, sr in zip(relative, ranges):
+        normalized.append(bilateral(r, sigma_range=sr, sigma_px=s_bil))
+        step()
+    normalized = np.stack(normalized)
+    for n in normalized:
+        grads.append(ndimage.gaussian_filter(gradient_magnitude(n), s_grad))
+        step()
+    grads = np.stack(grads)
     if noise_normalize:
-        grads = grads / np.stack([np.maximum(patch_noise_map(r, patch), 1e-12) for r in relative])
+        noise_maps = []
+        for r in relative:
+            noise_maps.append(np.maximum(patch_noise_map(r, patch), 1e-12))
+            step()
+        grads = grads / np.stack(noise_maps)
         # standardize each delay's score over the image: most pixels carry no edge, so the median
         # and MAD give the score of noise alone; a pixel without a significant edge in any delay
         # (z < min_significance) takes the least noisy delay instead of a noise-picked one.
@@ -294,6 +330,7 @@ def enhance_contrast(
         raw = best_delay_map(grads, d)
     smooth = ndimage.gaussian_filter(raw, s_map, mode="reflect") if s_map > 0 else raw
     image = compose(normalized, d, smooth)
+    step()
     params = {
         "patch_px": patch,
         "normalize_sigma_px": patch / 2.0,

@@ -73,6 +73,7 @@ __all__ = [
     "stack_images",
     "transport_images",
     "delay_sweep_images",
+    "delay_sweep_selection",
 ]
 
 #: Method key -> label for tables and figures (the order of the panels).
@@ -433,7 +434,10 @@ def stack_images(
     t_e = float(exp[usable].min() if usable.any() else exp.min()) if exposure_us is None else float(exposure_us)
     at_all = np.flatnonzero(np.isclose(exp, t_e, atol=0.5))
     if at_all.size == 0:
-        raise InputError(f"the stack has no image at exposure {t_e:g} us (it has {sorted(set(exp.tolist()))})")
+        raise InputError(
+            f"exposure_us = {t_e:g}: the stack has no image at that exposure (it has "
+            f"{', '.join(f'{x:g}' for x in sorted(set(exp.tolist())))} us)"
+        )
     at = at_all[usable[at_all]]
     uniq = np.unique(dl[at_all])
     step = float(np.min(np.diff(uniq))) if uniq.size > 1 else np.inf
@@ -450,13 +454,13 @@ def stack_images(
         flagged, fd = pick(float(delay_us), at_all)
         if flagged is not None:
             raise InputError(
-                f"the stack's image nearest delay {delay_us:g} us at exposure {t_e:g} us ({fd:g} us) is excluded "
-                f"(a boundary image, flagged in the stack; usable delays {', '.join(f'{x:g}' for x in np.unique(dl[at]))} "
-                "us); pass --include-excluded (include_excluded=True) to use it"
+                f"delay_us = {delay_us:g}: the stack's image nearest it at exposure {t_e:g} us ({fd:g} us) is "
+                f"excluded (a boundary image, flagged in the stack; usable delays "
+                f"{', '.join(f'{x:g}' for x in np.unique(dl[at]))} us); pass --include-excluded to use it"
             )
         raise InputError(
-            f"the stack has no image near delay {delay_us:g} us at exposure {t_e:g} us "
-            f"(delays {', '.join(f'{x:g}' for x in np.unique(dl[at]))})"
+            f"delay_us = {delay_us:g}: the stack has no image near that delay at exposure {t_e:g} us "
+            f"(delays {', '.join(f'{x:g}' for x in np.unique(dl[at]))} us)"
         )
     lps = float(stack.lines_per_second)
     name = band_name(d, t_e)
@@ -523,17 +527,12 @@ def transport_images(
     return images, info
 
 
-def delay_sweep_images(
+def delay_sweep_selection(
     stack, *, exposure_us: float | None = None, min_delay_us: float = 0.0, include_excluded: bool = False
-):
-    """Delay images of one exposure with ``t_d > min_delay_us``, the band off the epipolar plane, not excluded.
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Which images :func:`delay_sweep_images` reads, without reading them: ``(indices, delays_us, info)``.
 
-    Returns ``(images (N, H, W), delays_us (N,), info)`` sorted by delay: the input of
-    :func:`planeray.skin.enhance.enhance_contrast`.  Images whose band touches the epipolar
-    plane (``|t_d| <= t_e / 2``) are left out, and so are the images the stack excludes (its
-    ``excluded`` flags: boundary images, whose row artefacts would stripe Eq. 7's composite)
-    unless ``include_excluded``.  ``info``: ``exposure_us``, ``indices`` (stack images used),
-    ``excluded_delays_us`` (flagged images left out), ``include_excluded``.
+    Refuses (one line naming ``exposure_us`` or ``min_delay_us``) a selection of fewer than 2 images.
     """
     exp = np.asarray(stack.exposure_us, np.float64)
     dl = np.asarray(stack.delay_us, np.float64)
@@ -546,9 +545,14 @@ def delay_sweep_images(
         flagged = (
             f" ({left_out.size} more excluded by the stack; --include-excluded uses them)" if left_out.size else ""
         )
+        if not np.isclose(exp, t_e, atol=0.5).any():
+            raise InputError(
+                f"exposure_us = {t_e:g}: the stack has no image at that exposure (it has "
+                f"{', '.join(f'{x:g}' for x in sorted(set(exp.tolist())))} us)"
+            )
         raise InputError(
-            f"the stack has {sel.size} usable non-epipolar delay images at exposure {t_e:g} us with delay > "
-            f"{min_delay_us:g} us{flagged}; contrast enhancement needs at least 2"
+            f"min_delay_us = {min_delay_us:g}: the stack has {sel.size} usable non-epipolar delay images at "
+            f"exposure {t_e:g} us with a longer delay{flagged}; contrast enhancement needs at least 2"
         )
     sel = sel[np.argsort(dl[sel])]
     info = {
@@ -557,4 +561,33 @@ def delay_sweep_images(
         "excluded_delays_us": sorted(float(dl[i]) for i in left_out),
         "include_excluded": bool(include_excluded),
     }
-    return np.stack([np.asarray(stack.images[int(i)], np.float64) for i in sel]), dl[sel], info
+    return sel, dl[sel], info
+
+
+def delay_sweep_images(
+    stack,
+    *,
+    exposure_us: float | None = None,
+    min_delay_us: float = 0.0,
+    include_excluded: bool = False,
+    progress=None,
+):
+    """Delay images of one exposure with ``t_d > min_delay_us``, the band off the epipolar plane, not excluded.
+
+    Returns ``(images (N, H, W), delays_us (N,), info)`` sorted by delay: the input of
+    :func:`planeray.skin.enhance.enhance_contrast`.  Images whose band touches the epipolar
+    plane (``|t_d| <= t_e / 2``) are left out, and so are the images the stack excludes (its
+    ``excluded`` flags: boundary images, whose row artefacts would stripe Eq. 7's composite)
+    unless ``include_excluded``.  ``info``: ``exposure_us``, ``indices`` (stack images used),
+    ``excluded_delays_us`` (flagged images left out), ``include_excluded``.  ``progress``, if
+    given, is called with 1 after each image read.
+    """
+    sel, delays, info = delay_sweep_selection(
+        stack, exposure_us=exposure_us, min_delay_us=min_delay_us, include_excluded=include_excluded
+    )
+    images = np.empty((sel.size, *stack.shape), np.float64)
+    for k, i in enumerate(sel):
+        images[k] = np.asarray(stack.images[int(i)], np.float64)
+        if progress is not None:
+            progress(1)
+    return images, delays, info

@@ -51,11 +51,11 @@ def colormap_tables() -> dict[str, list[int]]:
 def check_display(*, white: float, gamma: float, colormap: str) -> None:
     """Refuse display settings that cannot be shown (one line naming the setting)."""
     if not (isinstance(white, int | float) and np.isfinite(white) and white > 0):
-        raise InputError(f"white level must be a positive number, got {white!r}")
+        raise InputError(f"white must be a positive number (the value shown white), got {white!r}")
     if not (isinstance(gamma, int | float) and np.isfinite(gamma) and 0.05 <= gamma <= 20):
         raise InputError(f"gamma must be a number in [0.05, 20], got {gamma!r}")
     if colormap not in COLORMAPS:
-        raise InputError(f"unknown colormap {colormap!r}; choose one of {', '.join(COLORMAPS)}")
+        raise InputError(f"colormap must be one of {', '.join(COLORMAPS)}, got {colormap!r}")
 
 
 def display_codes(image, *, white: float, gamma: float = 1.0) -> np.ndarray:

@@ -6,8 +6,11 @@ for the whole sweep ("all images equally brightened"), upscaled by whole pixels 
 captioned with the delay and exposure of each frame.  They are encoded by ffmpeg through
 `imageio-ffmpeg <https://github.com/imageio/imageio-ffmpeg>`_, whose wheel carries the
 ffmpeg binary (nothing to install besides the Python package).  The file is written
-atomically (:func:`planeray.io.atomic_file`); its ``comment`` metadata holds the sweep
-and display settings as JSON.
+atomically (:func:`planeray.io.atomic_file`); its ``title`` metadata is planeray's mark
+(:mod:`planeray.io.marks`: ``--overwrite`` replaces only a video planeray wrote) and its
+``comment`` metadata holds the sweep and display settings as JSON, of bounded size: the
+sweep's first and last value and its frame count, and the values themselves up to
+:data:`MAX_LISTED_VALUES` frames.
 """
 
 from __future__ import annotations
@@ -21,17 +24,48 @@ import numpy as np
 from .._validate import check_integer, check_number, check_positive
 from ..errors import InputError
 from ..io import atomic_file
-from ..io.atomic import ALREADY_EXISTS
 from .display import auto_white, check_display, to_rgb
 from .session import StackSource, ViewSettings, ViewSource
 
-__all__ = ["CODECS", "sweep_values", "write_sweep_video"]
+__all__ = [
+    "CODECS",
+    "MAX_FRAMES",
+    "FPS_RANGE",
+    "MAX_LISTED_VALUES",
+    "check_sweep_value",
+    "sweep_values",
+    "write_sweep_video",
+]
 
 #: Output suffix -> ffmpeg codec.
 CODECS = {".mp4": "libx264", ".mkv": "libx264", ".webm": "libvpx-vp9"}
 
 #: Default sweeps of a scene or transport: the paper's delays, and exposures from 1 to 2 paper maxima.
 DEFAULT_RANGE_US = {"delay": (-1500.0, 1500.0), "exposure": (100.0, 2400.0)}
+#: Most frames a sweep may have (an hour at 30 frames per second is 108,000).
+MAX_FRAMES = 100_000
+#: Frame rates a video may have, frames per second.
+FPS_RANGE = (0.1, 240.0)
+#: The sweep's values are listed in the ``comment`` metadata up to this many frames (a summary beyond).
+MAX_LISTED_VALUES = 256
+#: Kind of planeray's mark in the video's ``title``.
+VIDEO_KIND = "video"
+
+
+def _frame_us() -> float:
+    from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
+
+    return PAPER_PROJECTOR_ROWS / PAPER_LINES_PER_SECOND * 1e6
+
+
+def check_sweep_value(value, sweep: str, name: str) -> float:
+    """A delay within +-one projector sweep (13,333 us), or an exposure in (0, one sweep]."""
+    f = _frame_us()
+    if sweep == "delay":
+        return check_number(value, name, minimum=-f, maximum=f, requirement=f"a delay in us within +-{f:.0f}")
+    return check_number(
+        value, name, minimum=0.0, maximum=f, min_inclusive=False, requirement=f"an exposure in us, > 0 and <= {f:.0f}"
+    )
 
 
 def sweep_values(source: ViewSource, sweep: str, *, start_us=None, stop_us=None, frames=None) -> np.ndarray:
@@ -40,7 +74,7 @@ def sweep_values(source: ViewSource, sweep: str, *, start_us=None, stop_us=None,
         raise InputError(f"--sweep must be delay or exposure, got {sweep!r}")
     for name, value in (("--from", start_us), ("--to", stop_us)):
         if value is not None:
-            check_number(value, name)
+            check_sweep_value(value, sweep, name)
     if isinstance(source, StackSource):
         grid = source.delays if sweep == "delay" else source.exposures
         lo = grid[0] if start_us is None else start_us
@@ -52,7 +86,7 @@ def sweep_values(source: ViewSource, sweep: str, *, start_us=None, stop_us=None,
     lo, hi = DEFAULT_RANGE_US[sweep]
     lo = lo if start_us is None else float(start_us)
     hi = hi if stop_us is None else float(stop_us)
-    n = 121 if frames is None else check_integer(frames, "--frames", minimum=2)
+    n = 121 if frames is None else check_integer(frames, "--frames", minimum=2, maximum=MAX_FRAMES)
     values = np.linspace(lo, hi, n)
     if sweep == "exposure" and np.any(values <= 0):
         raise InputError(f"exposures must be positive, the sweep goes from {lo:g} to {hi:g} us")
@@ -138,19 +172,27 @@ def write_sweep_video(
     """
     import imageio_ffmpeg
 
+    from ..io.atomic import check_replaceable
+    from ..io.marks import mark_text
+
     out = Path(out)
     codec = CODECS.get(out.suffix.lower())
     if codec is None:
         raise InputError(f"--out must end in {', '.join(CODECS)}, got {out.name!r}")
-    if out.exists() and not overwrite:
-        raise InputError(ALREADY_EXISTS, out)
+    check_replaceable(out, overwrite=overwrite, kind=VIDEO_KIND)
     settings = settings or ViewSettings()
     if settings.mode != "band":
         raise InputError(f"a sweep shows band images (mode band), not {settings.mode!r}")
+    check_sweep_value(settings.delay_us, "delay", "--delay-us")
+    check_sweep_value(settings.exposure_us, "exposure", "--exposure-us")
     source.check(settings)
+    if white is not None:
+        check_positive(white, "--white")
     check_display(white=1.0 if white is None else white, gamma=gamma, colormap=colormap)
     values = sweep_values(source, sweep, start_us=start_us, stop_us=stop_us, frames=frames)
-    fps = (4.0 if isinstance(source, StackSource) else 30.0) if fps is None else check_positive(fps, "--fps")
+    if fps is None:
+        fps = 4.0 if isinstance(source, StackSource) else 30.0
+    fps = check_number(fps, "--fps", minimum=FPS_RANGE[0], maximum=FPS_RANGE[1])
     key = "delay_us" if sweep == "delay" else "exposure_us"
     frame_settings = [replace(settings, **{key: float(v)}) for v in values]
 
@@ -169,7 +211,10 @@ def write_sweep_video(
         "planeray": "video",
         "source": {"kind": source.kind, "name": source.name},
         "sweep": sweep,
-        "values_us": [float(v) for v in values],
+        "frames": int(len(values)),
+        "from_us": float(values[0]),
+        "to_us": float(values[-1]),
+        **({"values_us": [float(v) for v in values]} if len(values) <= MAX_LISTED_VALUES else {}),
         "settings": settings.to_dict(),
         "display": {"white": float(white), "gamma": float(gamma), "colormap": colormap},
         "fps": float(fps),
@@ -200,7 +245,12 @@ def write_sweep_video(
                         quality=8,
                         macro_block_size=2,
                         ffmpeg_log_level="error",
-                        output_params=["-metadata", f"comment={json.dumps(meta, separators=(',', ':'))}"],
+                        output_params=[
+                            "-metadata",
+                            f"title={mark_text(VIDEO_KIND)}",
+                            "-metadata",
+                            f"comment={json.dumps(meta, separators=(',', ':'))}",
+                        ],
                     )
                     writer.send(None)
                 writer.send(rgb.tobytes())
