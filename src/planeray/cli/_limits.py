@@ -15,7 +15,6 @@ command needs against what the machine has (:func:`check_memory`).
 from __future__ import annotations
 
 import contextlib
-import os
 from pathlib import Path
 
 from .._validate import check_integer, check_number
@@ -121,35 +120,22 @@ def folder(path, option: str = "--out") -> None:
             break
 
 
-def available_memory() -> int:
-    """Bytes of memory available to a new allocation (``MemAvailable``; else the physical memory)."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
-        return 1 << 40
+def available_memory() -> int | None:
+    """Bytes of memory available now (:func:`planeray._validate.available_memory_bytes`; None: unknown)."""
+    from .._validate import available_memory_bytes
+
+    return available_memory_bytes()
 
 
 def check_memory(nbytes: float, what: str) -> None:
     """Refuse, in one line, work whose arrays would not fit in the memory available now.
 
-    ``what`` names the options that set the size (``"--size 4096 4096 with --projector-rows 8192"``).
+    ``what`` names the options that set the size (``"--size 2048 2048"``); the check is
+    :func:`planeray._validate.check_memory`'s.
     """
-    have = available_memory()
-    if nbytes > have:
-        raise InputError(
-            f"{what} needs about {_gib(nbytes)} of memory, {_gib(have)} is available; choose smaller values"
-        )
+    from .._validate import check_memory as check
 
-
-def _gib(nbytes: float) -> str:
-    return f"{nbytes / 2**30:.1f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.0f} MiB"
+    check(nbytes, what, advice="choose smaller values", available=available_memory())
 
 
 @contextlib.contextmanager
