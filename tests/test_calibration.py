@@ -234,7 +234,9 @@ def test_write_calibration_keeps_other_fields_and_feeds_the_import(tmp_path, tar
     both = write_calibration(folder / "acquisition.json", delay_zero=dz)
     assert both["delay_zero_us"] == pytest.approx(dz.delay_zero_us)
     assert both["lines_per_second"] == pytest.approx(lines.lines_per_second)
-    assert set(both["calibration"]) == {"lines", "delay_zero"}
+    assert set(both["calibration"]) == {"lines", "delay_zero", "replaced"}
+    # the value the first calibration replaced (the export's own) is kept, not lost
+    assert both["calibration"]["replaced"] == {"lines_per_second": before["lines_per_second"]}
     # a new file is created; a broken one is refused
     assert write_calibration(tmp_path / "new" / "acquisition.json", lines=lines)["lines_per_second"] > 0
     (tmp_path / "bad.json").write_text("[1, 2]")

@@ -432,6 +432,7 @@ def test_cli_labels_skin_with_a_white_reference(tmp_path):
 
     def run(*extra):
         args = ["profiles", tmp_path / "skin.zarr", "--out", tmp_path / "p.png", "--transport", tmp_path / "T.zarr"]
+        extra = (*extra, "--overwrite")  # each run replaces the label map the previous one wrote
         return CliRunner().invoke(app, [str(a) for a in [*args, "--classify", tmp_path / "labels.png", *extra]])
 
     res = run("--direct-reference", tmp_path / "white.zarr")
@@ -456,12 +457,14 @@ def test_effects_figure_writes_strict_json(tmp_path, monkeypatch):
     monkeypatch.setattr(paper, "list_scenes", lambda: {"diffuse_plane": "", "skin": ""})
     numbers = paper.effects(tmp_path, size=64, seed=0)
     saved = json.loads((tmp_path / "effects.json").read_text(), parse_constant=_no_constant)
+    assert saved.pop("planeray_mark").startswith("planeray:record:")  # so --overwrite may replace it
     assert saved == numbers and set(saved) == {"diffuse_plane", "skin"}
     assert saved["skin"]["recall_visible"]["subsurface"] > 0.95
     assert saved["skin"]["direct_reference"] == "diffuse_plane"
     # A number with nothing to score is null, never NaN.
     paper._write_numbers(tmp_path, "x", {"overall_visible": float("nan"), "n": np.float32(2.5)})
     assert json.loads((tmp_path / "x.json").read_text(), parse_constant=_no_constant) == {
+        "planeray_mark": paper.mark_text("record"),
         "overall_visible": None,
         "n": 2.5,
     }

@@ -93,7 +93,8 @@ def test_contact_sheet_and_profiles_write_pngs(stack_path, tmp_path):
     )
     assert res.exit_code == 0, res.output
     assert (tmp_path / "p.png").exists()
-    lines = (tmp_path / "p.csv").read_text().splitlines()
+    mark, *lines = (tmp_path / "p.csv").read_text().splitlines()
+    assert mark.startswith("# planeray_mark: planeray:table:")  # so --overwrite may replace it
     assert lines[0].startswith("row,col") and len(lines) == 1 + 2 * 27
 
 
@@ -257,14 +258,16 @@ def test_mc_profile_writes_csv_json_and_png(tmp_path, monkeypatch):
     import json
 
     with open(out) as fh:
+        assert fh.readline().startswith("# planeray_mark: ")  # the mark, a comment line
         rows = list(csv.DictReader(fh))
     assert len(rows) == 21 and rows[10]["offset_rows"] == "0"
     assert float(rows[10]["exitance"]) > float(rows[0]["exitance"]) > 0
     summary = json.loads(out.with_suffix(".json").read_text())
+    assert summary["planeray_mark"].startswith("planeray:record:")
     assert abs(summary["energy_balance"] - 1.0) < 1e-9
     assert summary["params"]["sigma_a"] == 0.1 and summary["n_photons"] == 4000
     assert (tmp_path / "p.png").stat().st_size > 10_000
-    bad = invoke("mc", "profile", "--out", out, "--g", 1.5, "--photons", 10)
+    bad = invoke("mc", "profile", "--out", tmp_path / "bad.csv", "--g", 1.5, "--photons", 10)
     assert bad.exit_code != 0 and "g must lie in (-1, 1)" in bad.output
 
 
@@ -289,7 +292,7 @@ def test_mc_profile_point_source(tmp_path, monkeypatch):
         tmp_path / "r.png",
     )
     assert r.exit_code == 0, r.output
-    lines = out.read_text().splitlines()
+    lines = out.read_text().splitlines()[1:]  # after the mark
     assert lines[0].startswith("radius_bin,r_mm,exitance") and len(lines) == 1 + 9
     assert (tmp_path / "r.png").exists()
 

@@ -316,10 +316,10 @@ def test_messages_name_command_line_options(tmp_path):
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
-        (("synth", "{T}", "--band", 0, 0, "--out", "{d}/a.png"), "exposure_us must be a positive number"),
-        (("synth", "{T}", "--band", "nan", 600, "--out", "{d}/a.png"), "delay_us must be a finite number"),
-        (("synth", "{T}", "--sharpen", "nan", "--out", "{d}/a.png"), "must be a positive number"),
-        (("synth", "{T}", "--short-range", "nan", "--out", "{d}/a.png"), "must be a positive number"),
+        (("synth", "{T}", "--band", 0, 0, "--out", "{d}/a.png"), "--band (its exposure) must be a finite number > 0"),
+        (("synth", "{T}", "--band", "nan", 600, "--out", "{d}/a.png"), "--band (its delay) must be a finite number"),
+        (("synth", "{T}", "--sharpen", "nan", "--out", "{d}/a.png"), "--sharpen must be a finite number > 0"),
+        (("synth", "{T}", "--short-range", "nan", "--out", "{d}/a.png"), "--short-range must be a finite number > 0"),
         (
             ("profiles", "{S}", "--pixel", "3,3", "--exposure-us", 601, "--out", "{d}/p.png"),
             "600, 750, 900, 1050, 1200",

@@ -77,7 +77,8 @@ def test_fig12_prints_one_json_line_and_is_the_same_bytes_in_every_run_and_proce
     (line,) = res.stdout.splitlines()
     printed = json.loads(line)
     assert printed["figure"] == "fig12" and printed["json"] == str(tmp_path / "a" / "fig12.json")
-    assert printed["numbers"] == json.loads((tmp_path / "a" / "fig12.json").read_text())
+    saved = json.loads((tmp_path / "a" / "fig12.json").read_text())
+    assert saved.pop("planeray_mark").startswith("planeray:record:") and printed["numbers"] == saved
     again = fig12(tmp_path / "b", size=24, seed=1)
     assert _numbers(again) == _numbers(printed["numbers"])
     # ... and in a fresh process (its own hash seed, thread pools, caches), at a narrow terminal.
@@ -131,7 +132,8 @@ def test_figure_all_reports_all_its_work(tmp_path, bars):
     lines = [json.loads(line) for line in res.stdout.splitlines()]
     assert [x["figure"] for x in lines] == list(FIGURES)
     for x in lines:
-        assert x["numbers"] == json.loads(Path(x["json"]).read_text())
+        saved = json.loads(Path(x["json"]).read_text())
+        assert saved.pop("planeray_mark").startswith("planeray:record:") and x["numbers"] == saved
 
 
 def test_study_prints_its_findings_and_whole_paths(tmp_path, bars):
@@ -163,7 +165,7 @@ def test_mc_profile_shows_photons_traced(tmp_path, bars, monkeypatch):
     assert task["total"] == 3000
     lines = res.stdout.splitlines()
     assert f"  {out}" in lines and f"  {out.with_suffix('.json')}" in lines
-    res = runner.invoke(app, args)  # from the cache: the bar still completes
+    res = runner.invoke(app, [*args, "--overwrite"])  # from the cache: the bar still completes
     assert res.exit_code == 0, res.output
     _finished(bars)
 

@@ -560,8 +560,11 @@ def test_cli_render_projector_options_are_recorded_and_bad_values_named_as_typed
     assert attrs["rig_sources"]["projector_aspect"].startswith("planeray default: 16:9")
     bad = [
         ([*base, "--projector-columns", "50", "--projector-aspect", "1.5"], "columns or its aspect, not both"),
-        (["render", str(path), "--rows", "0"], "--rows must be an integer >= 1, got 0"),
-        (["render", str(path), "--size", "0", "4"], "--size must be an integer >= 1, got 0"),
+        (["render", str(path), "--rows", "0"], "--rows must be an integer >= 1 and <= 8192, got 0"),
+        (
+            ["render", str(path), "--size", "0", "4"],
+            "--size must be two integers H W, each >= 1 and <= 2048, got (0, 4)",
+        ),
         ([*base, "--projector-vfov", "200"], "--projector-vfov must be in (0, 180) degrees"),
         ([*base, "--variant", "cuda"], "--variant must be 'llvm' or 'scalar'"),
     ]

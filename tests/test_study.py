@@ -66,15 +66,16 @@ def test_run_study_quick_writes_files(tmp_path, provider):
         "fig6c_mse_vs_g.csv",
         "study.json",
     } <= names
-    assert json.loads((tmp_path / "study.json").read_text()) == r
+    saved = json.loads((tmp_path / "study.json").read_text())
+    assert saved.pop("planeray_mark").startswith("planeray:record:") and saved == r
     assert r["files"][-1] == str(tmp_path / "study.json") and len(r["files"]) == 11
     report = study_report(r)
     first = {m: r["noise_sweep"][m]["mean"][0] for m in study.METHODS}  # eta 0.005
     assert report[4].split() == ["0.005", *(f"{v:.1e}" for v in first.values()), min(first, key=first.get)]
     assert not any(n.startswith(".") for n in names)  # no temporaries left
-    header = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()[0]
-    assert header == "noise,seed,pinv,nnls,full"
-    assert len((tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()) == 1 + 3 * 2
+    mark, header, *rows = (tmp_path / "fig5c_mse_vs_noise.csv").read_text().splitlines()
+    assert mark.startswith("# planeray_mark: planeray:table:") and header == "noise,seed,pinv,nnls,full"
+    assert len(rows) == 3 * 2
     assert set(r["example_mse"]) == set(study.METHODS)
     assert np.array(r["regularization"]["mse"]).shape == (3, 3)
 
@@ -100,3 +101,32 @@ def test_back_scattering_degrades_the_full_method_with_monte_carlo_profiles(setu
     pinv = ps["mse"]["pinv"].mean(axis=1)
     assert full[0] > 3 * full[1]
     assert pinv[1] / full[1] > 2 * (pinv[0] / full[0])
+
+
+def test_regularization_heatmap_labels_are_readable_on_their_cells():
+    """Each cell's number contrasts with the cell (WCAG ratio >= 4.5), and no marker sits on a number."""
+    from matplotlib.colors import to_rgb
+
+    from planeray.figures.study import plot_regularization
+
+    a = b = np.array([1e-3, 1e-2, 1e-1])
+    mse = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.5]]) * 1e-4  # dark to bright (viridis)
+    fig = plot_regularization({"alphas": a, "betas": b, "mse": mse, "bias2": mse / 2}, noise=0.05)
+
+    def luminance(rgb):
+        c = np.asarray(rgb, float)
+        c = np.where(c <= 0.03928, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+
+    for ax in fig.axes[:2]:  # the two heatmaps (then their colour bars)
+        im = ax.images[0]
+        texts = [t for t in ax.texts if t.get_text()]
+        assert len(texts) == 9
+        for t in texts:
+            q, p = (int(round(v)) for v in t.get_position())
+            cell = im.cmap(im.norm(im.get_array()[p, q]))[:3]
+            hi, lo = sorted((luminance(to_rgb(t.get_color())), luminance(cell)), reverse=True)
+            assert (hi + 0.05) / (lo + 0.05) >= 4.5, (t.get_text(), t.get_color(), cell)
+        for line in ax.lines:  # the lowest-MSE marker: in a corner of its cell, off the number at its centre
+            x, y = line.get_xdata()[0], line.get_ydata()[0]
+            assert abs(x - round(x)) > 0.2 and abs(y - round(y)) > 0.2

@@ -157,7 +157,7 @@ def test_synth_cli(noise_free, tmp_path):
         ["--short-range", "40"],
         ["--long-range", "40"],
     ):
-        res = runner.invoke(app, ["synth", str(store), *args, "--out", str(tmp_path / "x.png")])
+        res = runner.invoke(app, ["synth", str(store), *args, "--out", str(tmp_path / "x.png"), "--overwrite"])
         assert res.exit_code == 0, (args, res.output)
     res = runner.invoke(app, ["synth", str(store), "--band", "0", "600", "--out", str(tmp_path / "x.tif")])
     assert res.exit_code == 0 and (tmp_path / "x.tif").exists()

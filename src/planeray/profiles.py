@@ -97,9 +97,13 @@ def write_profiles_csv(profiles: DelayProfiles, path) -> Path:
     """Write measured delay profiles as CSV (``row,col,exposure_us,delay_us,raw,normalized``), atomically.
 
     One line per pixel, exposure and delay with a measurement (missing ones are skipped).
+    The first line is planeray's mark, a comment (``# planeray_mark: planeray:table:VERSION``;
+    pandas: ``read_csv(path, comment="#")``), then the header.
     """
+    from .io.marks import MARK_KEY, mark_text
+
     prof = profiles
-    rows = ["row,col,exposure_us,delay_us,raw,normalized"]
+    rows = [f"# {MARK_KEY}: {mark_text('table')}", "row,col,exposure_us,delay_us,raw,normalized"]
     for p, (r, c) in enumerate(prof.pixels):
         for e_i, e in enumerate(prof.exposure_us):
             for d_i, d in enumerate(prof.delay_us):

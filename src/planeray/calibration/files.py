@@ -13,12 +13,25 @@ from ..linesweep import PAPER_CALIBRATION_EXPOSURE_US, LineSweep
 from .delay_zero import DelayZeroCalibration
 from .lines import LineCalibration
 
+#: The mark kind of line-sweep files (:mod:`planeray.io.marks`).
+LINE_SWEEP_KIND = "line sweep"
 
-def write_line_sweep(sweep: LineSweep, path, *, overwrite: bool = True) -> Path:
-    """Write a :class:`LineSweep` to one ``.npz`` file, atomically."""
+
+def write_line_sweep(sweep: LineSweep, path, *, overwrite: bool = False) -> Path:
+    """Write a :class:`LineSweep` to one ``.npz`` file, atomically.
+
+    The file carries planeray's mark (member ``planeray_mark``,
+    :mod:`planeray.io.marks`); an existing file is replaced only with ``overwrite``
+    and only if it is a line sweep planeray wrote
+    (:func:`planeray.io.atomic.check_replaceable`).
+    """
+    from ..io.atomic import check_replaceable
+    from ..io.marks import MARK_KEY, mark_text
+
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise InputError("a line sweep is written as .npz", path)
+    check_replaceable(path, overwrite=overwrite, kind=LINE_SWEEP_KIND)
     meta = {
         "format": "planeray-line-sweep",
         "format_version": 1,
@@ -29,13 +42,17 @@ def write_line_sweep(sweep: LineSweep, path, *, overwrite: bool = True) -> Path:
         "timing_jitter_us": sweep.timing_jitter_us,
         "metadata": jsonable(sweep.metadata, "metadata", InputError),
     }
-    arrays = {"images": np.asarray(sweep.images, np.float32), "meta": np.array(json.dumps(meta))}
+    arrays = {
+        "images": np.asarray(sweep.images, np.float32),
+        "meta": np.array(json.dumps(meta)),
+        MARK_KEY: np.array(mark_text(LINE_SWEEP_KIND)),
+    }
     for name in ("dark", "flat"):
         if getattr(sweep, name) is not None:
             arrays[name] = np.asarray(getattr(sweep, name), np.float32)
     if sweep.saturated is not None:
         arrays["saturated"] = np.asarray(sweep.saturated, bool)
-    with atomic_file(path, overwrite=overwrite) as tmp:
+    with atomic_file(path) as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
     return path
@@ -102,10 +119,77 @@ def read_line_sweep(path, *, exposure_us: float | None = None, rows_per_line: in
     )
 
 
+#: The fields of ``acquisition.json`` that :func:`write_calibration` sets (every other field is kept).
+CALIBRATION_FIELDS = (
+    "lines_per_second",
+    "lines_per_second_uncertainty",
+    "delay_zero_us",
+    "delay_zero_uncertainty_us",
+    "sync_offset_us",
+    "base_trigger_delay_us",
+)
+
+
+def _no_duplicate_keys(pairs):
+    keys = [k for k, _ in pairs]
+    twice = sorted({k for k in keys if keys.count(k) > 1})
+    if twice:
+        raise InputError(f"key {twice[0]!r} appears twice; rewriting the file would keep only one of them")
+    return dict(pairs)
+
+
+def calibration_target(path) -> tuple[Path, dict]:
+    """The ``acquisition.json`` that :func:`write_calibration` would update, and its current content.
+
+    ``path`` is a ``.json`` file (created if missing) or a folder (``path/acquisition.json``).
+    Checked before any calibration work, so a file that could not be updated is refused
+    first: another extension, a file that is not a JSON object, a key written twice (a
+    rewrite would keep one), a field ``calibration`` that is not an object (planeray
+    keeps its results there), a symbolic link or special file.
+
+    Returns
+    -------
+    path : pathlib.Path
+    content : dict
+        The file's fields (empty when it does not exist yet).
+
+    Raises
+    ------
+    InputError
+        The file cannot be updated without losing something.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "acquisition.json"
+    if path.suffix.lower() != ".json":
+        raise InputError("a calibration is written into a .json file (acquisition.json) or its folder", path)
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        raise InputError("is a symbolic link or a special file; planeray updates only plain files", path)
+    if not path.exists():
+        return path, {}
+    try:
+        acq = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=_no_duplicate_keys)
+    except InputError as exc:
+        raise InputError(exc.problem, path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read file ({exc})", path) from exc
+    except json.JSONDecodeError as exc:
+        raise InputError(f"invalid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})", path) from exc
+    if not isinstance(acq, dict):
+        raise InputError(f"expected a JSON object, got {type(acq).__name__}", path)
+    if acq.get("calibration") is not None and not isinstance(acq["calibration"], dict):
+        raise InputError(
+            f"field 'calibration' is a {type(acq['calibration']).__name__}, not an object; planeray keeps its "
+            "results there (rename the field to keep it)",
+            path,
+        )
+    return path, acq
+
+
 def write_calibration(
     path, *, lines: LineCalibration | None = None, delay_zero: DelayZeroCalibration | None = None
 ) -> dict:
-    """Store calibration results in an ``acquisition.json``, keeping its other fields.
+    """Store calibration results in an ``acquisition.json``, keeping every other field.
 
     Writes ``lines_per_second`` (the field the stack import requires),
     ``lines_per_second_uncertainty``, ``delay_zero_us``,
@@ -114,9 +198,16 @@ def write_calibration(
     ``planeray acquire --calibration``) when the delay-zero result has one --
     and removes a previous one when it has not, so the file never pairs a new
     delay zero with an old base -- and the full results under
-    ``calibration.lines`` / ``calibration.delay_zero``.  The file
-    (or ``path/acquisition.json`` when ``path`` is a folder) is created if missing
-    and replaced atomically.
+    ``calibration.lines`` / ``calibration.delay_zero``.
+
+    Nothing of the file is lost: every other field (and its order) is kept, and a
+    value that a new calibration changes or removes is kept under
+    ``calibration.replaced`` (``{"lines_per_second": 52000.0, ...}``, the values as
+    they were before the latest update), so an old calibration can be restored by
+    hand.  The file (or ``path/acquisition.json`` when ``path`` is a folder) is created
+    if missing and replaced atomically (a temporary sibling renamed into place: a
+    crash leaves the old file or the new one, never half of either); see
+    :func:`calibration_target` for what is refused.
 
     Returns
     -------
@@ -126,25 +217,14 @@ def write_calibration(
     Raises
     ------
     InputError
-        Nothing to write, or an existing file that is not a JSON object.
+        Nothing to write, or a file that cannot be updated (:func:`calibration_target`).
     """
 
     if lines is None and delay_zero is None:
         raise InputError("nothing to write: give a line-velocity and/or a delay-zero calibration")
-    path = Path(path)
-    if path.is_dir():
-        path = path / "acquisition.json"
-    acq: dict = {}
-    if path.exists():
-        try:
-            acq = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"cannot read file ({exc})", path) from exc
-        except json.JSONDecodeError as exc:
-            raise InputError(f"invalid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})", path) from exc
-        if not isinstance(acq, dict):
-            raise InputError(f"expected a JSON object, got {type(acq).__name__}", path)
-    cal = dict(acq.get("calibration") or {}) if isinstance(acq.get("calibration"), dict) else {}
+    path, acq = calibration_target(path)
+    old = dict(acq)
+    cal = dict(acq.get("calibration") or {})
     if lines is not None:
         acq["lines_per_second"] = float(lines.lines_per_second)
         acq["lines_per_second_uncertainty"] = float(lines.uncertainty)
@@ -158,8 +238,14 @@ def write_calibration(
         else:
             acq.pop("base_trigger_delay_us", None)
         cal["delay_zero"] = delay_zero.to_dict()
+    replaced = {k: old[k] for k in CALIBRATION_FIELDS if k in old and acq.get(k, _MISSING) != old[k]}
+    if replaced:
+        cal["replaced"] = {**(cal.get("replaced") if isinstance(cal.get("replaced"), dict) else {}), **replaced}
     acq["calibration"] = cal
     acq = jsonable(acq, "acquisition.json", InputError)
     with atomic_file(path) as tmp:
         tmp.write_text(json.dumps(acq, indent=2) + "\n", encoding="utf-8")
     return acq
+
+
+_MISSING = object()

@@ -52,13 +52,13 @@ def _as_typed(text: str, options: dict) -> str:
 
     Only a parameter that a message is *about* is renamed: ``NAME must ...``, ``NAME = ...``,
     ``NAME=...`` and ``NAME[0] must ...`` (one element of a tuple option such as ``shape`` ->
-    ``--size``) -- never a word of other text ("cannot read the vein mask: ...") nor a Python keyword
-    argument quoted as such ("or overwrite=True").
+    ``--size``) -- never a word of other text ("cannot read the vein mask: ..."), a device option
+    (``-O size must ...``) nor a Python keyword argument quoted as such ("or overwrite=True").
     """
     import re
 
     for name in sorted(options, key=len, reverse=True):
-        pattern = rf"(?<![\w\-.]){re.escape(name)}(\[\d+\])?(?=( must\b| = |=(?!True\b|False\b)))"
+        pattern = rf"(?<![\w\-.])(?<!-O ){re.escape(name)}(\[\d+\])?(?=( must\b| = |=(?!True\b|False\b)))"
         text = re.sub(pattern, options[name], text)
     return text
 

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 from typing import Annotated
@@ -14,8 +15,37 @@ import numpy as np
 import typer
 
 from .._console import console, out
+from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
-from ._common import _friendly_errors, _save_image
+from . import _limits as lim
+from ._common import _check_outputs, _friendly_errors, _save_image
+
+#: The images each command writes (a .png preview and a .tif of the values each) and its numbers file.
+EMULATE_IMAGES = ("emulated", "synchronized", "truth")
+SEPARATE_IMAGES = ("nayar_direct", "nayar_global", "epipolar", "truth_direct", "truth_global")
+
+
+def _outputs(out_dir: Path, images, name: str) -> list:
+    files = [(out_dir / f"{key}{ext}", "image") for key in images for ext in (".png", ".tif")]
+    return files + [(out_dir / f"{name}.json", "record")]
+
+
+def _check_common(out_dir: Path, images, name: str, *, overwrite: bool, size, projector_rows, seed, ambient_e_per_us):
+    """Everything these commands take, checked before any work (the outputs first)."""
+    lim.folder(out_dir, "--out")
+    _check_outputs(*_outputs(out_dir, images, name), overwrite=overwrite)
+    size = lim.size(size)
+    lim.projector_rows(projector_rows)
+    lim.seed(seed)
+    lim.nonnegative(ambient_e_per_us, "--ambient-e-per-us", maximum=1e6)
+    lim.check_memory(size[0] * size[1] * (257 * 4 * 3 + 200 * 8), f"--size {size[0]} {size[1]}")
+    return size
+
+
+def _scan_time_us(projector_rows, lines_per_second: float = PAPER_LINES_PER_SECOND) -> float:
+    """The time the projector takes to scan all its rows (us): no delay or exposure means more."""
+    return 1e6 * (projector_rows or PAPER_PROJECTOR_ROWS) / lines_per_second
+
 
 separate_app = typer.Typer(help="Conventional projector-camera baselines (Nayar et al. 2006).", no_args_is_help=True)
 
@@ -45,26 +75,47 @@ def _sim_device(
 def _write_results(out_dir: Path, images: dict, numbers: dict, name: str):
     from ..figures._common import display_scale
     from ..io import atomic_file
+    from ..io.marks import MARK_KEY, mark_text
 
+    created = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
     valid = [im for im in images.values() if im is not None]
     scale = display_scale(valid, percentile=99.5)  # one brightening for all, so they compare
-    for key, image in images.items():
-        if image is not None:
-            _save_image(np.nan_to_num(image), out_dir / f"{key}.png", scale_to=scale)
-            _save_image(np.clip(np.nan_to_num(image), 0, 1), out_dir / f"{key}.tif")
-    with atomic_file(out_dir / f"{name}.json") as tmp:
-        tmp.write_text(json.dumps(numbers, indent=2, default=float))
-    out.print(f"{name}: {out_dir}  {json.dumps(numbers.get('n_captures', {}))}")
+    files = [path for path, _ in _outputs(out_dir, images, name)]
+    try:
+        with lim.written_together(*files):  # all of them, or none of those this run creates
+            for key, image in images.items():
+                if image is not None:
+                    _save_image(np.nan_to_num(image), out_dir / f"{key}.png", scale_to=scale)
+                    _save_image(np.clip(np.nan_to_num(image), 0, 1), out_dir / f"{key}.tif")
+            with atomic_file(out_dir / f"{name}.json") as tmp:
+                tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **numbers}, indent=2, default=float))
+    except BaseException:
+        if created:
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()  # the folder this run made, if nothing else is in it
+        raise
+    out.print(f"{name}: {out_dir}  {json.dumps(numbers.get('n_captures', {}))}", markup=False, highlight=False)
     errors = numbers.get("errors", {})
     for key, value in errors.items():
         overall = value.get("all", value) if isinstance(value, dict) else value
         if isinstance(overall, dict) and "relative_rmse" in overall:
-            out.print(f"  {key:28s} relative RMSE {overall['relative_rmse']:.4f}  MAE {overall['mae']:.4g}")
+            rmse, mae = overall["relative_rmse"], overall["mae"]
+            rmse = "n/a (no light in the truth)" if rmse is None else f"{rmse:.4f}"
+            mae = "n/a" if mae is None else f"{mae:.4g}"
+            out.print(f"  {key:28s} relative RMSE {rmse}  MAE {mae}", markup=False, highlight=False)
 
 
 @separate_app.command("direct-global")
-@_friendly_errors
+@_friendly_errors(
+    options={
+        "n_shifts": "--shifts",
+        "low": "--contrast-b",
+        "period_rows": "--period-rows",
+        "exposure_us": "--epipolar-exposure-us",
+        "shape": "--size",
+    }
+)
 def separate_direct_global(
     scene: Annotated[str, typer.Argument(help="Built-in scene (simulated conventional projector-camera).")],
     out_dir: Annotated[
@@ -97,10 +148,35 @@ def separate_direct_global(
         ),
     ] = 0.01,
     noise: Annotated[bool, typer.Option(help="Simulate noise.")] = True,
+    overwrite: Annotated[bool, typer.Option(help="Replace the files a previous run wrote (only those).")] = False,
 ):
-    """Direct/global separation with shifted stripes vs synchronized epipolar imaging, against ground truth."""
+    """Direct/global separation with shifted stripes vs synchronized epipolar imaging, against ground truth.
+
+    Writes ``nayar_direct``, ``nayar_global``, ``epipolar``, ``truth_direct`` and
+    ``truth_global`` (.png preview, .tif values) and ``direct_global.json`` into
+    ``--out``, a folder that may hold other files; each is checked before any work.
+    """
     from ..baselines import compare_direct_global
 
+    size = _check_common(
+        out_dir,
+        SEPARATE_IMAGES,
+        "direct_global",
+        overwrite=overwrite,
+        size=size,
+        projector_rows=projector_rows,
+        seed=seed,
+        ambient_e_per_us=ambient_e_per_us,
+    )
+    P = projector_rows or PAPER_PROJECTOR_ROWS
+    if period_rows is not None:
+        if period_rows < 2 or period_rows % 2 or period_rows > P:
+            raise InputError(f"--period-rows must be an even number in 2..{P} (--projector-rows), got {period_rows}")
+    if shifts is not None:
+        top = period_rows if period_rows is not None else P
+        lim.integer(shifts, "--shifts", minimum=2, maximum=top)
+    lim.number(contrast_b, "--contrast-b", minimum=0.0, maximum=1.0, max_inclusive=False)
+    lim.positive(epipolar_exposure_us, "--epipolar-exposure-us", maximum=_scan_time_us(P))
     dev = _sim_device(scene, size, projector_rows, seed, ambient_e_per_us, noise)
     with console.status("capturing stripe patterns and the epipolar image"):
         res = compare_direct_global(
@@ -120,7 +196,7 @@ def separate_direct_global(
     _write_results(out_dir, images, res["numbers"], "direct_global")
 
 
-@_friendly_errors
+@_friendly_errors(options={"shape": "--size"})
 def emulate(
     scene: Annotated[str, typer.Argument(help="Built-in scene (simulated conventional projector-camera).")],
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for images and numbers.")],
@@ -138,10 +214,30 @@ def emulate(
         float, typer.Option("--ambient-e-per-us", "--ambient", help="Room light, electrons per microsecond.")
     ] = 0.01,
     noise: Annotated[bool, typer.Option(help="Simulate noise.")] = True,
+    overwrite: Annotated[bool, typer.Option(help="Replace the files a previous run wrote (only those).")] = False,
 ):
-    """Digital epipolar emulation (Sec. 5.1, Fig. 4): one band per capture vs one synchronized capture."""
+    """Digital epipolar emulation (Sec. 5.1, Fig. 4): one band per capture vs one synchronized capture.
+
+    Writes ``emulated``, ``synchronized`` and ``truth`` (.png preview, .tif values) and
+    ``emulation.json`` into ``--out``, a folder that may hold other files; each is
+    checked before any work.
+    """
     from ..baselines import compare_emulation
 
+    size = _check_common(
+        out_dir,
+        EMULATE_IMAGES,
+        "emulation",
+        overwrite=overwrite,
+        size=size,
+        projector_rows=projector_rows,
+        seed=seed,
+        ambient_e_per_us=ambient_e_per_us,
+    )
+    scan = _scan_time_us(projector_rows)
+    lim.number(delay_us, "--delay-us", minimum=-scan, maximum=scan)
+    lim.positive(exposure_us, "--exposure-us", maximum=scan)
+    lim.optional(lim.integer, spacing_rows, "--spacing-rows", minimum=1, maximum=size[0])
     dev = _sim_device(scene, size, projector_rows, seed, ambient_e_per_us, noise)
     with console.status("sweeping the band one row at a time"):
         res = compare_emulation(dev, delay_us=delay_us, exposure_us=exposure_us, spacing_rows=spacing_rows)

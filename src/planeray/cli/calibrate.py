@@ -10,11 +10,30 @@ import numpy as np
 import typer
 
 from .._console import out
+from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND
-from ._common import _friendly_errors, _load_stack
-from ._devices import CalibrationArg, DeviceOptionArg, close_device, device_options_from_cli
+from . import _limits as lim
+from ._common import _check_outputs, _friendly_errors, _load_stack
+from ._devices import CalibrationArg, DeviceOptionArg, close_device, open_device_from_cli
 
 calibrate_app = typer.Typer(help="Calibration (Sec. 6): line velocity v_p and delay zero.", no_args_is_help=True)
+
+
+#: Longest exposure of a calibration capture (us): a little over one 60 Hz projector frame.
+MAX_CALIBRATION_EXPOSURE_US = 20_000.0
+#: Projector frame periods of the base-trigger search (us): 1 kHz to 1 Hz.
+FRAME_PERIOD_RANGE_US = (1_000.0, 1_000_000.0)
+
+
+def _check_write_target(write: Path | None) -> None:
+    """Refuse, before any work, an acquisition.json that could not be updated without loss."""
+    if write is not None:
+        from ..calibration.files import calibration_target
+
+        try:
+            calibration_target(write)
+        except InputError as exc:
+            raise InputError(f"--write: {exc}") from None
 
 
 def _report_calibration(result, write: Path | None, as_json: bool, key: str):
@@ -44,16 +63,33 @@ def calibrate_lines(
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
 ):
-    """Projector scanline velocity v_p = n_lines / t_e from a line-sweep capture, with its uncertainty."""
+    """Projector scanline velocity v_p = n_lines / t_e from a line-sweep capture, with its uncertainty.
+
+    ``--write`` updates (or creates) an acquisition.json: it sets the calibration
+    fields and keeps every other field; a value it changes is kept under
+    ``calibration.replaced``.  The file is checked before any work and replaced
+    atomically.
+    """
     from ..calibration import calibrate_lines_per_second, read_line_sweep
 
+    lim.optional(lim.positive, exposure_us, "--exposure-us", maximum=MAX_CALIBRATION_EXPOSURE_US)
+    lim.optional(lim.integer, rows_per_line, "--rows-per-line", minimum=1, maximum=lim.MAX_PROJECTOR_ROWS)
+    _check_write_target(write)
     result = calibrate_lines_per_second(read_line_sweep(path, exposure_us=exposure_us, rows_per_line=rows_per_line))
+    if not lim.MIN_LINES_PER_SECOND <= result.lines_per_second <= lim.MAX_LINES_PER_SECOND:
+        raise InputError(
+            f"{result.n_lines:.2f} lines in {result.exposure_us:g} us make {result.lines_per_second:,.0f} lines/s, "
+            f"outside what a raster projector scans ({lim.MIN_LINES_PER_SECOND:,.0f}-{lim.MAX_LINES_PER_SECOND:,.0f}); "
+            "check --exposure-us (the capture's global-shutter exposure)"
+        )
     _report_calibration(result, write, as_json, "lines")
     if not as_json:
         out.print(
             f"lines_per_second = {result.lines_per_second:,.0f} +- {result.uncertainty:,.0f} (1 sigma, "
             f"{result.relative_uncertainty * 100:.2f} %) from {result.n_lines:.2f} lines in {result.exposure_us:g} us"
-            + (f"; written to {write}" if write else "")
+            + (f"; written to {write}" if write else ""),
+            markup=False,
+            highlight=False,
         )
 
 
@@ -70,16 +106,33 @@ def calibrate_simulate_lines(
     projector_rows: Annotated[int, typer.Option(help="Projector rows spanned by the image.")] = 96,
     exposure_us: Annotated[float, typer.Option(help="Global-shutter exposure (us).")] = 500.0,
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
+    overwrite: Annotated[bool, typer.Option(help="Replace a line sweep planeray wrote.")] = False,
 ):
     """Capture a line-velocity calibration on the simulated device (a diffuse target)."""
     from ..calibration import write_line_sweep
+    from ..calibration.files import LINE_SWEEP_KIND
     from ..devices import SimulatedEpiscan
     from ..scenes import make_scene
 
+    if out_path.suffix.lower() != ".npz":
+        raise InputError(f"--out must end in .npz (a line sweep), got {out_path.name}")
+    _check_outputs((out_path, LINE_SWEEP_KIND), overwrite=overwrite)
+    lim.lines_per_second(lines_per_second)
+    size = lim.size(size)
+    lim.projector_rows(projector_rows)
+    lim.positive(exposure_us, "--exposure-us", maximum=MAX_CALIBRATION_EXPOSURE_US)
+    lim.seed(seed)
     scene = make_scene("diffuse_plane", size, projector_rows=projector_rows, seed=seed)
     dev = SimulatedEpiscan(scene, lines_per_second=lines_per_second, seed=seed)
-    path = write_line_sweep(dev.capture_line_sweep(exposure_us=exposure_us), out_path)
-    out.print(f"line sweep: {path}  (true lines_per_second {lines_per_second:,.0f})")
+    try:
+        sweep = dev.capture_line_sweep(exposure_us=exposure_us)
+    except ValueError as exc:  # the geometry: the lines must be resolved and fit on the projector
+        raise InputError(
+            f"--exposure-us {exposure_us:g} at --lines-per-second {lines_per_second:g} with --size {size[0]} "
+            f"{size[1]} and --projector-rows {projector_rows}: {exc}"
+        ) from None
+    path = write_line_sweep(sweep, out_path, overwrite=overwrite)
+    out.print(f"line sweep: {path}  (true lines_per_second {lines_per_second:,.0f})", markup=False, highlight=False)
 
 
 @calibrate_app.command("delay-zero")
@@ -100,14 +153,22 @@ def calibrate_delay_zero_cmd(
         typer.Option(help="--device: a known base trigger delay (us) to refine; skips the search over one frame."),
     ] = None,
     sweep: Annotated[
-        str, typer.Option(help="--device: the sweep the base must serve (the base exceeds its largest t'_o).")
-    ] = "paper",
+        str | None,
+        typer.Option(
+            help="--device: the sweep the base must serve (the base exceeds its largest t'_o).", show_default="paper"
+        ),
+    ] = None,
     frame_period_us: Annotated[
-        float, typer.Option(help="--device: projector frame period (us), the range of the search.")
-    ] = 1e6 / 60.0,  # a 60 Hz projector (planeray.calibration.PROJECTOR_FRAME_PERIOD_US)
+        float | None,
+        typer.Option(
+            help="--device: projector frame period (us), the range of the search.", show_default="16666.7 (60 Hz)"
+        ),
+    ] = None,
     simulate: Annotated[bool, typer.Option(help="Sweep the simulated device instead of reading a stack.")] = False,
-    delay_error_us: Annotated[float, typer.Option(help="--simulate: hidden sync error to recover (us).")] = 0.0,
-    seed: Annotated[int, typer.Option(help="--simulate: seed.")] = 0,
+    delay_error_us: Annotated[
+        float | None, typer.Option(help="--simulate: hidden sync error to recover (us).", show_default="0")
+    ] = None,
+    seed: Annotated[int | None, typer.Option(help="--simulate: seed.", show_default="0")] = None,
     write: Annotated[
         Path | None,
         typer.Option(help="Write delay_zero_us (and base_trigger_delay_us) into this acquisition.json (or folder)."),
@@ -120,9 +181,11 @@ def calibrate_delay_zero_cmd(
     live and turned into the camera's base trigger delay, the trigger delay at
     t'_o = 0, which ``--write`` stores for ``planeray acquire --calibration``.  A
     stack captured by the uEye driver gives it too (its metadata holds the base
-    it was captured with).
+    it was captured with).  ``--write`` keeps every other field of the file (a
+    value it changes or removes is kept under ``calibration.replaced``).
     """
     from ..calibration import (
+        PROJECTOR_FRAME_PERIOD_US,
         calibrate_base_trigger_delay,
         calibrate_delay_zero,
         delay_zero_sweep,
@@ -132,20 +195,49 @@ def calibrate_delay_zero_cmd(
 
     if sum((stack_path is not None, simulate, device is not None)) > 1:
         raise ValueError("give one of STACK, --device or --simulate")
+    given = {
+        "--base-trigger-delay-us": (base_trigger_delay_us, device is not None),
+        "--sweep": (sweep, device is not None),
+        "--frame-period-us": (frame_period_us, device is not None),
+        "--device-option": (device_option or None, device is not None),
+        "--calibration": (calibration, device is not None),
+        "--delay-error-us": (delay_error_us, simulate),
+        "--seed": (seed, simulate),
+    }
+    for option, (value, applies) in given.items():
+        if value is not None and not applies:
+            mode = "--simulate" if option in ("--delay-error-us", "--seed") else "--device"
+            raise InputError(f"{option} applies to {mode} only")
+    lim.positive(exposure_us, "--exposure-us", maximum=MAX_CALIBRATION_EXPOSURE_US)
+    lim.optional(lim.nonnegative, base_trigger_delay_us, "--base-trigger-delay-us", maximum=lim.MAX_TIME_US)
+    lim.optional(
+        lim.number,
+        frame_period_us,
+        "--frame-period-us",
+        minimum=FRAME_PERIOD_RANGE_US[0],
+        maximum=FRAME_PERIOD_RANGE_US[1],
+    )
+    seed = lim.seed(0 if seed is None else seed)
+    delay_error_us = lim.number(0.0 if delay_error_us is None else delay_error_us, "--delay-error-us")
+    reach = max(0.5 * exposure_us, 250.0)  # the fine sweep brackets the plateau by this much on each side
+    if abs(delay_error_us) > reach:
+        raise InputError(
+            f"--delay-error-us must be within +-{reach:g} us at --exposure-us {exposure_us:g} (the fine delay sweep "
+            f"brackets the epipolar plateau by that much), got {delay_error_us:g}"
+        )
+    _check_write_target(write)
     if device is not None:
-        from ..devices import open_device
-        from ..timing import make_sweep
-
-        options = device_options_from_cli(device, {}, device_option, calibration)
-        dev = open_device(device, **options)
+        if sweep is not None:
+            lim.sweep(sweep)
+        dev = open_device_from_cli(device, {}, device_option, calibration)
         try:
             if hasattr(dev, "base_trigger_delay_us"):  # a camera triggered by VSYNC: find its base
                 result = calibrate_base_trigger_delay(
                     dev,
                     exposure_us=exposure_us,
-                    sweeps=[make_sweep(sweep)],
+                    sweeps=[lim.sweep(sweep or "paper")],
                     base_trigger_delay_us=base_trigger_delay_us,
-                    frame_period_us=frame_period_us,
+                    frame_period_us=PROJECTOR_FRAME_PERIOD_US if frame_period_us is None else frame_period_us,
                 )
             else:
                 sw = delay_zero_sweep(exposure_us=exposure_us)
@@ -173,11 +265,18 @@ def calibrate_delay_zero_cmd(
         st = _load_stack(stack_path)
         idx = np.flatnonzero(np.isclose(st.exposure_us, exposure_us))
         if idx.size < 5:
-            raise ValueError(f"{stack_path}: needs at least 5 images at exposure {exposure_us:g} us, found {idx.size}")
+            have = ", ".join(f"{e:g}" for e in st.exposures())
+            raise InputError(
+                f"{stack_path}: needs at least 5 images at --exposure-us {exposure_us:g}, found {idx.size} "
+                f"(its exposures: {have} us)"
+            )
         images = np.stack([st.image(int(i)) for i in idx])
-        result = calibrate_delay_zero(
-            images, st.delay_us[idx], exposure_us=exposure_us, lines_per_second=st.lines_per_second
-        )
+        try:
+            result = calibrate_delay_zero(
+                images, st.delay_us[idx], exposure_us=exposure_us, lines_per_second=st.lines_per_second
+            )
+        except InputError as exc:
+            raise InputError(f"{stack_path}: {exc}") from None
         base_used = st.metadata.get("base_trigger_delay_us")
         if isinstance(base_used, (int, float)) and not isinstance(base_used, bool):
             result = with_base_trigger_delay(result, float(base_used))
@@ -188,11 +287,15 @@ def calibrate_delay_zero_cmd(
             f"delay zero = {result.delay_zero_us:+.2f} +- {result.uncertainty_us:.2f} us (commanded delay of the true "
             f"epipolar centre); sync offset t'_o = {result.sync_offset_us:.2f} us"
             + (f"; base trigger delay = {base:.2f} us" if base is not None else "")
-            + (f"; written to {write}" if write else "")
+            + (f"; written to {write}" if write else ""),
+            markup=False,
+            highlight=False,
         )
         if base is not None and result.details.get("fits_sweeps") is False:
             out.print(
-                f"note: the base is below {result.details['required_base_us']:.1f} us, the least the {sweep!r} sweep "
-                "needs: its earliest points will be refused. Calibrate again without --base-trigger-delay-us "
-                "(the search picks a base that fits)."
+                f"note: the base is below {result.details['required_base_us']:.1f} us, the least the "
+                f"{sweep or 'paper'!r} sweep needs: its earliest points will be refused. Calibrate again without "
+                "--base-trigger-delay-us (the search picks a base that fits).",
+                markup=False,
+                highlight=False,
             )

@@ -9,7 +9,16 @@ import numpy as np
 import typer
 
 from .._console import console, out, progress_bar
-from ._common import StackArg, _friendly_errors, _load_stack
+from ..errors import InputError
+from . import _limits as lim
+from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack
+
+#: The solvers of ``--method``.
+METHODS = ("fast", "pinv", "nnls", "cvxpy")
+#: Largest smoothness or sparsity weight (the Sec. 5.2 study sweeps up to 1e4).
+MAX_WEIGHT = 1e6
+#: Most Dask workers of a local cluster.
+MAX_WORKERS = 1024
 
 
 @_friendly_errors
@@ -38,6 +47,14 @@ def demux(
         raise ValueError("give --workers or --scheduler, not both")
     if Path(out_path).resolve() == Path(stack_path).resolve():
         raise ValueError(f"{out_path}: is the input stack; name another output")
+    _check_outputs((out_path, "transport"), overwrite=overwrite)
+    lim.nonnegative(alpha, "--alpha", maximum=MAX_WEIGHT)
+    lim.nonnegative(beta, "--beta", maximum=MAX_WEIGHT)
+    if method not in METHODS:
+        raise InputError(f"--method {method}: unknown demultiplexing method; choose one of {', '.join(METHODS)}")
+    lim.optional(lim.integer, workers, "--workers", minimum=1, maximum=MAX_WORKERS)
+    lim.integer(chunk_rows, "--chunk-rows", minimum=1, maximum=lim.MAX_SIDE)
+    lim.optional(lim.number, tol, "--tol", minimum=0.0, maximum=1.0, min_inclusive=False, max_inclusive=False)
     st = _load_stack(stack_path)
     t0 = time.perf_counter()
     with progress_bar() as bar:

@@ -9,13 +9,22 @@ from typing import Annotated
 import typer
 
 from .._console import print_verbatim, progress_bar
-from ._common import _friendly_errors
+from ..errors import InputError
+from . import _limits as lim
+from ._common import _check_outputs, _friendly_errors
+
+#: Largest scattering or absorption coefficient (1/mm): a mean free path of 0.1 micrometre.
+MAX_COEFFICIENT = 1e4
+#: Longest length (mm): a kilometre.
+MAX_MM = 1e6
+#: Most photon packets of one run (1e10 takes hours).
+MAX_PHOTONS = 10**10
 
 mc_app = typer.Typer(help="Monte Carlo subsurface scattering (HG slab, line source).", no_args_is_help=True)
 
 
 @mc_app.command("profile")
-@_friendly_errors
+@_friendly_errors(options={"n_photons": "--photons", "offsets_rows": "--rows", "mm_per_bin": "--mm-per-row"})
 def mc_profile(
     out_path: Annotated[
         Path,
@@ -54,8 +63,16 @@ def mc_profile(
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
     plot: Annotated[Path | None, typer.Option(help="Also write a PNG of the profile against the dipole.")] = None,
     cache: Annotated[bool, typer.Option(help="Reuse/keep the result in the on-disk cache.")] = True,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace the CSV, its JSON and the plot a previous run wrote (only those).")
+    ] = False,
 ):
-    """Line-source (or --point) exit profile of a homogeneous HG medium (Sec. 5.2), with Monte Carlo errors."""
+    """Line-source (or --point) exit profile of a homogeneous HG medium (Sec. 5.2), with Monte Carlo errors.
+
+    Writes the CSV (``--out``; its first line is planeray's mark, a ``#`` comment), its
+    JSON sidecar (same name, ``.json``) and, with ``--plot``, a PNG; all three are checked
+    before any photon is traced.
+    """
     import time
 
     import numpy as np
@@ -64,6 +81,25 @@ def mc_profile(
     from ..mc.report import write_profile
     from ..medium import Medium
 
+    if out_path.suffix.lower() != ".csv":
+        raise InputError(f"--out must end in .csv (the JSON sidecar goes beside it), got {out_path.name}")
+    if plot is not None and plot.suffix.lower() != ".png":
+        raise InputError(f"--plot must end in .png, got {plot.name}")
+    _check_outputs(
+        (out_path, "table"), (out_path.with_suffix(".json"), "record"), (plot, "figure"), overwrite=overwrite
+    )
+    for option, value in (("--sigma-s", sigma_s), ("--sigma-a", sigma_a)):
+        lim.nonnegative(value, option, maximum=MAX_COEFFICIENT)
+    lim.number(n, "--n", minimum=0.1, maximum=10.0)
+    if thickness_mm is not None and thickness_mm != float("inf"):
+        lim.positive(thickness_mm, "--thickness-mm", maximum=MAX_MM)
+    lim.integer(photons, "--photons", minimum=1, maximum=MAX_PHOTONS)
+    lim.integer(rows, "--rows", minimum=0, maximum=100_000)
+    lim.positive(mm_per_row, "--mm-per-row", maximum=1_000.0)
+    lim.nonnegative(source_width_mm, "--source-width-mm", maximum=1_000.0)
+    lim.optional(lim.positive, cutoff_mm, "--cutoff-mm", maximum=MAX_MM)
+    lim.nonnegative(diffusion_depth_mfp, "--diffusion-depth-mfp", maximum=1e6)
+    lim.seed(seed)
     t0 = time.perf_counter()
     thickness = np.inf if thickness_mm is None else thickness_mm
     medium = Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n, thickness_mm=thickness)
@@ -95,7 +131,12 @@ def mc_profile(
                 progress=advance,
             )
     dt = time.perf_counter() - t0
-    csv_path, json_path = write_profile(prof, out_path)
+    with lim.written_together(out_path, out_path.with_suffix(".json"), plot):  # the three, or none of them
+        csv_path, json_path = write_profile(prof, out_path)
+        if plot is not None:
+            from ..figures.mc import mc_profile_figure
+
+            mc_profile_figure(prof, out=plot)
     print_verbatim(
         f"diffuse reflectance {prof.total_reflectance:.5f} +- {prof.total_reflectance_stderr:.5f}, "
         f"specular {prof.specular_reflectance:.5f}, transmitted {prof.transmittance:.5f}, "
@@ -104,7 +145,4 @@ def mc_profile(
     print_verbatim(f"{prof.n_interactions / max(prof.n_photons, 1):.0f} collisions per photon, {dt:.1f} s")
     print_verbatim(f"  {csv_path}\n  {json_path}")
     if plot is not None:
-        from ..figures.mc import mc_profile_figure
-
-        mc_profile_figure(prof, out=plot)
         print_verbatim(f"  {plot}")

@@ -10,7 +10,28 @@ from rich.table import Table
 
 from .._console import console, out, progress_bar
 from ..timing import PAPER_LINES_PER_SECOND
+from . import _limits as lim
 from ._common import _check_outputs, _friendly_errors
+
+#: Most electrons a camera model takes (full well, laser, per microsecond of ambient light x 1e3).
+MAX_ELECTRONS = 1e9
+#: Longest timing jitter (us): beyond 10 ms the bands of a 60 Hz projector are gone.
+MAX_JITTER_US = 10_000.0
+#: Most frames averaged per image.
+MAX_FRAMES = 65_536
+
+
+def check_camera_options(
+    *, frames, full_well_e, read_noise_e, laser_electrons, ambient_e_per_us, jitter_us, row_jitter_us
+) -> None:
+    """The camera model's options, where they are parsed (the ranges a camera has)."""
+    lim.integer(frames, "--frames", minimum=1, maximum=MAX_FRAMES)
+    lim.positive(full_well_e, "--full-well-e", maximum=MAX_ELECTRONS)
+    lim.nonnegative(read_noise_e, "--read-noise-e", maximum=full_well_e)
+    lim.positive(laser_electrons, "--laser-electrons", maximum=MAX_ELECTRONS)
+    lim.nonnegative(ambient_e_per_us, "--ambient-e-per-us", maximum=MAX_ELECTRONS / 1e3)
+    lim.nonnegative(jitter_us, "--jitter-us", maximum=MAX_JITTER_US)
+    lim.nonnegative(row_jitter_us, "--row-jitter-us", maximum=MAX_JITTER_US)
 
 
 @_friendly_errors
@@ -108,9 +129,23 @@ def simulate(
     from ..io import store_format, write_stack, write_transport
     from ..scenes import make_scene
     from ..scenes.store_scene import scene_from_transport_store
-    from ..timing import make_sweep
 
     _check_outputs((out_path, "stack"), (truth, "transport"), overwrite=overwrite)
+    if size is not None:
+        size = lim.size(size, minimum=1)
+    lim.projector_rows(projector_rows)
+    lim.seed(seed)
+    lim.lines_per_second(lines_per_second)
+    sw = lim.sweep(sweep)
+    check_camera_options(
+        frames=frames,
+        full_well_e=full_well_e,
+        read_noise_e=read_noise_e,
+        laser_electrons=laser_electrons,
+        ambient_e_per_us=ambient_e_per_us,
+        jitter_us=jitter_us,
+        row_jitter_us=row_jitter_us,
+    )
     render_options = {
         "--spp": ("spp", spp),
         "--batch-spp": ("batch_spp", batch_spp),
@@ -135,6 +170,26 @@ def simulate(
             f"{scene}: not a transport store (no planeray-transport format attribute); simulate sweeps a built-in "
             "scene (`planeray scenes`), mitsuba:FILE.xml or a transport store"
         )
+    if scene.startswith("mitsuba:"):
+        from .render import check_render_options
+
+        check_render_options(
+            size=size or (128, 128),
+            rows=projector_rows or (size or (128, 128))[0],
+            spp=spp,
+            batch_spp=batch_spp,
+            caustics=caustics,
+            band_rows=band_rows,
+            max_depth=max_depth,
+            baseline=baseline,
+            projector_aspect=projector_aspect,
+            projector_columns=projector_columns,
+            projector_vfov=projector_vfov,
+            names={"rows": "--projector-rows"},
+        )
+    elif not is_store:
+        h, w = size or (128, 128)
+        lim.check_memory(h * w * (257 * 4 * 3 + 85 * 8), f"--size {h} {w}")
     camera = CameraModel(
         bit_depth=bit_depth,
         black_level=black_level,
@@ -146,7 +201,6 @@ def simulate(
         jitter_us=jitter_us,
         row_jitter_us=row_jitter_us,
     )
-    sw = make_sweep(sweep)
     if is_store:
         with console.status(f"reading transport store {scene}"):
             sc = scene_from_transport_store(scene, shape=size, projector_rows=projector_rows)
@@ -164,7 +218,9 @@ def simulate(
     if truth is not None:
         attrs = {"lines_per_second": lines_per_second, "method": "ground_truth", "scene": sc.params}
         write_transport(sc.transport, truth, attrs=attrs, overwrite=overwrite)
-        out.print(f"ground-truth transport: {truth}")
+        out.print(f"ground-truth transport: {truth}", markup=False, highlight=False)
     out.print(
-        f"stack: {out_path}  ({len(stack)} images, {H}x{W}, {int((~stack.excluded).sum())} used for demultiplexing)"
+        f"stack: {out_path}  ({len(stack)} images, {H}x{W}, {int((~stack.excluded).sum())} used for demultiplexing)",
+        markup=False,
+        highlight=False,
     )

@@ -10,6 +10,8 @@ import typer
 from rich.table import Table
 
 from .._console import console, out, progress_bar
+from ..errors import InputError
+from . import _limits as lim
 from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack
 
 
@@ -61,10 +63,15 @@ def export(
     """Export a stack as 16-bit images + manifest.csv + acquisition.json (the import format)."""
     from ..io import export_folder
 
+    _check_outputs((out_dir, "export folder"), overwrite=overwrite)
+    if fmt.lower() not in ("tiff", "tif", "png"):
+        raise InputError(f"--format must be tiff or png, got {fmt!r}")
+    lim.integer(bit_depth, "--bit-depth", minimum=1, maximum=16)
+    lim.number(black_level, "--black-level", minimum=0, maximum=2**bit_depth - 1, max_inclusive=False)
     st = _load_stack(stack_path)
     with console.status(f"exporting {len(st)} images"):
         export_folder(st, out_dir, fmt=fmt, bit_depth=bit_depth, black_level=black_level, overwrite=overwrite)
-    out.print(f"exported folder: {out_dir}")
+    out.print(f"exported folder: {out_dir}", markup=False, highlight=False)
 
 
 @_friendly_errors
@@ -81,4 +88,4 @@ def import_(
     with progress_bar() as bar:
         task = bar.add_task("writing stack", total=len(st))
         write_stack(st, out_path, overwrite=overwrite, progress=lambda i: bar.advance(task))
-    out.print(f"stack: {out_path}  ({len(st)} images, {st.shape[0]}x{st.shape[1]})")
+    out.print(f"stack: {out_path}  ({len(st)} images, {st.shape[0]}x{st.shape[1]})", markup=False, highlight=False)

@@ -28,6 +28,7 @@ from ..figures._common import display_scale, new_figure, save_png
 from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
 from ..io import atomic_file
+from ..io.marks import MARK_KEY, mark_text
 from ..profiles import measured_delay_profiles
 from ..scenes import EFFECTS, list_scenes, make_scene, representative_pixels
 from ..synthesis import (
@@ -44,6 +45,7 @@ __all__ = [
     "EFFECTS_SIZES",
     "check_figure_size",
     "figure_work",
+    "figure_outputs",
     "fig8",
     "fig9",
     "fig11",
@@ -79,6 +81,26 @@ def figure_work(name: str, *, size: int = 128) -> int:
     return work[name]
 
 
+def figure_outputs(name: str) -> list[tuple[str, str]]:
+    """``(file name, kind)`` of every file figure ``name`` writes into its folder (PNG figures, JSON numbers).
+
+    Examples
+    --------
+    >>> figure_outputs("fig8")
+    [('fig8_contact_sheet.png', 'figure'), ('fig8.json', 'record')]
+    """
+    pngs = {
+        "fig8": ["fig8_contact_sheet.png"],
+        "fig9": ["fig9_mirror_ball.png", "fig9_delay_profiles.png"],
+        "fig11": ["fig11_sharpened_epipolar.png"],
+        "fig12": ["fig12_relighting.png"],
+        "effects": [f"effects_{scene}.png" for scene in list_scenes()],
+    }
+    if name not in pngs:
+        raise ValueError(f"unknown figure {name!r}; choose one of {sorted(pngs)}")
+    return [(png, "figure") for png in pngs[name]] + [(f"{name}.json", "record")]
+
+
 def _done(progress, n: int = 1) -> None:
     if progress is not None:
         progress(n)
@@ -90,10 +112,13 @@ def _per_image(progress):
 
 
 def _write_numbers(out_dir: Path, name: str, numbers: dict) -> dict:
-    """Write ``NAME.json`` as strict JSON (a non-finite number becomes ``null``) and return what was written."""
+    """Write ``NAME.json`` as strict JSON (a non-finite number becomes ``null``) and return what was written.
+
+    The file carries planeray's mark (key ``planeray_mark``), so ``--overwrite`` may replace it.
+    """
     numbers = jsonable(numbers)
     with atomic_file(out_dir / f"{name}.json") as tmp:
-        tmp.write_text(json.dumps(numbers, indent=2, allow_nan=False))
+        tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **numbers}, indent=2, allow_nan=False))
     return numbers
 
 

@@ -17,7 +17,8 @@ import numpy as np
 from .._validate import check_integer, check_nonnegative
 from ..figures import study as figs
 from ..io import atomic_file
-from ..io.atomic import storage_error
+from ..io.atomic import check_replaceable, storage_error
+from ..io.marks import MARK_KEY, mark_text
 from ..study import (
     DEFAULT_NOISE,
     METHODS,
@@ -32,12 +33,28 @@ from ..study import (
     study_setup,
 )
 
-__all__ = ["run_study", "study_work", "study_report"]
+__all__ = ["run_study", "study_work", "study_report", "study_outputs"]
 
 #: The PNGs :func:`run_study` draws (one unit of work each).
 _N_FIGURES = 4
 #: The parameter sweeps of Fig. 6: (panel, parameter).
 _PARAMETERS = (("a", "sigma_s"), ("b", "sigma_a"), ("c", "g"))
+
+
+def study_outputs() -> list[tuple[str, str]]:
+    """``(file name, kind)`` of every file :func:`run_study` writes into its folder.
+
+    Examples
+    --------
+    >>> [name for name, _ in study_outputs()][:3]
+    ['fig5_reconstruction.csv', 'fig5_reconstruction.png', 'fig5c_mse_vs_noise.csv']
+    """
+    files = [("fig5_reconstruction.csv", "table"), ("fig5_reconstruction.png", "figure")]
+    files += [("fig5c_mse_vs_noise.csv", "table"), ("fig5c_mse_vs_noise.png", "figure")]
+    files += [(f"fig6{tag}_mse_vs_{name}.csv", "table") for tag, name in _PARAMETERS]
+    files += [("fig6_mse_vs_params.png", "figure")]
+    files += [("regularization_sweep.csv", "table"), ("regularization_sweep.png", "figure")]
+    return files + [("study.json", "record")]
 
 
 def study_work(*, quick: bool = False) -> int:
@@ -62,8 +79,10 @@ def study_work(*, quick: bool = False) -> int:
 
 
 def _write_csv(path: Path, header, rows) -> Path:
+    """A CSV whose first line is planeray's mark (a ``#`` comment), then the header and the rows."""
     with atomic_file(path) as tmp:
         with open(tmp, "w", newline="") as f:
+            f.write(f"# {MARK_KEY}: {mark_text('table')}\n")
             w = csv.writer(f)
             w.writerow(header)
             for r in rows:
@@ -95,6 +114,7 @@ def run_study(
     noise: float = DEFAULT_NOISE,
     *,
     progress=None,
+    overwrite: bool = False,
 ) -> dict:
     """Run the whole Sec. 5.2 study, write PNGs, CSVs and its numbers into ``out_dir``, return the numbers.
 
@@ -115,6 +135,9 @@ def run_study(
     progress : callable, optional
         Called as ``progress(n)`` with the units of work just done; they add up
         to :func:`study_work`.
+    overwrite : bool
+        Replace files a previous run wrote; a file planeray did not write is never
+        replaced.  Every output is checked before any work.
 
     Returns
     -------
@@ -123,9 +146,10 @@ def run_study(
 
     Notes
     -----
-    Files: ``fig5_reconstruction.png/.csv``, ``fig5c_mse_vs_noise.png/.csv``,
-    ``fig6_mse_vs_params.png``, ``fig6{a,b,c}_mse_vs_{sigma_s,sigma_a,g}.csv``,
-    ``regularization_sweep.png/.csv`` and ``study.json``.
+    Files (:func:`study_outputs`): ``fig5_reconstruction.png/.csv``,
+    ``fig5c_mse_vs_noise.png/.csv``, ``fig6_mse_vs_params.png``,
+    ``fig6{a,b,c}_mse_vs_{sigma_s,sigma_a,g}.csv``, ``regularization_sweep.png/.csv``
+    and ``study.json``; each carries planeray's mark (the CSVs as a first ``#`` line).
     """
 
     def done(n=1):
@@ -135,6 +159,8 @@ def run_study(
     check_integer(seeds, "seeds", minimum=1)
     check_nonnegative(noise, "noise")
     out = Path(out_dir)
+    for name, kind in study_outputs():
+        check_replaceable(out / name, overwrite=overwrite, kind=kind)
     setup = study_setup()
     provider = cached_provider(resolve_provider(provider, setup.offsets))
     try:
@@ -229,7 +255,7 @@ def run_study(
     path = out / "study.json"
     result["files"] = [str(f) for f in [*result["files"], path]]
     with atomic_file(path) as tmp:
-        tmp.write_text(json.dumps(result, indent=2))
+        tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **result}, indent=2))
     return result
 
 

@@ -8,6 +8,7 @@ matrix and the diffusion dipole as the profile provider (fast).
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.patches import Rectangle
 from matplotlib.ticker import NullFormatter
 
 from ._common import figure_for, finish, new_figure
@@ -179,6 +180,24 @@ def plot_parameter_sweeps(sweeps: dict, *, noise, out=None):
     return finish(fig, out)
 
 
+def _ink(im, value) -> str:
+    """Black or white, whichever contrasts more with the cell of ``im`` showing ``value``.
+
+    The cell's relative luminance ``L`` (WCAG, linearized sRGB): black text has contrast
+    ``(L + 0.05) / 0.05``, white ``1.05 / (L + 0.05)``; they are equal at ``L = 0.179``, and
+    the better of the two is at least 4.58 on any colour.
+    """
+    c = np.asarray(im.cmap(im.norm(value))[:3], float)
+    c = np.where(c <= 0.03928, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return "k" if 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2] > 0.179 else "w"
+
+
+def _outline():  # a dark edge keeps a white marker visible on light cells
+    import matplotlib.patheffects as pe
+
+    return [pe.Stroke(linewidth=3.5, foreground="k"), pe.Normal()]
+
+
 def plot_regularization(rs: dict, *, noise, out=None):
     """Heatmaps of MSE and squared bias of the full method over (alpha, beta).
 
@@ -219,13 +238,21 @@ def plot_regularization(rs: dict, *, noise, out=None):
         ax.set_ylabel(r"$\alpha$ (smoothness)")
         for p in range(len(a)) if len(a) * len(b) <= 81 else ():
             for q in range(len(b)):
-                ax.text(q, p, f"{rs[key][p, q]:.1e}", ha="center", va="center", fontsize=5.5, color="w")
+                ax.text(
+                    q,
+                    p,
+                    f"{rs[key][p, q]:.1e}",
+                    ha="center",
+                    va="center",
+                    fontsize=6.5,
+                    color=_ink(im, np.log10(rs[key][p, q])),
+                )
         ia, ib = int(np.argmin(np.abs(np.log(a / 0.01)))), int(np.argmin(np.abs(np.log(b / 0.01))))
-        ax.plot(ib, ia, "s", mfc="none", mec="r", ms=16, mew=1.5, label="paper 0.01 / 0.01")
-        ax.plot(j, i, "x", color="w", ms=12, mew=2, label="min MSE")
+        # the markers frame their cells and sit in a corner, so they never cover a cell's number
+        ax.add_patch(Rectangle((ib - 0.5, ia - 0.5), 1, 1, fill=False, ec="r", lw=2, label="paper 0.01 / 0.01"))
+        ax.plot(j - 0.3, i + 0.28, "x", color="w", ms=7, mew=2, label="min MSE", path_effects=_outline())
         ax.set_title(
-            f"log10 {title} of the full method, eta = {noise}\n"
-            "red square: the paper's 0.01 / 0.01, white x: lowest MSE",
+            f"log10 {title} of the full method, eta = {noise}\nred frame: the paper's 0.01 / 0.01, white x: lowest MSE",
             fontsize=10,
         )
         fig.colorbar(im, ax=ax)

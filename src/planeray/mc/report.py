@@ -70,17 +70,39 @@ def profile_summary(prof: MCProfile) -> dict:
 
 
 def write_profile(prof: MCProfile, path) -> tuple[Path, Path]:
-    """Write ``path`` (CSV, see the module docstring) and its ``.json`` sidecar atomically."""
+    """Write ``path`` (CSV, see the module docstring) and its ``.json`` sidecar atomically.
+
+    Both carry planeray's mark: the CSV's first line is the comment
+    ``# planeray_mark: planeray:table:VERSION`` (pandas: ``read_csv(path, comment="#")``),
+    the JSON the key ``planeray_mark``.
+    """
+    from ..io.marks import MARK_KEY, mark_text
+
     path = Path(path)
+    side = path.with_suffix(".json")
+    existed = path.exists()
+    try:
+        _write_csv(prof, path)
+        with atomic_file(side) as tmp:
+            tmp.write_text(
+                json.dumps({MARK_KEY: mark_text("record"), **profile_summary(prof)}, indent=2, sort_keys=True)
+            )
+    except BaseException:
+        if not existed:  # the CSV without its sidecar is no result: a failed run leaves neither
+            path.unlink(missing_ok=True)
+        raise
+    return path, side
+
+
+def _write_csv(prof: MCProfile, path: Path) -> None:
+    from ..io.marks import MARK_KEY, mark_text
+
     cols = profile_columns(prof)
     names = _columns(prof)
     with atomic_file(path) as tmp:
         with open(tmp, "w", newline="") as f:
+            f.write(f"# {MARK_KEY}: {mark_text('table')}\n")
             w = csv.writer(f)
             w.writerow(names)
             for i in range(cols[names[0]].size):
                 w.writerow([int(cols[names[0]][i])] + [repr(float(cols[c][i])) for c in names[1:]])
-    side = path.with_suffix(".json")
-    with atomic_file(side) as tmp:
-        tmp.write_text(json.dumps(profile_summary(prof), indent=2, sort_keys=True))
-    return path, side

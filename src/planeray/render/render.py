@@ -572,9 +572,13 @@ def render_to_store(
     restart=False,
     lines_per_second=None,
     progress=None,
+    on_resume=None,
     **kwargs,
 ) -> tuple[Path, RenderResult]:
     """:func:`render_transport` into a transport store, resumable batch by batch.
+
+    ``on_resume(done, total)`` (batches) is called when an unfinished render of the
+    same output and inputs is continued, so a front end can say so.
 
     The running sums live in a hidden partial store next to ``out`` (two
     buffers: a batch is written into the spare one and becomes current when it
@@ -626,6 +630,8 @@ def render_to_store(
         raise InputError("internal error: a partial render with units done out of order", partial_path(out))
     cur = n_done % 2
     if n_done:
+        if on_resume is not None:
+            on_resume(n_done, len(units))
         full, classes, albedo = (np.asarray(group[a][cur]) for a in ("sum_T", "sum_classes", "sum_albedo"))
         if progress is not None:
             progress(n_done)
