@@ -38,6 +38,22 @@ def _not_an_input(out_path: Path, inputs) -> None:
             )
 
 
+def _check_parent(path: Path) -> None:
+    """Refuse an output whose folder cannot be made: a file on its way."""
+    for parent in Path(path).absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"--out {path} cannot be created: {parent} is a file, not a folder")
+            return
+
+
+def _outputs(*outputs, overwrite: bool) -> None:
+    """:func:`_check_outputs` (before any work), and outputs whose folder cannot be made refused too."""
+    for path, _ in outputs:
+        _check_parent(path)
+    _check_outputs(*outputs, overwrite=overwrite)
+
+
 def _read_labels(path: Path, option: str, shape):
     """A label image of the stack's size, errors naming the option."""
     from ..errors import InputError
@@ -130,7 +146,7 @@ def simulate(
         sweep=sweep,
     )
     check_capture_options(**options)
-    _check_outputs((out_dir, "materials capture"), overwrite=overwrite)
+    _outputs((out_dir, "materials capture"), overwrite=overwrite)
     trace = tables_to_trace(source=source, channel=channel, wall=wall)
     n = len(make_sweep(sweep))
     with progress_bar() as bar:
@@ -219,6 +235,7 @@ def train(
     if out_path.suffix.lower() != ".zip":
         raise ValueError(f"--out must end in .zip (a model file: a JSON record and a skops estimator), got {out_path}")
     _not_an_input(out_path, [("a stack", p) for p in stacks] + [("--labels", p) for p in labels])
+    _check_parent(out_path)
     check_model_output(out_path, overwrite=overwrite)
     loaded = [_load_stack(p) for p in stacks]
     labs = [_read_labels(lp, "--labels", st.shape) for lp, st in zip(labels, loaded)]
@@ -297,7 +314,7 @@ def predict(
         out_png,
         [("the model", model_path), ("the stack", stack_path), ("--labels", labels), ("--near-wall", near_wall)],
     )
-    _check_outputs((out_png, "segmentation"), overwrite=overwrite)
+    _outputs((out_png, "segmentation"), overwrite=overwrite)
     model = load_model(model_path)
     st = _load_stack(stack_path)
     model.check_stack(st, source=str(stack_path))
@@ -370,7 +387,7 @@ def report(
     from ..experiments.materials import check_report_options, report_tasks, run_materials_report
 
     check_report_options(size=size, quick=quick)
-    _check_outputs((out_dir, "materials report"), overwrite=overwrite)
+    _outputs((out_dir, "materials report"), overwrite=overwrite)
     with progress_bar() as bar:
         task = bar.add_task("materials report", total=report_tasks(quick=quick))
 

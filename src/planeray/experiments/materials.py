@@ -128,10 +128,13 @@ def capture_memory_bytes(size, sweep: str = "paper") -> int:
     return H * W * (_BYTES_PER_PIXEL_OFFSET * offsets + _BYTES_PER_PIXEL_IMAGE * len(make_sweep(sweep)))
 
 
-def _check_memory(needed: int, what: str) -> None:
+def _check_memory(needed: int, name: str, what: str) -> None:
     free = _available_memory()
     if free is not None and needed > free:
-        raise InputError(f"{what} needs about {needed / 2**30:.1f} GiB of memory, {free / 2**30:.1f} GiB are available")
+        raise InputError(
+            f"{name} must fit in the memory available: {what} needs about {needed / 2**30:.1f} GiB, "
+            f"{free / 2**30:.1f} GiB are available"
+        )
 
 
 def check_capture_options(
@@ -193,7 +196,7 @@ def check_capture_options(
             f"fills the full well in the sweep's shortest exposure, {shortest:g} us: every pixel saturates), "
             f"got {ambient_e_per_us!r}"
         )
-    _check_memory(capture_memory_bytes((H, W), sweep), f"a {H}x{W} capture")
+    _check_memory(capture_memory_bytes((H, W), sweep), "size", f"a {H}x{W} capture")
 
 
 def max_projector_rows(camera_rows: int) -> int:
@@ -512,7 +515,7 @@ def check_report_options(*, size: int = 128, quick: bool = False) -> None:
     """Refuse, before any work, a report size that cannot give one (:data:`MIN_REPORT_SIZE` .. :data:`MAX_SIZE`)."""
     n = check_integer(size, "size", minimum=MIN_REPORT_SIZE, maximum=MAX_SIZE)
     # The report holds four captures and two transports at once (train, test, same conditions, one curve point).
-    _check_memory(6 * capture_memory_bytes((n, n)), f"the {n}x{n} report")
+    _check_memory(6 * capture_memory_bytes((n, n)), "size", f"the {n}x{n} report")
 
 
 def report_tasks(*, quick: bool = False) -> int:

@@ -23,14 +23,19 @@ directory) and the nesting depth of both JSON documents (:data:`MAX_JSON_DEPTH`)
 **Unclassified pixels.**  An SVM assigns every pixel to one of the classes it was
 trained on, however unlike them the pixel is (a table left out of training becomes
 "toothpaste").  :meth:`MaterialModel.segment` therefore also asks how *typical* a pixel
-is of the class the SVM picks: the squared Mahalanobis distance of its standardized
-features, in the 6 leading principal components of the training features, to the
-class's training pixels (Ledoit-Wolf covariance), turned into a conformal p-value
+is of the class the SVM picks: the squared Mahalanobis distance to the class's training
+pixels (Ledoit-Wolf covariance) of the pixel's standardized features in the 6 leading
+principal components of the training features, and of its brightness (the log of the
+area of its profiles before normalization, standardized), turned into a conformal p-value
 against the same distance of held-out training pixels of that class (each scored by a
 fit to the *other* captures or image blocks): ``p = (1 + #{held-out >= d}) / (n + 1)``,
 the share of the class's held-out pixels at least as unlike it.  A pixel with ``p``
 below ``unclassified_below`` (:data:`DEFAULT_UNCLASSIFIED_BELOW`) is *unclassified*
-(class id 0).
+(class id 0).  The profile's shape alone barely tells a matte table from the nearly
+opaque toothpaste (measured: 0.3 % of a table left out of training unclassified at the
+training conditions); its brightness does (100 %).  So a capture with another laser
+power or camera gain than the training captures reads as unlike them: train on it, or
+pass ``unclassified_below=0``.
 """
 
 from __future__ import annotations
@@ -167,9 +172,10 @@ class MaterialModel:
         chosen ``C`` and ``gamma``.
     typicality : dict
         The typicality model (module docstring): ``components`` (K, F) and ``mean`` (F)
-        of the principal components of the standardized training features, and per
-        class id ``center`` (K), ``precision`` (K, K) and ``calibration`` (sorted
-        squared distances of held-out training pixels).
+        of the principal components of the standardized training features,
+        ``area_center`` and ``area_scale`` of the log area, and per class id ``center``
+        (K + 1), ``precision`` (K + 1, K + 1) and ``calibration`` (sorted squared
+        distances of held-out training pixels).
     """
 
     pipeline: object
@@ -190,16 +196,18 @@ class MaterialModel:
             raise InputError(f"expected features of shape (P, {self.definition.n_features}), got {X.shape}")
         return X
 
-    def typicality_of(self, features, class_ids) -> np.ndarray:
-        """Conformal p-value of each feature row as a pixel of ``class_ids`` (module docstring), in ``(0, 1]``."""
+    def typicality_of(self, features, class_ids, area) -> np.ndarray:
+        """Conformal p-value of each pixel as one of ``class_ids`` (module docstring), in ``(0, 1]``.
+
+        ``features``: rows ``(P, F)``; ``area``: the area of each pixel's profiles before
+        normalization (``signal`` of :func:`capture_features`, > 0).
+        """
         X = self._features(features)
         cids = np.asarray(class_ids, dtype=np.int64)
         p = np.ones(X.shape[0])
         if not self.typicality:
             return p
-        Z = self.pipeline.steps[0][1].transform(X)
-        comp = np.asarray(self.typicality["components"], dtype=np.float64)
-        proj = (Z - np.asarray(self.typicality["mean"], dtype=np.float64)) @ comp.T
+        proj = _typicality_space(self.typicality, self.pipeline.steps[0][1].transform(X), area)
         for cid, entry in self.typicality["classes"].items():
             sel = cids == int(cid)
             if not sel.any():
@@ -258,7 +266,7 @@ class MaterialModel:
         if ok.any():
             picks = self.predict_features(X[ok])
             svm.ravel()[ok] = picks
-            typical.ravel()[ok] = self.typicality_of(X[ok], picks)
+            typical.ravel()[ok] = self.typicality_of(X[ok], picks, signal.ravel()[ok])
         unclassified = ok.reshape(signal.shape) & (typical < threshold)
         return Segmentation(
             labels=np.where(unclassified, 0, svm),
@@ -342,6 +350,14 @@ def _plain(value):
     if isinstance(value, float) and not np.isfinite(value):
         return None
     return value
+
+
+def _typicality_space(model: dict, Z, area) -> np.ndarray:
+    """Coordinates of the typicality model: principal components of ``Z``, then the standardized log area."""
+    comp = np.asarray(model["components"], dtype=np.float64)
+    proj = (np.asarray(Z, dtype=np.float64) - np.asarray(model["mean"], dtype=np.float64)) @ comp.T
+    log_area = np.log(np.maximum(np.asarray(area, dtype=np.float64), 1e-300))
+    return np.column_stack([proj, (log_area - model["area_center"]) / model["area_scale"]])
 
 
 def _mahalanobis2(points, center, precision) -> np.ndarray:
@@ -471,7 +487,7 @@ def load_model(path) -> MaterialModel:
                 raise InputError(f"is not a planeray materials model (no {_META} and {_BLOB} inside)", path)
             extra = sorted(set(names) - {_META, _BLOB})
             if extra:
-                raise InputError(f"is not a planeray materials model (unexpected member {extra[0]!r})", path)
+                raise InputError(f"is not a planeray materials model (an extra member {extra[0]!r})", path)
             text = _read_member(z, _META, MAX_RECORD_BYTES, path)
             depth = _json_depth(text)
             if depth > MAX_JSON_DEPTH:
@@ -564,8 +580,11 @@ def _check_typicality(data, n_features: int, classes: dict) -> dict:
     mean = np.asarray(data["mean"], dtype=np.float64)
     if comp.ndim != 2 or comp.shape[1] != n_features or mean.shape != (n_features,):
         raise ValueError(f"typicality components {comp.shape} do not match {n_features} features")
-    k = comp.shape[0]
-    out = {"components": comp.tolist(), "mean": mean.tolist(), "classes": {}}
+    k = comp.shape[0] + 1
+    area_center, area_scale = float(data["area_center"]), float(data["area_scale"])
+    if not (np.isfinite(area_center) and np.isfinite(area_scale) and area_scale > 0):
+        raise ValueError("typicality area_center and area_scale must be finite, the scale > 0")
+    out = {"area_center": area_center, "area_scale": area_scale, "classes": {}}
     for cid, entry in data["classes"].items():
         if int(cid) not in classes:
             raise ValueError(f"typicality of class {cid}, which the model does not predict")
@@ -579,6 +598,8 @@ def _check_typicality(data, n_features: int, classes: dict) -> dict:
         if np.any(np.diff(cal) < 0):
             raise ValueError(f"typicality calibration of class {cid} is not sorted")
         out["classes"][str(int(cid))] = {"center": center, "precision": prec, "calibration": cal}
+    if set(out["classes"]) != {str(c) for c in classes}:
+        raise ValueError(f"typicality of classes {sorted(out['classes'])}, the model predicts {sorted(classes)}")
     if not np.all(np.isfinite(comp)) or not np.all(np.isfinite(mean)):
         raise ValueError("typicality components are not finite")
     out["components"], out["mean"] = comp, mean
@@ -754,7 +775,7 @@ def train_model(
     sources = list(sources) if sources is not None else [f"capture {i}" for i in range(len(stacks))]
     transports = list(transports) if transports is not None else [None] * len(stacks)
     rng = np.random.default_rng(seed)
-    X_all, y_all, g_all, definition = [], [], [], None
+    X_all, y_all, g_all, a_all, definition = [], [], [], [], None
     for i, (st, lab) in enumerate(zip(stacks, labels)):
         lab = np.asarray(lab)
         if lab.shape != st.shape:
@@ -778,6 +799,7 @@ def train_model(
         X_all.append(X[keep])
         y_all.append(y[keep])
         g_all.append(groups[keep])
+        a_all.append(signal.ravel()[keep])
         if progress is not None:
             progress(i + 1, len(stacks), "features")
     X, y, groups = np.concatenate(X_all).astype(np.float64), np.concatenate(y_all), np.concatenate(g_all)
@@ -813,7 +835,7 @@ def train_model(
     search.fit(X, y, groups=groups)
     fits[0] = fits[1] - 2  # (a fit that failed is not scored)
     tick()  # the final fit
-    typicality = fit_typicality(search.best_estimator_.steps[0][1].transform(X), y, groups)
+    typicality = fit_typicality(search.best_estimator_.steps[0][1].transform(X), y, groups, np.concatenate(a_all))
     tick()
     names = {**CLASS_NAMES, **({int(k): str(v) for k, v in class_names.items()} if class_names else {})}
     classes = {int(c): names.get(int(c), f"class {int(c)}") for c in present}
@@ -859,11 +881,11 @@ def check_training_options(
 MAX_PER_CLASS = 5000
 
 
-def fit_typicality(Z, y, groups, *, n_components: int = TYPICALITY_COMPONENTS) -> dict:
-    """The typicality model of standardized training features ``Z`` (module docstring).
+def fit_typicality(Z, y, groups, area, *, n_components: int = TYPICALITY_COMPONENTS) -> dict:
+    """The typicality model of standardized training features ``Z`` and their profiles' ``area`` (module docstring).
 
-    Principal components of ``Z``; per class a Ledoit-Wolf Gaussian of its pixels in
-    them, and the calibration: the squared Mahalanobis distance of each of its pixels
+    Principal components of ``Z`` and the standardized log area; per class a Ledoit-Wolf
+    Gaussian of its pixels in them, and the calibration: the squared Mahalanobis distance of each of its pixels
     under a fit to the class's pixels of the *other* groups (captures or image blocks;
     a class found in one group only: five random folds of it), sorted.
     """
@@ -873,12 +895,19 @@ def fit_typicality(Z, y, groups, *, n_components: int = TYPICALITY_COMPONENTS) -
     Z = np.asarray(Z, dtype=np.float64)
     k = int(min(n_components, Z.shape[1], max(Z.shape[0] - 1, 1)))
     pca = PCA(n_components=k, svd_solver="full").fit(Z)
-    P = pca.transform(Z)
+    log_area = np.log(np.maximum(np.asarray(area, dtype=np.float64), 1e-300))
+    model = {
+        "components": pca.components_,
+        "mean": pca.mean_,
+        "area_center": float(np.mean(log_area)),
+        "area_scale": float(np.std(log_area)) or 1.0,
+    }
+    P = _typicality_space(model, Z, area)
     rng = np.random.default_rng(0)
     classes = {}
     for c in np.unique(y):
         Pc, gc = P[y == c], np.asarray(groups)[y == c]
-        if np.unique(gc).size < 2:
+        if np.unique(gc).size < 2:  # one group: five random folds of it
             gc = rng.permutation(np.arange(gc.size) % 5)
         scores = []
         for g in np.unique(gc):
@@ -892,4 +921,4 @@ def fit_typicality(Z, y, groups, *, n_components: int = TYPICALITY_COMPONENTS) -
             "precision": whole.precision_,
             "calibration": np.sort(np.concatenate(scores)) if scores else np.zeros(0),
         }
-    return {"components": pca.components_, "mean": pca.mean_, "classes": classes}
+    return {**model, "classes": classes}
