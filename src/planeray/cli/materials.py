@@ -320,6 +320,16 @@ def predict(
     model.check_stack(st, source=str(stack_path))
     truth = _read_labels(labels, "--labels", st.shape) if labels is not None else None
     near = _read_labels(near_wall, "--near-wall", st.shape) > 0 if near_wall is not None else None
+    blind = {c: p for c, p in model.smallest_typicality().items() if 0 < threshold <= p}
+    if blind:
+        console.print(
+            "note: --unclassified-below "
+            f"{threshold:g} cannot unclassify any pixel of "
+            + ", ".join(f"{model.classes[c]} (smallest typicality {p:.3g})" for c, p in blind.items())
+            + ": too few held-out training pixels; train with more (--max-per-class, more captures) or raise it",
+            highlight=False,
+            markup=False,
+        )
     with console.status("classifying pixels"):
         seg = model.segment(st, unclassified_below=threshold, source=str(stack_path))
     write_label_image(out_png, seg.labels, kind="segmentation")

@@ -217,6 +217,16 @@ class MaterialModel:
             p[sel] = (1.0 + cal.size - np.searchsorted(cal, d, side="left")) / (cal.size + 1.0)
         return p
 
+    def smallest_typicality(self) -> dict:
+        """Per class id, the smallest typicality a pixel can get, ``1 / (n + 1)`` (``n`` held-out training pixels).
+
+        A threshold at or below it unclassifies none of the class's pixels.
+        """
+        return {
+            int(cid): 1.0 / (np.asarray(entry["calibration"]).size + 1.0)
+            for cid, entry in (self.typicality.get("classes") or {}).items()
+        }
+
     def check_stack(self, stack: Stack, *, source=None) -> None:
         """Refuse, before any work, a stack whose features the model cannot read (another sweep, line rate)."""
         from .features import stack_definition
