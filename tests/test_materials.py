@@ -573,6 +573,20 @@ def test_cli_simulate_train_predict(tmp_path):
     assert res.exit_code == 1 and "already exists" in res.output
     res = invoke("materials", "predict", model, b / "stack.zarr", "--out", tmp_path / "seg4.png", "--overwrite")
     assert res.exit_code == 0, res.output
+    # A threshold finer than the model's held-out pixels can resolve is said to do nothing.
+    smallest = min(load_model(model).smallest_typicality().values())
+    res = invoke(
+        "materials",
+        "predict",
+        model,
+        b / "stack.zarr",
+        "--out",
+        tmp_path / "seg5.png",
+        "--unclassified-below",
+        smallest / 2,
+    )
+    assert res.exit_code == 0 and "cannot unclassify any pixel of fat-free milk" in res.output, res.output
+    assert "unclassified: 0 px" in res.output
     # A stack of another sweep is refused in one line.
     other = tmp_path / "q"
     res = invoke("materials", "simulate", "--out", other, "--size", 48, 48, "--sweep", "quick")
@@ -706,3 +720,38 @@ def test_typicality_is_a_conformal_p_value_of_the_pick():
     for P in (0.05, 0.2):
         assert abs(np.mean(got < P) - P) < 0.05, (P, np.mean(got < P))
     assert np.all(model.typicality_of(Xq, np.full(400, 2), aq * 20.0) < 0.01)
+
+
+# ----------------------------------------------------------------------------- wall tables: notice and progress
+def test_tables_to_trace_names_what_is_neither_shipped_nor_cached(tmp_path, monkeypatch):
+    from planeray.scenes.materials import tables_to_trace
+
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path))  # an empty cache: only the shipped tables
+    assert tables_to_trace() == [] and tables_to_trace(source="jensen") == []
+    assert tables_to_trace(wall="absorbing", channel="blue") == sorted(MATERIAL_CLASSES)
+
+
+def test_simulate_says_it_traces_tables_and_counts_the_runs(tmp_path, monkeypatch):
+    """Tables to trace: a notice line first, then a bar advancing per Monte Carlo run (not frozen at 0)."""
+    from typer.testing import CliRunner
+
+    import planeray.scenes.materials as sm
+    from planeray.cli import app
+    from planeray.mc.wall import TABLE_RUNS
+
+    real = sm.material_tables
+    runs = []
+
+    def tracing(**kw):  # as if two media had to be traced: each run reported
+        for _ in range(2 * TABLE_RUNS):
+            if kw.get("progress") is not None:
+                kw["progress"](1)
+                runs.append(1)
+        return real(**{k: v for k, v in kw.items() if k != "progress"})
+
+    monkeypatch.setattr(sm, "tables_to_trace", lambda **kw: [2, 3])
+    monkeypatch.setattr(sm, "material_tables", tracing)
+    res = CliRunner().invoke(app, ["materials", "simulate", "--out", str(tmp_path / "c"), "--size", "16", "16"])
+    assert res.exit_code == 0, res.output
+    assert "note: the wall-kernel tables of 2 media (2% milk, whole milk" in res.output
+    assert f"{2 * TABLE_RUNS}/{2 * TABLE_RUNS}" in res.output and len(runs) == 2 * TABLE_RUNS
