@@ -102,7 +102,7 @@ def simulate(
     ],
     size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels), 8 to 4096.")] = (128, 128),
     projector_rows: Annotated[
-        int, typer.Option(help="Projector rows spanned by the image (0.3 mm each), up to ~126 per image row.")
+        int, typer.Option(help="Projector rows spanned by the image (0.3 mm each), up to 127 per image row.")
     ] = 720,
     seed: Annotated[int, typer.Option(help="Seed of the camera noise and the table's texture (>= 0).")] = 0,
     placement: Annotated[int, typer.Option(help="0: materials in class order; k >= 1: shuffled and moved.")] = 0,
