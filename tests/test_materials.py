@@ -755,3 +755,17 @@ def test_simulate_says_it_traces_tables_and_counts_the_runs(tmp_path, monkeypatc
     assert res.exit_code == 0, res.output
     assert "note: the wall-kernel tables of 2 media (2% milk, whole milk" in res.output
     assert f"{2 * TABLE_RUNS}/{2 * TABLE_RUNS}" in res.output and len(runs) == 2 * TABLE_RUNS
+
+
+def test_the_largest_projector_row_count_is_the_scenes_own_limit():
+    """check_capture_options' bound is exactly where the scene's kernel tables stop (an independent refusal)."""
+    from planeray.experiments.materials import check_capture_options, max_projector_rows
+
+    for H in (8, 16):
+        most = max_projector_rows(H)
+        check_capture_options(size=(H, H), projector_rows=most)
+        make_scene("materials", (H, H), projector_rows=most, seed=0)  # builds
+        with pytest.raises(InputError, match="too wide for the kernel tables"):
+            make_scene("materials", (H, H), projector_rows=most + 1, seed=0)
+        with pytest.raises(InputError, match=f"projector_rows must be <= {most}"):
+            check_capture_options(size=(H, H), projector_rows=most + 1)
