@@ -769,3 +769,30 @@ def test_the_largest_projector_row_count_is_the_scenes_own_limit():
             make_scene("materials", (H, H), projector_rows=most + 1, seed=0)
         with pytest.raises(InputError, match=f"projector_rows must be <= {most}"):
             check_capture_options(size=(H, H), projector_rows=most + 1)
+
+
+@pytest.mark.slow
+def test_cli_predict_with_a_transport_model_counts_the_demultiplexed_rows(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+    from planeray.experiments.materials import write_capture
+
+    cap = simulate_capture(size=(24, 24), seed=0)
+    write_capture(cap, tmp_path / "cap")
+    model = train_model([cap.stack], [cap.labels], kind="transport", param_grid={"C": (10.0,), "gamma_scale": (1.0,)})
+    model.save(tmp_path / "t.zip")
+    res = CliRunner().invoke(
+        app,
+        [
+            "materials",
+            "predict",
+            str(tmp_path / "t.zip"),
+            str(tmp_path / "cap" / "stack.zarr"),
+            "--out",
+            str(tmp_path / "seg.tif"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    assert "demultiplexing the stack (rows)" in res.output and "24/24" in res.output
+    assert read_label_image(tmp_path / "seg.tif", shape=(24, 24)).max() <= 6

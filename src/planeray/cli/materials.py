@@ -292,7 +292,8 @@ def predict(
         float,
         typer.Option(
             help="A pixel less typical of the SVM's pick than this share of the class's held-out training pixels "
-            "is unclassified (0 in the map); 0 keeps every pick. Measured default: 0.01."
+            "is unclassified (0 in the map); 0 keeps every pick. The default is measured on held-out captures "
+            "(README)."
         ),
     ] = 0.01,
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
@@ -330,8 +331,15 @@ def predict(
             highlight=False,
             markup=False,
         )
-    with console.status("classifying pixels"):
-        seg = model.segment(st, unclassified_below=threshold, source=str(stack_path))
+    if model.definition.kind == "transport":  # demultiplexing first: minutes, counted in camera rows
+        with progress_bar() as bar:
+            task = bar.add_task("demultiplexing the stack (rows)", total=st.shape[0])
+            seg = model.segment(
+                st, unclassified_below=threshold, source=str(stack_path), progress=lambda n: bar.advance(task, n)
+            )
+    else:
+        with console.status("classifying pixels"):
+            seg = model.segment(st, unclassified_below=threshold, source=str(stack_path))
     write_label_image(out_png, seg.labels, kind="segmentation")
     counts = {}
     for c in sorted(set(seg.labels[~seg.no_profile & ~seg.unclassified].ravel().tolist())):
