@@ -255,6 +255,7 @@ CASES = [
     ((*PREDICT, "--labels", "{c}/labels.png", "--near-wall", "{d}/notes.txt"), "--near-wall", ()),
     ((*PREDICT, "--labels", "{d}/notes.txt"), "--labels", ()),
     ((*PREDICT, "--labels", "{d}/clip.tif"), "--labels", ()),
+    ((*PREDICT, "--labels", "{d}/fake.png"), "--labels", ("cannot read as PNG",)),
     ((*PREDICT, "--unclassified-below", -0.1), "--unclassified-below", ()),
     ((*PREDICT, "--unclassified-below", 1.5), "--unclassified-below", ()),
     ((*PREDICT, "--unclassified-below", "nan"), "--unclassified-below", ()),
@@ -330,6 +331,7 @@ def test_bad_input_gives_one_line_naming_the_option_and_loses_nothing(args, opti
     monkeypatch.setattr("planeray.experiments.materials._available_memory", lambda: 16 * 2**30)
     (folder / "notes.zip").write_bytes(b"PK\x05\x06" + bytes(18))  # an (empty) zip of the user's
     (folder / "lines.zip").write_bytes((folder / "notes.zip").read_bytes())
+    (folder / "fake.png").write_text("not an image")
     run_bad(_words(args, env), folder=folder, option=option, needles=needles)
 
 

@@ -75,7 +75,9 @@ def read_label_image(path, *, shape=None) -> np.ndarray:
                         path,
                     )
                 arr = np.array(img)
-        except (UnidentifiedImageError, OSError) as exc:
+        except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as exc:
+            if isinstance(exc, InputError):
+                raise
             raise InputError(f"cannot read as PNG ({exc})", path) from None
     else:
         raise InputError("label images must be .png, .tif or .tiff", path)
