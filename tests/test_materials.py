@@ -148,7 +148,7 @@ def test_held_out_capture_recognized_per_class(captures, model):
     _, test = captures
     for key in ("seed", "placement", "noise", "ambient_e_per_us"):
         assert test.settings[key] != TRAIN_SETTINGS[key]
-    pred = model.predict(test.stack)
+    pred = model.predict(test.stack, unclassified_below=0.0)  # the SVM's picks: the paper's classifier
     truth = np.where(test.labels == BACKGROUND_CLASS, 0, test.labels)
     s = score(pred, truth, near_wall=test.near_wall, wall_distance_mm=test.wall_distance_mm)
     assert sorted(model.classes) == sorted(MATERIAL_CLASSES)
@@ -229,14 +229,17 @@ def test_tampered_and_foreign_files_fail_clearly(model, tmp_path):
     _rewrite(good, bad, model_skops=bytes(blob))
     with pytest.raises(InputError, match="SHA-256"):
         load_model(bad)
-    # An estimator of another type, with a consistent digest: refused by the allowed types, before loading.
+    # An estimator of another type, with consistent digests: refused by the allowed types, before loading.
     import hashlib
 
     import skops.io as sio
     from sklearn.linear_model import LogisticRegression
 
+    from planeray.materials.model import record_digest
+
     foreign = sio.dumps(LogisticRegression())
     meta["estimator_sha256"] = hashlib.sha256(foreign).hexdigest()
+    meta["record_sha256"] = record_digest(meta)
     evil = tmp_path / "foreign.zip"
     _rewrite(good, evil, model_skops=foreign, planeray_model_json=json.dumps(meta).encode())
     with pytest.raises(InputError, match="types planeray does not load: sklearn.linear_model"):
@@ -247,6 +250,98 @@ def test_tampered_and_foreign_files_fail_clearly(model, tmp_path):
     _rewrite(good, odd, planeray_model_json=json.dumps(meta2).encode())
     with pytest.raises(InputError, match="not a planeray materials model"):
         load_model(odd)
+
+
+def test_every_field_of_the_record_is_covered_by_its_digest(model, tmp_path):
+    """Editing any field of the JSON record (floor, class names, typicality...) without its digest is refused."""
+    from planeray.materials.model import record_digest
+
+    good = model.save(tmp_path / "good.zip")
+    with zipfile.ZipFile(good) as z:
+        meta = json.loads(z.read("planeray-model.json"))
+    assert meta["format_version"] == 2 and meta["record_sha256"] == record_digest(meta)
+    edits = {
+        "floor": lambda m: m["definition"].update(floor="none"),
+        "class names swapped": lambda m: m["classes"].update({"1": m["classes"]["2"], "2": m["classes"]["1"]}),
+        "lines per second": lambda m: m["definition"].update(lines_per_second=60000.0),
+        "typicality": lambda m: m["typicality"]["classes"]["4"]["calibration"].append(1e9),
+        "training record": lambda m: m["training"].update(cv_accuracy=1.0),
+        "a field added": lambda m: m.update(note="hello"),
+    }
+    for what, edit in edits.items():
+        changed = json.loads(json.dumps(meta))
+        edit(changed)
+        bad = tmp_path / f"{what}.zip"
+        _rewrite(good, bad, planeray_model_json=json.dumps(changed).encode())
+        with pytest.raises(InputError, match="record does not match its recorded SHA-256") as err:
+            load_model(bad)
+        assert "\n" not in str(err.value), what
+    # The same file re-saved with the digest recomputed loads (the digest is over canonical JSON: key order,
+    # spaces and indentation do not matter).
+    same = tmp_path / "reformatted.zip"
+    _rewrite(good, same, planeray_model_json=json.dumps(meta, indent=None, sort_keys=False).encode())
+    assert load_model(same).classes == model.classes
+
+
+def test_the_record_must_describe_its_estimator(model, tmp_path):
+    """With consistent digests, a record that cannot describe the estimator is still refused in one line."""
+    from planeray.materials.model import record_digest
+
+    good = model.save(tmp_path / "good.zip")
+    with zipfile.ZipFile(good) as z:
+        meta = json.loads(z.read("planeray-model.json"))
+    cases = {
+        "kind transport": (lambda m: m["definition"].update(kind="transport"), "transport profiles need"),
+        "kind a list": (lambda m: m["definition"].update(kind=["stack"]), "unknown feature kind"),
+        "one exposure fewer": (lambda m: m["definition"]["exposure_us"].pop(), "one exposure per delay"),
+        "a class more": (lambda m: m["classes"].update({"9": "mayonnaise"}), "the model predicts"),
+        "version 2.5": (lambda m: m.update(format_version=2.5), "format_version must be an integer"),
+        "version true": (lambda m: m.update(format_version=True), "format_version must be an integer"),
+        "version 1": (lambda m: m.update(format_version=1), "train the model again"),
+        "no typicality scale": (lambda m: m["typicality"].update(area_scale=0.0), "area_scale"),
+        "definition a list": (lambda m: m.update(definition=[1, 2]), "malformed feature definition"),
+    }
+    for what, (edit, needle) in cases.items():
+        changed = json.loads(json.dumps(meta))
+        edit(changed)
+        changed["record_sha256"] = record_digest(changed)
+        bad = tmp_path / f"{what}.zip"
+        _rewrite(good, bad, planeray_model_json=json.dumps(changed).encode())
+        with pytest.raises(InputError, match=needle):
+            load_model(bad)
+
+
+def test_members_and_nesting_are_bounded_before_reading(model, tmp_path, monkeypatch):
+    """A huge member is refused from the zip's directory (never read); deep JSON before it is parsed."""
+    import tracemalloc
+
+    import planeray.materials.model as mm
+
+    good = model.save(tmp_path / "good.zip")
+    with zipfile.ZipFile(good) as z:
+        meta = z.read("planeray-model.json")
+    huge = tmp_path / "huge.zip"
+    with zipfile.ZipFile(huge, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        z.writestr("planeray-model.json", meta)
+        with z.open("model.skops", "w", force_zip64=True) as f:
+            for _ in range(300):
+                f.write(bytes(2**20))
+    tracemalloc.start()
+    with pytest.raises(InputError, match="model.skops is 300 MiB"):
+        load_model(huge)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 20 * 2**20, peak  # the 300 MB were never read (828 MB before the fix)
+    # The bound is the zip directory's size, not what a reader happens to get.
+    monkeypatch.setattr(mm, "MAX_ESTIMATOR_BYTES", 1000)
+    with pytest.raises(InputError, match="at most 0 MiB"):
+        load_model(good)
+    monkeypatch.undo()
+    deep = tmp_path / "deep.zip"
+    _rewrite(good, deep, planeray_model_json=b"[" * 200_000 + b"]" * 200_000)
+    with pytest.raises(InputError, match="nested 200000 deep"):
+        load_model(deep)
+    assert mm._json_depth(b'{"a": "[[[[", "b": [[1], {"c": []}]}') == 4  # brackets in strings do not count
 
 
 # ----------------------------------------------------------------------------- label images
@@ -394,7 +489,8 @@ def test_cli_simulate_train_predict(tmp_path):
         "--floor",
         "median",
     )
-    assert res.exit_code == 1 and "--floor 'median'" in res.output and len(res.output.strip().splitlines()) == 1
+    assert res.exit_code == 1 and "--floor must be one of edge, min, none, got 'median'" in res.output
+    assert len(res.output.strip().splitlines()) == 1
     seg = tmp_path / "seg.png"
     res = invoke(
         "materials",
@@ -414,6 +510,9 @@ def test_cli_simulate_train_predict(tmp_path):
     assert numbers["score"]["overall"] > 0.8
     pred = read_label_image(seg, shape=(48, 48))
     assert pred.max() <= 5
+    from planeray.io.marks import file_mark
+
+    assert file_mark(seg) == "segmentation" and file_mark(b / "labels.png") == "labels"
     # The table (class 6) is in the labels but the model was trained without it: not
     # scored (null, with the reason), not 0.0, and left out of the overall accuracy.
     truth = read_label_image(b / "labels.png", shape=(48, 48))
@@ -424,11 +523,70 @@ def test_cli_simulate_train_predict(tmp_path):
     assert all(sc["accuracy"][MATERIAL_CLASSES[c]] is not None for c in MATERIAL_CLASSES)
     materials = np.isin(truth, list(MATERIAL_CLASSES))
     assert sc["overall"] == pytest.approx(np.mean(pred[materials] == truth[materials]))
+    # The table, unlike every class the model knows, is unclassified (0), not "toothpaste".
+    table = truth == BACKGROUND_CLASS
+    assert np.mean(pred[table] == 0) > 0.9 and np.mean(pred[table] == 4) < 0.05
+    assert sc["unclassified"]["background"] == pytest.approx(np.mean(pred[table] == 0))
+    assert numbers["pixels"]["unclassified"] == int((pred == 0).sum()) and numbers["unclassified_below"] == 0.01
     res = invoke(
         "materials", "predict", model, b / "stack.zarr", "--out", tmp_path / "seg2.png", "--labels", b / "labels.png"
     )
     assert res.exit_code == 0, res.output
     assert "accuracy background: not scored (the model was trained without this class)" in res.output
+    assert "of its pixels unclassified" in res.output
+    # --unclassified-below 0: every pixel gets the SVM's pick, the table included (the paper's classifier).
+    res = invoke(
+        "materials",
+        "predict",
+        model,
+        b / "stack.zarr",
+        "--out",
+        tmp_path / "seg3.png",
+        "--unclassified-below",
+        0,
+        "--json",
+    )
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.output)["pixels"]["unclassified"] == 0
+    assert (read_label_image(tmp_path / "seg3.png")[table] > 0).all()
+    # An empty near-wall mask (no pixel near a wall) is valid: accuracies near walls are "no pixels" (null).
+    from PIL import Image
+
+    Image.fromarray(np.zeros((48, 48), np.uint8)).save(tmp_path / "empty.png")
+    res = invoke(
+        "materials",
+        "predict",
+        model,
+        b / "stack.zarr",
+        "--out",
+        tmp_path / "seg4.png",
+        "--labels",
+        b / "labels.png",
+        "--near-wall",
+        tmp_path / "empty.png",
+        "--json",
+    )
+    assert res.exit_code == 0, res.output
+    assert set(json.loads(res.output)["score"]["accuracy_near_wall"].values()) == {None}
+    # A segmentation planeray wrote is replaced with --overwrite; without it refused before any work.
+    res = invoke("materials", "predict", model, b / "stack.zarr", "--out", tmp_path / "seg4.png")
+    assert res.exit_code == 1 and "already exists" in res.output
+    res = invoke("materials", "predict", model, b / "stack.zarr", "--out", tmp_path / "seg4.png", "--overwrite")
+    assert res.exit_code == 0, res.output
+    # A threshold finer than the model's held-out pixels can resolve is said to do nothing.
+    smallest = min(load_model(model).smallest_typicality().values())
+    res = invoke(
+        "materials",
+        "predict",
+        model,
+        b / "stack.zarr",
+        "--out",
+        tmp_path / "seg5.png",
+        "--unclassified-below",
+        smallest / 2,
+    )
+    assert res.exit_code == 0 and "cannot unclassify any pixel of fat-free milk" in res.output, res.output
+    assert "unclassified: 0 px" in res.output
     # A stack of another sweep is refused in one line.
     other = tmp_path / "q"
     res = invoke("materials", "simulate", "--out", other, "--size", 48, 48, "--sweep", "quick")
@@ -443,10 +601,19 @@ def test_cli_simulate_train_predict(tmp_path):
 
 @pytest.mark.slow
 def test_report_writes_the_figures_and_numbers(tmp_path):
-    from planeray.experiments.materials import run_materials_report
+    from planeray.experiments.materials import report_tasks, run_materials_report
 
     out = tmp_path / "report"
-    n = run_materials_report(out, size=48, quick=True, param_grid=GRID)
+    calls = []
+    n = run_materials_report(out, size=48, quick=True, param_grid=GRID, progress=lambda *a: calls.append(a))
+    # A bar that advances task by task and ends full.
+    total = report_tasks(quick=True)
+    assert {c[1] for c in calls} == {total} and calls[0][0] == 0 and calls[-1][0] == total
+    assert [c[0] for c in calls] == sorted(c[0] for c in calls)
+    assert sum(1 for c in calls if c[2] is None) == total  # one tick per task
+    # The table, left out of training, is unclassified by the report's model; few right picks are lost.
+    row = next(r for r in n["unclassified"]["test"]["thresholds"] if r["unclassified_below"] == 0.01)
+    assert row["unclassified_of_untrained"] > 0.9 and row["lost_of_right"] < 0.1  # 0.5 % at 128x128 (README)
     for name in (
         "fig10a_photo",
         "fig10b_profiles",
@@ -499,3 +666,133 @@ def test_cli_report_prints_classes_without_interior_pixels(tmp_path, monkeypatch
     assert res.exit_code == 0, res.output
     assert "liquid soap: 1.000 (near walls 1.000, away no pixels)" in res.output
     assert "share of the errors near walls: 0.87" in res.output
+
+
+# ----------------------------------------------------------------------------- unclassified pixels
+def test_typicality_is_a_conformal_p_value_of_the_pick():
+    """The p-value equals an independent computation, and is calibrated on data like the training data."""
+    from sklearn.covariance import LedoitWolf
+    from sklearn.pipeline import Pipeline
+    from sklearn.preprocessing import StandardScaler
+    from sklearn.svm import SVC
+
+    from planeray.materials import MaterialModel
+    from planeray.materials.model import fit_typicality
+
+    rng = np.random.default_rng(3)
+    F, n = 12, 600
+
+    def draw(c, m):  # two classes: Gaussian features around two profiles, areas around two brightnesses
+        mean = np.sin(np.arange(F) * (c + 1) / 3.0)
+        return mean + 0.3 * rng.standard_normal((m, F)), np.exp(0.1 * rng.standard_normal(m) + (0.0 if c == 1 else 1.0))
+
+    (X1, a1), (X2, a2) = draw(1, n), draw(2, n)
+    X, area, y = np.vstack([X1, X2]), np.concatenate([a1, a2]), np.repeat([1, 2], n)
+    groups = np.tile(np.arange(4), 2 * n // 4)
+    scaler = StandardScaler().fit(X)
+    pipe = Pipeline([("scale", scaler), ("svc", SVC().fit(scaler.transform(X), y))])
+    typ = fit_typicality(scaler.transform(X), y, groups, area, n_components=4)
+    d = FeatureDefinition(kind="stack", delay_us=range(F), exposure_us=[600.0] * F, lines_per_second=54000.0)
+    model = MaterialModel(pipe, d, {1: "one", 2: "two"}, {}, typ)
+    # Independently: the 4 leading principal directions (SVD), the standardized log area, Ledoit-Wolf per class.
+    Z = scaler.transform(X)
+    mu = Z.mean(axis=0)
+    V = np.linalg.svd(Z - mu, full_matrices=False)[2][:4]
+    la = np.log(area)
+
+    def coords(Zq, aq):
+        return np.column_stack([(Zq - mu) @ V.T, (np.log(aq) - la.mean()) / la.std()])
+
+    C = coords(Z, area)
+    cal = []
+    for g in range(4):
+        held, train = (y == 2) & (groups == g), (y == 2) & (groups != g)
+        lw = LedoitWolf().fit(C[train])
+        cal.append(lw.mahalanobis(C[held]))
+    cal = np.sort(np.concatenate(cal))
+    Xq, aq = draw(2, 400)
+    lw = LedoitWolf().fit(C[y == 2])
+    dq = lw.mahalanobis(coords(scaler.transform(Xq), aq))
+    expected = (1 + np.array([(cal >= v).sum() for v in dq])) / (cal.size + 1)
+    got = model.typicality_of(Xq, np.full(400, 2), aq)
+    assert np.allclose(got, expected, rtol=1e-9)
+    # New pixels of the class: as many below P as P says (conformal); a brightness never trained is unlike it.
+    for P in (0.05, 0.2):
+        assert abs(np.mean(got < P) - P) < 0.05, (P, np.mean(got < P))
+    assert np.all(model.typicality_of(Xq, np.full(400, 2), aq * 20.0) < 0.01)
+
+
+# ----------------------------------------------------------------------------- wall tables: notice and progress
+def test_tables_to_trace_names_what_is_neither_shipped_nor_cached(tmp_path, monkeypatch):
+    from planeray.scenes.materials import tables_to_trace
+
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path))  # an empty cache: only the shipped tables
+    assert tables_to_trace() == [] and tables_to_trace(source="jensen") == []
+    assert tables_to_trace(wall="absorbing", channel="blue") == sorted(MATERIAL_CLASSES)
+
+
+def test_simulate_says_it_traces_tables_and_counts_the_runs(tmp_path, monkeypatch):
+    """Tables to trace: a notice line first, then a bar advancing per Monte Carlo run (not frozen at 0)."""
+    from typer.testing import CliRunner
+
+    import planeray.scenes.materials as sm
+    from planeray.cli import app
+    from planeray.mc.wall import TABLE_RUNS
+
+    real = sm.material_tables
+    runs = []
+
+    def tracing(**kw):  # as if two media had to be traced: each run reported
+        for _ in range(2 * TABLE_RUNS):
+            if kw.get("progress") is not None:
+                kw["progress"](1)
+                runs.append(1)
+        return real(**{k: v for k, v in kw.items() if k != "progress"})
+
+    monkeypatch.setattr(sm, "tables_to_trace", lambda **kw: [2, 3])
+    monkeypatch.setattr(sm, "material_tables", tracing)
+    res = CliRunner().invoke(app, ["materials", "simulate", "--out", str(tmp_path / "c"), "--size", "16", "16"])
+    assert res.exit_code == 0, res.output
+    assert "note: the wall-kernel tables of 2 media (2% milk, whole milk" in res.output
+    assert f"{2 * TABLE_RUNS}/{2 * TABLE_RUNS}" in res.output and len(runs) == 2 * TABLE_RUNS
+
+
+def test_the_largest_projector_row_count_is_the_scenes_own_limit():
+    """check_capture_options' bound is exactly where the scene's kernel tables stop (an independent refusal)."""
+    from planeray.experiments.materials import check_capture_options, max_projector_rows
+
+    for H in (8, 16):
+        most = max_projector_rows(H)
+        check_capture_options(size=(H, H), projector_rows=most)
+        make_scene("materials", (H, H), projector_rows=most, seed=0)  # builds
+        with pytest.raises(InputError, match="too wide for the kernel tables"):
+            make_scene("materials", (H, H), projector_rows=most + 1, seed=0)
+        with pytest.raises(InputError, match=f"projector_rows must be <= {most}"):
+            check_capture_options(size=(H, H), projector_rows=most + 1)
+
+
+@pytest.mark.slow
+def test_cli_predict_with_a_transport_model_counts_the_demultiplexed_rows(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+    from planeray.experiments.materials import write_capture
+
+    cap = simulate_capture(size=(24, 24), seed=0)
+    write_capture(cap, tmp_path / "cap")
+    model = train_model([cap.stack], [cap.labels], kind="transport", param_grid={"C": (10.0,), "gamma_scale": (1.0,)})
+    model.save(tmp_path / "t.zip")
+    res = CliRunner().invoke(
+        app,
+        [
+            "materials",
+            "predict",
+            str(tmp_path / "t.zip"),
+            str(tmp_path / "cap" / "stack.zarr"),
+            "--out",
+            str(tmp_path / "seg.tif"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    assert "demultiplexing the stack (rows)" in res.output and "24/24" in res.output
+    assert read_label_image(tmp_path / "seg.tif", shape=(24, 24)).max() <= 6

@@ -182,21 +182,29 @@ def test_wall_table_correlated_control_variate(tmp_path, monkeypatch):
 
 
 def test_materials_scene_uses_the_shipped_tables(tmp_path, monkeypatch):
-    # The default media (and the Jensen et al. milks of the report) ship precomputed
+    # The default media at the three laser lines (and the Jensen et al. milks of the report) ship precomputed
     # (src/planeray/mc/tables, tools/build_mc_tables.py); a stale table would make every
     # fresh machine trace ~10^7 photons per medium when it builds the scene.
     import planeray.mc.engine as engine
     import planeray.mc.wall as wall
+    import planeray.scenes.materials as sm
     from planeray.scenes import make_scene
 
     monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path))
+    monkeypatch.setattr(sm, "_TRACED", {})  # not the tables this process already holds
 
     def no_tracing(*a, **k):
         raise AssertionError("a wall-kernel table of the materials scene was not found in the shipped tables")
 
     monkeypatch.setattr(engine, "_run", no_tracing)
     monkeypatch.setattr(wall, "_run_wall", no_tracing)
-    for kw in ({}, {"source": "jensen"}, {"container": "cup", "placement": 2}):
+    for kw in (
+        {},
+        {"source": "jensen"},
+        {"container": "cup", "placement": 2},
+        {"channel": "green"},
+        {"channel": "blue"},
+    ):
         s = make_scene("materials", (64, 64), projector_rows=720, seed=0, **kw)
         assert s.maps["near_wall"].any()
     assert not any(tmp_path.rglob("*.npz"))

@@ -8,8 +8,8 @@ never waits for Monte Carlo:
 * the ``materials`` scene's wall-kernel tables (``wall-*.npz``: per medium, the slab
   kernel with 10^6 photons and the kernels beside a wall at 15 distances and 3 angles
   with 10^5 photons each; :func:`planeray.mc.wall.mc_wall_table`), for the default
-  (Narasimhan et al.) media and for the Jensen et al. milks of the report's robustness
-  check.  The slab profiles they trace on the way are not shipped (the tables hold them);
+  (Narasimhan et al.) media at the red, green and blue laser lines and for the Jensen et
+  al. milks of the report's robustness check (red).  The slab profiles they trace on the way are not shipped (the tables hold them);
 * the ``skin`` scene's vein perturbation tables (``skin-*.npz``: fair and dark skin at 638
   and 850 nm, 400,000 photons each; :func:`planeray.mc.layered.mc_vein_table`) and the
   background kernels of the tones in between (``layered-*.npz``, 100,000 photons each;
@@ -36,9 +36,11 @@ from planeray.optical_data_skin import SKIN_TONES
 from planeray.scenes import list_scenes, make_scene
 
 #: Scene builds beyond the defaults whose kernels ship too: (scene, parameters).
-EXTRA = [("materials", {"source": "jensen"})] + [
-    ("skin", {"wavelength_nm": w, "tone": t}) for w in (638, 850) for t in SKIN_TONES if (w, t) != (638, "fair")
-]
+EXTRA = [
+    ("materials", {"source": "jensen"}),
+    ("materials", {"channel": "green"}),
+    ("materials", {"channel": "blue"}),
+] + [("skin", {"wavelength_nm": w, "tone": t}) for w in (638, 850) for t in SKIN_TONES if (w, t) != (638, "fair")]
 #: Which of a scene's cache entries ship (default: all it traced).
 SHIPPED = {"materials": "wall-*.npz"}
 

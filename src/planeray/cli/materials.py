@@ -2,19 +2,67 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from .._console import console, out, progress_bar
-from ._common import _friendly_errors, _load_stack
+from .._console import console, out, print_json, progress_bar
+from ._common import _check_outputs, _friendly_errors, _load_stack
 
 materials_app = typer.Typer(
     help="Material recognition from delay profiles (Sec. 8, Fig. 10): simulate, train, predict, report.",
     no_args_is_help=True,
 )
+
+
+def _choice(value: str, option: str, choices) -> None:
+    if value not in choices:
+        raise ValueError(f"{option} must be one of {', '.join(choices)}, got {value!r}")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
+
+
+def _not_an_input(out_path: Path, inputs) -> None:
+    """Refuse an output that is also one of the command's inputs (compared as resolved paths)."""
+    for option, path in inputs:
+        if path is not None and _same_file(out_path, Path(path)):
+            raise ValueError(
+                f"--out {out_path} is also an input ({option}): planeray never writes over its inputs; "
+                "choose another output"
+            )
+
+
+def _check_parent(path: Path) -> None:
+    """Refuse an output whose folder cannot be made: a file on its way."""
+    for parent in Path(path).absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"--out {path} cannot be created: {parent} is a file, not a folder")
+            return
+
+
+def _outputs(*outputs, overwrite: bool) -> None:
+    """:func:`_check_outputs` (before any work), and outputs whose folder cannot be made refused too."""
+    for path, _ in outputs:
+        _check_parent(path)
+    _check_outputs(*outputs, overwrite=overwrite)
+
+
+def _read_labels(path: Path, option: str, shape):
+    """A label image of the stack's size, errors naming the option."""
+    from ..errors import InputError
+    from ..materials import read_label_image
+
+    try:
+        return read_label_image(path, shape=shape)
+    except InputError as exc:
+        raise ValueError(f"{option} {exc}") from None
 
 
 @materials_app.command("classes")
@@ -24,11 +72,13 @@ def classes(
     channel: Annotated[str, typer.Option(help="Laser colour: red, green or blue.")] = "red",
 ):
     """The documented class ids of label images and the simulated media."""
-    from ..optical_data import BACKGROUND_CLASS, CLASS_NAMES, UNLABELLED, optical_table
+    from ..optical_data import BACKGROUND_CLASS, CHANNELS, CLASS_NAMES, OPTICAL_SOURCES, UNLABELLED, optical_table
 
+    _choice(source, "--source", OPTICAL_SOURCES)
+    _choice(channel, "--channel", CHANNELS)
     rows = {r["class_id"]: r for r in optical_table(source=source, channel=channel)}
     out.print(f"class ids of label images (media: {source}, {channel} laser line):")
-    out.print(f"  {UNLABELLED}  unlabelled: not trained on, not scored")
+    out.print(f"  {UNLABELLED}  unlabelled: not trained on, not scored; in a segmentation: no class")
     for cid, name in CLASS_NAMES.items():
         r = rows.get(cid)
         if r is None:
@@ -50,46 +100,76 @@ def simulate(
     out_dir: Annotated[
         Path, typer.Option("--out", "-o", help="Capture folder to write (stack.zarr, labels.png, ...).")
     ],
-    size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels).")] = (128, 128),
-    projector_rows: Annotated[int, typer.Option(help="Projector rows spanned by the image (0.3 mm each).")] = 720,
-    seed: Annotated[int, typer.Option(help="Seed of the camera noise and the table's texture.")] = 0,
+    size: Annotated[tuple[int, int], typer.Option(help="Image size H W (camera pixels), 8 to 4096.")] = (128, 128),
+    projector_rows: Annotated[
+        int, typer.Option(help="Projector rows spanned by the image (0.3 mm each), up to 127 per image row.")
+    ] = 720,
+    seed: Annotated[int, typer.Option(help="Seed of the camera noise and the table's texture (>= 0).")] = 0,
     placement: Annotated[int, typer.Option(help="0: materials in class order; k >= 1: shuffled and moved.")] = 0,
     container: Annotated[str, typer.Option(help="tray (rectangular) or cup (round).")] = "tray",
     wall: Annotated[str, typer.Option(help="Container walls: fresnel (clear) or absorbing (black).")] = "fresnel",
     source: Annotated[str, typer.Option(help="Optical data of the milks: narasimhan or jensen.")] = "narasimhan",
     channel: Annotated[str, typer.Option(help="Laser colour: red, green or blue.")] = "red",
-    noise: Annotated[float, typer.Option(help="Noise factor: x the default camera's shot and read noise.")] = 1.0,
+    noise: Annotated[
+        float, typer.Option(help="Noise factor: x the default camera's shot and read noise (> 0, at most 77).")
+    ] = 1.0,
     ambient_e_per_us: Annotated[
         float,
-        typer.Option("--ambient-e-per-us", "--ambient", help="Ambient light, electrons per us of exposure (albedo 1)."),
+        typer.Option(
+            "--ambient-e-per-us",
+            "--ambient",
+            help="Ambient light, electrons per us of exposure (albedo 1); below what fills the full well.",
+        ),
     ] = 0.5,
     sweep: Annotated[str, typer.Option(help="Named sweep: paper (85 images) or quick.")] = "paper",
     overwrite: Annotated[bool, typer.Option(help="Replace an existing capture folder planeray wrote.")] = False,
 ):
     """Simulate a capture of the five containers (milks, toothpaste, soap) with its labels."""
-    from ..experiments.materials import simulate_capture
-    from ..io.atomic import check_replaceable
+    from ..experiments.materials import check_capture_options, simulate_capture
+    from ..mc.cache import cache_dir
+    from ..mc.wall import TABLE_RUNS
+    from ..optical_data import MATERIAL_CLASSES
+    from ..scenes.materials import tables_to_trace
     from ..timing import make_sweep
 
-    check_replaceable(out_dir, overwrite=overwrite, kind="materials capture")
+    options = dict(
+        size=size,
+        projector_rows=projector_rows,
+        seed=seed,
+        placement=placement,
+        container=container,
+        wall=wall,
+        source=source,
+        channel=channel,
+        noise=noise,
+        ambient_e_per_us=ambient_e_per_us,
+        sweep=sweep,
+    )
+    check_capture_options(**options)
+    _outputs((out_dir, "materials capture"), overwrite=overwrite)
+    trace = tables_to_trace(source=source, channel=channel, wall=wall)
     n = len(make_sweep(sweep))
     with progress_bar() as bar:
+        table_progress = None
+        if trace:
+            names = ", ".join(MATERIAL_CLASSES[c] for c in trace)
+            console.print(
+                f"note: the wall-kernel tables of {len(trace)} media ({names}; {source}, {channel} laser line, "
+                f"{wall} walls) are neither shipped nor cached: tracing them by Monte Carlo first "
+                f"({len(trace) * TABLE_RUNS} runs, about {1.6 * len(trace):.0f} minutes on 2 cores; once: "
+                f"cached in {cache_dir()})",
+                highlight=False,
+                markup=False,
+            )
+            ttask = bar.add_task("tracing wall-kernel tables (Monte Carlo runs)", total=len(trace) * TABLE_RUNS)
+            table_progress = lambda k: bar.advance(ttask, k)  # noqa: E731
         task = bar.add_task(f"building the scene, capturing {n} images", total=n)
         cap = simulate_capture(
             out_dir,
-            size=size,
-            projector_rows=projector_rows,
-            seed=seed,
-            placement=placement,
-            container=container,
-            wall=wall,
-            source=source,
-            channel=channel,
-            noise=noise,
-            ambient_e_per_us=ambient_e_per_us,
-            sweep=sweep,
+            **options,
             overwrite=overwrite,
             progress=lambda i: bar.advance(task),
+            table_progress=table_progress,
         )
     near = int(cap.near_wall.sum())
     out.print(
@@ -103,17 +183,19 @@ def _parse_class_names(items) -> dict:
     for item in items or []:
         key, sep, name = item.partition("=")
         if not sep or not key.strip().isdigit() or not name.strip():
-            raise ValueError(f"--class-name expects ID=NAME (e.g. 1='fat-free milk'), got {item!r}")
+            raise ValueError(f"--class-name expects ID=NAME (e.g. 7=mayonnaise), got {item!r}")
+        if not 1 <= int(key) <= 255:
+            raise ValueError(f"--class-name ids must be 1 to 255 (0 is unlabelled), got {item!r}")
         names[int(key)] = name.strip()
     return names
 
 
 @materials_app.command("train")
-@_friendly_errors
+@_friendly_errors(options={"kind": "--features"})
 def train(
     stacks: Annotated[list[Path], typer.Argument(help="Training stacks (Zarr or import folder), one or more.")],
     labels: Annotated[list[Path], typer.Option("--labels", help="Label image per stack (PNG/TIFF of class ids).")],
-    out_path: Annotated[Path, typer.Option("--out", "-o", help="Model file to write (a zip: JSON + skops).")],
+    out_path: Annotated[Path, typer.Option("--out", "-o", help="Model file to write (.zip: JSON + skops).")],
     features: Annotated[str, typer.Option(help="stack (measured profiles) or transport (demultiplexed).")] = "stack",
     floor: Annotated[
         str,
@@ -129,42 +211,53 @@ def train(
     ignore_class: Annotated[
         list[int] | None, typer.Option("--ignore-class", help="Class id to leave out (e.g. 6, the background).")
     ] = None,
-    max_per_class: Annotated[int, typer.Option(help="Training pixels per class and capture.")] = 400,
-    cv_folds: Annotated[int, typer.Option(help="Cross-validation folds (grouped by capture).")] = 4,
-    seed: Annotated[int, typer.Option(help="Seed of the pixel sampling.")] = 0,
+    max_per_class: Annotated[int, typer.Option(help="Training pixels per class and capture (10 to 5000).")] = 400,
+    cv_folds: Annotated[int, typer.Option(help="Cross-validation folds (grouped by capture), 2 to 20.")] = 4,
+    seed: Annotated[int, typer.Option(help="Seed of the pixel sampling (>= 0).")] = 0,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing model file planeray wrote.")] = False,
 ):
     """Train the per-pixel RBF-SVM on labelled captures (hyper-parameters by grouped cross-validation)."""
-    from ..io.atomic import ALREADY_EXISTS
-    from ..materials import read_label_image, train_model
-    from ..materials.features import FLOORS
-    from ..materials.model import _is_model_file
+    from ..materials import train_model
+    from ..materials.model import check_model_output, check_training_options
 
-    if out_path.exists() and (not overwrite or not _is_model_file(out_path)):
-        raise ValueError(f"{out_path}: {ALREADY_EXISTS}" if not overwrite else f"{out_path}: is not a planeray model")
-    if floor not in FLOORS:
-        raise ValueError(f"--floor {floor!r}: choose one of {', '.join(FLOORS)}")
-    if len(labels) != len(stacks):
-        raise ValueError(f"{len(stacks)} stacks but {len(labels)} --labels: give one label image per stack, in order")
     names = _parse_class_names(class_name)
+    check_training_options(
+        kind=features,
+        floor=floor,
+        class_names=names,
+        ignore_classes=tuple(ignore_class or ()),
+        max_per_class=max_per_class,
+        cv_folds=cv_folds,
+        seed=seed,
+    )
+    if len(labels) != len(stacks):
+        raise ValueError(f"--labels: {len(stacks)} stacks but {len(labels)} label images; give one per stack, in order")
+    if out_path.suffix.lower() != ".zip":
+        raise ValueError(f"--out must end in .zip (a model file: a JSON record and a skops estimator), got {out_path}")
+    _not_an_input(out_path, [("a stack", p) for p in stacks] + [("--labels", p) for p in labels])
+    _check_parent(out_path)
+    check_model_output(out_path, overwrite=overwrite)
     loaded = [_load_stack(p) for p in stacks]
-    labs = [read_label_image(lp, shape=st.shape) for lp, st in zip(labels, loaded)]
+    labs = [_read_labels(lp, "--labels", st.shape) for lp, st in zip(labels, loaded)]
     with progress_bar() as bar:
         task = bar.add_task(f"features of {len(stacks)} capture(s)", total=len(stacks))
-        with console.status("cross-validating the SVM"):
-            model = train_model(
-                loaded,
-                labs,
-                kind=features,
-                floor=floor,
-                class_names=names,
-                ignore_classes=tuple(ignore_class or ()),
-                max_per_class=max_per_class,
-                cv_folds=cv_folds,
-                seed=seed,
-                sources=[str(p) for p in stacks],
-                progress=lambda n: bar.advance(task),
-            )
+
+        def progress(done, total, stage):
+            bar.update(task, completed=done, total=total, description=stage)
+
+        model = train_model(
+            loaded,
+            labs,
+            kind=features,
+            floor=floor,
+            class_names=names,
+            ignore_classes=tuple(ignore_class or ()),
+            max_per_class=max_per_class,
+            cv_folds=cv_folds,
+            seed=seed,
+            sources=[str(p) for p in stacks],
+            progress=progress,
+        )
     model.save(out_path, overwrite=overwrite)
     tr = model.training
     out.print(
@@ -185,82 +278,141 @@ def _acc(value) -> str:
 def predict(
     model_path: Annotated[Path, typer.Argument(help="Model file (planeray materials train).")],
     stack_path: Annotated[Path, typer.Argument(help="Stack (Zarr or import folder) of the same sweep.")],
-    out_png: Annotated[Path, typer.Option("--out", "-o", help="Segmentation map: palette PNG of class ids (or TIFF).")],
+    out_png: Annotated[
+        Path, typer.Option("--out", "-o", help="Segmentation map: palette PNG of class ids (or TIFF); 0: no class.")
+    ],
     labels: Annotated[
         Path | None, typer.Option("--labels", help="Ground-truth label image: score the prediction.")
     ] = None,
     near_wall: Annotated[
-        Path | None, typer.Option("--near-wall", help="Mask of pixels near walls (non-zero): scored apart.")
+        Path | None,
+        typer.Option("--near-wall", help="Mask of pixels near walls (non-zero): scored apart (with --labels)."),
     ] = None,
+    unclassified_below: Annotated[
+        float,
+        typer.Option(
+            help="A pixel less typical of the SVM's pick than this share of the class's held-out training pixels "
+            "is unclassified (0 in the map); 0 keeps every pick. The default is measured on held-out captures "
+            "(README)."
+        ),
+    ] = 0.01,
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing segmentation planeray wrote.")] = False,
 ):
     """Segment a capture pixel by pixel with a trained model (refused if the sweep differs)."""
     from ..experiments._report import jsonable
     from ..experiments.materials import score
-    from ..materials import load_model, read_label_image, write_label_image
+    from ..materials import load_model
+    from ..materials.labels import LABEL_SUFFIXES, write_label_image
+    from ..materials.model import check_unclassified_below
 
+    threshold = check_unclassified_below(unclassified_below)
+    if out_png.suffix.lower() not in LABEL_SUFFIXES:
+        raise ValueError(f"--out must end in .png, .tif or .tiff (a label image of class ids), got {out_png}")
+    if near_wall is not None and labels is None:
+        raise ValueError("--near-wall needs --labels: it splits the accuracies into near walls and away from them")
+    _not_an_input(
+        out_png,
+        [("the model", model_path), ("the stack", stack_path), ("--labels", labels), ("--near-wall", near_wall)],
+    )
+    _outputs((out_png, "segmentation"), overwrite=overwrite)
     model = load_model(model_path)
     st = _load_stack(stack_path)
-    with console.status("classifying pixels"):
-        seg = model.predict(st, source=str(stack_path))
-    write_label_image(out_png, seg)
-    counts = {
-        model.classes.get(int(c), f"class {int(c)}") if c else "no profile": int((seg == c).sum())
-        for c in sorted(set(seg.ravel().tolist()))
-    }
+    model.check_stack(st, source=str(stack_path))
+    truth = _read_labels(labels, "--labels", st.shape) if labels is not None else None
+    near = _read_labels(near_wall, "--near-wall", st.shape) > 0 if near_wall is not None else None
+    blind = {c: p for c, p in model.smallest_typicality().items() if 0 < threshold <= p}
+    if blind:
+        console.print(
+            "note: --unclassified-below "
+            f"{threshold:g} cannot unclassify any pixel of "
+            + ", ".join(f"{model.classes[c]} (smallest typicality {p:.3g})" for c, p in blind.items())
+            + ": too few held-out training pixels; train with more (--max-per-class, more captures) or raise it",
+            highlight=False,
+            markup=False,
+        )
+    if model.definition.kind == "transport":  # demultiplexing first: minutes, counted in camera rows
+        with progress_bar() as bar:
+            task = bar.add_task("demultiplexing the stack (rows)", total=st.shape[0])
+            seg = model.segment(
+                st, unclassified_below=threshold, source=str(stack_path), progress=lambda n: bar.advance(task, n)
+            )
+    else:
+        with console.status("classifying pixels"):
+            seg = model.segment(st, unclassified_below=threshold, source=str(stack_path))
+    write_label_image(out_png, seg.labels, kind="segmentation")
+    counts = {}
+    for c in sorted(set(seg.labels[~seg.no_profile & ~seg.unclassified].ravel().tolist())):
+        counts[model.classes.get(int(c), f"class {int(c)}")] = int(((seg.labels == c) & ~seg.no_profile).sum())
+    counts["unclassified"] = int(seg.unclassified.sum())
+    counts["no profile"] = int(seg.no_profile.sum())
     numbers = {
         "segmentation": str(out_png),
         "pixels": counts,
+        "unclassified_below": threshold,
         "model": str(model_path),
         "features": model.definition.describe(),
     }
-    if labels is not None:
-        truth = read_label_image(labels, shape=st.shape)
-        near = read_label_image(near_wall, shape=st.shape) > 0 if near_wall is not None else None
+    if truth is not None:
         numbers["score"] = score(
-            seg,
+            seg.labels,
             truth,
             near_wall=near,
             classes=sorted(set(model.classes) | {int(c) for c in set(truth.ravel().tolist()) if c}),
             model_classes=sorted(model.classes),
         )
+        numbers["score"]["unclassified"] = _unclassified_by_class(seg, truth, numbers["score"]["confusion"])
     if json_out:
-        out.print_json(json.dumps(jsonable(numbers), allow_nan=False))
+        print_json(jsonable(numbers))
         return
-    out.print(f"segmentation: {out_png}")
+    out.print(f"segmentation: {out_png}  (unclassified below typicality {threshold:g})")
     for name, n in counts.items():
         out.print(f"  {name}: {n} px")
     if "score" in numbers:
         sc = numbers["score"]
         for name, acc in sc["accuracy"].items():
+            lost = sc["unclassified"].get(name)
+            share = f"; {lost:.0%} of its pixels unclassified" if lost is not None else ""
             if name in sc["not_scored"]:
-                out.print(f"  accuracy {name}: not scored ({sc['not_scored'][name]})")
+                out.print(f"  accuracy {name}: not scored ({sc['not_scored'][name]}){share}")
                 continue
             extra = ""
             if "accuracy_near_wall" in sc:
                 extra = (
                     f"  (near walls {_acc(sc['accuracy_near_wall'][name])}, away {_acc(sc['accuracy_interior'][name])})"
                 )
-            out.print(f"  accuracy {name}: {_acc(acc)}{extra}")
+            out.print(f"  accuracy {name}: {_acc(acc)}{extra}{share}")
+
+
+def _unclassified_by_class(seg, truth, confusion) -> dict:
+    """Share of each true class's pixels (with a profile) left unclassified (None: no such pixels)."""
+    out = {}
+    for cid, name in zip(confusion["classes"], confusion["names"]):
+        m = (truth == cid) & ~seg.no_profile
+        out[name] = float(seg.unclassified[m].mean()) if m.any() else None
+    return out
 
 
 @materials_app.command("report")
 @_friendly_errors
 def report(
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the figures (Fig. 10) and materials.json.")],
-    size: Annotated[int, typer.Option(help="Image size (size x size of a 720-row projector).")] = 128,
+    size: Annotated[int, typer.Option(help="Image size (size x size of a 720-row projector), 16 to 4096.")] = 128,
     quick: Annotated[bool, typer.Option(help="Fewer curve points, no Jensen or cup runs.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing report folder planeray wrote.")] = False,
 ):
     """The whole experiment end to end: simulate, train, test, curves, figures (Fig. 10b, c, d)."""
-    from ..experiments.materials import run_materials_report
-    from ..io.atomic import check_replaceable
+    from ..experiments.materials import check_report_options, report_tasks, run_materials_report
 
-    check_replaceable(out_dir, overwrite=overwrite, kind="materials report")
-    with console.status("materials report") as status:
-        numbers = run_materials_report(
-            out_dir, size=size, quick=quick, overwrite=overwrite, progress=lambda msg: status.update(msg)
-        )
+    check_report_options(size=size, quick=quick)
+    _outputs((out_dir, "materials report"), overwrite=overwrite)
+    with progress_bar() as bar:
+        task = bar.add_task("materials report", total=report_tasks(quick=quick))
+
+        def progress(done, total, msg):
+            bar.update(task, completed=done, total=total, **({"description": msg} if msg else {}))
+
+        numbers = run_materials_report(out_dir, size=size, quick=quick, overwrite=overwrite, progress=progress)
     main = numbers["stack_profiles"]["floor_edge"]["test"]
     out.print(f"report: {out_dir}  ({numbers['seconds']:g} s)")
     for name, acc in main["accuracy"].items():
@@ -269,3 +421,15 @@ def report(
             f"away {_acc(main['accuracy_interior'][name])})"
         )
     out.print(f"  share of the errors near walls: {main['errors']['share_near_wall']:.2f}")
+    unc = (numbers.get("unclassified") or {}).get("test")
+    if unc:
+        row = next(r for r in unc["thresholds"] if r["unclassified_below"] == numbers["unclassified"]["default"])
+        out.print(
+            f"  unclassified at the default threshold {row['unclassified_below']:g}: the table (not trained) "
+            f"{_pct(row['unclassified_of_untrained'])}, right picks lost {_pct(row['lost_of_right'])}, wrong picks "
+            f"flagged {_pct(row['flagged_of_wrong'])}"
+        )
+
+
+def _pct(value) -> str:
+    return "no pixels" if value is None else f"{value:.1%}"

@@ -14,12 +14,14 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .._validate import check_integer, check_nonnegative, check_number
 from ..acquire import simulate_stack
 from ..camera import CameraModel
 from ..errors import InputError
@@ -45,6 +47,10 @@ __all__ = [
     "REPORT_FORMAT",
     "Capture",
     "camera_for",
+    "capture_memory_bytes",
+    "check_capture_options",
+    "check_report_options",
+    "max_projector_rows",
     "simulate_capture",
     "score",
     "run_materials_report",
@@ -67,13 +73,19 @@ def camera_for(*, noise: float = 1.0, ambient_e_per_us: float = 0.5) -> CameraMo
     read noise by ``noise``: every image keeps its expected value (normalized units) and
     its shot and read noise grow ``noise``-fold -- a dimmer laser or a darker scene.
     ``ambient_e_per_us`` is given at the default camera's scale (0.5: the simulator's
-    room light).
+    room light).  ``noise`` is at most :data:`MAX_NOISE` (beyond it a white surface
+    gets less than one laser electron per image).
     """
-    noise, ambient = float(noise), float(ambient_e_per_us)
-    if not np.isfinite(noise) or noise <= 0:
-        raise InputError(f"noise must be a positive factor, got {noise!r}")
-    if not np.isfinite(ambient) or ambient < 0:
-        raise InputError(f"ambient_e_per_us must be >= 0, got {ambient!r}")
+    noise = check_number(
+        noise,
+        "noise",
+        minimum=0.0,
+        maximum=MAX_NOISE,
+        min_inclusive=False,
+        requirement=f"a factor > 0 and <= {MAX_NOISE:.4g} (beyond it a white surface gets less than one laser "
+        "electron per image: no signal)",
+    )
+    ambient = check_nonnegative(ambient_e_per_us, "ambient_e_per_us")
     base = CameraModel()
     s2 = noise * noise
     return CameraModel(
@@ -82,6 +94,126 @@ def camera_for(*, noise: float = 1.0, ambient_e_per_us: float = 0.5) -> CameraMo
         read_noise_e=base.read_noise_e / noise,
         ambient_e_per_us=ambient / s2,
     )
+
+
+#: Largest noise factor: the default camera's laser electrons per image of a white surface, square-rooted.
+MAX_NOISE = math.sqrt(CameraModel().laser_electrons)
+#: Smallest and largest image side of a simulated capture (the scene needs 8 pixels).
+MIN_SIZE, MAX_SIZE = 8, 4096
+#: Smallest image side of the report: below it a container holds a handful of pixels.
+MIN_REPORT_SIZE = 16
+#: Memory a capture takes per pixel (bytes per offset of the scene's band, per image):
+#: measured 4.6 kB per pixel at 256x256 (257 offsets, 85 images).
+_BYTES_PER_PIXEL_OFFSET, _BYTES_PER_PIXEL_IMAGE = 16, 12
+
+
+def _available_memory() -> int | None:
+    """Bytes of memory available now (Linux ``MemAvailable``), None where unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def capture_memory_bytes(size, sweep: str = "paper") -> int:
+    """Estimated peak memory of simulating one capture of ``size`` (scene kernels and images)."""
+    from ..scenes.base import DEFAULT_BAND_ROWS
+
+    H, W = (int(v) for v in size)
+    offsets = 2 * DEFAULT_BAND_ROWS + 1
+    return H * W * (_BYTES_PER_PIXEL_OFFSET * offsets + _BYTES_PER_PIXEL_IMAGE * len(make_sweep(sweep)))
+
+
+def _check_memory(needed: int, name: str, what: str) -> None:
+    free = _available_memory()
+    if free is not None and needed > free:
+        raise InputError(
+            f"{name} must fit in the memory available: {what} needs about {needed / 2**30:.1f} GiB, "
+            f"{free / 2**30:.1f} GiB are available"
+        )
+
+
+def check_capture_options(
+    *,
+    size=(128, 128),
+    projector_rows: int = PAPER_PROJECTOR_ROWS,
+    seed: int = 0,
+    placement: int = 0,
+    container: str = "tray",
+    wall: str = "fresnel",
+    source: str = "narasimhan",
+    channel: str = "red",
+    noise: float = 1.0,
+    ambient_e_per_us: float = 0.5,
+    sweep: str = "paper",
+) -> None:
+    """Refuse, before any work, the options of :func:`simulate_capture` that cannot give a capture.
+
+    Every message names the parameter as :func:`simulate_capture` does (the command
+    line prints its option instead): sizes from :data:`MIN_SIZE` to :data:`MAX_SIZE`
+    that fit in the available memory, a projector row count the kernel tables reach,
+    seeds and placements >= 0, the named choices, the noise factor
+    (:func:`camera_for`) and an ambient light that does not fill the full well in the
+    sweep's shortest exposure by itself.
+    """
+    from ..mc.wall import WALL_MODELS
+    from ..optical_data import CHANNELS, OPTICAL_SOURCES
+    from ..scenes.materials import CONTAINERS
+    from ..timing import SWEEPS
+
+    def choice(value, name, choices):
+        if value not in choices:
+            raise InputError(f"{name} must be one of {', '.join(choices)}, got {value!r}")
+
+    if not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise InputError(f"size must be two integers H W, got {size!r}")
+    H = check_integer(size[0], "size", minimum=MIN_SIZE, maximum=MAX_SIZE)
+    W = check_integer(size[1], "size", minimum=MIN_SIZE, maximum=MAX_SIZE)
+    rows = check_integer(projector_rows, "projector_rows", minimum=1)
+    most = max_projector_rows(H)
+    if rows > most:
+        raise InputError(
+            f"projector_rows must be <= {most} for {H} image rows (the kernel tables reach 192 projector rows; "
+            f"{rows / H:.4g} rows per camera row is beyond them), got {projector_rows!r}"
+        )
+    check_integer(seed, "seed", minimum=0, maximum=2**32 - 1)
+    check_integer(placement, "placement", minimum=0, maximum=2**32 - 1)
+    choice(container, "container", CONTAINERS)
+    choice(wall, "wall", WALL_MODELS)
+    choice(source, "source", OPTICAL_SOURCES)
+    choice(channel, "channel", CHANNELS)
+    choice(sweep, "sweep", tuple(SWEEPS))
+    camera = camera_for(noise=noise, ambient_e_per_us=ambient_e_per_us)
+    shortest = float(np.min(make_sweep(sweep).exposure_us))
+    most_ambient = CameraModel().full_well_e / shortest
+    if camera.ambient_e_per_us * shortest >= camera.full_well_e:
+        raise InputError(
+            f"ambient_e_per_us must be < {most_ambient:g} (at {float(ambient_e_per_us):g} the ambient light alone "
+            f"fills the full well in the sweep's shortest exposure, {shortest:g} us: every pixel saturates), "
+            f"got {ambient_e_per_us!r}"
+        )
+    _check_memory(capture_memory_bytes((H, W), sweep), "size", f"a {H}x{W} capture")
+
+
+def max_projector_rows(camera_rows: int) -> int:
+    """Most projector rows a ``camera_rows``-row image of the materials scene may span (its kernel tables' reach)."""
+    from ..scenes.base import DEFAULT_BAND_ROWS
+    from ..scenes.materials import _TABLE_REACH_ROWS
+
+    H = int(camera_rows)
+    lo, hi = 1, H * _TABLE_REACH_ROWS
+    while lo < hi:  # the largest P with max(band, ceil(P/H) + 1) + ceil(P/H/2 + 1/2) <= reach
+        mid = (lo + hi + 1) // 2
+        rpc = mid / H
+        if max(DEFAULT_BAND_ROWS, math.ceil(rpc) + 1) + math.ceil(0.5 * rpc + 0.5) <= _TABLE_REACH_ROWS:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
 
 
 @dataclass
@@ -127,6 +259,7 @@ def simulate_capture(
     sweep: str = "paper",
     overwrite: bool = False,
     progress=None,
+    table_progress=None,
 ) -> Capture:
     """Simulate one capture of the ``materials`` scene (and write it as a folder if ``out`` is given).
 
@@ -153,11 +286,30 @@ def simulate_capture(
         Sweep name (``"paper"``: 17 delays x 5 exposures).
     progress : callable, optional
         Called with the index of each simulated image.
+    table_progress : callable, optional
+        Called with 1 after each Monte Carlo run of the wall-kernel tables traced for
+        this capture (none for the shipped tables; :func:`tables_to_trace`).
     """
     from ..io.atomic import check_replaceable
+    from ..scenes.materials import material_tables
 
+    check_capture_options(
+        size=size,
+        projector_rows=projector_rows,
+        seed=seed,
+        placement=placement,
+        container=container,
+        wall=wall,
+        source=source,
+        channel=channel,
+        noise=noise,
+        ambient_e_per_us=ambient_e_per_us,
+        sweep=sweep,
+    )
     if out is not None:
         check_replaceable(out, overwrite=overwrite, kind="materials capture")
+    if table_progress is not None:  # trace (and cache) the tables first, so their runs can be counted
+        material_tables(source=source, channel=channel, wall=wall, progress=table_progress)
     H, W = (int(v) for v in size)
     scene = make_scene(
         "materials",
@@ -199,11 +351,15 @@ def simulate_capture(
 
 
 def _write_png8(path, image):
-    """An 8-bit grayscale PNG of an image in [0, 1]."""
+    """An 8-bit grayscale PNG of an image in [0, 1] (with planeray's mark)."""
     from PIL import Image
 
+    from ..io.marks import png_mark_info
+
     with atomic_file(path) as tmp:
-        Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)).save(tmp, format="PNG")
+        Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)).save(
+            tmp, format="PNG", pnginfo=png_mark_info("image")
+        )
 
 
 def write_capture(cap: Capture, out, *, overwrite=False, scene_params=None) -> Path:
@@ -211,8 +367,8 @@ def write_capture(cap: Capture, out, *, overwrite=False, scene_params=None) -> P
     out = Path(out)
     with atomic_directory(out, overwrite=overwrite, kind="materials capture") as tmp:
         write_stack(cap.stack, tmp / "stack.zarr")
-        write_label_image(tmp / "labels.png", cap.labels)
-        write_label_image(tmp / "near_wall.png", np.where(cap.near_wall, 255, 0))
+        write_label_image(tmp / "labels.png", cap.labels, kind="labels")
+        write_label_image(tmp / "near_wall.png", np.where(cap.near_wall, 255, 0), kind="mask")
         _write_png8(tmp / "photo.png", cap.photo)
         meta = {
             "format": CAPTURE_FORMAT,
@@ -355,6 +511,63 @@ def _saturated_share(cap: Capture) -> float:
     return float(sat[mat].mean())
 
 
+def check_report_options(*, size: int = 128, quick: bool = False) -> None:
+    """Refuse, before any work, a report size that cannot give one (:data:`MIN_REPORT_SIZE` .. :data:`MAX_SIZE`)."""
+    n = check_integer(size, "size", minimum=MIN_REPORT_SIZE, maximum=MAX_SIZE)
+    # The report holds four captures and two transports at once (train, test, same conditions, one curve point).
+    _check_memory(6 * capture_memory_bytes((n, n)), "size", f"the {n}x{n} report")
+
+
+def report_tasks(*, quick: bool = False) -> int:
+    """Tasks of :func:`run_materials_report` (captures simulated, models trained, transports demultiplexed, figures)."""
+    noises, ambients = _report_curves(quick)
+    return 12 + len(noises) + len(ambients) + (0 if quick else 6)
+
+
+def _report_curves(quick: bool):
+    noises = (1.0, 2.0, 4.0) if quick else (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
+    # Beyond ~5 e-/us the 1200-us images of the milks fill the full well (saturation).
+    ambients = (0.5, 4.0) if quick else (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0)
+    return noises, ambients
+
+
+#: Thresholds of the unclassified-pixel measurement (:func:`unclassified_numbers`).
+UNCLASSIFIED_THRESHOLDS = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1)
+
+
+def unclassified_numbers(seg, truth, model_classes) -> dict:
+    """What the typicality threshold does on a capture with ground truth.
+
+    For each threshold of :data:`UNCLASSIFIED_THRESHOLDS` (and the segmentation's own):
+    the share of the trained classes' pixels the SVM got right that become unclassified
+    (lost), of those it got wrong (flagged), and of the pixels of classes the model was
+    trained without (e.g. the table) that are unclassified.
+    """
+    truth = np.asarray(truth)
+    has = ~seg.no_profile
+    known = np.isin(truth, list(model_classes)) & has
+    right, wrong = known & (seg.svm_labels == truth), known & (seg.svm_labels != truth)
+    unknown = (truth > 0) & ~np.isin(truth, list(model_classes)) & has
+
+    def share(mask, below):
+        return float((seg.typicality[mask] < below).mean()) if mask.any() else None
+
+    rows = []
+    for below in sorted({*UNCLASSIFIED_THRESHOLDS, seg.unclassified_below}):
+        rows.append(
+            {
+                "unclassified_below": below,
+                "lost_of_right": share(right, below),
+                "flagged_of_wrong": share(wrong, below),
+                "unclassified_of_untrained": share(unknown, below),
+            }
+        )
+    return {
+        "pixels": {"right": int(right.sum()), "wrong": int(wrong.sum()), "untrained": int(unknown.sum())},
+        "thresholds": rows,
+    }
+
+
 def run_materials_report(
     out_dir,
     *,
@@ -370,20 +583,23 @@ def run_materials_report(
     (:data:`TEST_SETTINGS`): measured stack profiles (floor removed, and the paper's
     plain normalization) and demultiplexed transport profiles; accuracy as the noise
     factor and the ambient light grow (the test placement, new seeds); the same
-    experiment with the Jensen et al. milks; round cups instead of trays.
+    experiment with the Jensen et al. milks; round cups instead of trays; and what the
+    typicality threshold leaves unclassified (:func:`unclassified_numbers`).  The
+    accuracies are the SVM's picks (``unclassified_below=0``, the paper's classifier).
 
     Parameters
     ----------
     out_dir : path
         Output folder (replaced only with ``overwrite`` and only if it is such a report).
     size : int
-        Image size (``size x size`` of a 720-row projector).
+        Image size (``size x size`` of a 720-row projector), :data:`MIN_REPORT_SIZE` or more.
     quick : bool
         Fewer points on the curves, no Jensen or cup runs (for tests).
     param_grid : dict, optional
         SVM grid (:data:`planeray.materials.model.DEFAULT_PARAM_GRID`).
     progress : callable, optional
-        Called with a short description of each step.
+        Called as ``progress(done, total, description)`` before the first task and
+        after each (``total``: :func:`report_tasks`).
 
     Returns
     -------
@@ -391,14 +607,24 @@ def run_materials_report(
         The numbers written to ``materials.json``.
     """
     from ..io.atomic import check_replaceable
+    from ..materials.model import DEFAULT_UNCLASSIFIED_BELOW
 
+    check_report_options(size=size, quick=quick)
     out_dir = Path(out_dir)
     check_replaceable(out_dir, overwrite=overwrite, kind="materials report")
     t0 = time.perf_counter()
+    total = report_tasks(quick=quick)
+    done = [0]
 
-    def step(msg):
+    def start(msg):
         if progress is not None:
-            progress(msg)
+            progress(done[0], total, msg)
+
+    def tick(result=None):
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], total, None)
+        return result
 
     shape = (int(size), int(size))
     numbers: dict = {
@@ -409,14 +635,18 @@ def run_materials_report(
         "media": optical_table(),
         "media_jensen": optical_table(source="jensen"),
     }
-    step("simulating the training and test captures")
-    train = simulate_capture(size=shape, **TRAIN_SETTINGS)
-    test = simulate_capture(size=shape, **TEST_SETTINGS)
+
+    def capture(**kw):
+        return tick(simulate_capture(size=shape, **kw))
+
+    start("simulating the training and test captures")
+    train = capture(**TRAIN_SETTINGS)
+    test = capture(**TEST_SETTINGS)
     materials = list(MATERIAL_CLASSES)
     ignore = (BACKGROUND_CLASS,)  # the paper recognizes the five materials (its Fig. 10d is 5 x 5)
 
     def evaluate(model, cap, transport=None):
-        pred = model.predict(cap.stack, transport=transport)
+        pred = model.predict(cap.stack, transport=transport, unclassified_below=0.0)
         scored = BACKGROUND_CLASS in model.classes
         truth = cap.labels if scored else np.where(cap.labels == BACKGROUND_CLASS, 0, cap.labels)
         classes = [*materials, BACKGROUND_CLASS] if scored else materials
@@ -424,26 +654,32 @@ def run_materials_report(
 
     def fit(stacks, labels, **kw):
         kw.setdefault("ignore_classes", ignore)
-        return train_model(stacks, labels, param_grid=param_grid, **kw)
+        return tick(train_model(stacks, labels, param_grid=param_grid, **kw))
 
     with atomic_directory(out_dir, overwrite=overwrite, kind="materials report") as tmp:
         # --- stack profiles: the paper's features -------------------------------------------
-        step("training on stack profiles")
+        start("training on stack profiles")
         model = fit([train.stack], [train.labels], floor="edge")
         pred, main = evaluate(model, test)
         model.save(tmp / "materials_model.zip")
-        same = simulate_capture(size=shape, **{**TEST_SETTINGS, "noise": 1.0, "ambient_e_per_us": 0.5})
+        same = capture(**{**TEST_SETTINGS, "noise": 1.0, "ambient_e_per_us": 0.5})
         numbers["stack_profiles"] = {
             "floor_edge": {"training": model.training, "test": main, "test_at_training_noise": evaluate(model, same)[1]}
         }
-        step("training on stack profiles, minimum as the floor")
+        # --- pixels unlike every trained class: the table, left out of training ------------
+        numbers["unclassified"] = {
+            "default": DEFAULT_UNCLASSIFIED_BELOW,
+            "test": unclassified_numbers(model.segment(test.stack), test.labels, model.classes),
+            "test_at_training_noise": unclassified_numbers(model.segment(same.stack), same.labels, model.classes),
+        }
+        start("training on stack profiles, minimum as the floor")
         model_min = fit([train.stack], [train.labels], floor="min")
         numbers["stack_profiles"]["floor_min"] = {
             "training": model_min.training,
             "test": evaluate(model_min, test)[1],
             "test_at_training_noise": evaluate(model_min, same)[1],
         }
-        step("training on stack profiles, the paper's plain normalization")
+        start("training on stack profiles, the paper's plain normalization")
         model_none = fit([train.stack], [train.labels], floor="none")
         _, plain = evaluate(model_none, test)
         numbers["stack_profiles"]["floor_none"] = {
@@ -451,7 +687,7 @@ def run_materials_report(
             "test": plain,
             "test_at_training_noise": evaluate(model_none, same)[1],
         }
-        step("training with a background class")
+        start("training with a background class")
         model_bg = fit([train.stack], [train.labels], ignore_classes=())
         numbers["stack_profiles"]["with_background_class"] = {
             "training": model_bg.training,
@@ -460,31 +696,30 @@ def run_materials_report(
         }
 
         # --- transport profiles -------------------------------------------------------------
-        step("demultiplexing the captures (transport profiles)")
-        T_train = capture_transport(train.stack)
-        T_test = capture_transport(test.stack)
+        start("demultiplexing the captures (transport profiles)")
+        T_train = tick(capture_transport(train.stack))
+        T_test = tick(capture_transport(test.stack))
         model_t = fit([train.stack], [train.labels], kind="transport", transports=[T_train])
         pred_t, trans = evaluate(model_t, test, transport=T_test)
+        T_same = tick(capture_transport(same.stack))
         numbers["transport_profiles"] = {
             "training": model_t.training,
             "test": trans,
-            "test_at_training_noise": evaluate(model_t, same, transport=capture_transport(same.stack))[1],
+            "test_at_training_noise": evaluate(model_t, same, transport=T_same)[1],
         }
 
         # --- noise and ambient light --------------------------------------------------------
-        step("accuracy as noise and ambient light grow")
-        noises = (1.0, 2.0, 4.0) if quick else (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0)
-        # Beyond ~5 e-/us the 1200-us images of the milks fill the full well (saturation).
-        ambients = (0.5, 4.0) if quick else (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0)
+        start("accuracy as noise and ambient light grow")
+        noises, ambients = _report_curves(quick)
         curves = {"noise": [], "ambient_e_per_us": []}
         for i, nz in enumerate(noises):
-            cap = simulate_capture(size=shape, seed=10 + i, placement=1, noise=nz, ambient_e_per_us=0.5)
+            cap = capture(seed=10 + i, placement=1, noise=nz, ambient_e_per_us=0.5)
             row = {"value": nz, "saturated_pixels": _saturated_share(cap)}
             for tag, m in (("floor_edge", model), ("floor_min", model_min), ("floor_none", model_none)):
                 row[tag] = evaluate(m, cap)[1]
             curves["noise"].append(row)
         for i, amb in enumerate(ambients):
-            cap = simulate_capture(size=shape, seed=20 + i, placement=1, noise=1.0, ambient_e_per_us=amb)
+            cap = capture(seed=20 + i, placement=1, noise=1.0, ambient_e_per_us=amb)
             row = {"value": amb, "saturated_pixels": _saturated_share(cap)}
             for tag, m in (("floor_edge", model), ("floor_min", model_min), ("floor_none", model_none)):
                 row[tag] = evaluate(m, cap)[1]
@@ -493,21 +728,21 @@ def run_materials_report(
 
         # --- robustness: the other data set, round cups -------------------------------------
         if not quick:
-            step("the Jensen et al. milks")
-            tr_j = simulate_capture(size=shape, source="jensen", **TRAIN_SETTINGS)
-            te_j = simulate_capture(size=shape, source="jensen", **TEST_SETTINGS)
+            start("the Jensen et al. milks")
+            tr_j = capture(source="jensen", **TRAIN_SETTINGS)
+            te_j = capture(source="jensen", **TEST_SETTINGS)
             model_j = fit([tr_j.stack], [tr_j.labels])
             numbers["jensen"] = {"training": model_j.training, "test": evaluate(model_j, te_j)[1]}
             # A model trained on one data set applied to the other: how far apart the two are.
             numbers["jensen"]["narasimhan_model_on_jensen"] = evaluate(model, te_j)[1]
-            step("round cups")
-            tr_c = simulate_capture(size=shape, container="cup", **TRAIN_SETTINGS)
-            te_c = simulate_capture(size=shape, container="cup", **TEST_SETTINGS)
+            start("round cups")
+            tr_c = capture(container="cup", **TRAIN_SETTINGS)
+            te_c = capture(container="cup", **TEST_SETTINGS)
             model_c = fit([tr_c.stack], [tr_c.labels])
             numbers["cups"] = {"training": model_c.training, "test": evaluate(model_c, te_c)[1]}
 
         # --- figures ------------------------------------------------------------------------
-        step("figures")
+        start("figures")
         files = {}
         names = {c: CLASS_NAMES[c] for c in [*materials, BACKGROUND_CLASS]}
         shown = np.isin(test.labels, materials)  # the segmentation of the containers, as Fig. 10c
@@ -549,4 +784,5 @@ def run_materials_report(
         numbers = jsonable(numbers)
         (tmp / "materials.json").write_text(json.dumps(numbers, indent=1))
         (tmp / MARKER).write_text(json.dumps({"format": REPORT_FORMAT, "format_version": 1}, indent=1))
+        tick()
     return numbers

@@ -230,7 +230,12 @@ def accuracy_curves_figure(curves, *, floor="edge", out=None):
         ax.set_xticks(x)
         ax.set_ylim(0, 1.02)
         ax.set_xlabel(label, fontsize=8)
-        ax.set_ylabel("per-class accuracy" + (" (grey bars: saturated pixel share)" if any(s > 0 for s in sat) else ""))
+        ax.set_ylabel("per-class accuracy" + (" | bars: share" if any(s > 0 for s in sat) else ""))
+        if any(s > 0 for s in sat):  # the bars' legend beside them (the curves' is on the left panel)
+            bars = [h for h, t in zip(*ax.get_legend_handles_labels()) if t.startswith("saturated")]
+            ax.legend(
+                bars, ["saturated pixels (share of the material pixels)"], fontsize=7, frameon=False, loc="lower left"
+            )
     axes[0].legend(fontsize=7, frameon=False, loc="lower left")
     fig.suptitle(
         "recognition of the held-out placement as the capture gets worse (model trained at x1, 0.5 e-/us)", fontsize=9

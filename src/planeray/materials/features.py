@@ -105,6 +105,24 @@ class FeatureDefinition:
         object.__setattr__(self, "offsets_rows", tuple(int(v) for v in self.offsets_rows))
         object.__setattr__(self, "lines_per_second", float(self.lines_per_second))
         object.__setattr__(self, "demux", dict(self.demux or {}))
+        values = self.delay_us + self.exposure_us + (self.lines_per_second,)
+        if not all(math.isfinite(v) for v in values) or self.lines_per_second <= 0:
+            raise InputError("feature definition: delays, exposures and lines per second must be finite (> 0)")
+        if self.kind == "stack" and (len(self.exposure_us) != len(self.delay_us) or self.offsets_rows or self.demux):
+            raise InputError(
+                f"feature definition: stack profiles need one exposure per delay ({len(self.delay_us)} delays, "
+                f"{len(self.exposure_us)} exposures) and no offsets or demultiplexing"
+            )
+        if self.kind == "transport":
+            if self.exposure_us or len(self.offsets_rows) != len(self.delay_us):
+                raise InputError(
+                    f"feature definition: transport profiles need one offset per delay ({len(self.delay_us)} "
+                    f"delays, {len(self.offsets_rows)} offsets) and no exposures"
+                )
+            if set(self.demux) != {"alpha", "beta", "method"}:
+                raise InputError(
+                    f"feature definition: transport profiles need demux alpha, beta and method, got {sorted(self.demux)}"
+                )
 
     @property
     def n_features(self) -> int:
@@ -122,9 +140,13 @@ class FeatureDefinition:
 
     @classmethod
     def from_dict(cls, data) -> FeatureDefinition:
+        if not isinstance(data, dict):
+            raise InputError(f"malformed feature definition: expected an object, got {type(data).__name__}")
         try:
             return cls(**data)
-        except TypeError as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
+            if isinstance(exc, InputError):
+                raise
             raise InputError(f"malformed feature definition: {exc}") from None
 
     def describe(self) -> str:

@@ -19,7 +19,7 @@ from ..errors import InputError
 from ..io import atomic_file
 from ..optical_data import CLASS_NAMES
 
-__all__ = ["read_label_image", "write_label_image", "CLASS_COLOURS", "class_colour"]
+__all__ = ["read_label_image", "write_label_image", "CLASS_COLOURS", "LABEL_SUFFIXES", "class_colour"]
 
 #: Display colours of the documented classes (RGB, 0-255); 0 (unlabelled) is black.
 CLASS_COLOURS = {
@@ -75,7 +75,9 @@ def read_label_image(path, *, shape=None) -> np.ndarray:
                         path,
                     )
                 arr = np.array(img)
-        except (UnidentifiedImageError, OSError) as exc:
+        except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as exc:
+            if isinstance(exc, InputError):
+                raise
             raise InputError(f"cannot read as PNG ({exc})", path) from None
     else:
         raise InputError("label images must be .png, .tif or .tiff", path)
@@ -89,8 +91,20 @@ def read_label_image(path, *, shape=None) -> np.ndarray:
     return arr
 
 
-def write_label_image(path, labels, *, overwrite: bool = True) -> Path:
-    """Write class ids as a palette PNG (ids as pixel values, coloured by :func:`class_colour`) or a 16-bit TIFF."""
+#: Suffixes of label images.
+LABEL_SUFFIXES = (".png", ".tif", ".tiff")
+
+
+def write_label_image(path, labels, *, overwrite: bool = True, kind: str = "segmentation") -> Path:
+    """Write class ids as a palette PNG (ids as pixel values, coloured by :func:`class_colour`) or a 16-bit TIFF.
+
+    The file carries planeray's mark of ``kind`` (:mod:`planeray.io.marks`: PNG text /
+    TIFF tag ``Software``): ``"segmentation"`` for a predicted map, ``"labels"`` for the
+    ground truth of a simulated capture.  Callers check that an existing ``path`` may be
+    replaced (:func:`planeray.io.atomic.check_replaceable`) before any work.
+    """
+    from ..io.marks import mark_text, png_mark_info
+
     path = Path(path)
     labels = np.asarray(labels)
     if labels.ndim != 2 or labels.dtype.kind not in "iub":
@@ -107,12 +121,12 @@ def write_label_image(path, labels, *, overwrite: bool = True) -> Path:
             palette += list(class_colour(cid))
         img.putpalette(palette)
         with atomic_file(path, overwrite=overwrite) as tmp:
-            img.save(tmp, format="PNG")
+            img.save(tmp, format="PNG", pnginfo=png_mark_info(kind))
     elif suffix in (".tif", ".tiff"):
         import tifffile
 
         with atomic_file(path, overwrite=overwrite) as tmp:
-            tifffile.imwrite(tmp, labels.astype(np.uint16))
+            tifffile.imwrite(tmp, labels.astype(np.uint16), software=mark_text(kind))
     else:
         raise InputError("label images must be .png, .tif or .tiff", path)
     return path

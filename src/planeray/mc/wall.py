@@ -876,7 +876,17 @@ TABLE_ANGLES_DEG = (0.0, 45.0, 90.0)
 TABLE_PHOTONS = 100_000
 TABLE_SLAB_PHOTONS = 1_000_000
 
-__all__ += ["TABLE_DISTANCES_ROWS", "TABLE_ANGLES_DEG", "TABLE_PHOTONS", "TABLE_SLAB_PHOTONS"]
+#: Monte Carlo runs of a default table (the slab, the reference without a wall, one per angle and distance):
+#: what :func:`mc_wall_table` counts with ``progress``.
+TABLE_RUNS = 2 + len(TABLE_ANGLES_DEG) * len(TABLE_DISTANCES_ROWS)
+__all__ += [
+    "TABLE_DISTANCES_ROWS",
+    "TABLE_ANGLES_DEG",
+    "TABLE_PHOTONS",
+    "TABLE_SLAB_PHOTONS",
+    "TABLE_RUNS",
+    "wall_table_stored",
+]
 
 _TABLE_ARRAYS = (
     "offsets_rows",
@@ -1037,6 +1047,26 @@ def wall_table_key(
         diffusion_depth_mfp=None if diffusion_depth_mfp is None else float(diffusion_depth_mfp),
     )
     return f"wall-{cache_key(params, np.asarray(offsets_rows, dtype=np.int64))}.npz"
+
+
+def wall_table_stored(medium: Medium, *, wall="fresnel", offsets_rows=None, mm_per_row=0.3) -> bool:
+    """Whether the default :func:`mc_wall_table` of ``medium`` is shipped or cached (no Monte Carlo to run).
+
+    Lets a front end say, before it starts, that tables will be traced (minutes each).
+    """
+    offsets = np.arange(-192, 193) if offsets_rows is None else np.asarray(offsets_rows, dtype=np.int64)
+    name = wall_table_key(
+        medium,
+        wall=wall,
+        angles_deg=np.asarray(TABLE_ANGLES_DEG, dtype=np.float64),
+        distances_rows=np.asarray(TABLE_DISTANCES_ROWS, dtype=np.float64),
+        offsets_rows=offsets,
+        mm_per_row=mm_per_row,
+        n_photons=TABLE_PHOTONS,
+        slab_photons=TABLE_SLAB_PHOTONS,
+        seed=0,
+    )
+    return (TABLES_DIR / name).exists() or (cache_dir() / name).exists()
 
 
 def mc_wall_table(

@@ -77,7 +77,7 @@ from ..transport import Transport
 from ._textures import smooth_noise
 from .base import DEFAULT_BAND_ROWS, DEFAULT_MM_PER_ROW, Scene, footprint_kernel, register_scene, scene_offsets
 
-__all__ = ["build", "CONTAINERS", "NEAR_WALL_CHANGE", "container_layout", "material_tables"]
+__all__ = ["build", "CONTAINERS", "NEAR_WALL_CHANGE", "container_layout", "material_tables", "tables_to_trace"]
 
 #: Container shapes.
 CONTAINERS = ("tray", "cup")
@@ -151,16 +151,39 @@ def material_tables(
     if source not in OPTICAL_SOURCES:
         raise InputError(f"unknown optical data source {source!r}; choose one of {', '.join(OPTICAL_SOURCES)}")
     offsets = np.arange(-_TABLE_REACH_ROWS, _TABLE_REACH_ROWS + 1)
-    return {
-        cid: mc_wall_table(
-            material_medium(cid, source=source, channel=channel),
-            wall=wall,
-            offsets_rows=offsets,
-            mm_per_row=mm_per_row,
-            progress=progress,
-        )
+    key = (source, channel, wall, float(mm_per_row))
+    if key not in _TRACED:  # kept for the process: a read-only cache must not cost a second tracing
+        _TRACED[key] = {
+            cid: mc_wall_table(
+                material_medium(cid, source=source, channel=channel),
+                wall=wall,
+                offsets_rows=offsets,
+                mm_per_row=mm_per_row,
+                progress=progress,
+            )
+            for cid in MATERIAL_CLASSES
+        }
+    return dict(_TRACED[key])
+
+
+#: Tables of this process, by (source, channel, wall, mm per row).
+_TRACED: dict = {}
+
+
+def tables_to_trace(*, source="narasimhan", channel="red", wall="fresnel", mm_per_row=DEFAULT_MM_PER_ROW) -> list:
+    """Class ids whose wall-kernel tables :func:`material_tables` would trace (neither shipped nor cached)."""
+    from ..mc.wall import wall_table_stored
+
+    if (source, channel, wall, float(mm_per_row)) in _TRACED:
+        return []
+    offsets = np.arange(-_TABLE_REACH_ROWS, _TABLE_REACH_ROWS + 1)
+    return [
+        cid
         for cid in MATERIAL_CLASSES
-    }
+        if not wall_table_stored(
+            material_medium(cid, source=source, channel=channel), wall=wall, offsets_rows=offsets, mm_per_row=mm_per_row
+        )
+    ]
 
 
 def _pixel_kernels(table, distances_rows, angles_deg, signs, foot_offsets, foot, cos_phi):
