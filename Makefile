@@ -40,8 +40,9 @@ llvm:
 		echo "note: no LLVM >= 16, so planeray render falls back to row-by-row scalar rendering; install it (Debian: sudo apt-get install libllvm19)"; \
 	fi
 
+# Independent tests run in parallel on every core (pytest-xdist; worksteal balances the slow ones).
 test: venv browser llvm
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist worksteal
 
 lint: venv
 	$(VENV)/bin/ruff check src tests benchmarks tools
