@@ -1,0 +1,166 @@
+"""Sphinx helpers of planeray's documentation (loaded by ``docs/conf.py``).
+
+* :func:`figure_scraper`: sphinx-gallery collects the figures pyplot knows; planeray's figure
+  functions build :class:`matplotlib.figure.Figure` objects without pyplot (so importing
+  :mod:`planeray.figures` leaves the backend alone), so this scraper also collects every such
+  Figure an example block leaves in a variable.
+* :func:`copy_mathjax`: copies the MathJax that ``make docs`` installed from the npm registry
+  into the built site (``_static/mathjax``), so no page loads a script from the internet.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+_SEEN: dict[str, list] = {}
+
+# What of MathJax's es5 build the site needs: the TeX-to-CommonHTML component, its fonts, and
+# what it may load on demand (TeX extensions, the menu, the assistive MathML).
+_MATHJAX_PARTS = ("tex-chtml.js", "input", "output/chtml", "ui", "a11y", "adaptors")
+
+
+def reset_figures(gallery_conf, fname):
+    """Forget the figures scraped from the previous example (a sphinx-gallery reset hook)."""
+    _SEEN.clear()
+
+
+def figure_scraper(block, block_vars, gallery_conf):
+    """Save every new pyplot-free :class:`~matplotlib.figure.Figure` of an example's variables.
+
+    Figures that pyplot manages are left to sphinx-gallery's own matplotlib scraper.
+    """
+    from matplotlib.figure import Figure
+    from sphinx_gallery.scrapers import figure_rst
+
+    seen = _SEEN.setdefault(str(block_vars.get("src_file", "")), [])
+    paths = []
+    for value in list(block_vars["example_globals"].values()):
+        if not isinstance(value, Figure) or getattr(value.canvas, "manager", None) is not None:
+            continue
+        if any(value is s for s in seen):
+            continue
+        seen.append(value)
+        path = next(block_vars["image_path_iterator"])
+        value.savefig(path, dpi=100, bbox_inches="tight")
+        paths.append(path)
+    return figure_rst(paths, gallery_conf["src_dir"])
+
+
+def copy_mathjax(app, exception):
+    """Copy the locally installed MathJax into ``_static/mathjax`` of the built site."""
+    if exception is not None or app.builder.format != "html":
+        return
+    source = Path(app.config.planeray_mathjax_source) / "es5"
+    if not (source / "tex-chtml.js").is_file():
+        raise RuntimeError(
+            f"MathJax is not installed at {source}: run `make docs` (it installs it with "
+            "`npm install --prefix docs/_build/mathjax mathjax@3`) or set PLANERAY_MATHJAX to a mathjax@3 package folder"
+        )
+    target = Path(app.outdir) / "_static" / "mathjax"
+    for part in _MATHJAX_PARTS:
+        src, dst = source / part, target / part
+        if src.is_dir():
+            shutil.copytree(src, dst, dirs_exist_ok=True)
+        elif src.is_file():
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dst)
+
+
+# The groups of the front door, in the order of ``planeray.__init__._EXPORTS``.
+_GROUPS = {
+    "timing": "The imaging model (Eqs. 1-3)",
+    "transport": "Light transport (Eqs. 4-6)",
+    "stack": "Captures",
+    "camera": "Captures",
+    "scenes": "Captures",
+    "scenes.skin": "Captures",
+    "devices": "Captures",
+    "acquire": "Captures",
+    "calibration": "Calibration (Sec. 6)",
+    "io": "Files",
+    "demux": "Demultiplexing (Sec. 4)",
+    "synthesis": "Analysis (Secs. 4, 7, 8, 9)",
+    "profiles": "Analysis (Secs. 4, 7, 8, 9)",
+    "classify": "Analysis (Secs. 4, 7, 8, 9)",
+    "medium": "Subsurface scattering (Sec. 5.2)",
+    "mc": "Subsurface scattering (Sec. 5.2)",
+    "kernels": "Subsurface scattering (Sec. 5.2)",
+    "render": "Any Mitsuba 3 scene",
+}
+
+
+def public_modules():
+    """planeray's public top-level modules and packages (no leading underscore; the CLI has its own page)."""
+    import pkgutil
+
+    import planeray
+
+    return sorted(m.name for m in pkgutil.iter_modules(planeray.__path__) if not m.name.startswith("_") and m.name != "cli")
+
+
+def write_api_index(app, config=None):
+    """Write ``reference/api/index.rst`` from ``planeray._EXPORTS`` and the package's modules.
+
+    Generated at every build, so a name added to the front door or a module added to the
+    package gets its page without anyone editing the docs.
+    """
+    import planeray
+
+    groups: dict[str, list[str]] = {}
+    for name, module in planeray._EXPORTS.items():
+        groups.setdefault(_GROUPS.get(module, "Other"), []).append(name)
+    lines = [
+        ".. This file is written by docs/_ext/planeray_docs.py at every build: do not edit.",
+        "",
+        "Python API",
+        "==========",
+        "",
+        "Generated from the numpydoc docstrings. The front door, ``import planeray as pr``, holds the",
+        "names a notebook needs (``planeray.__init__._EXPORTS``: each name and the module that defines",
+        "it); every module of the package follows, with a page per function and class.",
+        "",
+        ".. currentmodule:: planeray",
+        "",
+        "The front door: ``import planeray as pr``",
+        "-----------------------------------------",
+        "",
+    ]
+    for title, names in groups.items():
+        lines += [title, "~" * len(title), "", ".. autosummary::", "   :toctree: generated/", "   :nosignatures:", ""]
+        lines += [f"   {n}" for n in names] + [""]
+    lines += [
+        "Modules",
+        "-------",
+        "",
+        "One module (or subpackage) per pipeline stage; dependencies point down this list"
+        " (see :doc:`/contributing`).",
+        "",
+        ".. autosummary::",
+        "   :toctree: generated/",
+        "   :recursive:",
+        "",
+    ]
+    lines += [f"   {m}" for m in public_modules()]  # relative to the current module, planeray + [""]
+    path = Path(app.srcdir) / "reference" / "api" / "index.rst"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = "\n".join(lines)
+    if not path.is_file() or path.read_text() != text:
+        path.write_text(text)
+
+
+def check_mathjax(app):
+    """Fail at once, not after the whole build, when the local MathJax is missing."""
+    if not (Path(app.config.planeray_mathjax_source) / "es5" / "tex-chtml.js").is_file():
+        raise RuntimeError(
+            f"MathJax is not installed at {app.config.planeray_mathjax_source}: run `make docs` (it installs it with "
+            "`npm install --prefix docs/_build/mathjax mathjax@3`) or set PLANERAY_MATHJAX to a mathjax@3 package folder"
+        )
+
+
+def setup(app):
+    app.add_config_value("planeray_mathjax_source", "", "html")
+    app.connect("config-inited", write_api_index)
+    app.connect("builder-inited", check_mathjax, priority=100)
+    app.connect("build-finished", copy_mathjax)
+    return {"parallel_read_safe": True, "parallel_write_safe": True}
