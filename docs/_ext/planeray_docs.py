@@ -6,10 +6,15 @@
   Figure an example block leaves in a variable.
 * :func:`copy_mathjax`: copies the MathJax that ``make docs`` installed from the npm registry
   into the built site (``_static/mathjax``), so no page loads a script from the internet.
+* ``click_app``: the command line as a click object (typer builds it from ``planeray.cli.app``),
+  which sphinx-click documents on the command-line page.
+* :func:`strip_summary_citations`: autosummary copies a docstring's first sentence into its
+  tables, where a citation mark (``[1]_``) has no References section to point to.
 """
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -158,9 +163,35 @@ def check_mathjax(app):
         )
 
 
+_CITATION = re.compile(r"\s*\[[A-Za-z0-9_-]+\]_")
+
+
+def strip_summary_citations(app, what, name, obj, options, lines):
+    """Drop the citation marks of a docstring's first paragraph (an autodoc-process-docstring hook).
+
+    Runs after numpydoc (which renames ``[1]_`` to ``[R...-1]_``); the References section
+    itself is kept.
+    """
+    for i, line in enumerate(lines):
+        if not line.strip():
+            break
+        lines[i] = _CITATION.sub("", line)
+
+
+def __getattr__(name):
+    if name == "click_app":  # built on first use: importing the CLI loads typer and every command module
+        import typer
+
+        from planeray.cli import app
+
+        return typer.main.get_command(app)
+    raise AttributeError(name)
+
+
 def setup(app):
     app.add_config_value("planeray_mathjax_source", "", "html")
     app.connect("config-inited", write_api_index)
     app.connect("builder-inited", check_mathjax, priority=100)
     app.connect("build-finished", copy_mathjax)
+    app.connect("autodoc-process-docstring", strip_summary_citations, priority=900)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
