@@ -34,7 +34,6 @@ extensions = [
     "sphinx.ext.mathjax",
     "numpydoc",
     "sphinx_design",
-    "sphinx_click",
     "sphinx_gallery.gen_gallery",
     "matplotlib.sphinxext.plot_directive",
     "planeray_docs",
@@ -115,6 +114,7 @@ sphinx_gallery_conf = {
     "thumbnail_size": (320, 224),
     "capture_repr": ("_repr_html_", "__repr__"),
     "matplotlib_animations": False,
+    "parallel": 2,  # the examples run in two processes (the build machine has two cores)
     "abort_on_example_error": False,
     "only_warn_on_example_error": False,
 }

@@ -6,8 +6,8 @@
   Figure an example block leaves in a variable.
 * :func:`copy_mathjax`: copies the MathJax that ``make docs`` installed from the npm registry
   into the built site (``_static/mathjax``), so no page loads a script from the internet.
-* ``click_app``: the command line as a click object (typer builds it from ``planeray.cli.app``),
-  which sphinx-click documents on the command-line page.
+* :func:`write_cli_page`: the page of every command and option, generated from the command line
+  itself at every build.
 * :func:`strip_summary_citations`: autosummary copies a docstring's first sentence into its
   tables, where a citation mark (``[1]_``) has no References section to point to.
 """
@@ -163,34 +163,103 @@ def check_mathjax(app):
         )
 
 
-_CITATION = re.compile(r"\s*\[[A-Za-z0-9_-]+\]_")
+_CITATION = re.compile(r"\s*\[([A-Za-z0-9_-]+)\]_")
+_CITATION_TARGET = re.compile(r"^\s*\.\. \[([A-Za-z0-9_-]+)\]")
 
 
 def strip_summary_citations(app, what, name, obj, options, lines):
-    """Drop the citation marks of a docstring's first paragraph (an autodoc-process-docstring hook).
+    """Fix the citation marks (``[1]_``) docutils cannot resolve (an autodoc-process-docstring hook).
 
-    Runs after numpydoc (which renames ``[1]_`` to ``[R...-1]_``); the References section
-    itself is kept.
+    Runs after numpydoc (which renames the marks of a docstring's own References section to
+    ``[R...-1]_``).  The marks of the first paragraph are dropped: autosummary copies it into
+    its tables, where no References section follows.  A mark whose reference is in another
+    docstring (a function citing its module's References) is kept as plain text, ``[1]``.
     """
-    for i, line in enumerate(lines):
-        if not line.strip():
-            break
-        lines[i] = _CITATION.sub("", line)
+    targets = {m.group(1) for line in lines if (m := _CITATION_TARGET.match(line))}
+    first = next((i for i, line in enumerate(lines) if line.strip()), len(lines))
+    in_first = True
+    for i in range(first, len(lines)):
+        if not lines[i].strip():
+            in_first = False
+        if in_first:
+            lines[i] = _CITATION.sub("", lines[i])
+        else:
+            lines[i] = _CITATION.sub(lambda m: m.group(0) if m.group(1) in targets else m.group(0)[:-1], lines[i])
 
 
-def __getattr__(name):
-    if name == "click_app":  # built on first use: importing the CLI loads typer and every command module
-        import typer
+def click_app():
+    """The command line as a click-style command tree (typer builds it from ``planeray.cli.app``)."""
+    import typer
 
-        from planeray.cli import app
+    from planeray.cli import app
 
-        return typer.main.get_command(app)
-    raise AttributeError(name)
+    return typer.main.get_command(app)
+
+
+_RST_SPECIAL = re.compile(r"([\\`*|_\[\]<>])")
+
+
+def _rst_text(text: str) -> str:
+    """Help text as reStructuredText that shows it as it is (its markup characters escaped)."""
+    return _RST_SPECIAL.sub(r"\\\1", " ".join((text or "").split()))
+
+
+def _command_rst(command, ctx, path: list[str], level: int) -> list[str]:
+    from typer import _click as click  # typer's own click, whose objects get_command returns
+
+    title = " ".join(path)
+    underline = "-~^"[min(level, 2)]
+    lines = [f".. _cli-{'-'.join(path[1:]) or 'planeray'}:", "", f"``{title}``", underline * (len(title) + 4), ""]
+    if command.help:
+        lines += [_rst_text(command.help), ""]
+    lines += [".. code-block:: text", "", "   " + command.get_usage(ctx).strip().replace("\n", "\n   "), ""]
+    records = [p.get_help_record(ctx) for p in command.params if not getattr(p, "hidden", False)]
+    for record in records:
+        if record:
+            lines += [f"``{record[0]}``", f"   {_rst_text(record[1]) or '(no description)'}", ""]
+    for name, sub in sorted(getattr(command, "commands", {}).items()) if level else getattr(command, "commands", {}).items():
+        if getattr(sub, "hidden", False):
+            continue
+        lines += _command_rst(sub, click.Context(sub, info_name=name, parent=ctx), [*path, name], level + 1)
+    return lines
+
+
+def write_cli_page(app, config=None):
+    """Write ``reference/cli_commands.rst``: every command and option, from the program itself.
+
+    Read from the click-style tree typer builds (``--help`` shows the same records), at every
+    build, so the page cannot drift from what the commands accept.  (sphinx-click cannot read
+    it: typer >= 0.16 ships its own click, whose classes are not click's.)
+    """
+    from typer import _click as click
+
+    root = click_app()
+    ctx = click.Context(root, info_name="planeray")
+    lines = [
+        ".. This file is written by docs/_ext/planeray_docs.py at every build: do not edit.",
+        "",
+        "Every command and option",
+        "========================",
+        "",
+        "Generated from the program itself (what ``planeray COMMAND --help`` prints), so it cannot drift",
+        "from what the commands accept. See :doc:`cli` for the conventions all commands share.",
+        "",
+        ".. contents:: Commands",
+        "   :local:",
+        "   :depth: 2",
+        "",
+    ]
+    lines += _command_rst(root, ctx, ["planeray"], 0)[5:]  # the page's own title stands for the root
+    path = Path(app.srcdir) / "reference" / "cli_commands.rst"
+    text = "\n".join(lines) + "\n"
+    if not path.is_file() or path.read_text() != text:
+        path.write_text(text)
 
 
 def setup(app):
     app.add_config_value("planeray_mathjax_source", "", "html")
     app.connect("config-inited", write_api_index)
+    app.connect("config-inited", write_cli_page)
     app.connect("builder-inited", check_mathjax, priority=100)
     app.connect("build-finished", copy_mathjax)
     app.connect("autodoc-process-docstring", strip_summary_citations, priority=900)
