@@ -11,9 +11,7 @@ inventories).
 from __future__ import annotations
 
 import os
-import shutil
 import sys
-import time
 from pathlib import Path
 
 import planeray
@@ -62,7 +60,9 @@ numpydoc_xref_param_type = False
 numpydoc_validation_checks: set[str] = set()
 
 # -- Offline MathJax (see the module docstring) ---------------------------------------------------
-planeray_mathjax_source = str(Path(os.environ.get("PLANERAY_MATHJAX", HERE / "_build" / "mathjax" / "node_modules" / "mathjax")))
+planeray_mathjax_source = str(
+    Path(os.environ.get("PLANERAY_MATHJAX", HERE / "_build" / "mathjax" / "node_modules" / "mathjax"))
+)
 mathjax_path = "mathjax/tex-chtml.js"  # relative to _static/
 mathjax3_config = {"tex": {"inlineMath": [["\\(", "\\)"]], "displayMath": [["\\[", "\\]"]]}}
 
@@ -82,7 +82,7 @@ html_theme_options = {
     "secondary_sidebar_items": ["page-toc", "sourcelink"],
     "use_edit_page_button": False,
 }
-html_sidebars = {"index": [], "benchmarks": [], "changelog": []}
+html_sidebars = {page: [] for page in ("index", "getting_started", "concepts", "benchmarks", "changelog", "contributing")}
 html_show_sourcelink = True
 html_copy_source = True
 html_last_updated_fmt = None
@@ -106,6 +106,7 @@ sphinx_gallery_conf = {
     "remove_config_comments": True,
     "download_all_examples": False,
     "show_memory": False,
+    "write_computation_times": False,  # its pages load DataTables from a CDN; each example shows its own time
     "min_reported_time": 0,
     "reference_url": {"planeray": None},
     "doc_module": ("planeray",),

@@ -101,7 +101,9 @@ def parse(path: Path) -> _Page:
 
 def html_pages(site: Path) -> list[Path]:
     # _static holds the theme's and MathJax's files; _sources the pages' sources (text)
-    return sorted(p for p in site.rglob("*.html") if not {"_static", "_sources", "_images"} & set(p.relative_to(site).parts))
+    return sorted(
+        p for p in site.rglob("*.html") if not {"_static", "_sources", "_images"} & set(p.relative_to(site).parts)
+    )
 
 
 def local_target(page: Path, url: str) -> tuple[Path, str] | None:
@@ -175,7 +177,11 @@ def test_nothing_is_loaded_from_the_internet(site):
     """Scripts, stylesheets, images and fonts all come from the site itself (no CDN)."""
     remote = []
     for page in html_pages(site):
-        remote += [f"{page.relative_to(site)}: <{tag}> {url}" for tag, url in parse(page).resources if local_target(page, url) is None]
+        remote += [
+            f"{page.relative_to(site)}: <{tag}> {url}"
+            for tag, url in parse(page).resources
+            if local_target(page, url) is None
+        ]
     assert remote == []
     # MathJax is configured to load from _static, and its files are there
     concepts = (site / "concepts.html").read_text(encoding="utf-8")
@@ -241,10 +247,16 @@ def test_browser_index(browser, site):
         assert "planeray" in page.title()
         # the front page leads to every part in one click
         hrefs = page.eval_on_selector_all("article a", "els => els.map(e => e.getAttribute('href'))")
-        for part in ("getting_started.html", "concepts.html", "user_guide/index.html", "auto_examples/index.html", "reference/index.html"):
+        for part in (
+            "getting_started.html",
+            "concepts.html",
+            "user_guide/index.html",
+            "auto_examples/index.html",
+            "reference/index.html",
+        ):
             assert any(h and h.split("#")[0] == part for h in hrefs), part
         # the navigation bar offers the sections
-        nav = page.inner_text("nav.navbar-nav")
+        nav = page.inner_text(".bd-header ul.navbar-nav")
         for section in ("Getting started", "Concepts", "User guide", "Gallery", "Reference"):
             assert section in nav
         check_images(page)
@@ -277,7 +289,12 @@ def test_browser_gallery_page(browser, site):
     page, errors, requests = open_page(browser, site, GALLERY_PAGE)
     try:
         # the picture, decoded, beside the code that made it, with the script to download
-        assert page.eval_on_selector_all("article img.sphx-glr-single-img, article img.sphx-glr-multi-img", "els => els.length") >= 1
+        assert (
+            page.eval_on_selector_all(
+                "article img.sphx-glr-single-img, article img.sphx-glr-multi-img", "els => els.length"
+            )
+            >= 1
+        )
         check_images(page)
         code = page.inner_text("article div.highlight-Python")
         assert "import planeray" in code

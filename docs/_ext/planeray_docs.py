@@ -101,7 +101,9 @@ def public_modules():
 
     import planeray
 
-    return sorted(m.name for m in pkgutil.iter_modules(planeray.__path__) if not m.name.startswith("_") and m.name != "cli")
+    return sorted(
+        m.name for m in pkgutil.iter_modules(planeray.__path__) if not m.name.startswith("_") and m.name != "cli"
+    )
 
 
 def write_api_index(app, config=None):
@@ -138,8 +140,7 @@ def write_api_index(app, config=None):
         "Modules",
         "-------",
         "",
-        "One module (or subpackage) per pipeline stage; dependencies point down this list"
-        " (see :doc:`/contributing`).",
+        "One module (or subpackage) per pipeline stage; dependencies point down this list (see :doc:`/contributing`).",
         "",
         ".. autosummary::",
         "   :toctree: generated/",
@@ -217,7 +218,9 @@ def _command_rst(command, ctx, path: list[str], level: int) -> list[str]:
     for record in records:
         if record:
             lines += [f"``{record[0]}``", f"   {_rst_text(record[1]) or '(no description)'}", ""]
-    for name, sub in sorted(getattr(command, "commands", {}).items()) if level else getattr(command, "commands", {}).items():
+    for name, sub in (
+        sorted(getattr(command, "commands", {}).items()) if level else getattr(command, "commands", {}).items()
+    ):
         if getattr(sub, "hidden", False):
             continue
         lines += _command_rst(sub, click.Context(sub, info_name=name, parent=ctx), [*path, name], level + 1)

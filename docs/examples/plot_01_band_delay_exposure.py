@@ -20,7 +20,9 @@ for delay, exposure in [(0.0, 600.0), (375.0, 600.0), (-750.0, 1200.0)]:
     band = pr.Band(delay_us=delay, exposure_us=exposure, lines_per_second=lps)
     w = band.profile(offsets)  # the weight of each whole 1-row bin (Band.weights adds the edge rule)
     centre, width = band.centre_rows, band.width_rows
-    print(f"t_d={delay:7.1f} us  t_e={exposure:6.1f} us: centre {centre:6.2f} rows, width {width:5.2f} rows, sum {w.sum():.2f}")
+    print(
+        f"t_d={delay:7.1f} us  t_e={exposure:6.1f} us: centre {centre:6.2f} rows, width {width:5.2f} rows, sum {w.sum():.2f}"
+    )
     ax.step(offsets, w, where="mid", label=f"$t_d$={delay:g} µs, $t_e$={exposure:g} µs")
 ax.set_xlabel("offset u = v - p_t (projector rows)")
 ax.set_ylabel("illumination weight of the bin")

@@ -28,7 +28,10 @@ relit = pr.relight(T, pattern) / scale
 stripes = pr.relight(T, (np.arange(720) // 36 % 2).astype(float)) / scale  # any pattern: stripes
 
 fig, axes = plt.subplots(1, 3, figsize=(9, 3.2))
-for ax, (name, image) in zip(axes, [("ground truth, row %d" % v, truth), ("from the stack, row %d" % v, relit), ("from the stack, stripes", stripes)]):
+for ax, (name, image) in zip(
+    axes,
+    [(f"ground truth, row {v}", truth), (f"from the stack, row {v}", relit), ("from the stack, stripes", stripes)],
+):
     ax.imshow(image, cmap="gray", vmin=0, vmax=np.percentile(image, 99.8))
     ax.set_title(name, fontsize=9)
     ax.set_axis_off()

@@ -21,7 +21,9 @@ scene = pr.make_scene("skin", (96, 96), projector_rows=720, seed=0, tone="fair",
 for vein in pr.skin_veins(scene):
     print(f"vein {vein.id}: {vein.depth_mm:.1f} mm deep, {vein.diameter_mm:.1f} mm wide")
 
-images, _ = device_images(scene, pr.CameraModel(), delay_us=500.0, exposure_us=600.0, methods=("photo", "direct", "delay"))
+images, _ = device_images(
+    scene, pr.CameraModel(), delay_us=500.0, exposure_us=600.0, methods=("photo", "direct", "delay")
+)
 metrics = measure(images, scene)
 labels = {"photo": "photo (all light)", "direct": "epipolar (direct)", "delay": "delay 500 µs (short-range indirect)"}
 fig = headline_figure(images, labels=labels, metrics=metrics)

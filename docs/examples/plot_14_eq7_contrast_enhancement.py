@@ -11,10 +11,17 @@ Command line: ``planeray skin enhance STACK --out DIR``.
 """
 
 import matplotlib.pyplot as plt
-import numpy as np
 
 import planeray as pr
-from planeray.experiments.skin import ROOM_LIGHT, SWEEP_DELAYS_US, SWEEP_EXPOSURE_US, camera_at, capture_delay_sweep, measure, valid_rows
+from planeray.experiments.skin import (
+    ROOM_LIGHT,
+    SWEEP_DELAYS_US,
+    SWEEP_EXPOSURE_US,
+    camera_at,
+    capture_delay_sweep,
+    measure,
+    valid_rows,
+)
 from planeray.skin.enhance import enhance_contrast
 
 # the study's sweep (``planeray skin compare``): 300 us exposures, delays 250 to 1000 us, office light

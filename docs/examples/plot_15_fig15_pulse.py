@@ -27,5 +27,9 @@ print(f"{video.frames.shape[0]} frames of {video.frames.shape[1:]} pixels at {vi
 
 result = analyze_pulse(video)
 e = result.estimate
-print(f"heart rate {e.rate_bpm:.1f} bpm (truth {capture.truth['mean_rate_bpm']:.1f}), SNR {e.snr_db:.1f} dB, detected: {e.detected}")
-fig = pulse_signal_figure(result.time_s, result.signal, e, raw=result.raw_signal, truth_bpm=capture.truth["mean_rate_bpm"])
+print(
+    f"heart rate {e.rate_bpm:.1f} bpm (truth {capture.truth['mean_rate_bpm']:.1f}), SNR {e.snr_db:.1f} dB, detected: {e.detected}"
+)
+fig = pulse_signal_figure(
+    result.time_s, result.signal, e, raw=result.raw_signal, truth_bpm=capture.truth["mean_rate_bpm"]
+)

@@ -22,8 +22,17 @@ scale = float(stack.metadata["signal_scale"])
 rows = []
 for name, t, k in [("ground truth", scene.transport, 1.0), ("demultiplexed", T, 1.0 / scale)]:
     short, long = pr.short_long_range(t, 20.0)
-    rows.append((name, {"epipolar (Eq. 5)": pr.epipolar_image(t) * k, "non-epipolar (Eq. 6)": pr.non_epipolar_image(t) * k,
-                        "short range, |u| <= 20": short * k, "long range, |u| > 20": long * k}))
+    rows.append(
+        (
+            name,
+            {
+                "epipolar (Eq. 5)": pr.epipolar_image(t) * k,
+                "non-epipolar (Eq. 6)": pr.non_epipolar_image(t) * k,
+                "short range, |u| <= 20": short * k,
+                "long range, |u| > 20": long * k,
+            },
+        )
+    )
 
 fig, axes = plt.subplots(2, 4, figsize=(10, 5.4))
 for r, (name, images) in enumerate(rows):

@@ -18,6 +18,8 @@ from planeray.render import render_transport
 scene_file = files("planeray.render") / "scenes" / "room_corner.xml"
 result = render_transport(str(scene_file), shape=(64, 64), projector_rows=720, spp=32, seed=0)
 T = result.transport
-print(f"transport of {T.geometry.camera_rows} camera rows x {T.geometry.projector_rows} projector rows, "
-      f"{T.sparse.value.size if T.sparse is not None else 0} sparse entries beyond the band")
+print(
+    f"transport of {T.geometry.camera_rows} camera rows x {T.geometry.projector_rows} projector rows, "
+    f"{T.sparse.value.size if T.sparse is not None else 0} sparse entries beyond the band"
+)
 fig = rendered_scene_figure(T, result.labels, title="room_corner.xml, rendered by Mitsuba 3")
