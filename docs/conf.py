@@ -82,7 +82,9 @@ html_theme_options = {
     "secondary_sidebar_items": ["page-toc", "sourcelink"],
     "use_edit_page_button": False,
 }
-html_sidebars = {page: [] for page in ("index", "getting_started", "concepts", "benchmarks", "changelog", "contributing")}
+html_sidebars = {
+    page: [] for page in ("index", "getting_started", "concepts", "benchmarks", "changelog", "contributing")
+}
 html_show_sourcelink = True
 html_copy_source = True
 html_last_updated_fmt = None
@@ -101,7 +103,8 @@ sphinx_gallery_conf = {
     "gallery_dirs": "auto_examples",
     "filename_pattern": r"plot_",
     "within_subsection_order": "FileNameSortKey",
-    "image_scrapers": ("matplotlib", "planeray_docs.figure_scraper"),
+    # planeray_docs.figure_scraper first: it skips pyplot's figures, which the matplotlib scraper closes (and so unregisters)
+    "image_scrapers": ("planeray_docs.figure_scraper", "matplotlib"),
     "reset_modules": ("matplotlib", "planeray_docs.reset_figures"),
     "remove_config_comments": True,
     "download_all_examples": False,

@@ -247,10 +247,6 @@ def write_cli_page(app, config=None):
         "Generated from the program itself (what ``planeray COMMAND --help`` prints), so it cannot drift",
         "from what the commands accept. See :doc:`cli` for the conventions all commands share.",
         "",
-        ".. contents:: Commands",
-        "   :local:",
-        "   :depth: 2",
-        "",
     ]
     lines += _command_rst(root, ctx, ["planeray"], 0)[5:]  # the page's own title stands for the root
     path = Path(app.srcdir) / "reference" / "cli_commands.rst"
