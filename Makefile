@@ -90,4 +90,4 @@ bench-mc: venv
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache docs/_build docs/auto_examples docs/reference/api/generated \
-		docs/reference/api/backreferences docs/sg_execution_times.rst
+		docs/reference/api/backreferences docs/reference/api/index.rst docs/reference/cli_commands.rst docs/sg_execution_times.rst

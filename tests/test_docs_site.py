@@ -152,6 +152,21 @@ def test_the_site_has_every_part(site):
     assert [name for name in commands if f"planeray {name}" not in cli_text] == []
 
 
+def test_every_gallery_example_ran_within_30_s(site):
+    """Each example of the gallery ran at build time (its pictures are on its page) in at most 30 s."""
+    times = {}
+    for page in sorted((site / "auto_examples").glob("plot_*.html")):
+        text = " ".join(parse(page).text)
+        m = re.search(r"Total running time of the script:\s*\(\s*(\d+) minutes\s+([\d.]+) seconds\)", text)
+        assert m, f"{page.name}: no running time"
+        times[page.stem] = 60 * int(m.group(1)) + float(m.group(2))
+        assert any(u for t, u in parse(page).resources if t == "img" and "sphx_glr_" + page.stem in u), (
+            f"{page.name}: no picture"
+        )
+    assert len(times) >= 12
+    assert {k: v for k, v in times.items() if v > 30.0} == {}
+
+
 def test_every_internal_link_and_image_resolves(site):
     """Every href and src of every page names a file of the site (and an id of it for a #fragment)."""
     pages = html_pages(site)
