@@ -10,8 +10,6 @@ The table of what happens, cell by cell, is in the README ("Material recognition
 
 from __future__ import annotations
 
-import _io
-import builtins
 import errno
 import hashlib
 import os
@@ -23,8 +21,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import test_faults
 from planeray.cli import app
 
+failing_folder = test_faults.failing_folder  # the fixture: writes under a folder fail with an OSError
 runner = CliRunner()
 SIZE = 32
 TINY_GRID = {"C": (10.0,), "gamma_scale": (1.0,)}
@@ -96,54 +96,6 @@ def command(name: str, out: Path, env, *extra):
 
 OUTPUT = {"simulate": "cap", "train": "model.zip", "predict": "seg.png", "report": "rep"}
 COMMANDS = sorted(OUTPUT)
-
-
-@pytest.fixture
-def failing_folder(monkeypatch):
-    """Make writes under a folder fail with an OSError, as a read-only folder or a full disk would (root
-    ignores permission bits, so the failure is injected where every writer goes through)."""
-
-    def arm(folder: Path, code: int):
-        folder = Path(folder).resolve()
-
-        def under(path) -> bool:
-            try:
-                return Path(os.fsdecode(path)).resolve().is_relative_to(folder)
-            except (TypeError, ValueError, OSError):
-                return False
-
-        def fail(path):
-            raise OSError(code, os.strerror(code), os.fsdecode(path))
-
-        real_open, real_os_open = builtins.open, os.open
-        real_mkdir, real_rename, real_replace = os.mkdir, os.rename, os.replace
-
-        def fake_open(file, mode="r", *args, **kwargs):
-            if isinstance(file, (str, bytes, os.PathLike)) and any(c in mode for c in "wax+") and under(file):
-                fail(file)
-            return real_open(file, mode, *args, **kwargs)
-
-        def fake_os_open(path, flags, *args, **kwargs):
-            if flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT) and under(path):
-                fail(path)
-            return real_os_open(path, flags, *args, **kwargs)
-
-        def guard(real):
-            def fake(src, *args, **kwargs):
-                if under(src) or (args and under(args[0])):
-                    fail(src)
-                return real(src, *args, **kwargs)
-
-            return fake
-
-        monkeypatch.setattr(builtins, "open", fake_open)
-        monkeypatch.setattr(_io, "open", fake_open)
-        monkeypatch.setattr(os, "open", fake_os_open)
-        monkeypatch.setattr(os, "mkdir", guard(real_mkdir))
-        monkeypatch.setattr(os, "rename", guard(real_rename))
-        monkeypatch.setattr(os, "replace", guard(real_replace))
-
-    return arm
 
 
 # ----------------------------------------------------------------------------- an existing file of the user's

@@ -328,7 +328,7 @@ def _words(args, env):
 )
 def test_bad_input_gives_one_line_naming_the_option_and_loses_nothing(args, option, needles, env, folder, monkeypatch):
     # A machine with 16 GiB available: a 4096x4096 capture (80 GiB) is refused whatever runs the tests.
-    monkeypatch.setattr("planeray.experiments.materials._available_memory", lambda: 16 * 2**30)
+    monkeypatch.setattr("planeray.experiments.materials.available_memory_bytes", lambda: 16 * 2**30)
     (folder / "notes.zip").write_bytes(b"PK\x05\x06" + bytes(18))  # an (empty) zip of the user's
     (folder / "lines.zip").write_bytes((folder / "notes.zip").read_bytes())
     (folder / "fake.png").write_text("not an image")

@@ -112,15 +112,24 @@ def test_cli_video_writes_a_capture_that_skin_pulse_reads(tmp_path):
 
 
 @pytest.mark.slow
-def test_pulse_report_writes_fig15_and_its_numbers(tmp_path):
+def test_pulse_report_writes_fig15_and_its_numbers(tmp_path, monkeypatch):
     import json
 
     from typer.testing import CliRunner
 
+    import planeray.experiments.pulse as pulse_experiment
     from planeray.cli import app
 
+    steps, run = [], pulse_experiment.run_pulse_report
+
+    def counted(*args, progress, **kwargs):  # the progress bar's steps, as the command reports them
+        return run(*args, progress=lambda text: (steps.append(text), progress(text)), **kwargs)
+
+    monkeypatch.setattr(pulse_experiment, "run_pulse_report", counted)
     res = CliRunner().invoke(app, ["skin", "pulse-report", "--out", str(tmp_path / "r"), "--quick"])
     assert res.exit_code == 0, res.output
+    # The bar's total is the number of steps taken (it used to end at 31/30); --quick: 3 rates, 1 seed, 3 nulls.
+    assert len(steps) == pulse_experiment.pulse_report_steps(rates_bpm=(50, 80, 110), seeds=(0,), null_seeds=range(3))
     rep = json.loads((tmp_path / "r" / "report.json").read_text())
     assert rep["accuracy"]["detected"] == rep["accuracy"]["total"] and rep["accuracy"]["max_abs_error_bpm"] < 2
     assert rep["pulse_free"]["false_alarms"] == 0

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validate import check_integer, check_nonnegative, check_number
+from .._validate import available_memory_bytes, check_integer, check_nonnegative, check_number
 from ..acquire import simulate_stack
 from ..camera import CameraModel
 from ..errors import InputError
@@ -107,18 +107,6 @@ MIN_REPORT_SIZE = 16
 _BYTES_PER_PIXEL_OFFSET, _BYTES_PER_PIXEL_IMAGE = 16, 12
 
 
-def _available_memory() -> int | None:
-    """Bytes of memory available now (Linux ``MemAvailable``), None where unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
 def capture_memory_bytes(size, sweep: str = "paper") -> int:
     """Estimated peak memory of simulating one capture of ``size`` (scene kernels and images)."""
     from ..scenes.base import DEFAULT_BAND_ROWS
@@ -129,7 +117,7 @@ def capture_memory_bytes(size, sweep: str = "paper") -> int:
 
 
 def _check_memory(needed: int, name: str, what: str) -> None:
-    free = _available_memory()
+    free = available_memory_bytes()
     if free is not None and needed > free:
         raise InputError(
             f"{name} must fit in the memory available: {what} needs about {needed / 2**30:.1f} GiB, "

@@ -294,9 +294,10 @@ def pulse_report_steps(
         + len(null_seeds)
         + len(NOISE_CONDITIONS) * len(NOISE_SEEDS)
         + len(DELAY_STUDY_US) * len(DELAY_STUDY_EXPOSURES_US)
-        + 1
-        + 2
-        + 1
+        + 1  # the delay study's regular light
+        + 2  # the resolution study at two noise levels
+        + 1  # the synthetic false-alarm study
+        + 1  # the figures written
     )
 
 
