@@ -188,6 +188,29 @@ def strip_summary_citations(app, what, name, obj, options, lines):
             lines[i] = _CITATION.sub(lambda m: m.group(0) if m.group(1) in targets else m.group(0)[:-1], lines[i])
 
 
+def front_door_constant_docs(app, what, name, obj, options, lines):
+    """The ``#:`` comment of a constant of the front door (an autodoc-process-docstring hook).
+
+    ``planeray.PAPER_PROJECTOR_ROWS`` is loaded lazily from ``planeray.timing``, so autodoc,
+    reading ``planeray/__init__.py``, finds no comment there and shows ``int``'s docstring instead.
+    """
+    if what not in ("data", "attribute") or not isinstance(obj, (int, float, str, tuple)):
+        return
+    from sphinx.pycode import ModuleAnalyzer
+
+    import planeray
+
+    module, _, short = name.rpartition(".")
+    if module == "planeray" and short in planeray._EXPORTS:
+        module = f"planeray.{planeray._EXPORTS[short]}"
+    try:
+        doc = ModuleAnalyzer.for_module(module).find_attr_docs().get(("", short))
+    except Exception:  # a module without source: keep what autodoc found
+        return
+    if doc:
+        lines[:] = [line.rstrip("\n") for line in doc]
+
+
 def click_app():
     """The command line as a click-style command tree (typer builds it from ``planeray.cli.app``)."""
     import typer
@@ -256,10 +279,23 @@ def write_cli_page(app, config=None):
 
 
 def setup(app):
+    # autosummary's tables show a docstring's first sentence, cut at ". " unless an abbreviation
+    # ends it: the paper's references ("Sec. 4", "Eqs. 5, 6") are not sentence ends.
+    from sphinx.ext import autosummary
+
+    autosummary.WELL_KNOWN_ABBREVIATIONS = (
+        *autosummary.WELL_KNOWN_ABBREVIATIONS,
+        *(
+            f"{sep}{a}."
+            for a in ("Sec", "Secs", "Eq", "Eqs", "Fig", "Figs", "al", "cf", "approx", "vs")
+            for sep in " ("
+        ),
+    )
     app.add_config_value("planeray_mathjax_source", "", "html")
     app.connect("config-inited", write_api_index)
     app.connect("config-inited", write_cli_page)
     app.connect("builder-inited", check_mathjax, priority=100)
     app.connect("build-finished", copy_mathjax)
     app.connect("autodoc-process-docstring", strip_summary_citations, priority=900)
+    app.connect("autodoc-process-docstring", front_door_constant_docs, priority=400)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
