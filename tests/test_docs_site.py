@@ -55,6 +55,7 @@ class _Page(HTMLParser):
     def __init__(self):
         super().__init__(convert_charrefs=True)
         self.links: list[str] = []  # <a href>
+        self.article_links: list[str] = []  # <a href> inside the page's article (not the navigation)
         self.resources: list[tuple[str, str]] = []  # (tag, url) the browser loads: img/script src, link href, ...
         self.ids: set[str] = set()
         self.text: list[str] = []
@@ -68,6 +69,8 @@ class _Page(HTMLParser):
                 self.ids.add(a[key])
         if tag == "a" and a.get("href"):
             self.links.append(a["href"])
+            if self._article:
+                self.article_links.append(a["href"])
         elif tag in ("img", "script", "source", "iframe", "video", "audio", "embed") and a.get("src"):
             self.resources.append((tag, a["src"]))
         elif tag == "link" and a.get("href") and {"stylesheet", "icon", "preload"} & set((a.get("rel") or "").split()):
@@ -186,6 +189,26 @@ def test_every_internal_link_and_image_resolves(site):
                 if fragment not in parse(path).ids:
                     broken.append(f"{where} (no id {fragment!r})")
     assert broken == []
+
+
+def test_every_guide_and_reference_page_is_two_clicks_from_the_index(site):
+    """Following links in the pages' text alone (not the navigation bar), every page of the guide,
+    the reference, the gallery's index and the other top-level pages is at most two clicks away."""
+    depth = {site / "index.html": 0}
+    frontier = [site / "index.html"]
+    for d in (1, 2):
+        following = []
+        for page in frontier:
+            for url in parse(page).article_links:
+                target = local_target(page, url)
+                if target and target[0].suffix == ".html" and target[0].is_file() and target[0] not in depth:
+                    depth[target[0]] = d
+                    following.append(target[0])
+        frontier = following
+    wanted = [p for p in html_pages(site) if p.parent in (site, site / "user_guide", site / "reference")]
+    wanted += [site / "auto_examples/index.html", site / "reference/api/index.html"]
+    skip = {"search.html", "genindex.html", "py-modindex.html"}
+    assert sorted(str(p.relative_to(site)) for p in wanted if p not in depth and p.name not in skip) == []
 
 
 def test_nothing_is_loaded_from_the_internet(site):
