@@ -163,9 +163,8 @@ def test_every_gallery_example_ran_within_30_s(site):
         m = re.search(r"Total running time of the script:\s*\(\s*(\d+) minutes\s+([\d.]+) seconds\)", text)
         assert m, f"{page.name}: no running time"
         times[page.stem] = 60 * int(m.group(1)) + float(m.group(2))
-        assert any(u for t, u in parse(page).resources if t == "img" and "sphx_glr_" + page.stem in u), (
-            f"{page.name}: no picture"
-        )
+        pictures = [u for t, u in parse(page).resources if t == "img" and "sphx_glr_" + page.stem in u]
+        assert pictures, f"{page.name}: no picture"
     assert len(times) >= 12
     assert {k: v for k, v in times.items() if v > 30.0} == {}
 

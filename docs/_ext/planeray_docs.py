@@ -41,11 +41,11 @@ def figure_scraper(block, block_vars, gallery_conf):
     seen = _SEEN.setdefault(str(block_vars.get("src_file", "")), [])
     paths = []
     for value in list(block_vars["example_globals"].values()):
-        if not isinstance(value, Figure) or getattr(value.canvas, "manager", None) is not None:
+        if not isinstance(value, Figure) or any(value is s for s in seen):
             continue
-        if any(value is s for s in seen):
+        seen.append(value)  # pyplot's too: once the matplotlib scraper closed it, it looks pyplot-free
+        if getattr(value.canvas, "manager", None) is not None:
             continue
-        seen.append(value)
         path = next(block_vars["image_path_iterator"])
         value.savefig(path, dpi=100, bbox_inches="tight")
         paths.append(path)
