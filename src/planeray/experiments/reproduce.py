@@ -258,6 +258,8 @@ def _figure_measured(name: str, numbers: dict) -> dict:
             "n_delays": len(delays),
             "exposures_us": exposures,
             "epipolar_images": int(epipolar),
+            "boundary_images_left_out": int(sweep.excluded.sum()),
+            "images_demultiplexed": int((~sweep.excluded).sum()),
         }
     if name == "fig11":
         imgs = numbers["images"]
