@@ -560,13 +560,14 @@ def comparisons(key: str, m: dict) -> list[dict]:
 
 # --- writing -------------------------------------------------------------------------------------
 def _per_figure(manifest: dict, records: dict):
-    """``{figure key: (step name, its result, settings, seconds)}`` over :data:`FIGURE_ORDER`."""
-    from .reproduce import STEPS
+    """``{figure key: (step name, its result, settings, seconds, command)}`` over :data:`FIGURE_ORDER`.
 
+    ``records``: per step, the record :func:`planeray.experiments.reproduce.run_step` wrote.
+    """
     out = {}
     for name, record in records.items():
         for key, result in record["results"].items():
-            out[key] = (name, result, record["settings"], record["seconds"], STEPS[name].command(record["settings"]))
+            out[key] = (name, result, record["settings"], record["seconds"], record["command"])
     return {k: out[k] for k in FIGURE_ORDER if k in out}
 
 

@@ -538,7 +538,7 @@ def _header(*, quick: bool, size, seed: int) -> dict:
 
 
 def _options_text(options: dict) -> str:
-    words = ["--quick" if options.get("quick") else "(full)"]
+    words = ["--quick"] if options.get("quick") else []
     if options.get("size") is not None:
         words.append(f"--size {options['size']}")
     words.append(f"--seed {options.get('seed', 0)}")
@@ -607,16 +607,21 @@ def plan_paper_run(out_dir, *, quick: bool = False, size: int | None = None, see
             check_replaceable(out, overwrite=True, kind="paper report")
             return Plan(out, fresh, [], list(STEPS), resuming=False, restart=True)
         if old.get("options") != header["options"]:
-            why = f"options {_options_text(old.get('options') or {})}, not {_options_text(header['options'])}"
+            why = (
+                f"options {_options_text(old.get('options') or {})}, not {_options_text(header['options'])}: "
+                "rerun with its options to resume it, or pass --overwrite to start again"
+            )
         elif old.get("planeray_version") != header["planeray_version"]:
-            why = f"planeray {old.get('planeray_version')}, not {header['planeray_version']}"
+            why = (
+                f"planeray {old.get('planeray_version')}, not {header['planeray_version']}: a run resumes only on "
+                "the same inputs; pass --overwrite to start again"
+            )
         else:
-            why = "other inputs (planeray's sources or data changed since)"
-        raise InputError(
-            f"holds a planeray paper run with {why}: rerun with its options to resume it, "
-            "or pass --overwrite to start again",
-            out,
-        )
+            why = (
+                "other inputs (planeray's sources or data changed since): a run resumes only on the same inputs; "
+                "pass --overwrite to start again"
+            )
+        raise InputError(f"holds a planeray paper run with {why}", out)
     done = [n for n in STEPS if _step_done(out, old, n)]
     manifest = {**header, "steps": {n: old["steps"][n] for n in done}}
     todo = [n for n in STEPS if n not in done]
@@ -669,6 +674,7 @@ def run_step(out: Path, name: str, settings: dict, *, advance=None) -> dict:
             "format_version": 1,
             "step": name,
             "settings": settings,
+            "command": step.command(settings),
             "seconds": seconds,
             "results": figures,
         }
