@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from planeray.cli import app
 from planeray.experiments import reproduce
-from planeray.experiments.paper_report import FIGURE_ORDER, PAPER
+from planeray.experiments.paper_report import FIGURE_ORDER, PAPER, WHERE
 
 runner = CliRunner()
 ROOT = Path(__file__).resolve().parents[1]
@@ -152,14 +152,35 @@ def _check_numbers(run, tmp_path):
     assert numbers["fig10"]["accuracy"] == mat["stack_profiles"]["floor_edge"]["test"]["accuracy"]
 
 
-def test_the_paper_quotations_are_verbatim():
+def _sections(text: str) -> dict:
+    """``{"5.1": (start, end)}``: each numbered section's span of the paper's text (to the next heading)."""
+    heads = [(m.start(), m.group(1)) for m in re.finditer(r"^(\d+(?:\.\d+)?) (?:[A-Z]|3D )", text, flags=re.M)]
+    spans = {}
+    for i, (start, number) in enumerate(heads):
+        later = [h for h, n in heads[i + 1 :] if n.count(".") <= number.count(".")]
+        spans[number] = (start, later[0] if later else len(text))
+    return spans
+
+
+def test_the_paper_quotations_are_verbatim_and_where_the_report_says():
     if not PAPER_TEXT.is_file():
         pytest.skip(f"the paper's text is not beside the project ({PAPER_TEXT})")
     text = PAPER_TEXT.read_text(encoding="utf-8")
+    spans = _sections(text)
+    assert {"4", "5.1", "5.2", "6", "8", "9", "10"} <= set(spans)
     quotes = [(key, name, q) for key, entry in PAPER.items() for name, q in entry["quotes"].items()]
-    assert len(quotes) >= 2 * len(FIGURE_ORDER) - 4
-    missing = [(key, name) for key, name, q in quotes if q not in text]
-    assert not missing
+    assert len(quotes) >= 2 * len(FIGURE_ORDER)
+    for key, name, q in quotes:
+        assert text.count(q) >= 1, (key, name)
+        place = WHERE[key][name]
+        caption = re.fullmatch(r"Fig\. (\d+) caption", place)
+        if caption:  # in the figure's caption line
+            line = next(ln for ln in text.splitlines() if ln.startswith(f"Fig. {caption.group(1)}. "))
+            assert q in line, (key, name, place)
+        else:  # inside the section it names
+            number = re.match(r"Sec\. (\d+(?:\.\d+)?)", place).group(1)
+            start, end = spans[number]
+            assert any(start <= m.start() < end for m in re.finditer(re.escape(q), text)), (key, name, place)
     for key, entry in PAPER.items():  # the figure the section names is the figure's own
         if key.startswith("fig"):
             assert f"Fig. {key[3:]}" in entry["section"]
@@ -169,8 +190,9 @@ def _check_report_quotes(run):
     md = (run["out"] / "report.md").read_text()
     for key, entry in PAPER.items():
         assert entry["section"] in md
-        for q in entry["quotes"].values():
-            assert q.replace("|", "\\|") in md, (key, q)
+        for name, q in entry["quotes"].items():
+            cell = q.replace("|", "\\|")  # a pipe in a Markdown table cell is escaped
+            assert f'"{cell}" ({WHERE[key][name]})' in md, (key, q)
 
 
 def test_other_options_refuse_to_resume_in_one_line(tmp_path):
