@@ -210,6 +210,11 @@ def test_other_options_refuse_to_resume_in_one_line(tmp_path):
     assert again.resuming and again.todo == list(reproduce.STEPS)
     # --overwrite starts again
     assert reproduce.plan_paper_run(out, quick=True, size=32, overwrite=True).restart
+    # a file of yours where a step writes its folder: refused before any work, and kept
+    (out / "fig8").write_text("mine")
+    result = _invoke("paper", "--out", out, "--quick", "--size", "16")
+    assert result.exit_code == 1 and "fig8" in result.output and "did not write" in result.output
+    assert (out / "fig8").read_text() == "mine"
 
 
 def test_a_folder_planeray_did_not_write_is_refused_even_with_overwrite(tmp_path):

@@ -31,11 +31,9 @@ def paper(
 ):
     """Reproduce Figs. 4, 5, 6, 8-16 and the effect labels: figures, numbers and a report beside the paper's.
 
-    One step per experiment (Figs. 5-6 and Figs. 13, 14, 16 come from one study each), each
-    calling the code of the figure's own command. A killed run started again with the same
-    options continues with the steps not done; other options are refused (``--overwrite``
-    starts again). Prints the report's paths on stdout.
+    One step per experiment (Figs. 5-6 and Figs. 13, 14, 16 come from one study each), each calling the code of the figure's own command. A killed run started again with the same options continues with the steps not done; other options are refused (--overwrite starts again). Prints the report's paths on stdout.
     """
+
     from ..experiments.reproduce import MAX_SIZE, MIN_SIZE, STEPS, plan_paper_run, run_paper, step_work
 
     lim.folder(out_dir, "--out")

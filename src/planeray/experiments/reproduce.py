@@ -625,6 +625,8 @@ def plan_paper_run(out_dir, *, quick: bool = False, size: int | None = None, see
     done = [n for n in STEPS if _step_done(out, old, n)]
     manifest = {**header, "steps": {n: old["steps"][n] for n in done}}
     todo = [n for n in STEPS if n not in done]
+    for name in todo:  # a step's folder left by a killed run is replaced; anything else there is refused now
+        check_replaceable(out / name, overwrite=True, kind="paper step")
     if overwrite and not todo:  # a finished run, asked to be replaced: start again
         return Plan(out, fresh, [], list(STEPS), resuming=False, restart=True)
     return Plan(out, manifest, done, todo, resuming=True, restart=False)
