@@ -71,6 +71,15 @@ def inputs(tmp_path_factory):
 
 
 @pytest.fixture(autouse=True)
+def _tiny_study(monkeypatch):
+    """``study demux --quick`` on two values per axis: what it writes is checked here, not what it finds."""
+    import planeray.experiments.study as study
+
+    quick = study.grids(True)
+    monkeypatch.setattr(study, "grids", lambda q=False: {k: v[-2:] for k, v in quick.items()})
+
+
+@pytest.fixture(autouse=True)
 def _own_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path / "cache"))  # mc profile: never the user's cache
 
