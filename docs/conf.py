@@ -46,6 +46,7 @@ root_doc = "index"
 exclude_patterns = ["_build", "examples/README.txt", "auto_examples/*.ipynb", "auto_examples/*.py", "**.zip"]
 templates_path = ["_templates"]
 default_role = "code"
+highlight_language = "none"  # a block that names no language is shown as it is (pages hold listings, trees, tables)
 nitpicky = False
 
 # -- API reference -------------------------------------------------------------------------------
