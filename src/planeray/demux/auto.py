@@ -130,6 +130,8 @@ class WeightChoice:
     score_se: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alpha_range: tuple = (0.0, 0.0)
     beta_range: tuple = (0.0, 0.0)
+    #: (P, 2) camera (row, column) of the scored pixels, in the order of the scores (not stored)
+    pixels: np.ndarray | None = None
 
     def to_attrs(self) -> dict:
         """JSON-serializable record (the transport store's ``weights_choice`` attribute)."""
@@ -224,6 +226,7 @@ class _Sample:
     rows: list
     n_pixels: int
     weighting: str = "equal"
+    pixels: list = field(default_factory=list)  # (P_g, 2) camera (row, column) per part
 
 
 def _sample(stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | None) -> _Sample:
@@ -250,10 +253,11 @@ def _sample(stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | N
     from .driver import read_observations
 
     parts = _Sample([], [], [], [], [int(r) for r in rows], 0)
-    imgs_all, sat_all = {}, {}
+    imgs_all, sat_all, cols_all = {}, {}, {}
     for r in rows:
         imgs, sat = read_observations(stack, problem, slice(int(r), int(r) + 1))
         cols = np.sort(rng.choice(W, per_row, replace=False))
+        cols_all[int(r)] = cols
         imgs_all[int(r)] = imgs[:, 0, cols].T  # (P, N)
         sat_all[int(r)] = None if sat is None else sat[:, 0, cols].T
     for g in chosen:
@@ -269,6 +273,7 @@ def _sample(stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | N
         parts.B.append(B)
         parts.mask.append(None if usable.all() else usable)
         parts.weight.append(np.where(usable, w, 0.0))
+        parts.pixels.append(np.concatenate([np.stack([np.full(cols_all[r].size, r), cols_all[r]], 1) for r in rs]))
         parts.n_pixels += B.shape[0]
     parts.weighting = "equal" if observation_variance(stack, np.zeros(1)) is None else "camera-noise"
     return parts
@@ -336,9 +341,9 @@ def choose_weights(
     *,
     alpha="auto",
     beta="auto",
-    alphas=DEFAULT_ALPHAS,
-    betas=DEFAULT_BETAS,
-    folds: int = DEFAULT_FOLDS,
+    alphas=None,
+    betas=None,
+    folds: int | None = None,
     n_pixels: int | None = None,
     seed: int = 0,
     tol: float = CV_TOL,
@@ -351,10 +356,11 @@ def choose_weights(
     stack : Stack
     alpha, beta : float or "auto"
         A number is kept as it is; ``"auto"`` is chosen from the grid.
-    alphas, betas : sequence of float
-        Log grids scanned (default: half decades, 1e-3 ... 1e4 and 1e-4 ... 10).
-    folds : int
-        Folds of images (default 5).
+    alphas, betas : sequence of float, optional
+        Log grids scanned (default :data:`DEFAULT_ALPHAS`, :data:`DEFAULT_BETAS`: half
+        decades, 1e-3 ... 1e4 and 1e-4 ... 10).
+    folds : int, optional
+        Folds of images (default :data:`DEFAULT_FOLDS`, 5).
     n_pixels : int, optional
         Pixels scored (default: 2 % of the image, 256 ... 4096).
     seed : int
@@ -375,6 +381,9 @@ def choose_weights(
         v = requested[name]
         if v != AUTO and (not np.isfinite(v) or v < 0):
             raise InputError(f"{name} must be a non-negative number or 'auto', got {v!r}")
+    alphas = DEFAULT_ALPHAS if alphas is None else alphas
+    betas = DEFAULT_BETAS if betas is None else betas
+    folds = DEFAULT_FOLDS if folds is None else int(folds)
     if folds < 2:
         raise InputError(f"folds must be at least 2, got {folds}")
     if problem is None:
@@ -446,4 +455,5 @@ def choose_weights(
         score_se=ses,
         alpha_range=(float(arr_a[in_a].min()), float(arr_a[in_a].max())),
         beta_range=(float(arr_b[in_b].min()), float(arr_b[in_b].max())),
+        pixels=np.concatenate(sample.pixels),
     )
