@@ -18,7 +18,7 @@ noise of its signal plus read and quantization noise, averaged frames; equal
 weights for a stack without one), ``O`` the observations scored (saturated ones
 are neither fitted nor scored).  The weights with the smallest score are chosen;
 how sure the choice is, is the range of weights whose score lies within one standard
-error (over pixels) of the best.
+error (over pixels) of their paired difference to the best.
 
 Cost.  The score is evaluated on a sample of the stack's pixels (2 %, at least 256
 and at most 4096, spread over the camera rows of the largest row groups, so that a
@@ -32,6 +32,7 @@ for two grid points in a row above the best plus two standard errors.
 
 from __future__ import annotations
 
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -51,6 +52,8 @@ __all__ = [
     "is_auto",
     "DEFAULT_ALPHAS",
     "DEFAULT_BETAS",
+    "search",
+    "summarize",
 ]
 
 #: The value of ``alpha``/``beta`` that asks for the data's choice.
@@ -72,6 +75,8 @@ CV_TOL = 1e-3
 #: Weight of the paper (the start of a scan when the other weight is automatic).
 PAPER_WEIGHT = 0.01
 CRITERION = "cv-images"
+#: Observations weighted by their camera-noise variance ("noise") or alike ("equal").
+DEFAULT_WEIGHTING = "noise"
 
 
 def is_auto(value) -> bool:
@@ -112,8 +117,9 @@ class WeightChoice:
         prediction error of left-out observations; 1 is the noise level) and the
         score's standard error over pixels.
     alpha_range, beta_range : tuple of float
-        Smallest and largest tried weight whose score is within one standard error of
-        the best (with the other weight at its chosen value): how sure the choice is.
+        Smallest and largest tried weight (the other at its chosen value) whose score
+        exceeds the best by at most one standard error of the paired difference over
+        pixels: how sure the choice is.
     """
 
     alpha: float
@@ -229,7 +235,9 @@ class _Sample:
     pixels: list = field(default_factory=list)  # (P_g, 2) camera (row, column) per part
 
 
-def _sample(stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | None) -> _Sample:
+def _sample(
+    stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | None, weighting: str = "noise"
+) -> _Sample:
     H, W = stack.shape
     target = n_pixels or int(np.clip(round(SAMPLE_FRACTION * H * W), MIN_PIXELS, MAX_PIXELS))
     target = min(target, H * W)
@@ -267,7 +275,7 @@ def _sample(stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | N
         B = np.concatenate([imgs_all[r] for r in rs])
         sats = [sat_all[r] if sat_all[r] is not None else np.zeros_like(imgs_all[r], bool) for r in rs]
         usable = ~np.concatenate(sats)
-        var = observation_variance(stack, B)
+        var = observation_variance(stack, B) if weighting == "noise" else None
         w = np.ones_like(B) if var is None else 1.0 / var
         parts.groups.append(problem.groups[g])
         parts.B.append(B)
@@ -275,7 +283,8 @@ def _sample(stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | N
         parts.weight.append(np.where(usable, w, 0.0))
         parts.pixels.append(np.concatenate([np.stack([np.full(cols_all[r].size, r), cols_all[r]], 1) for r in rs]))
         parts.n_pixels += B.shape[0]
-    parts.weighting = "equal" if observation_variance(stack, np.zeros(1)) is None else "camera-noise"
+    noise = weighting == "noise" and observation_variance(stack, np.zeros(1)) is not None
+    parts.weighting = "camera-noise" if noise else "equal"
     return parts
 
 
@@ -303,24 +312,41 @@ def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, to
         Per pixel: sum of ``w (b - A x^{(-F)})^2`` over its left-out observations
         divided by their number (1 at the noise level).
     """
-    tasks = [(g, f) for g in range(len(groups)) for f in range(len(folds))]
     n_threads = _threads() if threads is None else threads
+    # each fold's pixels in as many parts as threads (5 folds on 2 threads would leave one idle
+    # for a third of the time); a fold's factorization is made once and shared by its parts
+    n_parts = n_threads if min(B.shape[0] for B in Bs) >= 64 * n_threads else 1
+    tasks = [(g, f, k) for k in range(n_parts) for g in range(len(groups)) for f in range(len(folds))]
+    solvers: dict = {}
+    lock = threading.Lock()
+
+    def solver_for(g, f, train):
+        with lock:
+            entry = solvers.setdefault((g, f), [threading.Lock(), None])
+        with entry[0]:
+            if entry[1] is None:
+                entry[1] = AdmmRowSolver(groups[g].A[train], alpha, beta)
+        return entry[1]
 
     def run(task):
-        g, f = task
+        g, f, k = task
         group, B, mask, w = groups[g], Bs[g], masks[g], weights[g]
         test = folds[f]
         train = np.setdiff1d(np.arange(B.shape[1]), test)
-        solver = AdmmRowSolver(group.A[train], alpha, beta)
-        X = np.zeros((B.shape[0], group.A.shape[1]))
-        for s in range(0, B.shape[0], 512):
-            sl = slice(s, min(s + 512, B.shape[0]))
-            m = None if mask is None else mask[sl][:, train]
+        solver = solver_for(g, f, train)
+        P = B.shape[0]
+        part = slice(k * P // n_parts, (k + 1) * P // n_parts)
+        Bp = B[part]
+        X = np.zeros((Bp.shape[0], group.A.shape[1]))
+        for s in range(0, Bp.shape[0], 512):
+            sl = slice(s, min(s + 512, Bp.shape[0]))
+            m = None if mask is None else mask[part][sl][:, train]
             if m is not None and m.all():
                 m = None
-            X[sl] = solver.solve(B[sl][:, train], tol, mask=m)[0]
-        R = B[:, test] - X @ group.A[test].T
-        return (w[:, test] * R * R).sum(axis=1), (w[:, test] > 0).sum(axis=1)
+            X[sl] = solver.solve(Bp[sl][:, train], tol, mask=m)[0]
+        R = Bp[:, test] - X @ group.A[test].T
+        wt = w[part][:, test]
+        return (g, part), (wt * R * R).sum(axis=1), (wt > 0).sum(axis=1)
 
     with blas_one_thread(n_threads):
         if n_threads > 1 and len(tasks) > 1:
@@ -328,12 +354,88 @@ def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, to
                 results = list(pool.map(run, tasks))
         else:
             results = [run(t) for t in tasks]
-    out = []
-    for g in range(len(groups)):
-        ss = sum(results[g * len(folds) + f][0] for f in range(len(folds)))
-        n = sum(results[g * len(folds) + f][1] for f in range(len(folds)))
-        out.append(ss / np.maximum(n, 1))
+    ss = [np.zeros(B.shape[0]) for B in Bs]
+    n = [np.zeros(B.shape[0]) for B in Bs]
+    for (g, part), s_, n_ in results:
+        ss[g][part] += s_
+        n[g][part] += n_
+    out = [a / np.maximum(b, 1) for a, b in zip(ss, n)]
     return np.concatenate(out)
+
+
+def search(score, requested: dict, alphas, betas) -> dict:
+    """The coordinate search over the log grids: ``{(alpha, beta): per-pixel scores}`` of every pair tried.
+
+    ``score(alpha, beta)`` returns the per-pixel scores (lower is better).  ``alpha`` is
+    scanned (ascending) at ``beta`` (the paper's 0.01 when it is automatic too), then
+    ``beta`` at the best ``alpha``, then ``alpha`` within two grid steps of its best at
+    the chosen ``beta``; a scan stops once the mean score has risen twice in a row above
+    the best plus two standard errors.  A weight that is not ``"auto"`` in ``requested``
+    is held at its value.
+    """
+    curve: dict[tuple, np.ndarray] = {}
+
+    def mean_se(a, b):
+        key = (float(a), float(b))
+        if key not in curve:
+            curve[key] = np.asarray(score(*key), np.float64)
+        v = curve[key]
+        return float(v.mean()), float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else 0.0
+
+    def scan(grid, fixed, which, indices=None):
+        best, best_s, best_se, rising, last = None, np.inf, 0.0, 0, None
+        for i in range(len(grid)) if indices is None else indices:
+            v = grid[i]
+            s, se = mean_se(v, fixed) if which == "alpha" else mean_se(fixed, v)
+            if s < best_s:
+                best, best_s, best_se = v, s, se
+            rising = rising + 1 if (last is not None and s > last and s > best_s + 2 * best_se) else 0
+            last = s
+            if rising >= 2:
+                break
+        return best
+
+    a = PAPER_WEIGHT if requested["alpha"] == AUTO else requested["alpha"]
+    b = PAPER_WEIGHT if requested["beta"] == AUTO else requested["beta"]
+    alphas = sorted(float(x) for x in alphas)
+    betas = sorted(float(x) for x in betas)
+    if requested["alpha"] == AUTO:
+        a = scan(alphas, b, "alpha")
+    if requested["beta"] == AUTO:
+        b = scan(betas, a, "beta")
+        if requested["alpha"] == AUTO:  # alpha again, around its best, at the chosen beta
+            i = alphas.index(a)
+            scan(alphas, b, "alpha", indices=range(max(0, i - 2), min(len(alphas), i + 3)))
+    if not curve:  # nothing automatic: the one pair asked for
+        mean_se(a, b)
+    return curve
+
+
+def summarize(curve: dict):
+    """``keys, means, standard errors, best pair, (alpha range, beta range)`` of a search's curve.
+
+    The best pair has the lowest mean score over everything tried.  The ranges hold the
+    tried weights (the other at its chosen value) whose mean exceeds the best's by at most
+    one standard error of the *paired* difference over pixels: the weights the data
+    cannot tell from the choice.
+    """
+    keys = list(curve)
+    means = np.array([curve[k].mean() for k in keys])
+    ses = np.array([curve[k].std(ddof=1) / np.sqrt(curve[k].size) if curve[k].size > 1 else 0.0 for k in keys])
+    best = int(np.argmin(means))
+    a, b = keys[best]
+    ref = curve[keys[best]]
+    diff_se = np.array([np.std(curve[k] - ref, ddof=1) / np.sqrt(ref.size) if ref.size > 1 else 0.0 for k in keys])
+    near = means - means[best] <= diff_se
+    arr_a = np.array([k[0] for k in keys])
+    arr_b = np.array([k[1] for k in keys])
+    in_a = near & (arr_b == b)
+    in_b = near & (arr_a == a)
+    ranges = (
+        (float(arr_a[in_a].min()), float(arr_a[in_a].max())),
+        (float(arr_b[in_b].min()), float(arr_b[in_b].max())),
+    )
+    return keys, means, ses, (float(a), float(b)), ranges
 
 
 def choose_weights(
@@ -348,6 +450,7 @@ def choose_weights(
     seed: int = 0,
     tol: float = CV_TOL,
     problem: DemuxProblem | None = None,
+    weighting: str | None = None,
 ) -> WeightChoice:
     """Choose ``alpha`` and/or ``beta`` by K-fold cross-validation over the stack's images.
 
@@ -393,54 +496,20 @@ def choose_weights(
             f"alpha/beta 'auto' needs at least {2 * folds} usable images for {folds}-fold cross-validation, "
             f"the stack has {problem.n_images}"
         )
-    sample = _sample(stack, problem, seed=seed, n_pixels=n_pixels)
+    weighting = DEFAULT_WEIGHTING if weighting is None else weighting
+    if weighting not in ("noise", "equal"):
+        raise InputError(f"weighting must be 'noise' or 'equal', got {weighting!r}")
+    sample = _sample(stack, problem, seed=seed, n_pixels=n_pixels, weighting=weighting)
     split = _folds(problem.n_images, folds, seed)
-    curve: dict[tuple, np.ndarray] = {}
-
-    def score(a, b):
-        key = (float(a), float(b))
-        if key not in curve:
-            curve[key] = cv_score(sample.groups, sample.B, sample.mask, sample.weight, split, a, b, tol=tol)
-        s = curve[key]
-        return float(s.mean()), float(s.std(ddof=1) / np.sqrt(s.size)) if s.size > 1 else 0.0
-
-    def scan(grid, fixed, which, indices=None):
-        """Scan ``grid`` (ascending) for ``which`` at the other weight ``fixed``; the best value."""
-        best, best_s, best_se, rising, last = None, np.inf, 0.0, 0, None
-        for i in range(len(grid)) if indices is None else indices:
-            v = grid[i]
-            s, se = score(v, fixed) if which == "alpha" else score(fixed, v)
-            if s < best_s:
-                best, best_s, best_se = v, s, se
-            rising = rising + 1 if (last is not None and s > last and s > best_s + 2 * best_se) else 0
-            last = s
-            if rising >= 2:
-                break
-        return best
-
-    a = PAPER_WEIGHT if requested["alpha"] == AUTO else requested["alpha"]
-    b = PAPER_WEIGHT if requested["beta"] == AUTO else requested["beta"]
-    alphas = sorted(float(x) for x in alphas)
-    betas = sorted(float(x) for x in betas)
-    if requested["alpha"] == AUTO:
-        a = scan(alphas, b, "alpha")
-    if requested["beta"] == AUTO:
-        b = scan(betas, a, "beta")
-        if requested["alpha"] == AUTO:  # alpha again, around its best, at the chosen beta
-            i = alphas.index(a)
-            a = scan(alphas, b, "alpha", indices=range(max(0, i - 2), min(len(alphas), i + 3)))
-    # the best pair over everything tried (the last scans may end at a neighbour)
-    keys = list(curve)
-    means = np.array([curve[k].mean() for k in keys])
-    ses = np.array([curve[k].std(ddof=1) / np.sqrt(curve[k].size) if curve[k].size > 1 else 0.0 for k in keys])
-    best = int(np.argmin(means))
-    a, b = keys[best]
-    limit = means[best] + ses[best]
-    near = means <= limit
+    curve = search(
+        lambda a, b: cv_score(sample.groups, sample.B, sample.mask, sample.weight, split, a, b, tol=tol),
+        requested,
+        alphas,
+        betas,
+    )
+    keys, means, ses, (a, b), (alpha_range, beta_range) = summarize(curve)
     arr_a = np.array([k[0] for k in keys])
     arr_b = np.array([k[1] for k in keys])
-    in_a = near & (arr_b == b)
-    in_b = near & (arr_a == a)
     return WeightChoice(
         alpha=float(a),
         beta=float(b),
@@ -453,7 +522,7 @@ def choose_weights(
         betas=arr_b,
         scores=means,
         score_se=ses,
-        alpha_range=(float(arr_a[in_a].min()), float(arr_a[in_a].max())),
-        beta_range=(float(arr_b[in_b].min()), float(arr_b[in_b].max())),
+        alpha_range=alpha_range,
+        beta_range=beta_range,
         pixels=np.concatenate(sample.pixels),
     )
