@@ -33,7 +33,7 @@ def small_grids(monkeypatch):
     """Coarse grids keep each automatic run to a few pairs (the search itself is the same)."""
     monkeypatch.setattr(auto_mod, "DEFAULT_ALPHAS", SMALL_ALPHAS)
     monkeypatch.setattr(auto_mod, "DEFAULT_BETAS", SMALL_BETAS)
-    monkeypatch.setattr(auto_mod, "MIN_PIXELS", 64)
+    monkeypatch.setattr(auto_mod, "MIN_PIXELS", 48)
 
 
 def _empty_stack(images) -> Stack:

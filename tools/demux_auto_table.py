@@ -71,8 +71,8 @@ def truth_on(scene, problem: DemuxProblem, scale: float, cols) -> np.ndarray:
     return scale * out
 
 
-def measure(name: str, scene, *, cols_n: int, seed: int = 0) -> dict:
-    stack = simulate_stack(scene, paper_sweep(), seed=seed)
+def measure(name: str, scene, *, cols_n: int, seed: int = 0, camera=None) -> dict:
+    stack = simulate_stack(scene, paper_sweep(), seed=seed, camera=camera)
     scale = float(stack.metadata["signal_scale"])
     t0 = time.perf_counter()
     choice = choose_weights(stack)
@@ -135,16 +135,20 @@ def main(argv=None) -> None:
     ap.add_argument("--cols", type=int, default=8)
     ap.add_argument("--projector-rows", type=int, default=PAPER_PROJECTOR_ROWS)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--ambient", type=float, default=None, help="ambient e-/us of the camera (default: its 0.5)")
     args = ap.parse_args(argv)
+    from planeray.camera import CameraModel
+
+    camera = None if args.ambient is None else CameraModel(ambient_e_per_us=args.ambient)
     rows = []
     for name in args.scenes:
         scene = make_scene(name, (args.size, args.size), projector_rows=args.projector_rows, seed=0)
-        rows.append(measure(name, scene, cols_n=args.cols))
+        rows.append(measure(name, scene, cols_n=args.cols, camera=camera))
     for path in args.store:
         from planeray.scenes.store_scene import scene_from_transport_store
 
         scene = scene_from_transport_store(path)
-        rows.append(measure(Path(path).stem, scene, cols_n=args.cols))
+        rows.append(measure(Path(path).stem, scene, cols_n=args.cols, camera=camera))
     print(
         "\n| scene | chosen alpha / beta (1-SE range of alpha) | error at chosen | best (alpha / beta) | error at best | error at 0.01 / 0.01 | chosen / best | chosen / default |"
     )
