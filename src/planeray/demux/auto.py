@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import InputError, PlanerayError
 from ..stack import Stack
 from .fast import AdmmRowSolver, _threads, blas_one_thread
-from .problem import DemuxProblem
+from .problem import DemuxProblem, read_observations
 
 __all__ = [
     "AUTO",
@@ -258,16 +258,19 @@ def _sample(
     n_rows = int(min(cand.size, max(4, min(64, -(-target // W) * 4))))
     rows = cand[np.unique(np.round(np.linspace(0, cand.size - 1, n_rows)).astype(int))]
     per_row = int(min(W, -(-target // rows.size)))
-    from .driver import read_observations
-
     parts = _Sample([], [], [], [], [int(r) for r in rows], 0)
     imgs_all, sat_all, cols_all = {}, {}, {}
-    for r in rows:
-        imgs, sat = read_observations(stack, problem, slice(int(r), int(r) + 1))
-        cols = np.sort(rng.choice(W, per_row, replace=False))
-        cols_all[int(r)] = cols
-        imgs_all[int(r)] = imgs[:, 0, cols].T  # (P, N)
-        sat_all[int(r)] = None if sat is None else sat[:, 0, cols].T
+    # rows read a stored block at a time (a lazily read stack decodes each of its chunks once)
+    chunks = getattr(stack.images, "chunks", None)
+    block = int(chunks[1]) if chunks is not None and len(chunks) == 3 else 1
+    for b in np.unique(rows // block):
+        lo, hi = int(b * block), int(min(H, (b + 1) * block))
+        imgs, sat = read_observations(stack, problem, slice(lo, hi))
+        for r in rows[(rows >= lo) & (rows < hi)]:
+            cols = np.sort(rng.choice(W, per_row, replace=False))
+            cols_all[int(r)] = cols
+            imgs_all[int(r)] = imgs[:, r - lo, cols].T  # (P, N)
+            sat_all[int(r)] = None if sat is None else sat[:, r - lo, cols].T
     for g in chosen:
         rs = [int(r) for r in rows if problem.row_group[r] == g]
         if not rs:

@@ -35,7 +35,7 @@ from ..transport import Transport
 from ._kernels import warm_up
 from .auto import WeightChoice, choose_weights, is_auto
 from .fast import _threads, blas_one_thread
-from .problem import DemuxProblem, RowGroup
+from .problem import DemuxProblem, RowGroup, read_observations
 from .solvers import get_solver, options
 
 __all__ = [
@@ -128,24 +128,6 @@ class _RowReader:
         part = slice(rows.start - self._rows.start, rows.stop - self._rows.start)
         sat = None if sat is None or not sat[:, part].any() else sat[:, part]
         return imgs[:, part], sat
-
-
-def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, *, source=None):
-    """Observations ``(N, r, W)`` float64 of the used images and their saturation mask."""
-    imgs = np.asarray(stack.images[:, rows, :], dtype=np.float64)[problem.image_index]
-    bad = ~np.isfinite(imgs)
-    if bad.any():
-        n, r, c = np.argwhere(bad)[0]
-        where = f"{source}: " if source else ""
-        raise InputError(
-            f"{where}image {int(problem.image_index[n])} has a non-finite value at pixel ({rows.start + r}, {c})"
-        )
-    sat = None
-    if stack.saturated is not None:
-        sat = np.asarray(stack.saturated[:, rows, :], dtype=bool)[problem.image_index]
-        if not sat.any():
-            sat = None
-    return imgs, sat
 
 
 def solve_chunk(
