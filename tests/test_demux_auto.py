@@ -181,18 +181,10 @@ def test_store_records_the_choice_and_the_command_prints_and_draws_it(tmp_path):
 
 def test_interrupted_auto_run_resumes_only_on_identical_inputs(tmp_path):
     stack, _ = synthetic("smooth")
-    full = demultiplex_to_store(stack, tmp_path / "full.zarr", alpha="auto", beta="auto", chunk_rows=4)
     out = tmp_path / "t.zarr"
     demultiplex_to_store(stack, out, alpha="auto", beta="auto", chunk_rows=4, _stop_after=1)
-    seen = []
-    demultiplex_to_store(
-        stack, out, alpha="auto", beta="auto", chunk_rows=4, on_choice=lambda c, resumed: seen.append(resumed)
-    )
-    assert seen == [True]  # the choice came from the unfinished run, not a new search
-    np.testing.assert_array_equal(read_transport(full)[0].dense, read_transport(out)[0].dense)
+    rec = zarr.open_group(str(tmp_path / ".t.zarr.partial"), mode="r").attrs["weights_choice"]
     # a different stack (one pixel changed) is refused, whatever the unfinished run chose
-    other = tmp_path / "o.zarr"
-    demultiplex_to_store(stack, other, alpha="auto", beta="auto", chunk_rows=4, _stop_after=1)
     changed = Stack(
         np.array(stack.images),
         stack.delay_us,
@@ -204,8 +196,18 @@ def test_interrupted_auto_run_resumes_only_on_identical_inputs(tmp_path):
     )
     changed.images[5, 7, 3] += 0.01
     with pytest.raises(InputError, match="unfinished run"):
-        demultiplex_to_store(changed, other, alpha="auto", beta="auto", chunk_rows=4)
+        demultiplex_to_store(changed, out, alpha="auto", beta="auto", chunk_rows=4)
     # explicit weights equal to the chosen ones are another request: refused too
-    rec = zarr.open_group(str(tmp_path / ".o.zarr.partial"), mode="r").attrs["weights_choice"]
     with pytest.raises(InputError, match="unfinished run"):
-        demultiplex_to_store(stack, other, alpha=rec["alpha"], beta=rec["beta"], chunk_rows=4)
+        demultiplex_to_store(stack, out, alpha=rec["alpha"], beta=rec["beta"], chunk_rows=4)
+    # the identical run continues, with the recorded choice (no second search)
+    seen = []
+    demultiplex_to_store(
+        stack, out, alpha="auto", beta="auto", chunk_rows=4, on_choice=lambda c, resumed: seen.append(resumed)
+    )
+    assert seen == [True]
+    T, attrs = read_transport(out)
+    assert attrs["weights_choice"] == rec and (attrs["alpha"], attrs["beta"]) == (rec["alpha"], rec["beta"])
+    # the same bytes as an uninterrupted run at those weights
+    ref = demultiplex(stack, alpha=rec["alpha"], beta=rec["beta"], chunk_rows=4).transport.dense
+    np.testing.assert_array_equal(T.dense, ref)
