@@ -12,7 +12,8 @@ Also reported: the best weights per band of camera rows (4 bands) with knowledge
 truth, i.e. what weights per region could gain at most over one pair per stack.
 
 Run (nice, small sizes): ``nice -n 10 .venv/bin/python tools/demux_auto_table.py --size 32 --cols 8``
-``[--store my_T.zarr ...] [--json out/demux_auto.json]``.
+``[--store my_T.zarr ...] [--ambient 0] [--json out/demux_auto.json]``; the README's stores come from
+``planeray render tools/demux_auto_scenes/NAME.xml --out NAME.zarr --rows 720 --size 32 32 --spp 64``.
 """
 
 from __future__ import annotations
