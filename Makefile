@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test lint format bench bench-demux bench-mc bench-viewer bench-mitsuba browser llvm clean venv
+.PHONY: demo test docs lint format bench bench-demux bench-mc bench-viewer bench-mitsuba browser llvm clean venv
 
 venv: $(VENV)/.installed
 
@@ -44,13 +44,34 @@ llvm:
 test: venv browser llvm
 	$(PY) -m pytest -q -n auto --dist worksteal
 
+# The documentation site: docs/ -> docs/_build/html (open docs/_build/html/index.html), offline, warnings as
+# errors, then opened in chromium by tests/test_docs_site.py.  The equations need MathJax: it is installed
+# (pinned) from the npm registry into docs/_build/mathjax and served from the site itself, never from a CDN.
+MATHJAX_VERSION := 3.2.2
+MATHJAX := docs/_build/mathjax/node_modules/mathjax/es5/tex-chtml.js
+SPHINXOPTS ?= -j 2
+
+docs: venv browser $(MATHJAX)
+	$(VENV)/bin/sphinx-build -W --keep-going -q $(SPHINXOPTS) -b html docs docs/_build/html
+	PLANERAY_DOCS_SITE=docs/_build/html $(PY) -m pytest -q -p no:cacheprovider tests/test_docs_site.py
+
+$(MATHJAX):
+	@if ! command -v npm >/dev/null 2>&1 && [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing npm to fetch MathJax for the docs (apt-get install npm)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq npm >/dev/null; fi
+	@command -v npm >/dev/null 2>&1 || { echo "make docs: npm is needed to install MathJax for the site (Debian: sudo apt-get install npm)"; exit 1; }
+	@mkdir -p docs/_build/mathjax
+	@npm install --prefix docs/_build/mathjax --no-audit --no-fund --no-save --loglevel=error --fetch-retries=1 \
+		--fetch-timeout=60000 mathjax@$(MATHJAX_VERSION) >docs/_build/mathjax/npm.log 2>&1 \
+		|| { echo "make docs: could not install MathJax $(MATHJAX_VERSION) from the npm registry (offline? see docs/_build/mathjax/npm.log)"; exit 1; }
+
 lint: venv
-	$(VENV)/bin/ruff check src tests benchmarks tools
-	$(VENV)/bin/ruff format --check src tests benchmarks tools
+	$(VENV)/bin/ruff check src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
+	$(VENV)/bin/ruff format --check src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
 
 format: venv
-	$(VENV)/bin/ruff check --fix src tests benchmarks tools
-	$(VENV)/bin/ruff format src tests benchmarks tools
+	$(VENV)/bin/ruff check --fix src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
+	$(VENV)/bin/ruff format src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
 
 bench: venv
 	$(PY) benchmarks/bench_render.py --size 512
@@ -68,4 +89,5 @@ bench-mc: venv
 	$(PY) benchmarks/bench_mc.py --plot $(OUT)/mc_vs_mitsuba.png
 
 clean:
-	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache
+	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache docs/_build docs/auto_examples docs/reference/api/generated \
+		docs/reference/api/backreferences docs/reference/api/index.rst docs/reference/cli_commands.rst docs/sg_execution_times.rst

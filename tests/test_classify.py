@@ -324,7 +324,7 @@ def test_mirror_ball_page_specular_light_is_below_the_demux_noise(scenes):
 # subset of the columns (demultiplexing is per pixel: a column sees exactly what it
 # would in the whole image; the simulated noise differs only in its draws).
 SIZES = [64, 128, pytest.param(256, marks=pytest.mark.slow)]
-COLUMNS = {64: 64, 128: 32, 256: 24}
+COLUMNS = {64: 64, 128: 32, 256: 16}
 #: Visible ground-truth effects of each scene (keys of EFFECTS); a new scene must say its own.
 SCENE_EFFECTS = {
     "corner": {1, 3},

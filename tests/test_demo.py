@@ -1,4 +1,7 @@
-"""``planeray demo`` (what ``make demo`` runs) writes every file the README promises, and they read back."""
+"""``planeray demo`` (what ``make demo`` runs) writes every file the docs promise, and they read back.
+
+The promise is the "What `make demo` writes" block of the getting-started page (docs/getting_started.md).
+"""
 
 import csv
 import re
@@ -12,13 +15,13 @@ from typer.testing import CliRunner
 from planeray.cli import app
 from planeray.io import read_stack, read_transport, read_transport_maps
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+GETTING_STARTED = Path(__file__).resolve().parents[1] / "docs" / "getting_started.md"
 SIZE = 32
 
 
 def _promised_files() -> list[str]:
-    """The names under ``out/`` in the README's "What `make demo` writes" block."""
-    text = README.read_text(encoding="utf-8")
+    """The names under ``out/`` in the getting-started page's "What `make demo` writes" block."""
+    text = GETTING_STARTED.read_text(encoding="utf-8")
     section = text.split("## What `make demo` writes", 1)[1].split("\n## ", 1)[0]
     block = section.split("```", 2)[1]
     return re.findall(r"^out/(\S+)", block, flags=re.MULTILINE)
@@ -32,7 +35,7 @@ def demo_dir(tmp_path_factory):
     return out
 
 
-def test_the_readme_lists_the_demo_outputs():
+def test_the_docs_list_the_demo_outputs():
     names = _promised_files()
     assert "disco_ball.zarr" in names and "transport_vs_truth.png" in names and len(names) == 10
 

@@ -53,3 +53,47 @@ def capture(device, pattern, exposure_us, frame_period_us):
 def to_transport_units(device, images, dark, exposure_us, frame_period_us):
     passes = float(exposure_us) / float(frame_period_us)
     return (images - dark) / (passes * signal_scale(device))
+
+
+def simulated_device(
+    scene: str,
+    size,
+    *,
+    projector_rows=None,
+    seed: int = 0,
+    ambient_e_per_us: float = 0.01,
+    noise: bool = True,
+    lines_per_second: float | None = None,
+):
+    """The simulated Episcan on built-in ``scene`` as ``planeray emulate`` and ``separate`` use it.
+
+    Parameters
+    ----------
+    scene : str
+        Built-in scene name.
+    size : tuple of int
+        Image size ``(H, W)`` (camera pixels).
+    projector_rows : int, optional
+        Projector rows spanned by the image height (default: ``H``, as :func:`planeray.scenes.make_scene`).
+    seed : int
+        Scene and noise seed.
+    ambient_e_per_us : float
+        Room light, electrons per microsecond (a dim room by default: conventional
+        frames integrate 16.7 ms).
+    noise : bool
+        Simulate noise.
+    lines_per_second : float, optional
+        Projector line rate (default: the paper's 54,000 lines/s).
+    """
+    from ..camera import CameraModel
+    from ..devices import SimulatedEpiscan
+    from ..scenes import make_scene
+    from ..timing import PAPER_LINES_PER_SECOND
+
+    return SimulatedEpiscan(
+        make_scene(scene, tuple(size), projector_rows=projector_rows, seed=seed),
+        camera=CameraModel(ambient_e_per_us=ambient_e_per_us),
+        lines_per_second=lines_per_second or PAPER_LINES_PER_SECOND,
+        seed=seed,
+        noise=noise,
+    )

@@ -20,6 +20,7 @@ order) and holds the entry point:
 * ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
 * ``skin.py``       skin simulate | validate | veins | enhance | compare (veins through skin, Sec. 10, Figs. 13, 14, 16)
 * ``pulse.py``      skin pulse | video | pulse-report (the pulse, Sec. 10, Fig. 15), on the skin group
+* ``paper.py``      paper (every figure of the paper, resumable, with a report beside the paper's numbers)
 * ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
@@ -41,6 +42,7 @@ from . import (
     demux,
     materials,
     mc,
+    paper,
     pulse,
     render,
     simulate,
@@ -83,6 +85,7 @@ app.command()(baselines.emulate)
 app.command()(demux.demux)
 app.command()(analysis.synth)
 app.command()(analysis.figure)
+app.command()(paper.paper)
 app.command()(stacks.export)
 app.command("import")(stacks.import_)
 app.command()(view.view)

@@ -59,16 +59,16 @@ def _sim_device(
     noise: bool,
     lines_per_second: float = PAPER_LINES_PER_SECOND,
 ):
-    from ..camera import CameraModel
-    from ..devices import SimulatedEpiscan
-    from ..scenes import make_scene
+    from ..baselines import simulated_device
 
-    return SimulatedEpiscan(
-        make_scene(scene, size, projector_rows=projector_rows, seed=seed),
-        camera=CameraModel(ambient_e_per_us=ambient_e_per_us),
-        lines_per_second=lines_per_second,
+    return simulated_device(
+        scene,
+        size,
+        projector_rows=projector_rows,
         seed=seed,
+        ambient_e_per_us=ambient_e_per_us,
         noise=noise,
+        lines_per_second=lines_per_second,
     )
 
 

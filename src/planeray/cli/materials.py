@@ -293,7 +293,7 @@ def predict(
         typer.Option(
             help="A pixel less typical of the SVM's pick than this share of the class's held-out training pixels "
             "is unclassified (0 in the map); 0 keeps every pick. The default is measured on held-out captures "
-            "(README)."
+            "(documentation: Material recognition)."
         ),
     ] = 0.01,
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,

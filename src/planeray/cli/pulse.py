@@ -355,7 +355,7 @@ def pulse_report(
 ):
     """The simulated pulse study: Fig. 15a/b, rate accuracy over rates and seeds, SNR per method, false alarms."""
     from .._validate import check_memory
-    from ..experiments.pulse import REPORT_RATES_BPM, pulse_report_steps, run_pulse_report
+    from ..experiments.pulse import QUICK_REPORT, REPORT_RATES_BPM, pulse_report_steps, run_pulse_report
     from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
     from ..pulse.rate import RATE_BAND_HZ
     from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes
@@ -369,7 +369,7 @@ def pulse_report(
             f"got {shape[0]}x{shape[1]}"
         ) from None
     _bounds.projector_rows(projector_rows)
-    kw = {"rates_bpm": (50, 80, 110), "seeds": (0,), "null_seeds": range(3), "null_runs": 100} if quick else {}
+    kw = dict(QUICK_REPORT) if quick else {}
     rates = kw.get("rates_bpm", REPORT_RATES_BPM)
     settings = LiveSettings(seconds=seconds, fps=fps, bpm=max(rates), hrv=0.02, rsa=0.03)
     need = 2.0 / RATE_BAND_HZ[0]

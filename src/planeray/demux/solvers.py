@@ -1,10 +1,10 @@
 """The demultiplexing solvers, by name (a Mitsuba-style registry).
 
-``fast``   the default: batched over all pixels sharing an illumination matrix,
-           exact to a certified tolerance (:mod:`planeray.demux.fast`);
-``pinv``   pseudo-inverse (no constraint, no regularization);
-``nnls``   non-negative least squares without regularization;
-``cvxpy``  the paper's formulation solved by CVXPY + Clarabel (slow reference).
+* ``fast``: the default, batched over all pixels sharing an illumination matrix,
+  exact to a certified tolerance (:mod:`planeray.demux.fast`);
+* ``pinv``: pseudo-inverse (no constraint, no regularization);
+* ``nnls``: non-negative least squares without regularization;
+* ``cvxpy``: the paper's formulation solved by CVXPY + Clarabel (slow reference).
 
 The last three are in :mod:`planeray.demux.reference`.  Every solver has the
 signature ``solve(group, B, alpha, beta, tol) -> SolveResult``; it may also take the

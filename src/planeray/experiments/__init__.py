@@ -3,7 +3,9 @@
 
 * :mod:`planeray.experiments.paper`: the paper's figures reproduced on the simulated device
   (``planeray figure ...``);
-* :mod:`planeray.experiments.study`: the Sec. 5.2 demultiplexing study (``planeray study demux``).
+* :mod:`planeray.experiments.study`: the Sec. 5.2 demultiplexing study (``planeray study demux``);
+* :mod:`planeray.experiments.reproduce`: every figure at once, resumable (``planeray paper``), and
+  :mod:`planeray.experiments.paper_report`, its report beside the paper's quoted numbers.
 
 Experiments sit above analysis and figures: they compose them, nothing below imports them.
 """

@@ -27,6 +27,7 @@ from ..pulse.waveform import cardiac_signal
 __all__ = [
     "ANALYSIS_FORMAT",
     "REPORT_FORMAT",
+    "QUICK_REPORT",
     "write_pulse_analysis",
     "resolution_study",
     "false_alarm_study",
@@ -55,6 +56,8 @@ DELAY_STUDY_EXPOSURES_US = (300, 600)
 REPORT_RATES_BPM = (50, 60, 70, 80, 90, 100, 110)
 REPORT_SEEDS = (0, 1, 2)
 REPORT_NULL_SEEDS = range(10)
+#: ``skin pulse-report --quick`` (and ``planeray paper --quick``): three rates, one seed, three pulse-free videos.
+QUICK_REPORT = {"rates_bpm": (50, 80, 110), "seeds": (0,), "null_seeds": range(3), "null_runs": 100}
 
 
 def _write_csv(path: Path, header, rows) -> None:

@@ -6,7 +6,7 @@
   (:func:`planeray.mc.layered.mc_vein_kernel_brute`), vein parallel (0 deg), oblique
   (45 deg) and across (90 deg) the projector rows, over depths and diameters: the vein's
   contrast in the short-range indirect band of the paper (delay 500 us, exposure 200 us:
-  offsets 21.6-32.4 rows) and in the epipolar band (|u| <= 2 rows).
+  offsets 21.6-32.4 rows) and in the epipolar band (``|u| <= 2`` rows).
 * :func:`layered_adding_doubling`: the total diffuse reflectance of the vein-free layers
   against adding-doubling (``iadpython``: each layer's reflection/transmission operators
   by doubling, the stack by adding).

@@ -45,6 +45,8 @@ _FOLDER_KINDS = {
     "planeray-skin-enhance": "skin enhance",
     "planeray-skin-validation": "skin validation",
     "planeray-pulse-report": "pulse report",  # `planeray skin pulse` / `skin pulse-report`
+    "planeray-paper": "paper report",  # `planeray paper`: the folder, its manifest
+    "planeray-paper-step": "paper step",  # one finished step of `planeray paper` inside it
 }
 #: The marker file of such folders.
 MARKER = "planeray.json"

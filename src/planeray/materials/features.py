@@ -12,7 +12,7 @@ trained model:
     ``ambient x t_e x albedo`` to every delay of an exposure
     (:class:`planeray.camera.CameraModel`), a floor that the paper's plain normalization
     (``floor="none"``) keeps; ``floor="edge"`` (default) subtracts from each curve the
-    mean of its :data:`EDGE_SAMPLES` outermost samples on each side (the largest |delay|;
+    mean of its :data:`EDGE_SAMPLES` outermost samples on each side (the largest ``|delay|``;
     four samples, so the floor's noise is half that of one), ``floor="min"`` its minimum
     (noisier: the minimum of 17 noisy samples).  A broad profile keeps some light at the
     edges, which the edge floor removes too -- the same in every capture, so the

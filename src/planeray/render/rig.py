@@ -58,7 +58,7 @@ DEFAULT_PROJECTOR_ASPECT = 16 / 9
 
 
 def xml_defaults(path) -> dict[str, str]:
-    """``<default name=... value=...>`` entries of a Mitsuba scene file (planeray reads ``planeray_*``)."""
+    """``<default name="..." value="...">`` entries of a Mitsuba scene file (planeray reads ``planeray_*``)."""
     path = Path(path)
     try:
         root = ET.parse(path).getroot()

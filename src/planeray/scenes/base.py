@@ -218,7 +218,7 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
 
 
 def scene_offsets(band_rows: int = DEFAULT_BAND_ROWS) -> np.ndarray:
-    """Offsets ``-band_rows .. band_rows`` of a scene's dense band."""
+    """Offsets ``-band_rows`` to ``band_rows`` of a scene's dense band."""
     return np.arange(-int(band_rows), int(band_rows) + 1)
 
 

@@ -1,6 +1,6 @@
 """Vein visibility metrics on a ground-truth (or user) vein mask: CNR, Weber contrast, per-vein detection.
 
-The contrast-to-noise ratio of a vein against its surroundings is
+The contrast-to-noise ratio of a vein against its surroundings is::
 
     CNR = |mu_bg - mu_vein| / sigma_bg,
 
