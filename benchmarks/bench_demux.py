@@ -21,6 +21,11 @@ pixels (for saturated pixels: the objective over the remaining observations).  T
 saturated stack is also solved in this process with its mask used and ignored
 (interleaved, best of ``--repeat``): what dropping the saturated observations costs.
 
+**Automatic weights** (``--alpha auto --beta auto``, cross-validation over the images):
+the same command with and without them on the wax and random stacks, alternated, best of
+``--repeat`` each; reported as the ratio of the solve times (the printed time includes the
+choice).  ``--auto-only`` runs only this part (no CVXPY).
+
 Run: ``make bench-demux`` or ``.venv/bin/python benchmarks/bench_demux.py [--pixels 384] [--large 512]``.
 """
 
@@ -234,6 +239,30 @@ def report(name, stack, stack_path, tmp, args, rng, *, masked=False):
     return result
 
 
+def auto_ratio(name: str, stack_path: Path, tmp: Path, repeat: int) -> float:
+    """``--alpha auto --beta auto`` against the plain command, alternated, best of ``repeat`` each."""
+    plain, auto = None, None
+    for _ in range(repeat):
+        p = time_command(stack_path, tmp / f"{name}_plain.zarr", 1)
+        a = time_command(stack_path, tmp / f"{name}_auto.zarr", 1, "--alpha", "auto", "--beta", "auto")
+        plain = p if plain is None or p["solve"] < plain["solve"] else plain
+        auto = a if auto is None or a["solve"] < auto["solve"] else auto
+    chosen = zarr_attrs(tmp / f"{name}_auto.zarr")["weights_choice"]
+    ratio = auto["solve"] / plain["solve"]
+    print(
+        f"  --alpha auto --beta auto    : {auto['solve']:.2f} s vs {plain['solve']:.2f} s plain -> **{ratio:.2f}x** "
+        f"(whole process {auto['wall'] / plain['wall']:.2f}x; chose alpha {chosen['alpha']:.3g}, beta "
+        f"{chosen['beta']:.3g} from {len(chosen['curve']['score'])} pairs, {chosen['n_pixels']} pixels)"
+    )
+    return ratio
+
+
+def zarr_attrs(path: Path) -> dict:
+    import zarr
+
+    return zarr.open_group(str(path), mode="r").attrs.asdict()
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=128)
@@ -242,6 +271,7 @@ def main():
     parser.add_argument("--large", type=int, default=0, help="also time a LARGE x LARGE wax stack")
     parser.add_argument("--dask", action="store_true", help="also time the large stack with --workers 2")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--auto-only", action="store_true", help="only the automatic weights' cost (no CVXPY)")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     shape = (args.size, args.size)
@@ -256,13 +286,22 @@ def main():
             "random",
         )
         print(f"paper sweep, {PAPER_PROJECTOR_ROWS}-row projector; stacks written in the import format and imported")
+        if args.auto_only:
+            wax = simulate_stack(make_scene("wax", shape, projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed), sweep)
+            wax_path = write_stack(wax, tmp / "wax.zarr")
+            for name, path in (("random transports, no ambient", random_path), ("wax scene", wax_path)):
+                print(f"\n[{name}: {args.size}x{args.size}]")
+                auto_ratio(name.split()[0], path, tmp, args.repeat)
+            return
         rand = report("random transports, no ambient", read_stack(random_path), random_path, tmp, args, rng)
+        auto_ratio("random", random_path, tmp, args.repeat)
 
         wax = simulate_stack(make_scene("wax", shape, projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed), sweep)
         wax_path = write_stack(wax, tmp / "wax.zarr")
         w = report("wax scene", read_stack(wax_path), wax_path, tmp, args, rng)
         paper = PAPER_SECONDS_128 * (args.size / 128) ** 2
         print(f"  the paper (9 min @128^2)    : {paper / w['solve']:.0f}x")
+        auto_ratio("wax", wax_path, tmp, args.repeat)
 
         sat_stack = simulate_stack(
             scene, sweep, camera=CameraModel(laser_electrons=LASER_E_SATURATED, **light), seed=args.seed

@@ -61,6 +61,9 @@ __all__ = [
     "noise_sweep",
     "parameter_sweep",
     "regularization_sweep",
+    "auto_weights",
+    "FIXED_ALPHAS",
+    "FIXED_BETAS",
 ]
 
 #: The paper's default configuration (Figs. 5, 6): sigma_s = 1, sigma_a = 0, g = 0.9 (mm^-1).
@@ -259,16 +262,79 @@ def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, *, progr
     return {"noise": np.asarray(noises, float), "mse": mse}
 
 
+#: Grid of the best fixed weights per profile (whole decades), against which the automatic choice is held.
+FIXED_ALPHAS = tuple(float(10.0**e) for e in range(-3, 5))
+FIXED_BETAS = tuple(float(10.0**e) for e in range(-4, 2))
+
+
+def auto_weights(setup: StudySetup, B, *, folds: int = 5, seed: int = 0) -> tuple[float, float]:
+    """``alpha, beta`` chosen from observations ``B`` (P, N) alone, as ``planeray demux --alpha auto --beta auto``.
+
+    K-fold cross-validation over the images (:mod:`planeray.demux.auto`), the
+    observations of the ``P`` noise realizations pooled like the pixels of a stack,
+    weighted alike (the study's noise is the same for every image).
+    """
+    from .demux.auto import DEFAULT_ALPHAS, DEFAULT_BETAS, _folds, cv_score, search, summarize
+
+    B = np.atleast_2d(np.asarray(B, np.float64))
+    split = _folds(B.shape[1], folds, seed)
+    ones = np.ones_like(B)
+    curve = search(
+        lambda a, b: cv_score([setup.group], [B], [None], [ones], split, a, b, threads=1),
+        {"alpha": "auto", "beta": "auto"},
+        DEFAULT_ALPHAS,
+        DEFAULT_BETAS,
+    )
+    return summarize(curve)[3]
+
+
+def _auto_vs_fixed(setup: StudySetup, T, noise, seeds, point):
+    """MSE per seed at the automatic weights, and the best fixed pair of the decade grid (mean MSE)."""
+    from threadpoolctl import threadpool_limits
+
+    B = _observations(setup, T, noise, seeds, point)
+    # a few pixels at a time: one thread, and BLAS held to one too (its spinning threads
+    # cost ~10x on a busy machine)
+    with threadpool_limits(1, user_api="blas"):
+        a, b = auto_weights(setup, B)
+        auto = ((solve_fast(setup.group, B, a, b, threads=1).X - T[None]) ** 2).mean(axis=1)
+        best = (np.inf, 0.0, 0.0)
+        for fa in FIXED_ALPHAS:
+            for fb in FIXED_BETAS:
+                m = float(((solve_fast(setup.group, B, fa, fb, threads=1).X - T[None]) ** 2).mean())
+                best = min(best, (m, fa, fb))
+    return (a, b, auto), best
+
+
 def parameter_sweep(
-    setup: StudySetup, provider: Provider, name: str, values, seeds=5, noise=DEFAULT_NOISE, *, progress=None, **params
+    setup: StudySetup,
+    provider: Provider,
+    name: str,
+    values,
+    seeds=5,
+    noise=DEFAULT_NOISE,
+    *,
+    progress=None,
+    auto: bool = False,
+    **params,
 ) -> dict:
     """Fig. 6: ``mse[method]`` of shape ``(len(values), seeds)`` as ``name`` in
     {'sigma_s', 'sigma_a', 'g'} varies, the others at their defaults; ``progress(1)``
-    after each value (its profile included: a Monte Carlo provider traces it then)."""
+    after each value (its profile included: a Monte Carlo provider traces it then).
+
+    With ``auto``, also ``auto`` (the full method at the weights chosen from each
+    profile's observations by :func:`auto_weights`: ``alpha``, ``beta`` ``(len(values),)``,
+    ``mse`` ``(len(values), seeds)``) and ``best_fixed`` (the pair of
+    :data:`FIXED_ALPHAS` x :data:`FIXED_BETAS` with the lowest mean MSE for that profile,
+    found with knowledge of the truth: ``alpha``, ``beta``, ``mse`` ``(len(values),)``),
+    on the same noise realizations."""
     if name not in DEFAULT_PARAMS:
         raise ValueError(f"unknown parameter {name!r}")
     mse = {m: np.zeros((len(values), seeds)) for m in METHODS}
     width = np.zeros(len(values))
+    n = len(values)
+    chosen = {"alpha": np.zeros(n), "beta": np.zeros(n), "mse": np.zeros((n, seeds))}
+    fixed = {"alpha": np.zeros(n), "beta": np.zeros(n), "mse": np.zeros(n)}
     for i, v in enumerate(values):
         p = {**DEFAULT_PARAMS, **params, name: float(v)}
         T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
@@ -276,9 +342,15 @@ def parameter_sweep(
         r = mse_trials(setup, T, noise, seeds, point=i)
         for m in METHODS:
             mse[m][i] = r[m]
+        if auto:
+            (chosen["alpha"][i], chosen["beta"][i], chosen["mse"][i]), best = _auto_vs_fixed(setup, T, noise, seeds, i)
+            fixed["mse"][i], fixed["alpha"][i], fixed["beta"][i] = best
         if progress is not None:
             progress(1)
-    return {"name": name, "values": np.asarray(values, float), "mse": mse, "mean_abs_offset": width}
+    out = {"name": name, "values": np.asarray(values, float), "mse": mse, "mean_abs_offset": width}
+    if auto:
+        out |= {"auto": chosen, "best_fixed": fixed}
+    return out
 
 
 def regularization_sweep(

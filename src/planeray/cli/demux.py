@@ -21,12 +21,28 @@ MAX_WEIGHT = 1e6
 MAX_WORKERS = 1024
 
 
+def _weight(text: str, option: str):
+    """``"auto"`` or a weight in ``[0, MAX_WEIGHT]`` (one line naming ``option`` otherwise)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{option} must be a number or 'auto', got {text!r}") from None
+    return lim.nonnegative(value, option, maximum=MAX_WEIGHT)
+
+
 @_friendly_errors
 def demux(
     stack_path: StackArg,
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Transport store to write (Zarr).")],
-    alpha: Annotated[float, typer.Option(help="Smoothness weight (paper: 0.01).")] = 0.01,
-    beta: Annotated[float, typer.Option(help="Sparsity weight (paper: 0.01).")] = 0.01,
+    alpha: Annotated[
+        str,
+        typer.Option(help="Smoothness weight (paper: 0.01), or 'auto': chosen by cross-validation over the images."),
+    ] = "0.01",
+    beta: Annotated[
+        str, typer.Option(help="Sparsity weight (paper: 0.01), or 'auto': chosen by cross-validation over the images.")
+    ] = "0.01",
     method: Annotated[str, typer.Option(help="fast | pinv | nnls | cvxpy.")] = "fast",
     workers: Annotated[int | None, typer.Option(help="Run on a Dask LocalCluster with N workers.")] = None,
     scheduler: Annotated[str | None, typer.Option(help="Address of an existing Dask scheduler.")] = None,
@@ -36,6 +52,10 @@ def demux(
     tol: Annotated[float | None, typer.Option(help="Solver tolerance (relative objective gap for fast).")] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing finished output.")] = False,
     restart: Annotated[bool, typer.Option(help="Discard an unfinished run instead of resuming it.")] = False,
+    report: Annotated[
+        Path | None,
+        typer.Option(help="With 'auto' weights: write the cross-validation curve to DIR/weights_cv.png."),
+    ] = None,
 ):
     """Demultiplex a delay-exposure stack into 3D light transport (Sec. 4); resumable."""
     import time
@@ -47,9 +67,14 @@ def demux(
         raise ValueError("give --workers or --scheduler, not both")
     if Path(out_path).resolve() == Path(stack_path).resolve():
         raise ValueError(f"{out_path}: is the input stack; name another output")
-    _check_outputs((out_path, "transport"), overwrite=overwrite)
-    lim.nonnegative(alpha, "--alpha", maximum=MAX_WEIGHT)
-    lim.nonnegative(beta, "--beta", maximum=MAX_WEIGHT)
+    alpha, beta = _weight(alpha, "--alpha"), _weight(beta, "--beta")
+    auto = "auto" in (alpha, beta)
+    if report is not None and not auto:
+        raise InputError("--report draws the choice of --alpha auto / --beta auto; give one of them")
+    figure = None if report is None else Path(report) / "weights_cv.png"
+    if figure is not None and Path(report).exists() and not Path(report).is_dir():
+        raise InputError(f"--report {report}: exists and is not a directory")
+    _check_outputs((out_path, "transport"), (figure, "figure"), overwrite=overwrite)
     if method not in METHODS:
         raise InputError(f"--method {method}: unknown demultiplexing method; choose one of {', '.join(METHODS)}")
     lim.optional(lim.integer, workers, "--workers", minimum=1, maximum=MAX_WORKERS)
@@ -57,6 +82,15 @@ def demux(
     lim.optional(lim.number, tol, "--tol", minimum=0.0, maximum=1.0, min_inclusive=False, max_inclusive=False)
     st = _load_stack(stack_path)
     t0 = time.perf_counter()
+    chosen = {}
+
+    def on_choice(choice, resumed):
+        chosen["choice"] = choice
+        note = " (taken from the unfinished run)" if resumed else f" ({time.perf_counter() - t0:.1f} s)"
+        out.print(choice.summary() + note, markup=False, highlight=False)
+
+    if auto:
+        console.print("choosing the weights by cross-validation over the images ...", markup=False, highlight=False)
     with progress_bar() as bar:
         task = bar.add_task(f"demultiplexing ({method})", total=st.shape[0])
         path = demultiplex_to_store(
@@ -78,6 +112,7 @@ def demux(
                 markup=False,
                 highlight=False,
             ),
+            on_choice=on_choice,
             source=str(stack_path),
         )
     elapsed = time.perf_counter() - t0
@@ -89,6 +124,12 @@ def demux(
         markup=False,
         highlight=False,
     )
+    if figure is not None:
+        from ..figures.demux import weights_cv_figure
+
+        Path(report).mkdir(parents=True, exist_ok=True)
+        weights_cv_figure(chosen["choice"], out=figure)
+        out.print(f"cross-validation curve: {figure}", markup=False, highlight=False)
     empty = int((maps["n_observations"] == 0).sum())
     if empty:
         console.print(

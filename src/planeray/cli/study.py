@@ -23,6 +23,10 @@ def study_demux(
     seeds: Annotated[int, typer.Option(help="Noise seeds per point.")] = 5,
     quick: Annotated[bool, typer.Option(help="Reduced grids.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace the files a previous run wrote (only those).")] = False,
+    auto: Annotated[
+        bool,
+        typer.Option(help="Add the weights chosen by cross-validation (demux --alpha auto --beta auto) per profile."),
+    ] = False,
 ):
     """Reconstruction quality of pinv, NNLS and the full method (Figs. 5, 6) and an alpha/beta sweep.
 
@@ -47,6 +51,7 @@ def study_demux(
             quick=quick,
             progress=lambda n: bar.advance(task, n),
             overwrite=overwrite,
+            auto=auto,
         )
     for line in study_report(numbers):
         print_verbatim(line)

@@ -3,9 +3,11 @@
 Modules: :mod:`~planeray.demux.problem` (the per-pixel problem and its row groups),
 :mod:`~planeray.demux.fast` (the default solver), :mod:`~planeray.demux.reference`
 (pinv, nnls, cvxpy), :mod:`~planeray.demux.solvers` (the registry :data:`SOLVERS`,
-chosen by name) and :mod:`~planeray.demux.driver` (chunked, resumable, Dask runs).
+chosen by name) and :mod:`~planeray.demux.driver` (chunked, resumable, Dask runs) and
+:mod:`~planeray.demux.auto` (``alpha``/``beta`` chosen by cross-validation over the images).
 """
 
+from .auto import WeightChoice, choose_weights
 from .driver import DEFAULT_CHUNK_ROWS, MAP_NAMES, DemuxResult, demultiplex, demultiplex_to_store, solve_chunk
 from .fast import solve_fast
 from .problem import DemuxProblem, RowGroup, difference_matrix
@@ -21,6 +23,8 @@ __all__ = [
     "DemuxResult",
     "RowGroup",
     "SolveResult",
+    "WeightChoice",
+    "choose_weights",
     "demultiplex",
     "demultiplex_to_store",
     "difference_matrix",

@@ -33,8 +33,9 @@ from ..stack import Stack
 from ..timing import RowGeometry
 from ..transport import Transport
 from ._kernels import warm_up
+from .auto import WeightChoice, choose_weights, is_auto
 from .fast import _threads, blas_one_thread
-from .problem import DemuxProblem, RowGroup
+from .problem import DemuxProblem, RowGroup, read_observations
 from .solvers import get_solver, options
 
 __all__ = [
@@ -127,24 +128,6 @@ class _RowReader:
         part = slice(rows.start - self._rows.start, rows.stop - self._rows.start)
         sat = None if sat is None or not sat[:, part].any() else sat[:, part]
         return imgs[:, part], sat
-
-
-def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, *, source=None):
-    """Observations ``(N, r, W)`` float64 of the used images and their saturation mask."""
-    imgs = np.asarray(stack.images[:, rows, :], dtype=np.float64)[problem.image_index]
-    bad = ~np.isfinite(imgs)
-    if bad.any():
-        n, r, c = np.argwhere(bad)[0]
-        where = f"{source}: " if source else ""
-        raise InputError(
-            f"{where}image {int(problem.image_index[n])} has a non-finite value at pixel ({rows.start + r}, {c})"
-        )
-    sat = None
-    if stack.saturated is not None:
-        sat = np.asarray(stack.saturated[:, rows, :], dtype=bool)[problem.image_index]
-        if not sat.any():
-            sat = None
-    return imgs, sat
 
 
 def solve_chunk(
@@ -336,8 +319,9 @@ def _chunks(H: int, chunk_rows: int) -> list[slice]:
     return [slice(r, min(r + chunk_rows, H)) for r in range(0, H, chunk_rows)]
 
 
-def _attrs(problem: DemuxProblem, method: str, tol) -> dict:
-    return {
+def _attrs(problem: DemuxProblem, method: str, tol, choice: WeightChoice | None = None) -> dict:
+    extra = {} if choice is None else {"weights_choice": choice.to_attrs()}
+    return extra | {
         "lines_per_second": problem.lines_per_second,
         "alpha": problem.alpha,
         "beta": problem.beta,
@@ -352,8 +336,8 @@ def _attrs(problem: DemuxProblem, method: str, tol) -> dict:
 def demultiplex(
     stack: Stack,
     *,
-    alpha: float = 0.01,
-    beta: float = 0.01,
+    alpha: float | str = 0.01,
+    beta: float | str = 0.01,
     method: str = "fast",
     chunk_rows: int = DEFAULT_CHUNK_ROWS,
     tol: float | None = None,
@@ -364,8 +348,11 @@ def demultiplex(
     Parameters
     ----------
     stack : Stack
-    alpha, beta : float
-        Smoothness and sparsity weights (paper: 0.01 each).
+    alpha, beta : float or "auto"
+        Smoothness and sparsity weights (paper: 0.01 each); ``"auto"`` chooses a
+        weight from the stack by cross-validation over its images
+        (:func:`planeray.demux.auto.choose_weights`), recorded in
+        ``attrs["weights_choice"]``.
     method : {'fast', 'pinv', 'nnls', 'cvxpy'}
     chunk_rows : int
         Camera rows per chunk (bounds memory).
@@ -390,6 +377,10 @@ def demultiplex(
     ((8, 8, 229), True)
     """
     _check_run_options(method, chunk_rows, tol)
+    choice = None
+    if is_auto(alpha) or is_auto(beta):
+        choice = choose_weights(stack, alpha=alpha, beta=beta)
+        alpha, beta = choice.alpha, choice.beta
     problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
     H, W = stack.shape
     T = np.zeros((H, W, problem.n_offsets), np.float32)
@@ -406,12 +397,18 @@ def demultiplex(
     reader = _RowReader(stack, problem)
     _solve_in_order(problem, lambda i: reader(chunks[i][1]), chunks, method, tol, done)
     transport = Transport(T, problem.offsets_rows, RowGeometry(H, stack.projector_rows))
-    return DemuxResult(transport, maps, _attrs(problem, method, tol))
+    return DemuxResult(transport, maps, _attrs(problem, method, tol, choice))
 
 
 # ---------------------------------------------------------------- the store
-def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_rows: int) -> str:
-    """Identity of a run: a resumed run must match it exactly."""
+def _fingerprint(
+    stack: Stack, problem: DemuxProblem, method: str, tol, chunk_rows: int, choice: WeightChoice | None = None
+) -> str:
+    """Identity of a run: a resumed run must match it exactly.
+
+    A run with automatic weights is identified by what was asked (``"auto"``), how
+    the weights are chosen and the weights chosen, besides the stack's content.
+    """
     h = hashlib.sha256()
     meta = {
         "stack": stack.content_digest(),  # every image and the saturation mask, not a sample of them
@@ -422,6 +419,16 @@ def _fingerprint(stack: Stack, problem: DemuxProblem, method: str, tol, chunk_ro
         "chunk_rows": chunk_rows,
         "offsets": [int(problem.offsets_rows[0]), int(problem.offsets_rows[-1])],
     }
+    if choice is not None:
+        meta["weights_choice"] = {
+            "requested": choice.requested,
+            "criterion": choice.criterion,
+            "folds": choice.folds,
+            "n_pixels": choice.n_pixels,
+            "rows": choice.rows,
+            "alpha": choice.alpha,
+            "beta": choice.beta,
+        }
     h.update(json.dumps(meta, sort_keys=True).encode())
     return h.hexdigest()
 
@@ -461,8 +468,8 @@ def demultiplex_to_store(
     stack: Stack,
     out,
     *,
-    alpha: float = 0.01,
-    beta: float = 0.01,
+    alpha: float | str = 0.01,
+    beta: float | str = 0.01,
     method: str = "fast",
     chunk_rows: int = DEFAULT_CHUNK_ROWS,
     tol: float | None = None,
@@ -472,6 +479,7 @@ def demultiplex_to_store(
     restart: bool = False,
     progress: Callable[[int], None] | None = None,
     on_resume: Callable[[int, int], None] | None = None,
+    on_choice: Callable[[WeightChoice, bool], None] | None = None,
     source=None,
     _stop_after: int | None = None,
 ) -> Path:
@@ -484,6 +492,15 @@ def demultiplex_to_store(
     out : path
         Transport store to write (Zarr group with ``T``, the diagnostic maps of
         :data:`MAP_NAMES` and the attributes of the transport format).
+    alpha, beta : float or "auto"
+        As in :func:`demultiplex`.  With ``"auto"`` the choice
+        (:class:`~planeray.demux.auto.WeightChoice`) is made before the first chunk and
+        stored in the attribute ``weights_choice``; a resumed run takes it from the
+        unfinished store (the run's fingerprint includes it and the stack's content,
+        so only an identical run continues).
+    on_choice : callable, optional
+        Called with the :class:`~planeray.demux.auto.WeightChoice` of an automatic run
+        (and whether it was taken from an unfinished run) before any chunk is solved.
     workers : int, optional
         Run chunks on a Dask ``LocalCluster`` with this many single-threaded workers.
     scheduler : str, optional
@@ -511,11 +528,24 @@ def demultiplex_to_store(
     out = Path(out)
     check_replaceable(out, overwrite=overwrite, kind="transport", error=TransportError)
     _check_run_options(method, chunk_rows, tol, workers)
+    choice = None
+    if is_auto(alpha) or is_auto(beta):
+        requested = {
+            "alpha": "auto" if is_auto(alpha) else float(alpha),
+            "beta": "auto" if is_auto(beta) else float(beta),
+        }
+        choice = None if restart else _recorded_choice(out, requested)
+        resumed = choice is not None
+        if choice is None:
+            choice = choose_weights(stack, alpha=alpha, beta=beta)
+        if on_choice is not None:
+            on_choice(choice, resumed)
+        alpha, beta = choice.alpha, choice.beta
     problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
     H, W = stack.shape
     chunks = _chunks(H, chunk_rows)
-    fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows)
-    attrs = _attrs(problem, method, tol)
+    fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows, choice)
+    attrs = _attrs(problem, method, tol, choice)
     group = resumable.open_partial(
         out, fingerprint, len(chunks), lambda d: _create_store(d, (H, W), problem, attrs), restart=restart
     )
@@ -538,6 +568,26 @@ def demultiplex_to_store(
         resumable.discard_if_empty(out)  # a run that finished nothing leaves nothing behind
         raise
     return resumable.promote(out, overwrite=overwrite, kind="transport", error=TransportError)
+
+
+def _recorded_choice(out, requested: dict) -> WeightChoice | None:
+    """The weights an unfinished automatic run of ``out`` chose (None: no such run).
+
+    Taken as they are only because the run's fingerprint (checked next) covers the
+    stack's content, the request and the choice: a different stack or request is refused.
+    """
+    partial = resumable.partial_path(out)
+    if not partial.exists():
+        return None
+    import zarr
+
+    try:
+        recorded = zarr.open_group(str(partial), mode="r").attrs.get("weights_choice")
+        if recorded is None or recorded.get("requested") != requested:
+            return None
+        return WeightChoice.from_attrs(recorded)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _run_local(stack, problem, chunks, todo, method, tol, group, progress, source):

@@ -37,7 +37,7 @@ from ..errors import InputError
 from ..stack import Stack
 from ..timing import sweep_support_rows
 
-__all__ = ["RowGroup", "DemuxProblem", "difference_matrix"]
+__all__ = ["RowGroup", "DemuxProblem", "difference_matrix", "read_observations"]
 
 #: Fewer used images than this cannot say anything about a 1-D profile.
 MIN_IMAGES = 4
@@ -283,3 +283,21 @@ def _masked_residual(group: RowGroup, X, B, mask):
         R = np.where(mask, R, 0.0)
         B = np.where(mask, B, 0.0)
     return X, R, B
+
+
+def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, *, source=None):
+    """Observations ``(N, r, W)`` float64 of the used images and their saturation mask."""
+    imgs = np.asarray(stack.images[:, rows, :], dtype=np.float64)[problem.image_index]
+    bad = ~np.isfinite(imgs)
+    if bad.any():
+        n, r, c = np.argwhere(bad)[0]
+        where = f"{source}: " if source else ""
+        raise InputError(
+            f"{where}image {int(problem.image_index[n])} has a non-finite value at pixel ({rows.start + r}, {c})"
+        )
+    sat = None
+    if stack.saturated is not None:
+        sat = np.asarray(stack.saturated[:, rows, :], dtype=bool)[problem.image_index]
+        if not sat.any():
+            sat = None
+    return imgs, sat

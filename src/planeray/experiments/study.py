@@ -115,6 +115,7 @@ def run_study(
     *,
     progress=None,
     overwrite: bool = False,
+    auto: bool = False,
 ) -> dict:
     """Run the whole Sec. 5.2 study, write PNGs, CSVs and its numbers into ``out_dir``, return the numbers.
 
@@ -138,6 +139,11 @@ def run_study(
     overwrite : bool
         Replace files a previous run wrote; a file planeray did not write is never
         replaced.  Every output is checked before any work.
+    auto : bool
+        Also the full method at weights chosen from each profile's observations by
+        cross-validation over the images (:func:`planeray.study.auto_weights`, what
+        ``planeray demux --alpha auto --beta auto`` does), against the best fixed weights
+        of a decade grid per profile (the parameter sweeps' ``auto`` and ``best_fixed``).
 
     Returns
     -------
@@ -207,13 +213,20 @@ def run_study(
 
     sweeps = {}
     for tag, name in _PARAMETERS:
-        ps = parameter_sweep(setup, provider, name, G[name], seeds, noise, progress=progress)
+        ps = parameter_sweep(setup, provider, name, G[name], seeds, noise, progress=progress, auto=auto)
         sweeps[name] = ps
         result[f"{name}_sweep"] = {
             "values": ps["values"].tolist(),
             "mean_abs_offset": ps["mean_abs_offset"].tolist(),
             **_summary(ps["mse"]),
         }
+        if auto:
+            result[f"{name}_sweep"]["auto"] = {
+                "alpha": ps["auto"]["alpha"].tolist(),
+                "beta": ps["auto"]["beta"].tolist(),
+                "mean": ps["auto"]["mse"].mean(axis=1).tolist(),
+            }
+            result[f"{name}_sweep"]["best_fixed"] = {k: v.tolist() for k, v in ps["best_fixed"].items()}
         result["files"].append(
             _write_csv(
                 out / f"fig6{tag}_mse_vs_{name}.csv",
@@ -290,11 +303,22 @@ def study_report(numbers: dict) -> list[str]:
     for tag, name in _PARAMETERS:
         ps = numbers[f"{name}_sweep"]
         lines.append(f"Fig. 6{tag}: MSE vs {name}, eta {numbers['noise']:g}")
-        lines.append(_row([name, *METHODS, "pinv/full", "mean |u|"]))
+        auto = ps.get("auto")
+        extra = ["auto", "best fixed", "auto/best", "auto a/b"] if auto else []
+        lines.append(_row([name, *METHODS, "pinv/full", "mean |u|", *extra]))
         for i, v in enumerate(ps["values"]):
             mse = [ps[m]["mean"][i] for m in METHODS]
             ratio = ps["pinv"]["mean"][i] / ps["full"]["mean"][i]
-            lines.append(_row([f"{v:.3g}", *(_sci(x) for x in mse), f"{ratio:.2g}", f"{ps['mean_abs_offset'][i]:.3g}"]))
+            cells = [f"{v:.3g}", *(_sci(x) for x in mse), f"{ratio:.2g}", f"{ps['mean_abs_offset'][i]:.3g}"]
+            if auto:
+                best = ps["best_fixed"]["mse"][i]
+                cells += [
+                    _sci(auto["mean"][i]),
+                    _sci(best),
+                    f"{auto['mean'][i] / best:.2f}",
+                    f"{auto['alpha'][i]:.2g}/{auto['beta'][i]:.2g}",
+                ]
+            lines.append(_row(cells))
     reg = numbers["regularization"]
     paper, best = reg["paper"], reg["best"]
     lines.append(

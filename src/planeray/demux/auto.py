@@ -1,0 +1,531 @@
+"""Regularization weights chosen by the data: K-fold cross-validation over the images.
+
+The weights ``alpha`` (smoothness) and ``beta`` (sparsity) of the Sec. 4 problem
+(:mod:`planeray.demux.problem`) decide the recovered transport, and no pair serves
+every scene (the paper's 0.01 / 0.01 is ~24x worse than alpha ~ 300 on smooth
+subsurface profiles, and alpha ~ 300 is 4x worse than 0.01 on mirrors).  Each image
+of a stack is a measurement the other images predict: with the images split into
+``K`` folds, a fold ``F`` is left out, every sampled pixel is solved from the rest,
+and the left-out images are predicted through the illumination matrix,
+
+.. math::
+
+    \\mathrm{CV}(\\alpha, \\beta) = \\frac{1}{|O|} \\sum_F \\sum_{(p, i) \\in O_F}
+        \\frac{(I_{p,i} - A_{i} \\, \\hat T_p^{(-F)})^2}{\\sigma_{p,i}^2},
+
+``sigma^2`` the variance of an observation under the stack's camera model (shot
+noise of its signal plus read and quantization noise, averaged frames; equal
+weights for a stack without one), ``O`` the observations scored (saturated ones
+are neither fitted nor scored).  The weights with the smallest score are chosen;
+how sure the choice is, is the range of weights whose score lies within one standard
+error (over pixels) of their paired difference to the best.
+
+Cost.  The score is evaluated on a sample of the stack's pixels (2 %, at least 256
+and at most 4096, spread over the camera rows of the largest row groups, so that a
+few illumination matrices serve them all), with a looser certificate (1e-3) than the
+final solve; each fold's factorization is shared by the sampled pixels of its row
+group.  ``alpha`` is scanned on a log grid (half decades, 1e-3 ... 1e4) at the
+current ``beta``, then ``beta`` (1e-4 ... 10) at the best ``alpha``, then ``alpha``
+again around its best at the chosen ``beta``; a scan stops when the score has risen
+for two grid points in a row above the best plus two standard errors.
+"""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError, PlanerayError
+from ..stack import Stack
+from .fast import AdmmRowSolver, _threads, blas_one_thread
+from .problem import DemuxProblem, read_observations
+
+__all__ = [
+    "AUTO",
+    "WeightChoice",
+    "choose_weights",
+    "cv_score",
+    "observation_variance",
+    "is_auto",
+    "DEFAULT_ALPHAS",
+    "DEFAULT_BETAS",
+    "search",
+    "summarize",
+]
+
+#: The value of ``alpha``/``beta`` that asks for the data's choice.
+AUTO = "auto"
+#: Log grids of the scans (half decades).
+DEFAULT_ALPHAS = tuple(float(10.0**e) for e in np.arange(-3.0, 4.01, 0.5))
+DEFAULT_BETAS = tuple(float(10.0**e) for e in np.arange(-4.0, 1.01, 0.5))
+#: Folds of images.
+DEFAULT_FOLDS = 5
+#: Pixels scored: this fraction of the image, within [MIN_PIXELS, MAX_PIXELS].
+SAMPLE_FRACTION = 0.02
+MIN_PIXELS = 256
+MAX_PIXELS = 4096
+#: Most row groups the sample is drawn from (the largest first, only as many as the sample needs:
+#: each costs its own factorizations).
+MAX_GROUPS = 8
+#: Certified relative gap of the cross-validation solves (the final solve keeps its own).
+CV_TOL = 1e-3
+#: Weight of the paper (the start of a scan when the other weight is automatic).
+PAPER_WEIGHT = 0.01
+CRITERION = "cv-images"
+#: Observations weighted by their camera-noise variance ("noise") or alike ("equal").
+DEFAULT_WEIGHTING = "noise"
+
+
+def is_auto(value) -> bool:
+    """Whether a weight asks for the automatic choice (the string ``"auto"``, any case)."""
+    return isinstance(value, str) and value.strip().lower() == AUTO
+
+
+def _weight(value, name: str) -> float:
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise InputError(f"{name} must be a non-negative number or 'auto', got {value!r}") from None
+    return value
+
+
+@dataclass
+class WeightChoice:
+    """The weights chosen by cross-validation and the curve they were chosen from.
+
+    Attributes
+    ----------
+    alpha, beta : float
+        The chosen weights.
+    requested : dict
+        ``{"alpha": "auto" or number, "beta": ...}`` as asked.
+    criterion : str
+        ``"cv-images"`` (K-fold cross-validation over images).
+    weighting : str
+        ``"camera-noise"`` (observations weighted by their variance under the stack's
+        camera model) or ``"equal"`` (no camera model in the stack's metadata).
+    folds, n_pixels : int
+        Folds of images; pixels scored.
+    rows : list of int
+        Camera rows the sampled pixels lie on.
+    alphas, betas, scores, score_se : ndarray
+        Every pair tried, in order, with its score (mean noise-weighted squared
+        prediction error of left-out observations; 1 is the noise level) and the
+        score's standard error over pixels.
+    alpha_range, beta_range : tuple of float
+        Smallest and largest tried weight (the other at its chosen value) whose score
+        exceeds the best by at most one standard error of the paired difference over
+        pixels: how sure the choice is.
+    """
+
+    alpha: float
+    beta: float
+    requested: dict
+    criterion: str = CRITERION
+    weighting: str = "equal"
+    folds: int = DEFAULT_FOLDS
+    n_pixels: int = 0
+    rows: list = field(default_factory=list)
+    alphas: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    betas: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    score_se: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    alpha_range: tuple = (0.0, 0.0)
+    beta_range: tuple = (0.0, 0.0)
+    #: (P, 2) camera (row, column) of the scored pixels, in the order of the scores (not stored)
+    pixels: np.ndarray | None = None
+
+    def to_attrs(self) -> dict:
+        """JSON-serializable record (the transport store's ``weights_choice`` attribute)."""
+        return {
+            "alpha": float(self.alpha),
+            "beta": float(self.beta),
+            "requested": dict(self.requested),
+            "criterion": self.criterion,
+            "weighting": self.weighting,
+            "folds": int(self.folds),
+            "n_pixels": int(self.n_pixels),
+            "rows": [int(r) for r in self.rows],
+            "curve": {
+                "alpha": [float(a) for a in self.alphas],
+                "beta": [float(b) for b in self.betas],
+                "score": [float(s) for s in self.scores],
+                "score_se": [float(s) for s in self.score_se],
+            },
+            "alpha_range": [float(v) for v in self.alpha_range],
+            "beta_range": [float(v) for v in self.beta_range],
+        }
+
+    @classmethod
+    def from_attrs(cls, d: dict) -> WeightChoice:
+        """The choice recorded by :meth:`to_attrs`."""
+        c = d["curve"]
+        return cls(
+            alpha=float(d["alpha"]),
+            beta=float(d["beta"]),
+            requested=dict(d["requested"]),
+            criterion=d["criterion"],
+            weighting=d["weighting"],
+            folds=int(d["folds"]),
+            n_pixels=int(d["n_pixels"]),
+            rows=list(d["rows"]),
+            alphas=np.asarray(c["alpha"], float),
+            betas=np.asarray(c["beta"], float),
+            scores=np.asarray(c["score"], float),
+            score_se=np.asarray(c["score_se"], float),
+            alpha_range=tuple(d["alpha_range"]),
+            beta_range=tuple(d["beta_range"]),
+        )
+
+    def summary(self) -> str:
+        """One line: the chosen weights and how sure the choice is."""
+        parts = []
+        for name in ("alpha", "beta"):
+            value = getattr(self, name)
+            if is_auto(self.requested.get(name)):
+                lo, hi = getattr(self, f"{name}_range")
+                parts.append(f"{name} = {value:.3g} (auto; {lo:.3g}-{hi:.3g} within 1 SE)")
+            else:
+                parts.append(f"{name} = {value:.3g}")
+        return (
+            f"weights: {', '.join(parts)}; {self.folds}-fold cross-validation over images "
+            f"({self.weighting} weighting, {self.n_pixels} pixels, {len(self.scores)} pairs tried)"
+        )
+
+
+def observation_variance(stack: Stack, B) -> np.ndarray | None:
+    """Variance of normalized observations ``B`` under the stack's camera model (None: no model).
+
+    A normalized value ``b`` holds ``b * full_well_e`` electrons per frame (signal plus
+    ambient); its average over ``n`` frames has the variance
+    ``(e + read_noise^2 + 1 / (12 gain^2)) / (n full_well^2)`` (shot noise, read noise,
+    the ADC's rounding), see :class:`planeray.camera.CameraModel`.
+    """
+    cam = stack.metadata.get("camera") if isinstance(stack.metadata, dict) else None
+    if not isinstance(cam, dict):
+        return None
+    try:
+        from ..camera import CameraModel
+
+        model = CameraModel(**{k: v for k, v in cam.items() if k in CameraModel.__dataclass_fields__})
+    except (ValueError, TypeError, PlanerayError):  # an invalid record: equal weights
+        return None
+    fw = model.full_well_e
+    e = np.maximum(np.asarray(B, np.float64), 0.0) * fw
+    g = model.gain_adu_per_e
+    return (e + model.read_noise_e**2 + 1.0 / (12.0 * g * g)) / (model.frames_averaged * fw * fw)
+
+
+# ------------------------------------------------------------------ the sample
+@dataclass
+class _Sample:
+    """Pixels scored by the criterion, grouped by row group."""
+
+    groups: list  # RowGroup per part
+    B: list  # (P_g, N) observations
+    mask: list  # (P_g, N) bool usable or None
+    weight: list  # (P_g, N) 1/variance
+    rows: list
+    n_pixels: int
+    weighting: str = "equal"
+    pixels: list = field(default_factory=list)  # (P_g, 2) camera (row, column) per part
+
+
+def _sample(
+    stack: Stack, problem: DemuxProblem, *, seed: int, n_pixels: int | None, weighting: str = "noise"
+) -> _Sample:
+    H, W = stack.shape
+    target = n_pixels or int(np.clip(round(SAMPLE_FRACTION * H * W), MIN_PIXELS, MAX_PIXELS))
+    target = min(target, H * W)
+    sizes = np.bincount(problem.row_group, minlength=len(problem.groups))
+    order = np.argsort(-sizes, kind="stable")
+    rng = np.random.default_rng(seed)
+    chosen, rows_total = [], 0
+    for g in order[:MAX_GROUPS]:
+        if problem.groups[g].A.shape[1] == 0:
+            continue
+        chosen.append(int(g))
+        rows_total += sizes[g]
+        if rows_total * W >= target:
+            break
+    if not chosen:
+        raise InputError("no camera row has an offset on the projector: nothing to demultiplex")
+    cand = np.sort(np.concatenate([np.flatnonzero(problem.row_group == g) for g in chosen]))
+    n_rows = int(min(cand.size, max(4, min(64, -(-target // W) * 4))))
+    rows = cand[np.unique(np.round(np.linspace(0, cand.size - 1, n_rows)).astype(int))]
+    per_row = int(min(W, -(-target // rows.size)))
+    parts = _Sample([], [], [], [], [int(r) for r in rows], 0)
+    imgs_all, sat_all, cols_all = {}, {}, {}
+    # rows read a stored block at a time (a lazily read stack decodes each of its chunks once)
+    chunks = getattr(stack.images, "chunks", None)
+    block = int(chunks[1]) if chunks is not None and len(chunks) == 3 else 1
+    for b in np.unique(rows // block):
+        lo, hi = int(b * block), int(min(H, (b + 1) * block))
+        imgs, sat = read_observations(stack, problem, slice(lo, hi))
+        for r in rows[(rows >= lo) & (rows < hi)]:
+            cols = np.sort(rng.choice(W, per_row, replace=False))
+            cols_all[int(r)] = cols
+            imgs_all[int(r)] = imgs[:, r - lo, cols].T  # (P, N)
+            sat_all[int(r)] = None if sat is None else sat[:, r - lo, cols].T
+    for g in chosen:
+        rs = [int(r) for r in rows if problem.row_group[r] == g]
+        if not rs:
+            continue
+        B = np.concatenate([imgs_all[r] for r in rs])
+        sats = [sat_all[r] if sat_all[r] is not None else np.zeros_like(imgs_all[r], bool) for r in rs]
+        usable = ~np.concatenate(sats)
+        var = observation_variance(stack, B) if weighting == "noise" else None
+        w = np.ones_like(B) if var is None else 1.0 / var
+        parts.groups.append(problem.groups[g])
+        parts.B.append(B)
+        parts.mask.append(None if usable.all() else usable)
+        parts.weight.append(np.where(usable, w, 0.0))
+        parts.pixels.append(np.concatenate([np.stack([np.full(cols_all[r].size, r), cols_all[r]], 1) for r in rs]))
+        parts.n_pixels += B.shape[0]
+    noise = weighting == "noise" and observation_variance(stack, np.zeros(1)) is not None
+    parts.weighting = "camera-noise" if noise else "equal"
+    return parts
+
+
+def _folds(n_images: int, folds: int, seed: int) -> list[np.ndarray]:
+    """Left-out image indices (into the used images) of each fold: a seeded, balanced split."""
+    perm = np.random.default_rng(seed).permutation(n_images)
+    return [np.sort(perm[k::folds]) for k in range(folds)]
+
+
+def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, tol: float = CV_TOL, threads=None):
+    """Noise-weighted K-fold prediction error of every pixel at ``(alpha, beta)``.
+
+    Parameters
+    ----------
+    groups : list of RowGroup
+    Bs, masks, weights : list of ndarray (P_g, N)
+        Observations, usable observations (None: all) and inverse variances, per group.
+    folds : list of ndarray of int
+        Left-out observations (columns of ``B``) of each fold.
+    alpha, beta : float
+
+    Returns
+    -------
+    ndarray (P,)
+        Per pixel: sum of ``w (b - A x^{(-F)})^2`` over its left-out observations
+        divided by their number (1 at the noise level).
+    """
+    n_threads = _threads() if threads is None else threads
+    # each fold's pixels in as many parts as threads (5 folds on 2 threads would leave one idle
+    # for a third of the time); a fold's factorization is made once and shared by its parts
+    n_parts = n_threads if min(B.shape[0] for B in Bs) >= 64 * n_threads else 1
+    tasks = [(g, f, k) for k in range(n_parts) for g in range(len(groups)) for f in range(len(folds))]
+    solvers: dict = {}
+    lock = threading.Lock()
+
+    def solver_for(g, f, train):
+        with lock:
+            entry = solvers.setdefault((g, f), [threading.Lock(), None])
+        with entry[0]:
+            if entry[1] is None:
+                entry[1] = AdmmRowSolver(groups[g].A[train], alpha, beta)
+        return entry[1]
+
+    def run(task):
+        g, f, k = task
+        group, B, mask, w = groups[g], Bs[g], masks[g], weights[g]
+        test = folds[f]
+        train = np.setdiff1d(np.arange(B.shape[1]), test)
+        solver = solver_for(g, f, train)
+        P = B.shape[0]
+        part = slice(k * P // n_parts, (k + 1) * P // n_parts)
+        Bp = B[part]
+        X = np.zeros((Bp.shape[0], group.A.shape[1]))
+        for s in range(0, Bp.shape[0], 512):
+            sl = slice(s, min(s + 512, Bp.shape[0]))
+            m = None if mask is None else mask[part][sl][:, train]
+            if m is not None and m.all():
+                m = None
+            X[sl] = solver.solve(Bp[sl][:, train], tol, mask=m)[0]
+        R = Bp[:, test] - X @ group.A[test].T
+        wt = w[part][:, test]
+        return (g, part), (wt * R * R).sum(axis=1), (wt > 0).sum(axis=1)
+
+    with blas_one_thread(n_threads):
+        if n_threads > 1 and len(tasks) > 1:
+            with ThreadPoolExecutor(n_threads) as pool:
+                results = list(pool.map(run, tasks))
+        else:
+            results = [run(t) for t in tasks]
+    ss = [np.zeros(B.shape[0]) for B in Bs]
+    n = [np.zeros(B.shape[0]) for B in Bs]
+    for (g, part), s_, n_ in results:
+        ss[g][part] += s_
+        n[g][part] += n_
+    out = [a / np.maximum(b, 1) for a, b in zip(ss, n)]
+    return np.concatenate(out)
+
+
+def search(score, requested: dict, alphas, betas) -> dict:
+    """The coordinate search over the log grids: ``{(alpha, beta): per-pixel scores}`` of every pair tried.
+
+    ``score(alpha, beta)`` returns the per-pixel scores (lower is better).  ``alpha`` is
+    scanned (ascending) at ``beta`` (the paper's 0.01 when it is automatic too), then
+    ``beta`` at the best ``alpha``, then ``alpha`` within two grid steps of its best at
+    the chosen ``beta``; a scan stops once the mean score has risen twice in a row above
+    the best plus two standard errors.  A weight that is not ``"auto"`` in ``requested``
+    is held at its value.
+    """
+    curve: dict[tuple, np.ndarray] = {}
+
+    def mean_se(a, b):
+        key = (float(a), float(b))
+        if key not in curve:
+            curve[key] = np.asarray(score(*key), np.float64)
+        v = curve[key]
+        return float(v.mean()), float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1 else 0.0
+
+    def scan(grid, fixed, which, indices=None):
+        best, best_s, best_se, rising, last = None, np.inf, 0.0, 0, None
+        for i in range(len(grid)) if indices is None else indices:
+            v = grid[i]
+            s, se = mean_se(v, fixed) if which == "alpha" else mean_se(fixed, v)
+            if s < best_s:
+                best, best_s, best_se = v, s, se
+            rising = rising + 1 if (last is not None and s > last and s > best_s + 2 * best_se) else 0
+            last = s
+            if rising >= 2:
+                break
+        return best
+
+    a = PAPER_WEIGHT if requested["alpha"] == AUTO else requested["alpha"]
+    b = PAPER_WEIGHT if requested["beta"] == AUTO else requested["beta"]
+    alphas = sorted(float(x) for x in alphas)
+    betas = sorted(float(x) for x in betas)
+    if requested["alpha"] == AUTO:
+        a = scan(alphas, b, "alpha")
+    if requested["beta"] == AUTO:
+        b = scan(betas, a, "beta")
+        if requested["alpha"] == AUTO:  # alpha again, around its best, at the chosen beta
+            i = alphas.index(a)
+            scan(alphas, b, "alpha", indices=range(max(0, i - 2), min(len(alphas), i + 3)))
+    if not curve:  # nothing automatic: the one pair asked for
+        mean_se(a, b)
+    return curve
+
+
+def summarize(curve: dict):
+    """``keys, means, standard errors, best pair, (alpha range, beta range)`` of a search's curve.
+
+    The best pair has the lowest mean score over everything tried.  The ranges hold the
+    tried weights (the other at its chosen value) whose mean exceeds the best's by at most
+    one standard error of the *paired* difference over pixels: the weights the data
+    cannot tell from the choice.
+    """
+    keys = list(curve)
+    means = np.array([curve[k].mean() for k in keys])
+    ses = np.array([curve[k].std(ddof=1) / np.sqrt(curve[k].size) if curve[k].size > 1 else 0.0 for k in keys])
+    best = int(np.argmin(means))
+    a, b = keys[best]
+    ref = curve[keys[best]]
+    diff_se = np.array([np.std(curve[k] - ref, ddof=1) / np.sqrt(ref.size) if ref.size > 1 else 0.0 for k in keys])
+    near = means - means[best] <= diff_se
+    arr_a = np.array([k[0] for k in keys])
+    arr_b = np.array([k[1] for k in keys])
+    in_a = near & (arr_b == b)
+    in_b = near & (arr_a == a)
+    ranges = (
+        (float(arr_a[in_a].min()), float(arr_a[in_a].max())),
+        (float(arr_b[in_b].min()), float(arr_b[in_b].max())),
+    )
+    return keys, means, ses, (float(a), float(b)), ranges
+
+
+def choose_weights(
+    stack: Stack,
+    *,
+    alpha="auto",
+    beta="auto",
+    alphas=None,
+    betas=None,
+    folds: int | None = None,
+    n_pixels: int | None = None,
+    seed: int = 0,
+    tol: float = CV_TOL,
+    problem: DemuxProblem | None = None,
+    weighting: str | None = None,
+) -> WeightChoice:
+    """Choose ``alpha`` and/or ``beta`` by K-fold cross-validation over the stack's images.
+
+    Parameters
+    ----------
+    stack : Stack
+    alpha, beta : float or "auto"
+        A number is kept as it is; ``"auto"`` is chosen from the grid.
+    alphas, betas : sequence of float, optional
+        Log grids scanned (default :data:`DEFAULT_ALPHAS`, :data:`DEFAULT_BETAS`: half
+        decades, 1e-3 ... 1e4 and 1e-4 ... 10).
+    folds : int, optional
+        Folds of images (default :data:`DEFAULT_FOLDS`, 5).
+    n_pixels : int, optional
+        Pixels scored (default: 2 % of the image, 256 ... 4096).
+    seed : int
+        Seed of the pixel sample and of the split into folds (the choice is a function
+        of the stack and these settings).
+    tol : float
+        Certified relative objective gap of the cross-validation solves.
+
+    Returns
+    -------
+    WeightChoice
+    """
+    requested = {
+        "alpha": AUTO if is_auto(alpha) else float(_weight(alpha, "alpha")),
+        "beta": AUTO if is_auto(beta) else float(_weight(beta, "beta")),
+    }
+    for name in ("alpha", "beta"):
+        v = requested[name]
+        if v != AUTO and (not np.isfinite(v) or v < 0):
+            raise InputError(f"{name} must be a non-negative number or 'auto', got {v!r}")
+    alphas = DEFAULT_ALPHAS if alphas is None else alphas
+    betas = DEFAULT_BETAS if betas is None else betas
+    folds = DEFAULT_FOLDS if folds is None else int(folds)
+    if folds < 2:
+        raise InputError(f"folds must be at least 2, got {folds}")
+    if problem is None:
+        problem = DemuxProblem.from_stack(stack)
+    if problem.n_images < 2 * folds:
+        raise InputError(
+            f"alpha/beta 'auto' needs at least {2 * folds} usable images for {folds}-fold cross-validation, "
+            f"the stack has {problem.n_images}"
+        )
+    weighting = DEFAULT_WEIGHTING if weighting is None else weighting
+    if weighting not in ("noise", "equal"):
+        raise InputError(f"weighting must be 'noise' or 'equal', got {weighting!r}")
+    sample = _sample(stack, problem, seed=seed, n_pixels=n_pixels, weighting=weighting)
+    split = _folds(problem.n_images, folds, seed)
+    curve = search(
+        lambda a, b: cv_score(sample.groups, sample.B, sample.mask, sample.weight, split, a, b, tol=tol),
+        requested,
+        alphas,
+        betas,
+    )
+    keys, means, ses, (a, b), (alpha_range, beta_range) = summarize(curve)
+    arr_a = np.array([k[0] for k in keys])
+    arr_b = np.array([k[1] for k in keys])
+    return WeightChoice(
+        alpha=float(a),
+        beta=float(b),
+        requested=requested,
+        weighting=sample.weighting,
+        folds=folds,
+        n_pixels=sample.n_pixels,
+        rows=sample.rows,
+        alphas=arr_a,
+        betas=arr_b,
+        scores=means,
+        score_se=ses,
+        alpha_range=alpha_range,
+        beta_range=beta_range,
+        pixels=np.concatenate(sample.pixels),
+    )

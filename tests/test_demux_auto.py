@@ -1,0 +1,213 @@
+"""``alpha``/``beta`` chosen by cross-validation over the images (issue 26).
+
+The criterion is checked against an independent computation (SciPy's NNLS on the
+augmented system, folds as documented) by exhaustive search over a grid; pure noise
+must choose strong regularization; explicit weights stay exactly what was asked; the
+store records the choice; an interrupted automatic run resumes only on identical inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import zarr
+from scipy.optimize import nnls
+from typer.testing import CliRunner
+
+from planeray.cli import app
+from planeray.demux import DemuxProblem, choose_weights, demultiplex, demultiplex_to_store
+from planeray.demux import auto as auto_mod
+from planeray.errors import InputError
+from planeray.io import read_transport, write_stack
+from planeray.stack import Stack
+from planeray.timing import PAPER_LINES_PER_SECOND, paper_sweep
+
+H, W = 16, 32
+PROJECTOR_ROWS = 720  # rows 3..12 share one illumination matrix at 16 camera rows
+SMALL_ALPHAS = (1e-2, 1.0, 100.0, 1e4)
+SMALL_BETAS = (1e-3, 1e-1)
+
+
+@pytest.fixture(autouse=True)
+def small_grids(monkeypatch):
+    """Coarse grids keep each automatic run to a few pairs (the search itself is the same)."""
+    monkeypatch.setattr(auto_mod, "DEFAULT_ALPHAS", SMALL_ALPHAS)
+    monkeypatch.setattr(auto_mod, "DEFAULT_BETAS", SMALL_BETAS)
+    monkeypatch.setattr(auto_mod, "MIN_PIXELS", 48)
+
+
+def _empty_stack(images) -> Stack:
+    sw = paper_sweep()
+    return Stack(
+        images.astype(np.float32),
+        sw.delay_us,
+        sw.exposure_us,
+        PAPER_LINES_PER_SECOND,
+        excluded=sw.excluded,
+        projector_rows=PROJECTOR_ROWS,
+        metadata={},  # no camera model: equal weights
+    )
+
+
+def synthetic(kind: str, *, noise=0.01, seed=0, shape=(H, W)):
+    """A stack ``A x + noise`` with a known transport ``x`` per pixel; returns (stack, x per row)."""
+    rng = np.random.default_rng(seed)
+    stack = _empty_stack(np.zeros((85, *shape)))
+    problem = DemuxProblem.from_stack(stack)
+    u = problem.offsets_rows.astype(float)
+    images = np.zeros((85, *shape))
+    truth = {}
+    for g in problem.groups:
+        for t in g.rows:
+            amp = rng.uniform(0.5, 1.0, (shape[1], 1))
+            if kind == "smooth":  # a broad subsurface-like profile
+                x = 0.02 * amp * np.exp(-0.5 * (u / 25.0) ** 2)
+            elif kind == "noise":
+                x = np.zeros((shape[1], u.size))
+            x = x[:, g.valid]
+            truth[int(t)] = x
+            images[problem.image_index, t, :] = (x @ g.A.T).T
+    images += rng.normal(0.0, noise, images.shape)
+    return _empty_stack(images), truth
+
+
+def independent_cv(stack, pixels, alpha, *, folds=5, seed=0):
+    """The criterion written out with SciPy: beta = 0, so each fit is an NNLS of ``[A; sqrt(alpha) D]``."""
+    problem = DemuxProblem.from_stack(stack)
+    N = problem.n_images
+    perm = np.random.default_rng(seed).permutation(N)  # the documented split: fold k = perm[k::folds]
+    split = [np.sort(perm[k::folds]) for k in range(folds)]
+    imgs = np.asarray(stack.images, np.float64)[problem.image_index]
+    scores = []
+    for r, c in pixels:
+        A = problem.groups[problem.row_group[r]].A
+        V = A.shape[1]
+        D = np.diff(np.eye(V), axis=0)
+        b = imgs[:, r, c]
+        ss = 0.0
+        for test in split:
+            train = np.setdiff1d(np.arange(N), test)
+            M = np.vstack([A[train], np.sqrt(alpha) * D])
+            x, _ = nnls(M, np.concatenate([b[train], np.zeros(V - 1)]), maxiter=20 * V)
+            ss += float(((b[test] - A[test] @ x) ** 2).sum())
+        scores.append(ss / N)
+    return float(np.mean(scores))
+
+
+def test_criterion_matches_exhaustive_search_with_an_independent_solver():
+    stack, _ = synthetic("smooth", shape=(H, 8))
+    grid = (1e-2, 1.0, 30.0, 1e3, 1e5)
+    choice = choose_weights(stack, alpha="auto", beta=0.0, alphas=grid, n_pixels=6, tol=1e-6)
+    assert choice.beta == 0.0 and set(choice.betas) == {0.0}
+    ours = dict(zip(choice.alphas, choice.scores))
+    theirs = {a: independent_cv(stack, choice.pixels, a) for a in grid if a in ours}
+    for a in theirs:
+        assert ours[a] == pytest.approx(theirs[a], rel=0.02), a
+    best = min(theirs, key=theirs.get)
+    assert best not in (grid[0], grid[-1])  # an interior optimum: the test can fail
+    assert choice.alpha == best
+    # the scan stops once the score has risen twice: every grid point up to there was scored
+    assert set(grid[: grid.index(best) + 2]) <= set(ours)
+
+
+def test_smooth_transport_gets_strong_smoothing_and_a_lower_error_than_the_paper():
+    stack, truth = synthetic("smooth")
+    choice = choose_weights(stack)
+    assert choice.alpha >= 100.0
+    err = {}
+    for name, (a, b) in {"auto": (choice.alpha, choice.beta), "paper": (0.01, 0.01)}.items():
+        T = demultiplex(stack, alpha=a, beta=b).transport.dense
+        problem = DemuxProblem.from_stack(stack)
+        g = problem.groups[problem.row_group[6]]
+        err[name] = np.linalg.norm(T[6][:, g.valid] - truth[6]) / np.linalg.norm(truth[6])
+    assert err["auto"] < 0.5 * err["paper"], err
+
+
+def test_pure_noise_chooses_strong_regularization():
+    stack, _ = synthetic("noise", noise=0.02)
+    choice = choose_weights(stack)
+    assert choice.alpha >= 100.0 or choice.beta >= 0.1, choice.summary()
+    auto = demultiplex(stack, alpha=choice.alpha, beta=choice.beta).transport.dense
+    paper = demultiplex(stack).transport.dense
+    assert np.linalg.norm(auto) < 0.2 * np.linalg.norm(paper)
+
+
+def test_explicit_weights_are_exactly_what_was_asked(tmp_path):
+    stack, _ = synthetic("smooth", shape=(H, 8))
+    res = demultiplex(stack, alpha=0.01, beta=0.02)
+    assert res.attrs["alpha"] == 0.01 and res.attrs["beta"] == 0.02 and "weights_choice" not in res.attrs
+    path = tmp_path / "s.zarr"
+    write_stack(stack, path)
+    out = tmp_path / "t.zarr"
+    r = CliRunner().invoke(app, ["demux", str(path), "--out", str(out), "--alpha", "0.01", "--beta", "0.02"])
+    assert r.exit_code == 0, r.output
+    assert "weights:" not in r.output
+    T, attrs = read_transport(out)
+    assert attrs["alpha"] == 0.01 and attrs["beta"] == 0.02 and "weights_choice" not in attrs
+    np.testing.assert_array_equal(T.dense, res.transport.dense)
+    # one weight fixed, the other automatic: the fixed one is kept exactly
+    choice = choose_weights(stack, alpha=0.5, beta="auto")
+    assert choice.alpha == 0.5 and set(choice.alphas) == {0.5} and choice.beta in SMALL_BETAS
+    r = CliRunner().invoke(app, ["demux", str(path), "--out", str(tmp_path / "x.zarr"), "--alpha", "lots"])
+    assert r.exit_code == 1 and "--alpha must be a number or 'auto'" in r.output
+
+
+def test_store_records_the_choice_and_the_command_prints_and_draws_it(tmp_path):
+    stack, _ = synthetic("smooth")
+    path = tmp_path / "s.zarr"
+    write_stack(stack, path)
+    out = tmp_path / "t.zarr"
+    r = CliRunner().invoke(
+        app,
+        ["demux", str(path), "--out", str(out), "--alpha", "auto", "--beta", "auto", "--report", str(tmp_path / "rep")],
+    )
+    assert r.exit_code == 0, r.output
+    lines = [line for line in r.output.splitlines() if line.startswith("weights:")]
+    assert len(lines) == 1 and "alpha = " in lines[0] and "within 1 SE" in lines[0]
+    attrs = zarr.open_group(str(out), mode="r").attrs.asdict()
+    rec = attrs["weights_choice"]
+    assert rec["requested"] == {"alpha": "auto", "beta": "auto"} and rec["criterion"] == "cv-images"
+    assert attrs["alpha"] == rec["alpha"] and attrs["beta"] == rec["beta"]
+    curve = rec["curve"]
+    n = len(curve["score"])
+    assert n >= 4 and len(curve["alpha"]) == len(curve["beta"]) == len(curve["score_se"]) == n
+    best = int(np.argmin(curve["score"]))
+    assert (curve["alpha"][best], curve["beta"][best]) == (rec["alpha"], rec["beta"])
+    assert rec["alpha_range"][0] <= rec["alpha"] <= rec["alpha_range"][1]
+    assert f"alpha = {rec['alpha']:.3g}" in lines[0]
+    png = tmp_path / "rep" / "weights_cv.png"
+    assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_interrupted_auto_run_resumes_only_on_identical_inputs(tmp_path):
+    stack, _ = synthetic("smooth")
+    out = tmp_path / "t.zarr"
+    demultiplex_to_store(stack, out, alpha="auto", beta="auto", chunk_rows=4, _stop_after=1)
+    rec = zarr.open_group(str(tmp_path / ".t.zarr.partial"), mode="r").attrs["weights_choice"]
+    # a different stack (one pixel changed) is refused, whatever the unfinished run chose
+    changed = Stack(
+        np.array(stack.images),
+        stack.delay_us,
+        stack.exposure_us,
+        stack.lines_per_second,
+        excluded=stack.excluded,
+        projector_rows=stack.projector_rows,
+        metadata=stack.metadata,
+    )
+    changed.images[5, 7, 3] += 0.01
+    with pytest.raises(InputError, match="unfinished run"):
+        demultiplex_to_store(changed, out, alpha="auto", beta="auto", chunk_rows=4)
+    # explicit weights equal to the chosen ones are another request: refused too
+    with pytest.raises(InputError, match="unfinished run"):
+        demultiplex_to_store(stack, out, alpha=rec["alpha"], beta=rec["beta"], chunk_rows=4)
+    # the identical run continues, with the recorded choice (no second search)
+    seen = []
+    demultiplex_to_store(
+        stack, out, alpha="auto", beta="auto", chunk_rows=4, on_choice=lambda c, resumed: seen.append(resumed)
+    )
+    assert seen == [True]
+    T, attrs = read_transport(out)
+    assert attrs["weights_choice"] == rec and (attrs["alpha"], attrs["beta"]) == (rec["alpha"], rec["beta"])
+    # the same bytes as an uninterrupted run at those weights
+    ref = demultiplex(stack, alpha=rec["alpha"], beta=rec["beta"], chunk_rows=4).transport.dense
+    np.testing.assert_array_equal(T.dense, ref)
