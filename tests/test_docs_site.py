@@ -23,7 +23,7 @@ from urllib.parse import unquote, urlsplit
 
 import pytest
 
-from planeray.viewer.browser import chromium_args, find_chromium
+from _browser import system_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
 REQUIRED = bool(os.environ.get("PLANERAY_DOCS_SITE"))  # set by `make docs`
@@ -240,20 +240,7 @@ def test_no_page_is_empty(site):
 
 @pytest.fixture(scope="module")
 def browser(site):
-    path = find_chromium()
-    if path is None:
-        _unavailable("no chromium on this machine: `apt-get install chromium` (make test does it as root)")
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        _unavailable("playwright is not installed: pip install -e '.[test]'")
-    pw = sync_playwright().start()
-    try:
-        b = pw.chromium.launch(executable_path=path, args=chromium_args())
-        yield b
-        b.close()
-    finally:
-        pw.stop()
+    yield from system_chromium(_unavailable)
 
 
 def open_page(browser, site: Path, name: str):

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _browser import system_chromium
 from planeray import synthesis as syn
 from planeray.acquire import simulate_stack
 from planeray.io import write_stack, write_transport
@@ -28,7 +29,7 @@ from planeray.profiles import measured_delay_profiles
 from planeray.scenes import make_scene
 from planeray.timing import PAPER_LINES_PER_SECOND, Band, quick_sweep
 from planeray.viewer import display
-from planeray.viewer.browser import chromium_args, find_chromium, measure_painted_fps
+from planeray.viewer.browser import find_chromium, measure_painted_fps
 from planeray.viewer.server import ViewerServer
 from planeray.viewer.session import ViewSettings, open_source
 
@@ -48,20 +49,7 @@ def _unavailable(reason: str):
 
 @pytest.fixture(scope="module")
 def browser():
-    path = chromium_path()
-    if path is None:
-        _unavailable("no chromium on this machine: `apt-get install chromium` (make test does it as root)")
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        _unavailable("playwright is not installed: pip install -e '.[test]'")
-    pw = sync_playwright().start()
-    try:
-        b = pw.chromium.launch(executable_path=path, args=chromium_args())
-        yield b
-        b.close()
-    finally:
-        pw.stop()
+    yield from system_chromium(_unavailable)
 
 
 def wait_for(page, expression: str, timeout_s: float = 20.0):
