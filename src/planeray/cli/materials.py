@@ -220,16 +220,16 @@ def train(
     from ..materials import train_model
     from ..materials.model import check_model_output, check_training_options
 
-    names = _parse_class_names(class_name)
-    check_training_options(
+    options = dict(
         kind=features,
         floor=floor,
-        class_names=names,
+        class_names=_parse_class_names(class_name),
         ignore_classes=tuple(ignore_class or ()),
         max_per_class=max_per_class,
         cv_folds=cv_folds,
         seed=seed,
     )
+    check_training_options(**options)  # every option refused before any file is read
     if len(labels) != len(stacks):
         raise ValueError(f"--labels: {len(stacks)} stacks but {len(labels)} label images; give one per stack, in order")
     if out_path.suffix.lower() != ".zip":
@@ -245,19 +245,7 @@ def train(
         def progress(done, total, stage):
             bar.update(task, completed=done, total=total, description=stage)
 
-        model = train_model(
-            loaded,
-            labs,
-            kind=features,
-            floor=floor,
-            class_names=names,
-            ignore_classes=tuple(ignore_class or ()),
-            max_per_class=max_per_class,
-            cv_folds=cv_folds,
-            seed=seed,
-            sources=[str(p) for p in stacks],
-            progress=progress,
-        )
+        model = train_model(loaded, labs, **options, sources=[str(p) for p in stacks], progress=progress)
     model.save(out_path, overwrite=overwrite)
     tr = model.training
     out.print(
