@@ -12,6 +12,7 @@ from planeray.timing import (
     Sweep,
     band_bin_weights,
     band_centre_rows,
+    band_weights_at_row,
     band_width_rows,
     boundary_images,
     delay_from_sync_offset,
@@ -168,3 +169,28 @@ def test_row_jitter_averages_frames():
     ref0 = 0.5 * (band_bin_weights(u, 0.5, b0.width_rows) + band_bin_weights(u, -0.5, b0.width_rows))
     np.testing.assert_allclose(w[0], ref0 * g.coverage(0, u), atol=1e-12)
     np.testing.assert_allclose(w[1], b0.weights(g, 1, u), atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    camera_rows=st.integers(8, 300),
+    projector_rows=st.integers(8, 900),
+    row_frac=st.floats(0.0, 1.0),
+    jitter_us=st.sampled_from([0.0, 3.0, 25.0]),
+    line_width_us=st.sampled_from([0.0, 1.5, 40.0]),
+)
+def test_band_weights_at_row_are_each_bands_own_weights(
+    camera_rows, projector_rows, row_frac, jitter_us, line_width_us
+):
+    """The vectorized weights of a demultiplexing problem are exactly each band's :meth:`Band.weights`."""
+    geometry = RowGeometry(camera_rows, projector_rows)
+    row = min(int(row_frac * camera_rows), camera_rows - 1)
+    bands = paper_sweep().bands(54_000.0, jitter_us=jitter_us, line_width_us=line_width_us)
+    offsets = np.arange(-70, 71)
+    expected = np.stack([b.weights(geometry, row, offsets) for b in bands])
+    np.testing.assert_array_equal(band_weights_at_row(bands, geometry, row, offsets), expected)
+    # bands of different blurs (and with realized row shifts) fall back to the bands' own weights
+    mixed = bands[:3] + [Band(100.0, 600.0, 54_000.0, jitter_us + 7.0, 0.0)]
+    np.testing.assert_array_equal(
+        band_weights_at_row(mixed, geometry, row, offsets), np.stack([b.weights(geometry, row, offsets) for b in mixed])
+    )

@@ -50,6 +50,7 @@ __all__ = [
     "band_interval_weights",
     "RowGeometry",
     "Band",
+    "band_weights_at_row",
     "RowPattern",
     "Sweep",
     "paper_sweep",
@@ -454,6 +455,50 @@ class Band:
             a, b = lo[edge], hi[edge]
             w[edge] = _fraction_of_part(lit(0.0, a, b), a, b)
         return w
+
+
+def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_rows) -> np.ndarray:
+    """:meth:`Band.weights` of many bands at one camera row, ``(N, U)``, in one vectorized pass.
+
+    The same numbers as ``np.stack([b.weights(geometry, camera_row, offsets_rows) for b in bands])``
+    (each band's profile once, the bins the projector's end cuts recomputed by the edge rule), at a
+    fraction of the cost: a demultiplexing problem needs them for every row group of a stack.
+    Bands with realized row shifts, or with different blurs, are computed band by band.
+
+    Parameters
+    ----------
+    bands : sequence of Band
+    geometry : RowGeometry
+    camera_row : int
+        Camera row ``t``.
+    offsets_rows : array_like of int, shape (U,)
+        Offset bins ``u = v - t`` (projector rows).
+
+    Returns
+    -------
+    weights : ndarray (N, U) float64
+    """
+    bands = list(bands)
+    offsets = np.asarray(offsets_rows)
+    if not bands:
+        return np.zeros((0, offsets.size))
+    blur = {(b.jitter_us * 1e-6 * b.lines_per_second, b.line_width_us * 1e-6 * b.lines_per_second) for b in bands}
+    if len(blur) > 1 or any(b.row_shifts_rows is not None for b in bands):
+        return np.stack([b.weights(geometry, camera_row, offsets) for b in bands])
+    ((sigma, line),) = blur
+    centre = np.array([b.centre_rows for b in bands])[:, None]
+    width = np.array([b.width_rows for b in bands])[:, None]
+    k = offsets.astype(float)[None, :]
+    w = np.minimum(
+        band_interval_weights(k - 0.5, k + 0.5, centre, width, blur_sigma_rows=sigma, line_width_rows=line), 1.0
+    )
+    lo, hi = geometry.bin_parts(camera_row, offsets)
+    edge = hi - lo < 1.0 - 1e-12
+    if edge.any():
+        a, b = lo[edge][None, :], hi[edge][None, :]
+        lit = band_interval_weights(a, b, centre, width, blur_sigma_rows=sigma, line_width_rows=line)
+        w[:, edge] = _fraction_of_part(lit, a, b)
+    return w
 
 
 @dataclass(frozen=True)

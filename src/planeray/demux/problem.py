@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..stack import Stack
-from ..timing import sweep_support_rows
+from ..timing import band_weights_at_row, sweep_support_rows
 
 __all__ = ["RowGroup", "DemuxProblem", "difference_matrix", "read_observations"]
 
@@ -205,7 +205,7 @@ class DemuxProblem:
             valid = slice(int(nz[0]), int(nz[-1]) + 1) if nz.size else slice(0, 0)
             # the edge rule: a band lights the fraction of a bin's part on the projector that it covers
             # (Band.weights); the unknown is the light per row, so A carries the part's length too
-            W_lit = np.stack([b.weights(geometry, t0, offsets) for b in bands])
+            W_lit = band_weights_at_row(bands, geometry, t0, offsets)
             on = coverage[t0][valid].astype(np.float64)
             partial = None if np.all(on == 1.0) else on
             groups.append(RowGroup(members, (W_lit[:, valid] * on).astype(np.float64), valid, partial))
