@@ -66,12 +66,12 @@ $(MATHJAX):
 		|| { echo "make docs: could not install MathJax $(MATHJAX_VERSION) from the npm registry (offline? see docs/_build/mathjax/npm.log)"; exit 1; }
 
 lint: venv
-	$(VENV)/bin/ruff check src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
-	$(VENV)/bin/ruff format --check src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
+	$(VENV)/bin/ruff check conftest.py src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
+	$(VENV)/bin/ruff format --check conftest.py src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
 
 format: venv
-	$(VENV)/bin/ruff check --fix src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
-	$(VENV)/bin/ruff format src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
+	$(VENV)/bin/ruff check --fix conftest.py src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
+	$(VENV)/bin/ruff format conftest.py src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
 
 bench: venv
 	$(PY) benchmarks/bench_render.py --size 512

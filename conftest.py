@@ -1,0 +1,31 @@
+"""Settings of a test session, for the suite (``tests/``) and the docstrings' examples (``src/planeray``).
+
+Under pytest-xdist every core already runs a test: a worker whose BLAS, OpenMP or Numba
+starts a thread per core as well puts two threads on each core, and OpenBLAS's threads,
+which spin while they wait for each other, then run many times slower (measured: a 75 x 229
+pseudo-inverse 3 ms alone, ~470 ms beside another busy process; ``test_faults_ops`` study
+case 27 s -> 16 s).  So each worker gets its share of the cores.  A user's own
+``OPENBLAS_NUM_THREADS`` (etc.) is kept.
+"""
+
+from __future__ import annotations
+
+import os
+
+_WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+#: Threads each worker may use (1 on the 2-core CI machine running two workers).
+THREADS_PER_WORKER = max(1, (os.cpu_count() or 1) // max(1, _WORKERS))
+
+if _WORKERS > 1:
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, str(THREADS_PER_WORKER))  # libraries loaded later, and subprocesses
+    from threadpoolctl import threadpool_limits
+
+    # libraries this worker has loaded already (numpy's OpenBLAS); held for the whole session
+    _LIMITS = threadpool_limits(int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
+
+    import numba
+
+    # Numba's parallel kernels (Monte Carlo): the pool keeps its size (tests that compare thread
+    # counts still can), the kernels called from this worker use its share
+    numba.set_num_threads(min(THREADS_PER_WORKER, numba.config.NUMBA_NUM_THREADS))
