@@ -89,6 +89,7 @@ import numba
 import numpy as np
 
 from ..medium import Medium, as_medium
+from ._batches import trace_batches
 from .cache import TABLES_DIR, cache_dir, cache_key, load_profile, save_profile, write_or_warn
 from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
 from .physics import fresnel_jit, hg_pdf_jit, hg_scatter_jit
@@ -149,7 +150,7 @@ def _bin(x, y, inv_bin, radial):
     return math.floor(x * inv_bin + 0.5)
 
 
-@numba.njit(cache=True, parallel=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _trace(
     states,
     counts,
@@ -193,7 +194,7 @@ def _trace(
     # Straight-up radiance: normal transmission and the n^2 radiance law at the face.
     up_gain = (1.0 - fresnel_jit(1.0, n)) / (n * n)
     inv_bin = 1.0 / mm_per_row
-    for b in numba.prange(B):
+    for b in range(B):
         s = states[b].copy()
         # Scalar accumulators per batch: writing neighbouring array slots from
         # several threads on every collision would thrash a shared cache line.
@@ -565,37 +566,29 @@ def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_m
     half = max(abs(kmin), abs(kmin + nk - 1)) * mm_per_row
     reach = int(np.ceil(min(cutoff_mm, half + 20.0 * z_cont) / mm_per_row)) if np.isfinite(z_cont) else 0
     hmin, nh = -reach, 2 * reach + 1
-    # Batches are independent (own stream, own tallies), so tracing them in groups
-    # gives the same bytes as one call.  With a progress callback the batches go in
-    # groups of one per thread, reported after each group; without, in one call.
-    step = B if progress is None else max(1, min(B, numba.get_num_threads()))
-    parts = []
-    for lo in range(0, B, step):
-        group = slice(lo, min(B, lo + step))
-        parts.append(
-            _trace(
-                states[group],
-                counts[group],
-                sigma_s,
-                sigma_a,
-                g,
-                n,
-                d,
-                kmin,
-                nk,
-                mm_per_row,
-                1.0 - r_sp,
-                source_width_mm,
-                cutoff_mm,
-                z_cont,
-                hmin,
-                nh,
-                radial,
-            )
-        )
-        if progress is not None:
-            progress(int(counts[group].sum()))
-    tallies = parts[0] if len(parts) == 1 else tuple(np.concatenate(t) for t in zip(*parts))
+    # Batches are independent (own stream, own tallies): traced on threads, concatenated in batch order.
+    tallies = trace_batches(
+        _trace,
+        (states, counts),
+        (
+            sigma_s,
+            sigma_a,
+            g,
+            n,
+            d,
+            kmin,
+            nk,
+            mm_per_row,
+            1.0 - r_sp,
+            source_width_mm,
+            cutoff_mm,
+            z_cont,
+            hmin,
+            nh,
+            radial,
+        ),
+        progress=progress,
+    )
     refl_bins, rad_bins, refl, trans, absorbed, truncated, events, cont, far = tallies
     # Radiance is tallied per unit area: divide by the bin's width (line) or annulus area (point).
     rad_bins /= bin_measure(np.arange(kmin, kmin + nk), mm_per_row, radial)

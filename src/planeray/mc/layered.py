@@ -68,6 +68,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..medium import Medium, as_medium
+from ._batches import trace_batches
 from .cache import TABLES_DIR, cache_dir, cache_key, write_or_warn
 from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _batch_stats, _uniform
 from .physics import fresnel_jit, hg_scatter_jit
@@ -106,7 +107,7 @@ def _cyl_roots(q, z, dq, dz, qc, zc, r):
 
 
 # ---------------------------------------------------------------- the kernel
-@numba.njit(cache=True, parallel=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _trace(
     states,
     counts,
@@ -171,7 +172,7 @@ def _trace(
     zlo_all = math.inf
     for c in range(nc):
         zlo_all = min(zlo_all, v_zc[c] - v_r[c])
-    for b in numba.prange(B):
+    for b in range(B):
         s = states[b].copy()
         tau = np.zeros((nj, nc, nr + 1))
         refl_b = 0.0
@@ -419,50 +420,44 @@ def _run(
         rho0, drho = 0.0, 1.0
     else:
         v_nx, v_ny, rho0, drho, v_zc, v_r, v_dmua = virtual
-    step = _N_BATCHES if progress is None else max(1, min(_N_BATCHES, numba.get_num_threads()))
-    parts = []
-    for lo in range(0, _N_BATCHES, step):
-        g = slice(lo, min(_N_BATCHES, lo + step))
-        parts.append(
-            _trace(
-                states[g],
-                counts[g],
-                zb,
-                mus,
-                mua,
-                gs,
-                ns,
-                mode,
-                float(src_x),
-                float(src_y),
-                float(acc_y),
-                float(mm),
-                int(kmin),
-                int(nk),
-                int(rmin),
-                int(nr),
-                float(cutoff_mm),
-                cyl_on,
-                float(nx),
-                float(ny),
-                float(qc),
-                float(zc),
-                float(rc),
-                bl.sigma_s,
-                bl.sigma_a,
-                bl.g,
-                np.ascontiguousarray(v_nx, dtype=np.float64),
-                np.ascontiguousarray(v_ny, dtype=np.float64),
-                float(rho0),
-                float(drho),
-                np.ascontiguousarray(v_zc, dtype=np.float64),
-                np.ascontiguousarray(v_r, dtype=np.float64),
-                np.ascontiguousarray(v_dmua, dtype=np.float64),
-            )
-        )
-        if progress is not None:
-            progress(int(counts[g].sum()))
-    out = parts[0] if len(parts) == 1 else tuple(np.concatenate(t) for t in zip(*parts))
+    out = trace_batches(
+        _trace,
+        (states, counts),
+        (
+            zb,
+            mus,
+            mua,
+            gs,
+            ns,
+            mode,
+            float(src_x),
+            float(src_y),
+            float(acc_y),
+            float(mm),
+            int(kmin),
+            int(nk),
+            int(rmin),
+            int(nr),
+            float(cutoff_mm),
+            cyl_on,
+            float(nx),
+            float(ny),
+            float(qc),
+            float(zc),
+            float(rc),
+            bl.sigma_s,
+            bl.sigma_a,
+            bl.g,
+            np.ascontiguousarray(v_nx, dtype=np.float64),
+            np.ascontiguousarray(v_ny, dtype=np.float64),
+            float(rho0),
+            float(drho),
+            np.ascontiguousarray(v_zc, dtype=np.float64),
+            np.ascontiguousarray(v_r, dtype=np.float64),
+            np.ascontiguousarray(v_dmua, dtype=np.float64),
+        ),
+        progress=progress,
+    )
     return counts, out
 
 

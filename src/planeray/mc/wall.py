@@ -87,6 +87,7 @@ from scipy.special import k1e
 
 from ..errors import InputError
 from ..medium import Medium, as_medium
+from ._batches import trace_batches
 from .cache import ENGINE_VERSION, TABLES_DIR, cache_dir, cache_key, load_profile, save_profile, write_or_warn
 from .diffusion import boundary_mismatch_A, diffusion_exit, diffusion_normal_radiance_ratio
 from .engine import (
@@ -139,11 +140,11 @@ def _photon_state(key, index, s):
         s[i] = out
 
 
-@numba.njit(cache=True, parallel=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _trace_wall(
-    key,
     starts,
     counts,
+    key,
     sigma_s,
     sigma_a,
     g,
@@ -193,7 +194,7 @@ def _trace_wall(
     finite = d < np.inf
     up_gain = (1.0 - fresnel_jit(1.0, n)) / (n * n)
     inv_bin = 1.0 / mm_per_row
-    for b in numba.prange(B):
+    for b in range(B):
         s = np.zeros(4, dtype=np.uint64)
         refl_b = 0.0
         trans_b = 0.0
@@ -795,29 +796,31 @@ def _run_wall(medium, offsets, params):
             delta_max = 4.0 * z_cont + (6.0 / q.sigma_tr if q.sigma_tr > 0 else 20.0 * z_cont)
             nd = _N_WALL_BINS + 1
             dbin = delta_max / _N_WALL_BINS
-    refl_bins, rad_bins, refl, trans, absorbed, truncated, wall, events, cont, far = _trace_wall(
-        key,
-        starts,
-        counts,
-        sigma_s,
-        sigma_a,
-        g,
-        n,
-        d,
-        kmin,
-        nk,
-        mm,
-        1.0 - r_sp,
-        cutoff_mm,
-        z_cont,
-        hmin,
-        nh,
-        dbin,
-        nd,
-        a,
-        wcx,
-        wcy,
-        n_wall,
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, wall, events, cont, far = trace_batches(
+        _trace_wall,
+        (starts, counts),
+        (
+            key,
+            sigma_s,
+            sigma_a,
+            g,
+            n,
+            d,
+            kmin,
+            nk,
+            mm,
+            1.0 - r_sp,
+            cutoff_mm,
+            z_cont,
+            hmin,
+            nh,
+            dbin,
+            nd,
+            a,
+            wcx,
+            wcy,
+            n_wall,
+        ),
     )
     rad_bins /= mm
     out = np.arange(kmin, kmin + nk)
