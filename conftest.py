@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import os
 
+import pytest
+
 _RAM_DISK = "/dev/shm"
 #: Free space a RAM disk needs to hold the suite's temporary folders (about 250 MB a session).
 _RAM_DISK_FREE_BYTES = 8 * 2**30
@@ -51,3 +53,27 @@ if _WORKERS > 1:
     # Numba's parallel kernels (Monte Carlo): the pool keeps its size (tests that compare thread
     # counts still can), the kernels called from this worker use its share
     numba.set_num_threads(min(THREADS_PER_WORKER, numba.config.NUMBA_NUM_THREADS))
+
+
+@pytest.fixture
+def figures_not_drawn(monkeypatch):
+    """Every figure saved blank and small, without drawing it (no layout, no ticks, no text).
+
+    For the suites that test what a command does with files (the data promises: what it
+    writes, replaces, refuses, leaves after a kill), not what its figures show: the PNGs are
+    still written by planeray's own atomic writer, with planeray's mark, at the same paths.
+    Drawing the figures is most of a quick report's time; the figures themselves are tested
+    by the tests of each command.
+    """
+    from matplotlib.figure import Figure
+
+    savefig = Figure.savefig
+
+    def blank(self, *args, **kwargs):
+        self.clear()
+        kwargs["dpi"] = 10
+        kwargs.pop("bbox_inches", None)
+        return savefig(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", blank)
+    monkeypatch.setattr(Figure, "tight_layout", lambda self, *args, **kwargs: None)

@@ -28,6 +28,9 @@ from planeray.errors import InputError, StorageError, TransportError
 from planeray.io import read_stack, read_transport, read_transport_maps, write_stack
 from planeray.io.atomic import check_replaceable, planeray_output_kind
 
+#: what these tests check is what happens to files, not what the figures show (conftest.py)
+pytestmark = pytest.mark.usefixtures("figures_not_drawn")
+
 runner = CliRunner()
 
 

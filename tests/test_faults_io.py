@@ -28,6 +28,9 @@ from planeray.stack import Stack
 from planeray.timing import RowGeometry, paper_sweep, quick_sweep
 from planeray.transport import Transport
 
+#: what these tests check is what happens to files, not what the figures show (conftest.py)
+pytestmark = pytest.mark.usefixtures("figures_not_drawn")
+
 runner = CliRunner()
 
 

@@ -24,6 +24,9 @@ from typer.testing import CliRunner
 import test_faults
 from planeray.cli import app
 
+#: what these tests check is what happens to files, not what the figures show (conftest.py)
+pytestmark = pytest.mark.usefixtures("figures_not_drawn")
+
 failing_folder = test_faults.failing_folder  # the fixture: writes under a folder fail with an OSError
 runner = CliRunner()
 SIZE = 32

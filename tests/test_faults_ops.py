@@ -29,6 +29,9 @@ from planeray.cli import app
 from planeray.io.marks import file_mark
 from test_faults import failing_folder  # noqa: F401  (the fixture: writes under a folder fail)
 
+#: what these tests check is what happens to files, not what the figures show (conftest.py)
+pytestmark = pytest.mark.usefixtures("figures_not_drawn")
+
 runner = CliRunner()
 HAS_MITSUBA = importlib.util.find_spec("mitsuba") is not None
 

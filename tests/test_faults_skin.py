@@ -29,6 +29,9 @@ from click.testing import CliRunner
 import test_faults
 from test_faults import leftovers, one_line_error
 
+#: what these tests check is what happens to files, not what the figures show (conftest.py)
+pytestmark = pytest.mark.usefixtures("figures_not_drawn")
+
 failing_folder = test_faults.failing_folder  # the fixture: writes under a folder fail with an OSError
 
 runner = CliRunner()

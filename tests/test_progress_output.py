@@ -122,6 +122,7 @@ def test_effects_figure_refuses_a_size_it_is_not_validated_at_before_running_any
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("figures_not_drawn")  # its progress and numbers; each figure's picture has its own test
 def test_figure_all_reports_all_its_work(tmp_path, bars):
     # 64: the smallest size the effects figure is validated at (README "Delay profiles")
     res = runner.invoke(app, ["figure", "all", "--out", str(tmp_path), "--size", "64"])
