@@ -112,6 +112,7 @@ def test_cli_video_writes_a_capture_that_skin_pulse_reads(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("figures_not_drawn")  # its numbers and files; `planeray paper`'s test draws Fig. 15
 def test_pulse_report_writes_fig15_and_its_numbers(tmp_path, monkeypatch):
     import json
 
