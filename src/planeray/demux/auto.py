@@ -90,8 +90,9 @@ def resolve_ambient(ambient, alpha="auto", beta="auto") -> str:
 
     ``None`` is the default: ``"estimate"`` when a weight is ``"auto"`` (the data choose
     the weights; the ambient light is then modelled instead of kept in ``T`` as a flat
-    floor that every image predicts), otherwise ``"none"``, so that explicit weights mean
-    exactly the paper's problem.
+    floor that every image predicts) and ``beta`` is not an explicit 0 (which cannot
+    split a flat transport from the ambient), otherwise ``"none"``, so that explicit
+    weights mean exactly the paper's problem.
 
     Raises
     ------
@@ -99,10 +100,18 @@ def resolve_ambient(ambient, alpha="auto", beta="auto") -> str:
         Anything but None, ``"none"`` or ``"estimate"``.
     """
     if ambient is None:
-        return "estimate" if (is_auto(alpha) or is_auto(beta)) else "none"
+        beta_zero = not is_auto(beta) and _is_zero(beta)
+        return "estimate" if (is_auto(alpha) or is_auto(beta)) and not beta_zero else "none"
     if isinstance(ambient, str) and ambient.strip().lower() in AMBIENT_MODES:
         return ambient.strip().lower()
     raise InputError(f"ambient must be one of {', '.join(AMBIENT_MODES)}, got {ambient!r}")
+
+
+def _is_zero(value) -> bool:
+    try:
+        return float(value) == 0.0
+    except (TypeError, ValueError):
+        return False
 
 
 def _weight(value, name: str) -> float:
