@@ -106,6 +106,28 @@ def test_fast_solver_with_ambient_matches_an_independent_optimum(collinear):
             assert np.linalg.norm(d) <= 2.0 * np.sqrt(2.0 * g / mu)
 
 
+@pytest.mark.parametrize("collinear", [True, False])
+def test_fast_solver_with_ambient_drops_saturated_observations_like_their_own_problem(collinear):
+    """Pixels with dropped observations (the low-rank update, in the batch): each is the optimum of its own rows."""
+    rng = np.random.default_rng(4)
+    N, U, P = 30, 12, 8
+    A = band_matrix(rng.uniform(-4, 4, N), rng.uniform(1.5, 5.0, N), np.arange(U) - U // 2)
+    e = A.sum(axis=1) if collinear else A.sum(axis=1) + rng.uniform(0.5, 2.0, N)
+    X = np.where(rng.random((P, U)) < 0.5, rng.exponential(0.05, (P, U)), 0.0)
+    B = X @ A.T + rng.uniform(0.005, 0.02, (P, 1)) * e + rng.normal(0.0, 1e-3, (P, N))
+    mask = rng.random((P, N)) > 0.2
+    mask[0] = True  # one pixel keeps everything
+    alpha, beta, tol = 0.3, 0.01, 1e-6
+    res = solve_fast(RowGroup(np.arange(1), A, slice(0, U)), B, alpha, beta, tol, ambient=e, mask=mask, threads=1)
+    assert res.converged.all()
+    for p in range(P):
+        k = mask[p]
+        x_ref, a_ref = cvxpy_optimum(A[k], e[k], B[p, k], alpha, beta)
+        f_ref = objective(A[k], e[k], B[p, k], alpha, beta, x_ref, a_ref)
+        f_fast = objective(A[k], e[k], B[p, k], alpha, beta, res.X[p], res.ambient[p])
+        assert f_ref * (1.0 - 1e-8) <= f_fast <= f_ref * (1.0 + tol) + 1e-12
+
+
 def test_collinear_ambient_makes_the_null_direction_exact_and_the_rest_of_the_problem_unchanged():
     rng = np.random.default_rng(3)
     A = band_matrix(rng.uniform(-4, 4, 20), rng.uniform(2, 5, 20), np.arange(11) - 5)
