@@ -11,12 +11,15 @@ and the left-out images are predicted through the illumination matrix,
 .. math::
 
     \\mathrm{CV}(\\alpha, \\beta) = \\frac{1}{|O|} \\sum_F \\sum_{(p, i) \\in O_F}
-        \\frac{(I_{p,i} - A_{i} \\, \\hat T_p^{(-F)})^2}{\\sigma_{p,i}^2},
+        \\frac{(I_{p,i} - A_{i} \\, \\hat T_p^{(-F)} - \\hat a_p^{(-F)} I_{w,i})^2}{\\sigma_{p,i}^2},
 
 ``sigma^2`` the variance of an observation under the stack's camera model (shot
 noise of its signal plus read and quantization noise, averaged frames; equal
 weights for a stack without one), ``O`` the observations scored (saturated ones
-are neither fitted nor scored).  The weights with the smallest score are chosen;
+are neither fitted nor scored), ``a`` each pixel's ambient when it is estimated (Eq. 6a
+of :mod:`planeray.demux.problem`, the default of an automatic run: ambient light is a
+flat floor of ``T`` that every image predicts, so a criterion that predicts images
+keeps it unless the problem has a place for it; 0 otherwise).  The weights with the smallest score are chosen;
 how sure the choice is, is the range of weights whose score lies within one standard
 error (over pixels) of their paired difference to the best.
 
@@ -412,8 +415,13 @@ def cv_score(
 
 
 def _test_columns(solver: AdmmRowSolver, A_test, e_test) -> np.ndarray:
-    """``[A, I_w / s]`` of left-out images in the solver's variables (``a' = s a``)."""
-    return np.column_stack([A_test, np.asarray(e_test, np.float64) / solver.ambient_scale])
+    """``[A, I_w / s]`` of left-out images in the solver's variables (``a' = s a``).
+
+    Where the solver took the ambient column as ``A 1`` (bands inside the projector), so do
+    the predictions.
+    """
+    e = A_test.sum(axis=1) if solver.null is not None else np.asarray(e_test, np.float64)
+    return np.column_stack([A_test, e / solver.ambient_scale])
 
 
 def search(score, requested: dict, alphas, betas) -> dict:

@@ -36,7 +36,7 @@ from ._kernels import warm_up
 from .auto import WeightChoice, choose_weights, is_auto, resolve_ambient
 from .fast import _threads, blas_one_thread
 from .problem import DemuxProblem, RowGroup, read_observations
-from .solvers import get_solver, options
+from .solvers import SOLVERS, get_solver, options
 
 __all__ = [
     "DEFAULT_CHUNK_ROWS",
@@ -339,19 +339,13 @@ def _check_run_options(method, chunk_rows, tol, workers=None, ambient="none") ->
     """Options of a run, checked before any work (one line naming the option)."""
     solve = get_solver(method)
     if ambient == "estimate" and "ambient" not in options(solve):
-        able = sorted(m for m in _solver_names() if "ambient" in options(get_solver(m)))
+        able = sorted(m for m, f in SOLVERS.items() if "ambient" in options(f))
         raise InputError(f"method {method!r} cannot estimate the ambient light; use one of {', '.join(able)}")
     check_integer(chunk_rows, "chunk_rows", minimum=1)
     if tol is not None:
         check_number(tol, "tol", minimum=0.0, min_inclusive=False, maximum=1.0, max_inclusive=False)
     if workers is not None:
         check_integer(workers, "workers", minimum=1)
-
-
-def _solver_names():
-    from .solvers import SOLVERS
-
-    return list(SOLVERS)
 
 
 def _chunks(H: int, chunk_rows: int) -> list[slice]:

@@ -37,6 +37,12 @@ Woodbury term ``(A_s M)^T S^{-1} (A_s M)``, ``S = I/2 - A_s M A_s^T`` (a k x k
 Cholesky per pixel and rho, ``2 k U`` flops per iteration), and its certificate
 uses its own ``Q_p^{-1}`` the same way.
 
+**The ambient term** (Eq. 6a, ``ambient=``) adds one unknown per pixel with its own
+column; where the bands lie inside the projector that column equals ``A 1``, so ``Q``
+is singular along ``(1, ..., 1, -1)`` (a flat transport traded for ambient).  ADMM
+needs only ``Q + rho I``; the certificate uses the pseudo-inverse on that direction's
+complement and first moves the multiplier along it (:class:`AdmmRowSolver`).
+
 Practicalities measured on a 2-core machine: batches of 512 pixels run on two
 Python threads (the products in BLAS held to one thread, the per-pixel passes
 compiled without the GIL); float32 entries below 1e-30 are flushed to zero
@@ -140,12 +146,13 @@ class _Factor:
 class AdmmRowSolver:
     """Everything that depends only on the illumination matrix ``A`` (one per row group).
 
-    With ``ambient`` (the column ``I_w`` (N,) of Eq. 6a) the unknowns are ``(T, a)``:
-    ``U + 1`` columns, the last one the ambient (no smoothness, no sparsity).  Where
-    the bands lie inside the projector ``A 1 = I_w`` up to the jitter's tails beyond
-    the support (~2e-8 relative); there the column is taken as ``A 1`` exactly, so that
-    ``n = (1, ..., 1, -1)`` is an exact null direction of ``Q``: the certificate then
-    uses the pseudo-inverse on ``n``'s complement and moves the multiplier along ``n``
+    With ``ambient`` (the column ``I_w`` (N,) of Eq. 6a) the unknowns are ``(T, a')``:
+    ``U + 1`` columns, the last one the ambient, solved scaled as ``a' = sqrt(U) a``
+    (column ``I_w / sqrt(U)``; no smoothness, no sparsity).  Where the bands lie inside
+    the projector ``A 1 = I_w`` up to the jitter's tails beyond the support (~2e-8
+    relative); there the column is taken as ``A 1`` exactly, so that ``n = (1, ..., 1,
+    -sqrt(U))`` is an exact null direction of ``Q``: the certificate then uses the
+    pseudo-inverse on ``n``'s complement and moves the multiplier along ``n``
     (:func:`planeray.demux._kernels.null_adjust`), which keeps the weak-duality bound
     finite where ``Q^{-1}`` does not exist.
     """
@@ -188,8 +195,8 @@ class AdmmRowSolver:
         # Q^{-1} norm for the certificate: h^T Q^{-1} h = ||h Lc^{-T}||^2.  An
         # unregularized problem (alpha = 0) with unlit offsets is only semidefinite.
         if self.ambient and collinear:
-            # Q n = 0 for n = (1, ..., 1, -1) / sqrt(U): Q^+ = Bn (Bn^T Q Bn)^{-1} Bn^T with Bn an
-            # orthonormal basis of n's complement (a Householder reflection's other columns)
+            # Q n = 0 for n ~ (1, ..., 1, -sqrt(U)) (A 1 = I_w): Q^+ = Bn (Bn^T Q Bn)^{-1} Bn^T with Bn
+            # an orthonormal basis of n's complement (a Householder reflection's other columns)
             n = np.ones(U)
             n[-1] = -self.ambient_scale
             n /= np.linalg.norm(n)
@@ -249,8 +256,9 @@ class AdmmRowSolver:
 
         Returns
         -------
-        X, iterations, converged, relative gap bound, objective, unscaled KKT residual,
-        residual sum of squares (over the observations used) -- of the returned ``X``
+        X, iterations, converged, relative gap bound, objective, unscaled KKT residual (in the
+        solver's variables), residual sum of squares (over the observations used) -- of the
+        returned ``X``
         (``(P, U + 1)`` with the ambient: its last column is ``a' = sqrt(U) a``, the solver's
         scaled ambient; :func:`solve_fast` returns ``a``).
         """
@@ -329,12 +337,14 @@ class AdmmRowSolver:
         V = np.zeros((P, U), np.float32)
         if self.ambient:
             # start: every offset's multiplier at beta (the sparsity term's pull balanced) and the
-            # ambient at its upper bound min_i b_i / I_w,i (T >= 0), scaled
+            # ambient at its upper bound min_i b_i / I_w,i over the observations used (T >= 0), scaled
             V[:, : self.n_x] = -self.beta / _RHO_LADDER[start]
             e = self.ambient_column
-            ratio = np.where(keep if keep.size else True, Bb / np.maximum(e, 1e-300), np.inf) if e.min() > 0 else None
-            if ratio is not None:
-                a0 = np.min(ratio, axis=1, initial=np.inf)
+            if e.min(initial=0.0) > 0:
+                ratio = Bb / e
+                if keep.size:
+                    ratio = np.where(keep, ratio, np.inf)
+                a0 = ratio.min(axis=1, initial=np.inf)
                 V[:, -1] = np.where(np.isfinite(a0), np.maximum(a0, 0.0), 0.0) * self.ambient_scale
         absV = np.abs(V)
         T = np.empty_like(V)
