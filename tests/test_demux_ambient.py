@@ -273,6 +273,24 @@ def test_store_records_the_option_and_the_map(tmp_path):
     assert group.attrs["ambient"] == "none" and "ambient" not in group
 
 
+def test_command_estimates_the_ambient_on_request_and_keeps_the_papers_problem_otherwise(tmp_path):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+    from planeray.io import write_stack
+
+    stack, _, amb, _ = synthetic_ambient(shape=(4, 8))
+    path = write_stack(stack, tmp_path / "s.zarr")
+    r = CliRunner().invoke(app, ["demux", str(path), "--out", str(tmp_path / "a.zarr"), "--ambient", "estimate"])
+    assert r.exit_code == 0, r.output
+    assert "median ambient" in r.output
+    maps = read_transport_maps(tmp_path / "a.zarr")
+    np.testing.assert_array_equal(maps["ambient"], demultiplex(stack, ambient="estimate").ambient)
+    r = CliRunner().invoke(app, ["demux", str(path), "--out", str(tmp_path / "p.zarr")])
+    assert r.exit_code == 0 and "median ambient" not in r.output
+    assert "ambient" not in read_transport_maps(tmp_path / "p.zarr")
+
+
 def test_resume_refuses_a_changed_ambient_and_continues_an_identical_run(tmp_path):
     stack, *_ = synthetic_ambient(shape=(4, 8))
     out = tmp_path / "T.zarr"

@@ -167,8 +167,10 @@ def test_store_records_the_choice_and_the_command_prints_and_draws_it(tmp_path):
     assert r.exit_code == 0, r.output
     lines = [line for line in r.output.splitlines() if line.startswith("weights:")]
     assert len(lines) == 1 and "alpha = " in lines[0] and "within 1 SE" in lines[0]
+    assert "pairs tried); ambient light estimated per pixel (" in lines[0]  # the default with auto weights, said so
     attrs = zarr.open_group(str(out), mode="r").attrs.asdict()
     rec = attrs["weights_choice"]
+    assert attrs["ambient"] == rec["ambient"] == "estimate"
     assert rec["requested"] == {"alpha": "auto", "beta": "auto"} and rec["criterion"] == "cv-images"
     assert attrs["alpha"] == rec["alpha"] and attrs["beta"] == rec["beta"]
     curve = rec["curve"]
