@@ -24,8 +24,8 @@ an image sum to its width (Eq. 2), so ``a I_w = A (a 1)``: the ambient column is
 collinear with a flat transport, and no image can tell them apart.  The split is
 decided by the sparsity term alone: moving a floor ``c`` from ``T`` into ``a`` leaves
 every residual and the smoothness term unchanged and lowers ``beta ||T||_1`` by
-``beta U c``, so at the optimum ``min_u T(u) = 0`` or ``a = 0`` -- the flat floor of
-``T`` goes into ``a``.  With ``beta = 0`` the split is not identifiable (a whole
+``beta U c``, so at the optimum ``min_u T(u) = 0`` there -- the flat floor of ``T``
+goes into ``a``.  With ``beta = 0`` the split is not identifiable (a whole
 segment of optima) and the ambient term is refused.  In the rows near the
 projector's ends, where bands are cut and ``a`` is not, the data see ``a`` directly.  The illumination matrix ``A[i, u] = L_i(u)`` comes from
 the stack's own metadata through :mod:`planeray.timing` -- the same
