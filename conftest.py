@@ -12,6 +12,12 @@ machine with a large RAM disk (``/dev/shm``, 8 GiB free or more) they go there (
 create than on this machine's disk, and nothing to delete from a disk later); pytest keeps only
 the latest session's folders (``tmp_path_retention_count = 1`` in pyproject.toml).  A user's own
 ``PYTEST_DEBUG_TEMPROOT`` or ``--basetemp`` is kept.
+
+Typer builds the whole click command tree of ``planeray`` (some forty commands, evaluating every
+option's annotations) at each ``CliRunner.invoke``: 0.13-0.18 s a call, a third of the data-promise
+suites' time (``test_faults_ops``: 159 calls, 28 of 74 s).  The tests build it once per app and
+reuse it, as the ``planeray`` program does in its one process; a test that registers or replaces a
+command gets a new tree (the key holds every registered callback).
 """
 
 from __future__ import annotations
@@ -55,16 +61,37 @@ if _WORKERS > 1:
     numba.set_num_threads(min(THREADS_PER_WORKER, numba.config.NUMBA_NUM_THREADS))
 
 
-@pytest.fixture
-def figures_not_drawn(monkeypatch):
-    """Every figure saved blank and small, without drawing it (no layout, no ticks, no text).
+def _command_key(app) -> tuple:
+    """The app and every callback registered in it, recursively (a changed app: a new key)."""
+    key = [app, getattr(app.registered_callback, "callback", None), getattr(app.info, "callback", None)]
+    key += [c.callback for c in app.registered_commands]
+    for group in app.registered_groups:
+        key.append(group.callback)
+        if group.typer_instance is not None:
+            key.append(_command_key(group.typer_instance))
+    return tuple(key)
 
-    For the suites that test what a command does with files (the data promises: what it
-    writes, replaces, refuses, leaves after a kill), not what its figures show: the PNGs are
-    still written by planeray's own atomic writer, with planeray's mark, at the same paths.
-    Drawing the figures is most of a quick report's time; the figures themselves are tested
-    by the tests of each command.
-    """
+
+def _cache_command_trees() -> None:
+    import typer.testing
+
+    build = typer.testing._get_command  # what CliRunner.invoke calls with the app
+    trees: dict = {}
+
+    def cached(app):
+        key = _command_key(app)
+        if key not in trees:
+            trees[key] = build(app)
+        return trees[key]
+
+    typer.testing._get_command = cached
+
+
+_cache_command_trees()
+
+
+def _blank_figures(monkeypatch) -> None:
+    """Every figure saved blank and small, without drawing it (no layout, no ticks, no text)."""
     from matplotlib.figure import Figure
 
     savefig = Figure.savefig
@@ -77,3 +104,22 @@ def figures_not_drawn(monkeypatch):
 
     monkeypatch.setattr(Figure, "savefig", blank)
     monkeypatch.setattr(Figure, "tight_layout", lambda self, *args, **kwargs: None)
+
+
+@pytest.fixture
+def figures_not_drawn(monkeypatch):
+    """Every figure saved blank and small, without drawing it (no layout, no ticks, no text).
+
+    For the suites that test what a command does with files (the data promises: what it
+    writes, replaces, refuses, leaves after a kill), not what its figures show: the PNGs are
+    still written by planeray's own atomic writer, with planeray's mark, at the same paths.
+    Drawing the figures is most of a quick report's time; the figures themselves are tested
+    by the tests of each command.
+    """
+    _blank_figures(monkeypatch)
+
+
+@pytest.fixture(scope="session")
+def blank_figures():
+    """:func:`figures_not_drawn` as a function of a ``MonkeyPatch``, for module-scoped fixtures."""
+    return _blank_figures

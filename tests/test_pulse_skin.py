@@ -7,6 +7,7 @@ and camera noise (the defaults of :class:`planeray.pulse.simulate.LiveSettings`)
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from planeray.pulse.analysis import analyze_pulse
 from planeray.pulse.simulate import METHODS, LiveSettings, linearize, simulate_live, skin_builder
@@ -112,7 +113,6 @@ def test_cli_video_writes_a_capture_that_skin_pulse_reads(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("figures_not_drawn")  # its numbers and files; `planeray paper`'s test draws Fig. 15
 def test_pulse_report_writes_fig15_and_its_numbers(tmp_path, monkeypatch):
     import json
 
@@ -134,8 +134,9 @@ def test_pulse_report_writes_fig15_and_its_numbers(tmp_path, monkeypatch):
     rep = json.loads((tmp_path / "r" / "report.json").read_text())
     assert rep["accuracy"]["detected"] == rep["accuracy"]["total"] and rep["accuracy"]["max_abs_error_bpm"] < 2
     assert rep["pulse_free"]["false_alarms"] == 0
-    for name in ("fig15a_pulse.png", "fig15b_methods.png", "rate_accuracy.png"):
-        assert (tmp_path / "r" / name).is_file()
+    for name in ("fig15a_pulse.png", "fig15b_methods.png", "rate_accuracy.png"):  # drawn here (blank in `paper`'s test)
+        with Image.open(tmp_path / "r" / name) as im:
+            assert im.format == "PNG" and min(im.size) > 300
 
 
 def test_blood_scale_knob_of_the_skin_scene():

@@ -12,6 +12,7 @@ from planeray.timing import (
     Sweep,
     band_bin_weights,
     band_centre_rows,
+    band_interval_weights,
     band_weights_at_row,
     band_width_rows,
     boundary_images,
@@ -169,6 +170,49 @@ def test_row_jitter_averages_frames():
     ref0 = 0.5 * (band_bin_weights(u, 0.5, b0.width_rows) + band_bin_weights(u, -0.5, b0.width_rows))
     np.testing.assert_allclose(w[0], ref0 * g.coverage(0, u), atol=1e-12)
     np.testing.assert_allclose(w[1], b0.weights(g, 1, u), atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    camera_rows=st.integers(2, 60),
+    projector_rows=st.integers(2, 700),
+    delay_us=st.floats(-15_000.0, 15_000.0, **finite),
+    exposure_us=st.floats(5.0, 3_000.0, **finite),
+    jitter_us=st.sampled_from([0.0, 0.5, 10.0, 120.0]),
+    line_width_us=st.sampled_from([0.0, 1.5, 40.0]),
+    shift_rows=st.sampled_from([0.01, 0.5, 4.0]),
+    frames=st.integers(1, 8),
+    entries=st.booleans(),
+    seed=st.integers(0, 2**16),
+)
+def test_row_jitter_weights_equal_every_frames_integral_over_every_bin(
+    camera_rows, projector_rows, delay_us, exposure_us, jitter_us, line_width_us, shift_rows, frames, entries, seed
+):
+    """With realized row shifts only the bins near the band are integrated: the same bytes as all of them.
+
+    Reference: the exact integral (band_interval_weights) of each frame's shifted band over
+    every bin's part inside the projector, averaged over the frames, as a fraction of the part.
+    """
+    rng = np.random.default_rng(seed)
+    geometry = RowGeometry(camera_rows, projector_rows)
+    shifts = rng.normal(0.0, shift_rows, size=(frames, camera_rows))
+    band = Band(delay_us, exposure_us, 54_000.0, jitter_us, line_width_us, row_shifts_rows=shifts)
+    if entries:  # a transport's sparse entries: (row, offset) pairs
+        n = int(rng.integers(1, 300))
+        rows, offsets = rng.integers(0, camera_rows, n), rng.integers(-projector_rows, projector_rows + 1, n)
+    else:
+        rows, offsets = np.arange(camera_rows)[:, None], np.arange(-projector_rows, projector_rows + 1)[None, :]
+    lo, hi = geometry.bin_parts(rows, offsets)
+    sigma, line = jitter_us * 1e-6 * 54_000.0, line_width_us * 1e-6 * 54_000.0  # as Band computes them
+    lit = sum(
+        band_interval_weights(
+            lo, hi, band.centre_rows + s[rows], band.width_rows, blur_sigma_rows=sigma, line_width_rows=line
+        )
+        for s in shifts
+    )
+    part = hi - lo
+    expected = np.where(part > 1e-9, np.minimum(lit / frames / np.where(part > 1e-9, part, 1.0), 1.0), 0.0)
+    np.testing.assert_array_equal(band.weights(geometry, rows, offsets), expected)
 
 
 @settings(max_examples=40, deadline=None)

@@ -444,10 +444,21 @@ class Band:
 
         if self.row_shifts_rows is not None:
             shifts = np.asarray(self.row_shifts_rows, dtype=float)
-            w = 0.0
+            # Only bins within reach of the band (half its width, the blurs' reach in
+            # _second_antiderivative, the largest shift, one bin) can be lit: the integral
+            # is exactly 0 beyond it (below the 1e-10 floor), so it is evaluated there only.
+            reach = 0.5 * self.width_rows + 10.0 * sigma + line + 1.0
+            rows_b = np.broadcast_to(rows, lo.shape)
+            near = (hi > self.centre_rows + shifts.min(initial=0.0) - reach) & (
+                lo < self.centre_rows + shifts.max(initial=0.0) + reach
+            )
+            a, b, r = lo[near], hi[near], rows_b[near]
+            acc = 0.0
             for frame_shift in shifts:  # a handful of frames; each term is vectorized
-                w = w + lit(frame_shift[rows], lo, hi)
-            return _fraction_of_part(w / len(shifts), lo, hi)
+                acc = acc + lit(frame_shift[r], a, b)
+            w = np.zeros(lo.shape)
+            w[near] = _fraction_of_part(acc / len(shifts), a, b)
+            return w
         # the same profile for every row, recomputed only on the bins that straddle the projector's edge
         w = np.array(np.broadcast_to(self.profile(offsets_rows), lo.shape), dtype=np.float64)
         edge = hi - lo < 1.0 - 1e-12
