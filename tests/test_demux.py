@@ -267,6 +267,27 @@ def test_lazy_stack_and_dask_equal_the_local_path(wax_stack, tmp_path):
     np.testing.assert_allclose(read_transport(dask)[0].dense, read_transport(local)[0].dense, rtol=1e-5, atol=1e-7)
 
 
+def test_a_problem_that_has_solved_chunks_still_pickles(wax_stack):
+    """A Dask worker sends the problem it holds to another worker after solving chunks with it.
+
+    The solver cache a solve leaves on each row group holds locks, which do not pickle: the
+    worker could not send it and the cluster waited forever (seen as a hung test).  The
+    problem pickles without the cache, and the copy solves the same chunk to the same bytes.
+    """
+    import pickle
+
+    _, stack = wax_stack
+    problem = DemuxProblem.from_stack(stack)
+    rows = slice(6, 12)
+    obs, sat = read_observations(stack, problem, rows)
+    first = solve_chunk(problem, obs, sat, rows)
+    assert any("_admm_cache" in vars(g) for g in problem.groups)  # what a solve leaves behind
+    copy = pickle.loads(pickle.dumps(problem))
+    assert not any("_admm_cache" in vars(g) for g in copy.groups)
+    again = solve_chunk(copy, obs, sat, rows)
+    np.testing.assert_array_equal(again.T, first.T)
+
+
 class _GuardedImages:
     """An image array that refuses reads of more camera rows than a chunk (larger-than-memory stand-in)."""
 

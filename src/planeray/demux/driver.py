@@ -707,6 +707,7 @@ def _run_dask(stack, problem, chunks, todo, method, tol, group, workers, schedul
     else:
         cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0")
         client = Client(cluster)
+        client.wait_for_workers(int(workers))  # the problem is broadcast to every worker, not fetched later
     try:
         shared = client.scatter(problem, broadcast=True)
         in_flight = max(2, 2 * len(client.scheduler_info()["workers"]))

@@ -103,6 +103,17 @@ class RowGroup:
     valid: slice
     on_projector: np.ndarray | None = None
 
+    def __getstate__(self) -> dict:
+        """The group without the solver cache a solve leaves on it (:func:`planeray.demux.fast.row_solver`).
+
+        A problem is sent to Dask workers by pickling, also from one worker to another after
+        it has solved chunks there; the cache holds locks, which do not pickle (the worker
+        could not send it, and the chunk waited forever).  A receiver factors again.
+        """
+        state = dict(self.__dict__)
+        state.pop("_admm_cache", None)
+        return state
+
     def transport(self, X) -> np.ndarray:
         """The light of each bin, ``T = x * on_projector``, from the unknowns ``X`` (``(P, V)``)."""
         return X if self.on_projector is None else X * self.on_projector
