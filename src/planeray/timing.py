@@ -454,8 +454,8 @@ class Band:
             )
             a, b, r = lo[near], hi[near], rows_b[near]
             acc = 0.0
-            for frame_shift in shifts:  # a handful of frames; each term is vectorized
-                acc = acc + lit(frame_shift[r], a, b)
+            for frame in lit(shifts[:, r], a, b):  # every frame at once, summed in frame order
+                acc = acc + frame
             w = np.zeros(lo.shape)
             w[near] = _fraction_of_part(acc / len(shifts), a, b)
             return w

@@ -957,6 +957,11 @@ class WallKernelTable:
     slab_stderr: np.ndarray
     params: dict = field(default_factory=dict)
 
+    @functools.cached_property
+    def _wall_effect(self) -> np.ndarray:
+        """``kernel - slab``, what :meth:`kernels` interpolates (computed once: a scene asks per pixel row)."""
+        return self.kernel - self.slab[None, None, :]
+
     def kernels(self, distance_rows, angle_deg) -> np.ndarray:
         """Kernels of pixels at ``distance_rows`` from a wall at ``angle_deg`` (broadcast), ``(..., U)``.
 
@@ -965,7 +970,7 @@ class WallKernelTable:
         the tabulated range take the nearest tabulated angle.
         """
         d, a = np.broadcast_arrays(np.asarray(distance_rows, np.float64), np.asarray(angle_deg, np.float64))
-        pert = self.kernel - self.slab[None, None, :]
+        pert = self._wall_effect
         A, D = self.angles_deg, self.distances_rows
         fa = np.interp(a, A, np.arange(A.size)) if A.size > 1 else np.zeros_like(a)
         ia = np.minimum(np.floor(fa).astype(np.int64), A.size - 1)
