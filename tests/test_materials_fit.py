@@ -1,0 +1,159 @@
+"""Measuring the medium (issue 27): the forward model against direct Monte Carlo, and the fit of mu_s', mu_a.
+
+Ground truth is a medium of known coefficients traced by :func:`planeray.mc.mc_line_profile` with its
+own seed and photon count (not the table's), so the fit is checked against a forward model it was not
+built from; tolerances come from the Monte Carlo standard errors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planeray.materials import fit
+from planeray.mc import mc_line_profile
+from planeray.medium import Medium
+
+MM = 0.3
+OFFSETS = np.arange(-100, 101)
+
+
+@pytest.fixture(scope="module")
+def table():
+    return fit.forward_table()
+
+
+def _direct(mu_s_prime, mu_a, *, mm=MM, n_photons=100_000, seed=11, offsets=OFFSETS):
+    """Direct Monte Carlo kernel in the scenes' unit and its standard error (independent of the table)."""
+    med = Medium.from_reduced(mu_s_prime, mu_a, g=fit.DEFAULT_G, n=fit.DEFAULT_N)
+    p = mc_line_profile(med, n_photons=n_photons, offsets_rows=offsets, mm_per_row=mm, seed=seed)
+    return np.pi * mm * p.radiance, np.pi * mm * p.radiance_stderr
+
+
+def test_the_shipped_table_is_found_without_tracing(monkeypatch):
+    fit._LOADED.clear()
+
+    def no_tracing(**kwargs):
+        raise AssertionError("the shipped forward table was not found")
+
+    monkeypatch.setattr(fit, "build_forward_table", no_tracing)
+    t = fit.forward_table()
+    assert t.kernel.shape == (fit.TABLE_MU_S_PRIME_PER_MM.size, fit.TABLE_MU_A_PER_MM.size, fit.TABLE_REACH_ROWS + 1)
+
+
+@pytest.mark.parametrize(
+    ("mu_s_prime", "mu_a", "mm"),
+    [(1.0, 0.01, 0.3), (0.45, 0.003, 0.3), (3.0, 0.05, 0.3), (0.8, 0.004, 0.5)],  # off the grid; another row size
+)
+def test_the_forward_model_matches_direct_monte_carlo(table, mu_s_prime, mu_a, mm):
+    k_dir, e_dir = _direct(mu_s_prime, mu_a, mm=mm)
+    k_fit = fit.line_kernel(mu_s_prime, mu_a, offsets_rows=OFFSETS, mm_per_row=mm, table=table)
+    # Groups of 9 rows (noise averages out), where the kernel carries light.
+    groups = OFFSETS.reshape(-1, 1)[:198].reshape(22, 9)
+    idx = groups - OFFSETS[0]
+    a, b = k_dir[idx].sum(axis=1), k_fit[idx].sum(axis=1)
+    ea = np.sqrt((e_dir[idx] ** 2).sum(axis=1))
+    keep = a > 1e-3 * a.max()
+    # The table has 10^5 photons per point too and is interpolated: allow 3 % of the value beside 4 sigma.
+    tol = 4.0 * np.sqrt(2.0) * ea[keep] + 0.03 * a[keep]
+    assert np.all(np.abs(a[keep] - b[keep]) <= tol), np.max(np.abs(a[keep] - b[keep]) / tol)
+    # and in total within the window (the reflectance a calibrated fit uses)
+    assert abs(k_fit.sum() - k_dir.sum()) <= 4 * np.sqrt(2 * (e_dir**2).sum()) + 0.015 * k_dir.sum()
+
+
+def test_a_kernel_outside_the_table_is_refused(table):
+    with pytest.raises(ValueError, match="outside the forward table"):
+        fit.line_kernel(50.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+
+
+@pytest.mark.parametrize("calibrated", [True, False])
+def test_the_fit_recovers_the_parameters_of_noiseless_profiles(table, calibrated):
+    truth = [(0.5, 0.002), (1.5, 0.02), (4.0, 0.08)]
+    Y = np.stack([fit.line_kernel(s, a, offsets_rows=OFFSETS, mm_per_row=MM, table=table) for s, a in truth])
+    if not calibrated:
+        Y = Y * 37.0  # camera units: only the shape is used
+    r = fit.fit_profiles(Y, offsets_rows=OFFSETS, mm_per_row=MM, calibrated=calibrated, table=table)
+    s_true, a_true = np.array(truth).T
+    np.testing.assert_allclose(r.mu_s_prime_per_mm, s_true, rtol=2e-3)
+    np.testing.assert_allclose(r.mu_a_per_mm, a_true, rtol=5e-3)
+    assert np.all(r.mask == 0)
+    np.testing.assert_allclose(r.scale, 1.0 if calibrated else 37.0, rtol=5e-3)
+
+
+def test_the_fit_recovers_media_traced_by_direct_monte_carlo(table):
+    """A forward model the fit was not built from (other seed, more photons): the issue's targets."""
+    truth = [(0.6, 0.003), (2.0, 0.03)]
+    Y, S = zip(*(_direct(s, a, n_photons=200_000, seed=5) for s, a in truth))
+    r = fit.fit_profiles(np.stack(Y), offsets_rows=OFFSETS, mm_per_row=MM, sigma=np.stack(S), calibrated=True)
+    s_true, a_true = np.array(truth).T
+    assert np.all(np.abs(r.mu_s_prime_per_mm / s_true - 1) <= 0.10), r.mu_s_prime_per_mm
+    assert np.all(np.abs(r.mu_a_per_mm / a_true - 1) <= 0.25), r.mu_a_per_mm
+
+
+def test_the_standard_errors_match_the_spread_over_noise_seeds(table):
+    clean = fit.line_kernel(1.2, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    sigma = 0.05 * clean.max() * np.ones_like(clean)
+    rng = np.random.default_rng(0)
+    Y = clean[None, :] + sigma[None, :] * rng.standard_normal((120, clean.size))
+    r = fit.fit_profiles(Y, offsets_rows=OFFSETS, mm_per_row=MM, sigma=sigma, calibrated=False, table=table)
+    ok = r.mask == 0
+    assert ok.mean() > 0.9
+    for est, se in ((r.mu_s_prime_per_mm, r.mu_s_prime_se_per_mm), (r.mu_a_per_mm, r.mu_a_se_per_mm)):
+        spread = np.std(np.log(est[ok]), ddof=1)
+        reported = np.median(se[ok] / est[ok])
+        # 120 seeds: the spread's own relative error is ~7 %; allow 25 %.
+        assert 0.75 < reported / spread < 1.25, (reported, spread)
+    # and without sigma, the errors come from the residuals: about the same
+    r2 = fit.fit_profiles(Y[:40], offsets_rows=OFFSETS, mm_per_row=MM, calibrated=False, table=table)
+    ratio = np.median(r2.mu_s_prime_se_per_mm / r.mu_s_prime_se_per_mm[:40])
+    assert 0.8 < ratio < 1.2
+
+
+def test_a_parameter_the_data_do_not_constrain_is_nan_with_its_reason(table):
+    # Weak absorption seen only near the line (|u| <= 8 rows = 2.4 mm, diffusion length ~ 40 mm), shape only:
+    # the profile hardly depends on mu_a -- a flat likelihood.
+    near = np.arange(-8, 9)
+    clean = fit.line_kernel(1.0, 0.0008, offsets_rows=near, mm_per_row=MM, table=table)
+    sigma = 0.02 * clean.max() * np.ones_like(clean)
+    y = clean + sigma * np.random.default_rng(1).standard_normal(clean.size)
+    r = fit.fit_profiles(y, offsets_rows=near, mm_per_row=MM, sigma=sigma, table=table)
+    assert np.isnan(r.mu_a_per_mm[0]) and np.isnan(r.mu_a_se_per_mm[0])
+    assert r.mask[0] & (4 | 16)
+    assert any("mu_a" in why for why in fit.describe_reasons(int(r.mask[0])))
+    # mu_s' is still measured there, and close to the truth
+    assert abs(r.mu_s_prime_per_mm[0] / 1.0 - 1) < 0.15
+
+
+def test_a_profile_without_signal_is_nan_with_its_reason(table):
+    r = fit.fit_profiles(np.zeros((2, OFFSETS.size)), offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    assert np.all(np.isnan(r.mu_s_prime_per_mm)) and np.all(np.isnan(r.mu_a_per_mm))
+    assert np.all(r.mask & 1)
+
+
+def test_a_profile_narrower_than_the_tables_reach_gives_no_mu_s_prime(table):
+    # Coarse rows (3 mm) of a strongly scattering, absorbing medium (per-row mu_s' 9, beyond the table's 2.4):
+    # nearly all the light returns within the line's own bin; the optimum sits at the table's edge.
+    coarse = np.arange(-20, 21)
+    y, e = _direct(3.0, 0.06, mm=3.0, n_photons=20_000, offsets=coarse)
+    r = fit.fit_profiles(y, offsets_rows=coarse, mm_per_row=3.0, sigma=np.maximum(e, 1e-6), table=table)
+    assert np.isnan(r.mu_s_prime_per_mm[0])
+    assert r.mask[0] & (2 | 8 | 32)
+    assert any("mu_s'" in why for why in fit.describe_reasons(int(r.mask[0])))
+
+
+def test_the_calibrated_fit_constrains_mu_a_better_than_the_shape_alone(table):
+    clean = fit.line_kernel(1.0, 0.003, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    sigma = 0.03 * clean.max() * np.ones_like(clean)
+    y = clean + sigma * np.random.default_rng(2).standard_normal(clean.size)
+    cal = fit.fit_profiles(y, offsets_rows=OFFSETS, mm_per_row=MM, sigma=sigma, calibrated=True, table=table)
+    shape = fit.fit_profiles(y, offsets_rows=OFFSETS, mm_per_row=MM, sigma=sigma, calibrated=False, table=table)
+    assert cal.mu_a_se_per_mm[0] < shape.mu_a_se_per_mm[0]
+
+
+def test_bad_inputs_are_refused_in_one_line(table):
+    with pytest.raises(ValueError, match="offsets_rows has 3 values"):
+        fit.fit_profiles(np.ones(5), offsets_rows=[0, 1, 2], mm_per_row=MM, table=table)
+    with pytest.raises(ValueError, match="mm_per_row must be positive"):
+        fit.fit_profiles(np.ones(3), offsets_rows=[0, 1, 2], mm_per_row=0, table=table)
+    with pytest.raises(ValueError, match="sigma must be positive"):
+        fit.fit_profiles(np.ones(3), offsets_rows=[0, 1, 2], mm_per_row=MM, sigma=0.0, table=table)
