@@ -157,3 +157,88 @@ def test_bad_inputs_are_refused_in_one_line(table):
         fit.fit_profiles(np.ones(3), offsets_rows=[0, 1, 2], mm_per_row=0, table=table)
     with pytest.raises(ValueError, match="sigma must be positive"):
         fit.fit_profiles(np.ones(3), offsets_rows=[0, 1, 2], mm_per_row=MM, sigma=0.0, table=table)
+
+
+# ---------------------------------------------------------------- the command
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory, table):
+    """A small transport store of two media side by side (known coefficients), with its row size recorded."""
+    from planeray.io import write_transport
+    from planeray.transport import Transport
+
+    root = tmp_path_factory.mktemp("fitcli")
+    off = np.arange(-60, 61)
+    k1 = fit.line_kernel(0.8, 0.005, offsets_rows=off, mm_per_row=MM, table=table)
+    k2 = fit.line_kernel(2.5, 0.04, offsets_rows=off, mm_per_row=MM, table=table)
+    rng = np.random.default_rng(3)
+    dense = np.empty((8, 8, off.size), np.float32)
+    dense[:, :4] = k1 * 50.0
+    dense[:, 4:] = k2 * 50.0
+    dense *= 1.0 + 0.01 * rng.standard_normal(dense.shape)
+    path = write_transport(Transport(dense, off), root / "cap.zarr", attrs={"mm_per_row": MM})
+    labels = np.zeros((8, 8), np.uint8)
+    labels[:, :4], labels[:, 4:] = 1, 2
+    from planeray.materials import write_label_image
+
+    write_label_image(root / "labels.png", labels, kind="labels")
+    return root, path
+
+
+def test_the_command_writes_maps_with_units_a_figure_and_a_summary(capture):
+    import json
+
+    import tifffile
+
+    from _new_user import runner as cli_runner
+    from planeray.cli import app
+
+    root, cap = capture
+    out = root / "fit1"
+    res = cli_runner.invoke(
+        app, ["materials", "fit", str(cap), "--out", str(out), "--labels", str(root / "labels.png"), "--block", "2"]
+    )
+    assert res.exit_code == 0, res.output
+    meta = json.loads((out / "planeray.json").read_text())
+    assert meta["format"] == "planeray-materials-fit" and "shape only" in meta["calibration"]
+    r1, r2 = meta["regions"]["1"], meta["regions"]["2"]
+    assert abs(r1["mu_s_prime_per_mm"] / 0.8 - 1) < 0.05 and abs(r2["mu_s_prime_per_mm"] / 2.5 - 1) < 0.05
+    assert abs(r2["mu_a_per_mm"] / 0.04 - 1) < 0.25
+    with tifffile.TiffFile(out / "mu_a_per_mm.tif") as tif:
+        page = tif.pages[0]
+        assert page.dtype == np.float32
+        assert json.loads(page.description)["unit"] == "1/mm"
+        m = page.asarray()
+    assert np.nanmedian(m[:, 4:]) == pytest.approx(0.04, rel=0.25)
+    assert (out / "fit.png").stat().st_size > 10_000
+    # the data promises: an existing output is refused without --overwrite, replaced with it
+    again = cli_runner.invoke(app, ["materials", "fit", str(cap), "--out", str(out)])
+    assert again.exit_code == 1 and "already exists" in again.output
+    again = cli_runner.invoke(app, ["materials", "fit", str(cap), "--out", str(out), "--overwrite", "--block", "8"])
+    assert again.exit_code == 0, again.output
+
+
+@pytest.mark.parametrize(
+    ("extra", "needle"),
+    [
+        (["--block", "0"], "--block"),
+        (["--n", "2.5"], "--n"),
+        (["--mm-per-row", "-1"], "--mm-per-row"),
+        (["--white-albedo", "1.5"], "--white-albedo"),
+        (["--labels", "{d}/nothing.png"], "--labels"),
+        (["--white-reference", "{d}/nothing.zarr"], "--white-reference"),
+    ],
+)
+def test_bad_command_inputs_are_refused_in_one_line_and_touch_nothing(capture, tmp_path, extra, needle):
+    from _new_user import run_bad, user_files
+
+    root, cap = capture
+    user_files(tmp_path)
+    run_bad(["materials", "fit", cap, "--out", "{d}/fit", *extra], folder=tmp_path, option=needle)
+
+
+def test_a_user_folder_is_never_the_output(capture, tmp_path):
+    from _new_user import run_bad, user_files
+
+    root, cap = capture
+    user_files(tmp_path)
+    run_bad(["materials", "fit", cap, "--out", "{d}", "--overwrite"], folder=tmp_path)
