@@ -14,7 +14,7 @@ weights, Henyey-Greenstein scattering, a Fresnel top face of relative index ``n`
 diffusion hand-off deep in the medium), in the scenes' unit -- Lambertian-equivalent
 reflectance per offset bin, ``pi`` x normal-view radiance x bin width (a white
 Lambertian surface sums to 1) -- precomputed on a grid (:class:`ForwardTable`) and
-interpolated smoothly (cubic) in ``log K`` over ``(log mu_s', log mu_a)``.
+interpolated smoothly (cubic) in ``log K`` over ``(log mu_s', sqrt(mu_a))``.
 
 * **Units and the row size.**  Radiative transfer has no length scale of its own: the
   kernel of a medium ``(mu_s', mu_a)`` binned in rows of ``h`` mm equals the kernel of
@@ -122,6 +122,9 @@ TABLE_REACH_ROWS = 128
 TABLE_PHOTONS = 100_000
 #: A parameter whose relative standard error exceeds this is not identifiable (NaN).
 MAX_RELATIVE_SE = 0.5
+#: Relative uncertainty of the forward model (table noise and interpolation; the forward-model
+#: test allows 3 % against direct Monte Carlo), added in quadrature to the data's noise.
+MODEL_RELATIVE_SD = 0.02
 #: Reasons for a NaN, as bits of the identifiability mask.
 REASONS = {
     1: "no signal: too few positive samples",
@@ -132,7 +135,7 @@ REASONS = {
     32: "profile narrower than a bin: shape carries no mu_s'",
     64: "fit did not converge",
 }
-_LOG_FLOOR = 1e-9  # kernel values below this fraction of the kernel's peak are clamped (log interpolation)
+_LOG_FLOOR = 1e-30  # kernel values below this fraction of the kernel's peak are clamped (log interpolation)
 _TABLE_VERSION = 1
 
 
@@ -169,8 +172,10 @@ class ForwardTable:
         floor = _LOG_FLOOR * k.max(axis=-1, keepdims=True)
         logk = np.log(np.maximum(k, floor))
         # Tensor-product cubic (not-a-knot) interpolating spline, built once: interpolate along
-        # log mu_s', then the coefficients along log mu_a.
-        xs, xa = np.log(self.mu_s_prime_per_row), np.log(self.mu_a_per_row)
+        # log mu_s', then the coefficients along sqrt(mu_a) -- the far tail falls as
+        # exp(-sigma_tr x), sigma_tr ~ sqrt(3 mu_a mu_s'), so log K is nearly linear in sqrt(mu_a)
+        # (in log mu_a it is exponential, and a cubic through it missed the tail by up to 50 %).
+        xs, xa = np.log(self.mu_s_prime_per_row), np.sqrt(self.mu_a_per_row)
         bs = make_interp_spline(xs, logk, k=3, axis=0)
         ba = make_interp_spline(xa, bs.c, k=3, axis=1)
         object.__setattr__(self, "_interp", NdBSpline((bs.t, ba.t), np.moveaxis(ba.c, 0, 1), k=3))
@@ -183,7 +188,7 @@ class ForwardTable:
 
     def log_kernel_per_row(self, log_s, log_a) -> np.ndarray:
         """``log K`` at per-row log-coefficients (broadcast), ``(..., U)``; inside the grid only."""
-        pts = np.stack(np.broadcast_arrays(np.asarray(log_s, float), np.asarray(log_a, float)), axis=-1)
+        pts = np.stack(np.broadcast_arrays(np.asarray(log_s, float), np.exp(0.5 * np.asarray(log_a, float))), axis=-1)
         return self._interp(pts)
 
     def save(self, path) -> Path:
@@ -416,6 +421,13 @@ class FitResult:
     calibrated: bool
 
 
+def _cell_rel(table_rel, gs, ga, log_s, log_a):
+    """Largest table relative error per offset over the grid cell that holds ``(log_s, log_a)``."""
+    i = int(np.clip(np.searchsorted(gs, log_s) - 1, 0, gs.size - 2))
+    j = int(np.clip(np.searchsorted(ga, log_a) - 1, 0, ga.size - 2))
+    return table_rel[i : i + 2, j : j + 2].max(axis=(0, 1))
+
+
 def describe_reasons(bits: int) -> list[str]:
     """The reasons (:data:`REASONS`) set in a mask value."""
     return [text for bit, text in REASONS.items() if int(bits) & bit]
@@ -431,6 +443,7 @@ def fit_profiles(
     rows_per_camera_row=1.0,
     table: ForwardTable | None = None,
     max_relative_se=MAX_RELATIVE_SE,
+    model_relative_sd=MODEL_RELATIVE_SD,
 ) -> FitResult:
     """Fit ``mu_s'`` and ``mu_a`` to line-kernel profiles (weighted least squares in log-parameters).
 
@@ -454,6 +467,11 @@ def fit_profiles(
         Default :func:`forward_table`.
     max_relative_se : float
         A parameter with a larger relative standard error is NaN (reason in ``mask``).
+    model_relative_sd : float
+        Relative uncertainty of the forward model's interpolation; with the table's own Monte
+        Carlo relative error per offset (at the start grid point) it is added in quadrature to
+        ``sigma`` (as a share of the data): without it, precise samples would fit the table's
+        own errors.  Only with ``sigma``.
 
     Returns
     -------
@@ -469,6 +487,10 @@ def fit_profiles(
     S = np.ones_like(Y) if sigma is None else np.broadcast_to(np.asarray(sigma, np.float64), Y.shape)
     if np.any(~(S > 0)):
         raise InputError("sigma must be positive everywhere")
+    # The table's own relative Monte Carlo error per offset (added to sigma at the start grid point).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        table_rel = np.clip(np.nan_to_num(table.kernel_stderr / table.kernel, nan=1.0, posinf=1.0), 0.0, 1.0)
+    u_tab = np.minimum(np.abs(offsets).astype(np.int64), table.offsets_rows[-1])
     h = float(mm_per_row)
     foot = _footprint(rows_per_camera_row)
     (s0, s1), (a0, a1) = table.bounds_per_row
@@ -499,6 +521,7 @@ def fit_profiles(
             c_g = np.maximum((wK @ wy) / np.maximum((wK * wK).sum(axis=1), 1e-300), 1e-300)
         cost_g = ((wy[None, :] - c_g[:, None] * wK) ** 2).sum(axis=1)
         g0 = int(np.argmin(cost_g))
+        sd0 = sd
         x0 = list(starts[g0])
         lo_p, hi_p = list(lo), list(hi)
         if not calibrated:
@@ -506,14 +529,23 @@ def fit_profiles(
             lo_p.append(-np.inf)
             hi_p.append(np.inf)
         x0 = np.clip(x0, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
-
-        def resid(x, y=y, sd=sd, ok=ok):
-            k = _kernel_per_row(table, x[0], x[1], offsets, foot)
-            c = math.exp(x[2]) if len(x) > 2 else 1.0
-            return np.where(ok, (c * k - y) / sd, 0.0)
-
+        # Two passes when sigma is given: the model's own error (the table's Monte Carlo error per
+        # offset, largest of the grid cell around the estimate, plus the interpolation share) joins
+        # the data's; first that of the start's cell, then of the first estimate's.
+        passes = 2 if sigma is not None and model_relative_sd >= 0 else 1
         try:
-            res = least_squares(resid, x0, bounds=(lo_p, hi_p), method="trf", x_scale=1.0, diff_step=1e-4)
+            for _ in range(passes):
+                if passes == 2:
+                    rel = float(model_relative_sd) + _cell_rel(table_rel, gs, ga, x0[0], x0[1])[u_tab]
+                    sd = np.hypot(sd0, rel * np.nan_to_num(np.abs(y)))
+
+                def resid(x, y=y, sd=sd, ok=ok):
+                    k = _kernel_per_row(table, x[0], x[1], offsets, foot)
+                    c = math.exp(x[2]) if len(x) > 2 else 1.0
+                    return np.where(ok, (c * k - y) / sd, 0.0)
+
+                res = least_squares(resid, x0, bounds=(lo_p, hi_p), method="trf", x_scale=1.0, diff_step=1e-4)
+                x0 = np.clip(res.x, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
         except (ValueError, np.linalg.LinAlgError):
             mask[p] |= 64
             continue
