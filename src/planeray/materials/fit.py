@@ -471,7 +471,8 @@ def fit_profiles(
         Relative uncertainty of the forward model's interpolation; with the table's own Monte
         Carlo relative error per offset (at the start grid point) it is added in quadrature to
         ``sigma`` (as a share of the data): without it, precise samples would fit the table's
-        own errors.  Only with ``sigma``.
+        own errors.  Only with ``sigma``; 0 leaves the model's error out (data made by the
+        table itself).
 
     Returns
     -------
@@ -532,7 +533,7 @@ def fit_profiles(
         # Two passes when sigma is given: the model's own error (the table's Monte Carlo error per
         # offset, largest of the grid cell around the estimate, plus the interpolation share) joins
         # the data's; first that of the start's cell, then of the first estimate's.
-        passes = 2 if sigma is not None and model_relative_sd >= 0 else 1
+        passes = 2 if sigma is not None and model_relative_sd > 0 else 1
         try:
             for _ in range(passes):
                 if passes == 2:
