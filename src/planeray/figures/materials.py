@@ -375,6 +375,7 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
     axp = fig.add_subplot(gs[1, :])
     order = sorted(result.profiles, key=lambda r: -result.regions[r]["pixels"])[:max_profiles]
     x = np.asarray(result.offsets_rows) * float(mm_per_row)
+    top = 0.0
     for k, region in enumerate(order):
         y, s, model = result.profiles[region]
         info = result.regions[region]
@@ -385,12 +386,15 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
             f"+- {fmt(info['mu_s_prime_se_per_mm'])}, mu_a {fmt(info['mu_a_per_mm'])} +- {fmt(info['mu_a_se_per_mm'])} /mm"
         )
         ok = np.isfinite(y) & (y > 0)
-        axp.errorbar(x[ok], y[ok], yerr=s[ok], fmt=".", ms=3, color=colour, alpha=0.6, elinewidth=0.6)
+        axp.plot(x[ok], y[ok], ".", ms=3, color=colour, alpha=0.6)
+        top = max(top, float(np.nanmax(y[ok]))) if ok.any() else top
         if np.all(np.isfinite(model)):
             axp.plot(x, model, "-", color=colour, lw=1.2, label=label)
         else:
             axp.plot([], [], ".", color=colour, label=label)
     axp.set_yscale("log")
+    if top > 0:
+        axp.set_ylim(top * 1e-6, top * 2.0)  # six decades: what a camera's dynamic range sees
     axp.set_xlabel("offset from the lit line (mm)")
     axp.set_ylabel("transport (reflectance per row)" if result.calibrated else "transport (camera units)")
     axp.set_title(
@@ -398,6 +402,6 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
         + ("calibrated by the white reference" if result.calibrated else "shape only (no white reference)"),
         fontsize=9,
     )
-    axp.legend(fontsize=7, frameon=False)
+    axp.legend(fontsize=7, frameon=True, framealpha=0.85, loc="upper right")
     fig.tight_layout()
     return finish(fig, out)

@@ -581,7 +581,7 @@ def fit_profiles(
         if k0[1] < 0.05 * k0[0] and float(rows_per_camera_row) <= 1.0 + 1e-12:
             mask[p] |= 32
     bad_s = (mask & (1 | 2 | 8 | 32 | 64)) > 0
-    bad_a = (mask & (1 | 4 | 16 | 64)) > 0
+    bad_a = (mask & (1 | 2 | 4 | 16 | 64)) > 0  # mu_a given a mu_s' stuck at the edge is no estimate
     for k in ("s", "se_s"):
         out[k][bad_s] = np.nan
     for k in ("a", "se_a"):
