@@ -182,6 +182,9 @@ def capture(tmp_path_factory, table):
     dense[:, 4:] = k2 * 50.0
     dense *= 1.0 + 0.01 * rng.standard_normal(dense.shape)
     path = write_transport(Transport(dense, off), root / "cap.zarr", attrs={"mm_per_row": MM})
+    white = np.zeros_like(dense)
+    white[:, :, off == 0] = 50.0 * 0.99  # a Lambertian card of albedo 0.99, same camera units
+    write_transport(Transport(white, off), root / "white.zarr", attrs={"mm_per_row": MM})
     labels = np.zeros((8, 8), np.uint8)
     labels[:, :4], labels[:, 4:] = 1, 2
     from planeray.materials import write_label_image
@@ -249,3 +252,23 @@ def test_a_user_folder_is_never_the_output(capture, tmp_path):
     root, cap = capture
     user_files(tmp_path)
     run_bad(["materials", "fit", cap, "--out", "{d}", "--overwrite"], folder=tmp_path)
+
+
+def test_the_white_reference_calibrates_the_magnitude(capture):
+    import json
+
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    root, cap = capture
+    out = root / "fit_white"
+    args = ["materials", "fit", str(cap), "--out", str(out), "--labels", str(root / "labels.png")]
+    res = CliRunner().invoke(app, [*args, "--white-reference", str(root / "white.zarr"), "--white-albedo", "0.99"])
+    assert res.exit_code == 0, res.output
+    meta = json.loads((out / "planeray.json").read_text())
+    assert "white reference" in meta["calibration"]
+    for region, (s_true, a_true) in {"1": (0.8, 0.005), "2": (2.5, 0.04)}.items():
+        r = meta["regions"][region]
+        assert abs(r["mu_s_prime_per_mm"] / s_true - 1) < 0.05, r
+        assert abs(r["mu_a_per_mm"] / a_true - 1) < 0.10, r
