@@ -742,9 +742,13 @@ def fit_transport(
                 maps[name][sl][m] = val[i]
             maps["mask"][sl][m] = res.mask[i]
         # The region: its mean profile, noise from the spread of its blocks.
-        y = np.nanmean(Y, axis=0) if len(blocks) > 1 else Y[0]
-        s = np.nanstd(Y, axis=0, ddof=1) / math.sqrt(len(blocks)) if len(blocks) > 2 else S[0]
-        s = np.where(np.isfinite(s) & (s > 0), s, np.nanmax(S))
+        fin = np.isfinite(Y)
+        cnt = fin.sum(axis=0)
+        Y0 = np.where(fin, Y, 0.0)
+        y = np.where(cnt > 0, Y0.sum(axis=0) / np.maximum(cnt, 1), np.nan)  # nanmean without the warning
+        var = np.where(fin, (Y0 - y) ** 2, 0.0).sum(axis=0) / np.maximum(cnt - 1, 1)
+        s = np.sqrt(var) / np.sqrt(np.maximum(cnt, 1)) if len(blocks) > 2 else S[0]
+        s = np.where(np.isfinite(s) & (s > 0) & (cnt > 2), s, np.nanmax(S))
         s = np.maximum(s, 1e-3 * np.nanmax(np.abs(y)))
         rr = fit_profiles(
             y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=s, calibrated=calibrated,
