@@ -62,8 +62,8 @@ def test_the_forward_model_matches_direct_monte_carlo(table, mu_s_prime, mu_a, m
 
 
 def test_a_kernel_outside_the_table_is_refused(table):
-    with pytest.raises(ValueError, match="outside the forward table"):
-        fit.line_kernel(50.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    with pytest.raises(ValueError, match="outside the forward model"):
+        fit.line_kernel(500.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
 
 
 @pytest.mark.parametrize("calibrated", [True, False])
