@@ -292,3 +292,67 @@ def test_a_stack_is_demultiplexed_and_orders_the_milks_by_scattering(tmp_path):
     s = [regions[c]["mu_s_prime_per_mm"] for c in ("1", "2", "3")]  # fat-free, 2 %, whole: 0.89, 2.49, 4.55
     assert None not in s and s[0] < s[1] < s[2], s
     assert regions["6"]["mu_s_prime_per_mm"] is None  # the matte table is no scattering medium
+
+
+# ---------------------------------------------------------------- walls and beyond the table
+def test_container_wall_distances_are_halfway_to_the_next_label():
+    lab = np.zeros((6, 7), int)
+    lab[1:4, 2:6] = 1  # rows 1-3, columns 2-5
+    lab[4:, :] = 2  # touches the image's border below: no wall there
+    d = fit.container_wall_distances(lab, rows_per_camera_row=2.0)
+    # pixel (1, 2): 3 pixels of its run downward -> wall 2.5 px = 5 rows; up 0.5 px; right 3.5 px; left 0.5 px
+    np.testing.assert_allclose(d[1, 2], [5.0, 1.0, 7.0, 1.0])
+    np.testing.assert_allclose(d[2, 4], [3.0, 3.0, 3.0, 5.0])
+    assert np.all(np.isinf(d[5, 3, [0, 2, 3]])) and d[5, 3, 1] == pytest.approx(3.0)  # only the wall above
+    assert np.all(np.isnan(d[0, 0]))  # not a container
+
+
+@pytest.mark.parametrize("angle", [0.0, 90.0])
+def test_the_wall_model_carries_the_monte_carlo_walls_effect(table, angle):
+    """The fit's wall model (diffusion images on the table's kernel) against the scene's brute-force Monte Carlo
+    wall kernels (:mod:`planeray.mc.wall`, shipped): 2 % milk, a wall 12 rows (3.6 mm) from the pixel."""
+    from planeray.scenes.materials import material_tables
+
+    wt = material_tables()[2]
+    med = wt.medium
+    u = np.arange(-120, 121)
+    sel = np.searchsorted(wt.offsets_rows, u)
+    mc_effect = wt.kernels(12.0, angle)[sel] - wt.slab[sel]
+    walls = np.array([[12.0, angle, 1.0, 1.0]])
+    kw = dict(offsets_rows=u, mm_per_row=wt.mm_per_row, table=table)
+    free = fit.line_kernel(med.sigma_s_prime, med.sigma_a, **kw)
+    effect = fit.line_kernel(med.sigma_s_prime, med.sigma_a, walls=walls, **kw) - free
+    size = np.abs(mc_effect).sum()
+    assert size > 0.05 * wt.slab[sel].sum()  # the wall matters: 8 % of the kernel
+    assert np.abs(effect - mc_effect).sum() < 0.2 * size  # and the model carries >= 80 % of it (measured 91-96 %)
+
+
+def test_the_fit_models_the_trays_walls_and_reaches_beyond_the_table():
+    """The materials scene's ground truth (Monte Carlo kernels with the trays' walls): 2 % milk's mu_a is read
+    ~1.7x too high without the walls and within 25 % with them; toothpaste (mu_s' 16 /mm, beyond the table's
+    8 /mm) is measured by the dipole beyond the table."""
+    from planeray.optical_data import material_medium
+    from planeray.scenes import make_scene
+
+    sc = make_scene("materials", (40, 40), projector_rows=300, seed=0)
+    mm = sc.params["mm_per_row"]
+    material = np.where(sc.maps["material"] == 6, 0, sc.maps["material"])
+    labels = np.where(np.isin(material, [2, 4]), material, 0)
+    kw = dict(mm_per_row=mm, labels=labels, block_px=40)
+    walls = fit.fit_transport(sc.transport, containers=material, **kw).regions
+    free = fit.fit_transport(sc.transport, **kw).regions
+    milk, paste = material_medium(2), material_medium(4)
+    assert abs(walls[2]["mu_a_per_mm"] / milk.sigma_a - 1) < 0.25, walls[2]
+    assert free[2]["mu_a_per_mm"] / milk.sigma_a - 1 > 0.4, free[2]
+    assert abs(walls[2]["mu_s_prime_per_mm"] / milk.sigma_s_prime - 1) < 0.10, walls[2]
+    assert abs(walls[4]["mu_s_prime_per_mm"] / paste.sigma_s_prime - 1) < 0.10, walls[4]
+
+
+def test_beyond_the_table_the_dipole_takes_over_continuously(table):
+    s1 = table.mu_s_prime_per_row[-1] / MM  # the table's largest mu_s', 1/mm
+    kw = dict(offsets_rows=np.arange(-30, 31), mm_per_row=MM, table=table)
+    at, beyond = fit.line_kernel(s1, 0.02, **kw), fit.line_kernel(s1 * 1.001, 0.02, **kw)
+    np.testing.assert_allclose(beyond, at, rtol=5e-3)
+    # and it narrows as mu_s' grows (more light near the line)
+    far = fit.line_kernel(4 * s1, 0.02, **kw)
+    assert far[30] / far.sum() > at[30] / at.sum()

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -93,7 +94,6 @@ def fig10_materials(size=(96, 96), variants=("none", "walls", "exclude"), near_m
     from planeray.materials.fit import container_wall_distances
     from planeray.optical_data import MATERIAL_CLASSES, material_medium
     from planeray.scenes import make_scene
-    from planeray.transport import Transport
 
     sc = make_scene("materials", size, projector_rows=720, seed=0)
     material = np.where(sc.maps["material"] == 6, 0, sc.maps["material"]).astype(np.int64)
@@ -111,8 +111,32 @@ def fig10_materials(size=(96, 96), variants=("none", "walls", "exclude"), near_m
                 dmin = np.nanmin(d, axis=-1)
                 dense = np.array(tr.dense, np.float64)
                 dense[np.abs(tr.offsets_rows)[None, None, :] >= dmin[..., None]] = np.nan
-                transport = Transport(dense, tr.offsets_rows, tr.geometry)
-            r = fit.fit_transport(transport, mm_per_row=MM, labels=labels, block_px=BLOCK, containers=containers)
+                transport = SimpleNamespace(dense=dense, offsets_rows=tr.offsets_rows, geometry=tr.geometry)
+            if variant == "exclude":  # region fits only: each region's mean over the pixels that keep a sample
+                regions = {}
+                for cid in MATERIAL_CLASSES:
+                    m = labels == cid
+                    px = transport.dense[m]
+                    cnt = np.isfinite(px).sum(axis=0)
+                    y = np.where(cnt > 0, np.nansum(px, axis=0) / np.maximum(cnt, 1), np.nan)
+                    y[(y == 0) | (cnt < 0.1 * m.sum())] = np.nan
+                    rr = fit.fit_profiles(
+                        y,
+                        offsets_rows=tr.offsets_rows,
+                        mm_per_row=MM,
+                        sigma=0.01 * np.nanmax(y),
+                        rows_per_camera_row=tr.geometry.rows_per_camera_row,
+                    )
+                    regions[cid] = dict(
+                        mu_s_prime_per_mm=fit._num(rr.mu_s_prime_per_mm[0]),
+                        mu_a_per_mm=fit._num(rr.mu_a_per_mm[0]),
+                        mu_s_prime_se_per_mm=fit._num(rr.mu_s_prime_se_per_mm[0]),
+                        mu_a_se_per_mm=fit._num(rr.mu_a_se_per_mm[0]),
+                        pixels=int(m.sum()),
+                    )
+                r = SimpleNamespace(regions=regions)
+            else:
+                r = fit.fit_transport(transport, mm_per_row=MM, labels=labels, block_px=BLOCK, containers=containers)
             res = {}
             for cid, name in MATERIAL_CLASSES.items():
                 med = material_medium(cid)

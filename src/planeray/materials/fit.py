@@ -20,7 +20,7 @@ interpolated smoothly (cubic) in ``log K`` over ``(log mu_s', sqrt(mu_a))``.
   kernel of a medium ``(mu_s', mu_a)`` binned in rows of ``h`` mm equals the kernel of
   ``(mu_s' h / h0, mu_a h / h0)`` binned in rows of ``h0`` (every length scaled by
   ``h / h0``; the binned fractions are dimensionless).  The table is therefore stored in
-  **per-row** coefficients ``mu h``; built over ``mu_s'`` 0.2-8 /mm and ``mu_a``
+  **per-row** coefficients ``mu h``; built over ``mu_s'`` 0.126-8 /mm and ``mu_a``
   0.0005-0.2 /mm at the materials scene's 0.3 mm per row (:data:`TABLE_MM_PER_ROW`), it
   serves any ``mm_per_row`` whose per-row coefficients fall inside it.
 * **Anisotropy ``g``: fixed** (:data:`DEFAULT_G` = 0.8, the table's ``g``), not fitted
@@ -119,7 +119,7 @@ DEFAULT_N = 1.33
 #: Row size (mm) at which the table's mm^-1 ranges are stated.
 TABLE_MM_PER_ROW = 0.3
 #: Grid of the shipped table, mm^-1 at :data:`TABLE_MM_PER_ROW` (log spaced).
-TABLE_MU_S_PRIME_PER_MM = np.geomspace(0.2, 8.0, 9)
+TABLE_MU_S_PRIME_PER_MM = np.geomspace(0.2 / 40.0 ** (1 / 8), 8.0, 10)  # 0.126-8: the soap's 0.2 inside
 TABLE_MU_A_PER_MM = np.geomspace(0.0005, 0.2, 9)
 #: Offsets of the table, projector rows (the kernel is symmetric: 0 .. reach).
 TABLE_REACH_ROWS = 128
@@ -288,24 +288,29 @@ def build_forward_table(
     for name, v in (("mu_s_prime_per_mm", s), ("mu_a_per_mm", a)):
         if v.size < 4 or np.any(np.diff(v) <= 0) or v[0] <= 0:
             raise InputError(f"{name} must be >= 4 increasing positive values")
-    offsets = np.arange(-int(reach_rows), int(reach_rows) + 1)
     K = np.empty((s.size, a.size, int(reach_rows) + 1))
     E = np.empty_like(K)
-    mid = int(reach_rows)
     for i, si in enumerate(s):
         for j, aj in enumerate(a):
-            # Per-row coefficients are mm^-1 in rows of 1 mm: trace at mm_per_row = 1.
-            med = Medium.from_reduced(float(si), float(aj), g=float(g), n=float(n))
-            p = mc_line_profile(med, n_photons=int(n_photons), offsets_rows=offsets, mm_per_row=1.0, seed=seed)
-            r, e = p.radiance, p.radiance_stderr
-            K[i, j] = np.pi * 0.5 * (r[mid:] + r[mid::-1])
-            E[i, j] = np.pi * 0.5 * np.hypot(e[mid:], e[mid::-1])
-            K[i, j, 0] = np.pi * r[mid]
-            E[i, j, 0] = np.pi * e[mid]
+            K[i, j], E[i, j] = _trace_point(si, aj, reach_rows=reach_rows, g=g, n=n, n_photons=n_photons, seed=seed)
             if progress is not None:
                 progress(1)
     params = dict(n_photons=int(n_photons), seed=int(seed), table_version=_TABLE_VERSION, source="mc_line_profile")
     return ForwardTable(s, a, np.arange(int(reach_rows) + 1), K, E, float(g), float(n), params)
+
+
+def _trace_point(s_per_row, a_per_row, *, reach_rows, g, n, n_photons, seed):
+    """One grid point of the table: the kernel on offsets ``0 .. reach`` (sides averaged) and its error."""
+    offsets = np.arange(-int(reach_rows), int(reach_rows) + 1)
+    mid = int(reach_rows)
+    # Per-row coefficients are mm^-1 in rows of 1 mm: trace at mm_per_row = 1.
+    med = Medium.from_reduced(float(s_per_row), float(a_per_row), g=float(g), n=float(n))
+    p = mc_line_profile(med, n_photons=int(n_photons), offsets_rows=offsets, mm_per_row=1.0, seed=seed)
+    r, e = p.radiance, p.radiance_stderr
+    k = np.pi * 0.5 * (r[mid:] + r[mid::-1])
+    err = np.pi * 0.5 * np.hypot(e[mid:], e[mid::-1])
+    k[0], err[0] = np.pi * r[mid], np.pi * e[mid]
+    return k, err
 
 
 _LOADED: dict = {}
@@ -314,7 +319,7 @@ _LOADED: dict = {}
 def forward_table(*, g=DEFAULT_G, n=DEFAULT_N, n_photons=TABLE_PHOTONS, seed=0, progress=None) -> ForwardTable:
     """The default forward table: shipped (:data:`planeray.mc.cache.TABLES_DIR`), cached, or traced once.
 
-    Other ``g`` or ``n`` than the shipped ones trace the table (81 Monte Carlo runs,
+    Other ``g`` or ``n`` than the shipped ones trace the table (90 Monte Carlo runs,
     about 6 minutes on 2 cores) and cache it under :func:`planeray.mc.cache.cache_dir`.
     """
     s = TABLE_MU_S_PRIME_PER_MM * TABLE_MM_PER_ROW
