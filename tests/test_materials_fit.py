@@ -305,26 +305,6 @@ def test_the_white_reference_calibrates_the_magnitude(capture):
         assert abs(r["mu_a_per_mm"] / a_true - 1) < 0.10, r
 
 
-def test_a_stack_is_demultiplexed_and_orders_the_milks_by_scattering(tmp_path):
-    """The STACK path end to end on a small noisy capture: the milks' fitted mu_s' rank as their published ones."""
-    import json
-
-    from typer.testing import CliRunner
-
-    from planeray.cli import app
-    from planeray.experiments.materials import simulate_capture
-
-    simulate_capture(tmp_path / "cap", size=(32, 32), seed=0)
-    out = tmp_path / "fit"
-    args = ["materials", "fit", str(tmp_path / "cap" / "stack.zarr"), "--out", str(out)]
-    res = CliRunner().invoke(app, [*args, "--labels", str(tmp_path / "cap" / "labels.png")])
-    assert res.exit_code == 0, (res.output, res.stderr if res.stderr_bytes else "", repr(res.exception))
-    regions = json.loads((out / "planeray.json").read_text())["regions"]
-    s = [regions[c]["mu_s_prime_per_mm"] for c in ("1", "2", "3")]  # fat-free, 2 %, whole: 0.89, 2.49, 4.55
-    assert None not in s and s[0] < s[1] < s[2], s
-    assert regions["6"]["mu_s_prime_per_mm"] is None  # the matte table is no scattering medium
-
-
 # ---------------------------------------------------------------- walls and beyond the table
 def test_container_wall_distances_are_halfway_to_the_next_label():
     lab = np.zeros((6, 7), int)

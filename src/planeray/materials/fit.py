@@ -397,6 +397,7 @@ def _kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot):
 WALL_ANGLES_DEG = (0.0, 90.0)
 _Y_GRID = 200  # points of the along-line grid of the half-line integrals (sinh spaced)
 _GL_X = (-0.25, 0.25)  # midpoints across an offset bin (the ratio of two binned kernels), parallel walls
+_WALL_BINS_PER_E_FOLD = 20  # wall distances of a group pooled within 5 % (1 + d)
 _WALL_PASSES = 12  # at most, of the fixed point of the walls' effect (fit_profiles)
 _L_STEP = 0.125  # rows: the dipole's line kernel is interpolated from this grid (parallel walls)
 
@@ -604,16 +605,22 @@ def container_wall_distances(containers, *, rows_per_camera_row) -> np.ndarray:
 _WALL_DIRECTIONS = ((0.0, 1.0), (0.0, -1.0), (90.0, 1.0), (90.0, -1.0))
 
 
-def _group_walls(distances):
-    """The walls of a group of pixels (their mean kernel): ``(M, 4)`` rows of :func:`fit_profiles`' ``walls``."""
+def _group_walls(distances, per_e_fold=_WALL_BINS_PER_E_FOLD):
+    """The walls of a group of pixels (their mean kernel): ``(M, 4)`` rows of :func:`fit_profiles`' ``walls``.
+
+    Distances are pooled in bins of ``1 / per_e_fold`` in ``log(1 + d)`` (their weighted mean kept), so
+    a large region costs a few dozen walls per direction, not one per pixel row or column.
+    """
     d = np.asarray(distances, np.float64).reshape(-1, 4)
     n = d.shape[0]
     rows = []
     for k, (ang, side) in enumerate(_WALL_DIRECTIONS):
         v = d[:, k][np.isfinite(d[:, k])]
         if v.size:
-            u, cnt = np.unique(v, return_counts=True)
-            rows.append(np.stack([u, np.full(u.size, ang), np.full(u.size, side), cnt / n], axis=1))
+            key, inv = np.unique(np.round(np.log1p(v) * per_e_fold), return_inverse=True)
+            cnt = np.bincount(inv, minlength=key.size)
+            mean = np.bincount(inv, weights=v, minlength=key.size) / cnt
+            rows.append(np.stack([mean, np.full(key.size, ang), np.full(key.size, side), cnt / n], axis=1))
     return np.concatenate(rows) if rows else np.zeros((0, 4))
 
 
