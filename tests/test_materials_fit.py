@@ -335,7 +335,7 @@ def test_the_wall_model_carries_the_monte_carlo_walls_effect(table, angle):
     effect = fit.line_kernel(med.sigma_s_prime, med.sigma_a, walls=walls, **kw) - free
     size = np.abs(mc_effect).sum()
     assert size > 0.05 * wt.slab[sel].sum()  # the wall matters: 8 % of the kernel
-    assert np.abs(effect - mc_effect).sum() < 0.2 * size  # and the model carries >= 80 % of it (measured 91-96 %)
+    assert np.abs(effect - mc_effect).sum() < 0.2 * size  # the model carries >= 80 % of it (measured 91-96 %)
 
 
 @pytest.mark.parametrize("class_id", [1, 2])  # fat-free and 2 % milk: the weakest absorbers, the largest wall effects

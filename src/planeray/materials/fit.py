@@ -47,7 +47,7 @@ Beyond the table and container walls
   walls' *relative* effect comes from diffusion theory -- the dipole and its mirror images across
   the wall's extrapolated boundary, opposite sign (Haskell et al. 1994; the method of
   :mod:`planeray.mc.wall`'s continuation) -- applied to the table's kernel,
-  ``K_wall = K L_wall / L``; it carries 85-97 % of the brute-force Monte Carlo wall effect
+  ``K_wall = K L_wall / L``; it carries 78-99 % of the brute-force Monte Carlo wall effect
   (tested against the materials scene's shipped wall tables).
 
 Calibration
@@ -404,8 +404,7 @@ def _kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot):
 # with its mirror images across the wall's extrapolated boundary, opposite sign (Haskell et al.
 # 1994; the same method of images as planeray.mc.wall's continuation) -- and applies it to the
 # Monte Carlo table kernel: K_wall(u) = K(u) * L_wall(u) / L(u), L the dipole's line kernels.
-# Against the scene's wall tables (tools/validate_fit.py --walls) this ratio carries 85-97 % of the
-# wall's effect.
+# Against the scene's Monte Carlo wall tables this ratio carries 78-99 % of the wall's effect (L1).
 
 #: Wall angles the fit models: parallel to the projector's lines (0) and across them (90 degrees).
 WALL_ANGLES_DEG = (0.0, 90.0)
