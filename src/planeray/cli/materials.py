@@ -381,6 +381,215 @@ def _unclassified_by_class(seg, truth, confusion) -> dict:
     return out
 
 
+def _read_fit_input(path: Path, option: str, *, with_progress: bool = True):
+    """``(transport, metadata)`` of a transport store, or of a stack demultiplexed (floor removed) first."""
+    from ..io.atomic import planeray_output_kind
+    from ..io.transport_store import read_transport
+    from ..materials.model import capture_transport
+
+    if not Path(path).exists():
+        raise ValueError(f"{option} {path}: no such file or folder")
+    if planeray_output_kind(path) == "transport":
+        transport, attrs = read_transport(path)
+        return transport, dict(attrs)
+    st = _load_stack(path)
+    if with_progress:
+        with progress_bar() as bar:
+            task = bar.add_task(f"demultiplexing {Path(path).name} (rows)", total=st.shape[0])
+            transport = capture_transport(st, progress=lambda n: bar.advance(task, n))
+    else:
+        transport = capture_transport(st)
+    return transport, dict(st.metadata or {})
+
+
+def _recorded_mm_per_row(meta: dict):
+    """The row size a capture records (its scene's ``mm_per_row``), or None."""
+    for where in (meta, meta.get("scene") or {}):
+        v = where.get("mm_per_row") if isinstance(where, dict) else None
+        if isinstance(v, (int, float)) and v > 0:
+            return float(v)
+    return None
+
+
+@materials_app.command("fit")
+@_friendly_errors
+def fit_cmd(
+    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write: maps (TIFF), figure, fit.json.")],
+    labels: Annotated[
+        Path | None, typer.Option("--labels", help="Label image of regions (0: left out); default: one region.")
+    ] = None,
+    white_reference: Annotated[
+        Path | None,
+        typer.Option(
+            "--white-reference",
+            help="Capture (stack or transport) of a white Lambertian target, same sweep and camera settings: "
+            "calibrates the magnitude. Without it only the shape is used (mu_a less identifiable).",
+        ),
+    ] = None,
+    white_albedo: Annotated[float, typer.Option(help="Albedo of the white reference, in (0, 1].")] = 0.99,
+    n: Annotated[
+        float, typer.Option("--n", help="Refractive index of the medium (the shipped forward table: 1.33).")
+    ] = 1.33,
+    mm_per_row: Annotated[
+        float | None,
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+    ] = None,
+    block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels (1: every pixel), 1-64.")] = 4,
+    walls: Annotated[
+        bool,
+        typer.Option(
+            help="With --labels: each labelled region is a container whose boundary is a clear wall (air behind it); "
+            "the model includes the light lost through it. --no-walls: the media are unbounded.",
+        ),
+    ] = True,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace a fit folder planeray wrote.")] = False,
+):
+    """Measure the medium: maps of mu_s' and mu_a (1/mm) with standard errors, per region and per pixel block."""
+    import json
+
+    import numpy as np
+
+    from ..experiments._report import jsonable
+    from ..figures.materials import fit_figure
+    from ..io import atomic_directory
+    from ..materials import fit as mfit
+
+    if not 1 <= block <= 64:
+        raise ValueError(f"--block must be an integer in 1-64, got {block}")
+    if not 0.0 < white_albedo <= 1.0:
+        raise ValueError(f"--white-albedo must be in (0, 1], got {white_albedo:g}")
+    if not 1.0 <= n <= 1.6:
+        raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
+    if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
+        raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
+    _not_an_input(out_dir, [("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)])
+    _outputs((out_dir, "materials fit"), overwrite=overwrite)
+    transport, meta = _read_fit_input(input_path, "the capture")
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+    lab = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
+    scale = None
+    if white_reference is not None:
+        white, _ = _read_fit_input(white_reference, "--white-reference")
+        if white.shape != transport.shape or not np.array_equal(white.offsets_rows, transport.offsets_rows):
+            raise ValueError(
+                f"--white-reference {white_reference} is {white.shape[0]}x{white.shape[1]} over "
+                f"{white.offsets_rows.size} offsets, the capture {transport.shape[0]}x{transport.shape[1]} over "
+                f"{transport.offsets_rows.size}: capture it with the same sweep and camera"
+            )
+        scale = mfit.white_reference_scale(white.dense, albedo=white_albedo)
+    if n != mfit.DEFAULT_N:
+        console.print(
+            f"note: --n {n:g} is not the shipped table's {mfit.DEFAULT_N:g}: tracing a forward table "
+            "(90 Monte Carlo runs, about 6 minutes on 2 cores; cached afterwards)",
+            highlight=False,
+            markup=False,
+        )
+    table = mfit.forward_table(n=n)
+    H, W = transport.shape
+    regions = lab if lab is not None else np.ones((H, W), np.int64)
+    n_blocks = sum(
+        1
+        for r in np.unique(regions)
+        if r != 0
+        for r0 in range(0, H, block)
+        for c0 in range(0, W, block)
+        if (regions[r0 : r0 + block, c0 : c0 + block] == r).any()
+    )
+    with progress_bar() as bar:
+        task = bar.add_task("fitting pixel blocks", total=n_blocks)
+        result = mfit.fit_transport(
+            transport,
+            mm_per_row=mm,
+            labels=lab,
+            white_scale=scale,
+            block_px=block,
+            containers=lab if walls else None,
+            table=table,
+            progress=lambda k: bar.advance(task, k),
+        )
+    summary = {
+        "format": "planeray-materials-fit",
+        "format_version": 1,
+        "capture": str(input_path),
+        "mm_per_row": mm,
+        "refractive_index": n,
+        "anisotropy_g": mfit.DEFAULT_G,
+        "calibration": (
+            f"white reference {white_reference} (albedo {white_albedo:g}): absolute reflectance"
+            if scale is not None
+            else "none: shape only (a free scale per block); mu_a is less identifiable"
+        ),
+        "block_px": block,
+        "walls": (
+            "modelled: each --labels region is a container with a clear wall at its boundary"
+            if walls and lab is not None
+            else "none: unbounded media"
+        ),
+        "regions": {str(k): v for k, v in result.regions.items()},
+        "mask_bits": {str(k): v for k, v in mfit.REASONS.items()} | {"255": "not fitted (outside every region)"},
+        "files": {
+            **{k: f"{k}.tif" for k in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")},
+            "mask": "identifiability_mask.tif",
+            "figure": "fit.png",
+        },
+    }
+    with atomic_directory(out_dir, overwrite=overwrite, kind="materials fit") as tmp:
+        for key, name in summary["files"].items():
+            if key == "figure":
+                continue
+            _write_map_tiff(tmp / name, result.maps[key], key)
+        fit_figure(result, mm_per_row=mm, out=tmp / "fit.png")
+        (tmp / "planeray.json").write_text(json.dumps(jsonable(summary), indent=1))
+    if json_out:
+        print_json(jsonable(summary))
+        return
+    out.print(f"fit: {out_dir}  ({summary['calibration']})")
+    for region, r in result.regions.items():
+        f = lambda v: "n/a" if v is None else f"{v:.4g}"  # noqa: E731
+        why = f"  [{'; '.join(r['not_identifiable'])}]" if r["not_identifiable"] else ""
+        out.print(
+            f"  region {region} ({r['pixels']} px): mu_s' {f(r['mu_s_prime_per_mm'])} +- "
+            f"{f(r['mu_s_prime_se_per_mm'])} /mm, mu_a {f(r['mu_a_per_mm'])} +- {f(r['mu_a_se_per_mm'])} /mm{why}",
+            highlight=False,
+        )
+
+
+_MAP_UNITS = {
+    "mu_s_prime_per_mm": ("reduced scattering coefficient mu_s'", "1/mm"),
+    "mu_a_per_mm": ("absorption coefficient mu_a", "1/mm"),
+    "mu_s_prime_se_per_mm": ("standard error of mu_s'", "1/mm"),
+    "mu_a_se_per_mm": ("standard error of mu_a", "1/mm"),
+    "mask": ("identifiability mask: bits of the reasons in planeray.json (0: both measured)", "bits"),
+}
+
+
+def _write_map_tiff(path: Path, image, key: str) -> None:
+    """A float32 (mask: uint8) TIFF with planeray's mark, and its quantity and unit in the description."""
+    import json
+
+    import numpy as np
+    import tifffile
+
+    from ..io import atomic_file
+    from ..io.marks import mark_text
+
+    what, unit = _MAP_UNITS[key]
+    arr = np.asarray(image, np.uint8 if key == "mask" else np.float32)
+    with atomic_file(path) as tmp:
+        tifffile.imwrite(
+            tmp,
+            arr,
+            photometric="minisblack",
+            software=mark_text("image"),
+            description=json.dumps({"quantity": what, "unit": unit, "name": key}),
+            metadata=None,
+        )
+
+
 @materials_app.command("report")
 @_friendly_errors
 def report(

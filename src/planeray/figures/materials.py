@@ -22,6 +22,7 @@ __all__ = [
     "accuracy_curves_figure",
     "accuracy_by_distance_figure",
     "wall_kernels_figure",
+    "fit_figure",
 ]
 
 
@@ -314,4 +315,93 @@ def wall_kernels_figure(tables, *, distances_rows=(0.0, 5.0, 17.0, 45.0), angle_
         fontsize=9,
     )
     fig.tight_layout(rect=(0, 0, 1, 0.95))
+    return finish(fig, out)
+
+
+def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
+    """Maps of the fitted ``mu_s'`` and ``mu_a`` (1/mm), where they are not identifiable, and
+    the regions' mean profiles over the fitted kernels.
+
+    Parameters
+    ----------
+    result : planeray.materials.fit.TransportFit
+    mm_per_row : float
+        Row size, mm (the profiles' x axis in mm).
+    names : dict, optional
+        Region names by label.
+    max_profiles : int
+        Regions whose profiles are drawn (the largest).
+    """
+    names = names or {}
+    maps = result.maps
+    fig = new_figure((12.0, 7.2))
+    gs = fig.add_gridspec(2, 3, height_ratios=(1.0, 0.9))
+    panels = (
+        ("mu_s_prime_per_mm", "reduced scattering $\\mu_s'$ (1/mm)"),
+        ("mu_a_per_mm", "absorption $\\mu_a$ (1/mm)"),
+    )
+    from matplotlib.colors import LogNorm
+
+    for i, (key, title) in enumerate(panels):
+        ax = fig.add_subplot(gs[0, i])
+        v = maps[key]
+        fin = v[np.isfinite(v) & (v > 0)]
+        norm = LogNorm(vmin=float(fin.min()), vmax=float(max(fin.max(), fin.min() * 1.01))) if fin.size else None
+        im = ax.imshow(np.ma.masked_invalid(v), cmap="viridis", norm=norm, interpolation="nearest")
+        ax.set_facecolor("0.85")
+        ax.set_title(title + "  (grey: none)", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
+    ax = fig.add_subplot(gs[0, 2])
+    mask = maps["mask"]
+    state = np.where(mask == 255, 0, np.where(mask == 0, 1, np.where(np.isfinite(maps["mu_s_prime_per_mm"]), 2, 3)))
+    cmap = ListedColormap(["0.85", "#3b8f3b", "#e0a030", "#c03030"])
+    ax.imshow(state, cmap=cmap, vmin=-0.5, vmax=3.5, interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_title("identifiability", fontsize=9)
+    ax.legend(
+        handles=[
+            Patch(color="#3b8f3b", label="both measured"),
+            Patch(color="#e0a030", label="mu_a not identifiable"),
+            Patch(color="#c03030", label="neither"),
+            Patch(color="0.85", label="not fitted"),
+        ],
+        fontsize=7,
+        loc="lower left",
+        framealpha=0.8,
+    )
+    axp = fig.add_subplot(gs[1, :])
+    order = sorted(result.profiles, key=lambda r: -result.regions[r]["pixels"])[:max_profiles]
+    x = np.asarray(result.offsets_rows) * float(mm_per_row)
+    top = 0.0
+    for k, region in enumerate(order):
+        y, s, model = result.profiles[region]
+        info = result.regions[region]
+        colour = f"C{k}"
+        fmt = lambda v: "n/a" if v is None else f"{v:.3g}"  # noqa: E731
+        label = (
+            f"{names.get(region, f'region {region}')}: mu_s' {fmt(info['mu_s_prime_per_mm'])} "
+            f"+- {fmt(info['mu_s_prime_se_per_mm'])}, mu_a {fmt(info['mu_a_per_mm'])} +- {fmt(info['mu_a_se_per_mm'])} /mm"
+        )
+        ok = np.isfinite(y) & (y > 0)
+        axp.plot(x[ok], y[ok], ".", ms=3, color=colour, alpha=0.6)
+        top = max(top, float(np.nanmax(y[ok]))) if ok.any() else top
+        if np.all(np.isfinite(model)):
+            axp.plot(x, model, "-", color=colour, lw=1.2, label=label)
+        else:
+            axp.plot([], [], ".", color=colour, label=label)
+    axp.set_yscale("log")
+    if top > 0:
+        axp.set_ylim(top * 1e-6, top * 2.0)  # six decades: what a camera's dynamic range sees
+    axp.set_xlabel("offset from the lit line (mm)")
+    axp.set_ylabel("transport (reflectance per row)" if result.calibrated else "transport (camera units)")
+    axp.set_title(
+        "regions' mean profiles (dots) and fitted kernels (lines); "
+        + ("calibrated by the white reference" if result.calibrated else "shape only (no white reference)"),
+        fontsize=9,
+    )
+    axp.legend(fontsize=7, frameon=True, framealpha=0.85, loc="upper right")
+    fig.tight_layout()
     return finish(fig, out)

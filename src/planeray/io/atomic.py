@@ -40,6 +40,7 @@ _KINDS = {"planeray-stack": "stack", "planeray-transport": "transport"}
 _FOLDER_KINDS = {
     "planeray-materials-capture": "materials capture",
     "planeray-materials-report": "materials report",
+    "planeray-materials-fit": "materials fit",
     "planeray-skin-report": "skin report",
     "planeray-skin-veins": "skin veins",
     "planeray-skin-enhance": "skin enhance",
