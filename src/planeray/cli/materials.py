@@ -617,3 +617,221 @@ def report(
 
 def _pct(value) -> str:
     return "no pixels" if value is None else f"{value:.1%}"
+
+
+def _wall_distance_from_labels(labels, mm_per_pixel):
+    """Distance (mm) of each pixel's centre to the edge of its labelled region (the container's wall)."""
+    import numpy as np
+    from scipy import ndimage
+
+    lab = np.asarray(labels)
+    out = np.full(lab.shape, np.inf)
+    for c in np.unique(lab[lab > 0]):
+        m = lab == c
+        d = ndimage.distance_transform_edt(np.pad(m, 1, constant_values=False))[1:-1, 1:-1]
+        out[m] = (d[m] - 0.5) * mm_per_pixel
+    return out
+
+
+@materials_app.command("recognize")
+@_friendly_errors
+def recognize_cmd(
+    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    out_dir: Annotated[
+        Path, typer.Option("--out", "-o", help="Folder to write: segmentation.png, planeray.json, recognition.png.")
+    ],
+    library: Annotated[
+        Path | None,
+        typer.Option("--library", help="Media library (JSON); default: the five Fig. 10 media shipped."),
+    ] = None,
+    regions: Annotated[
+        Path | None,
+        typer.Option(
+            "--regions", help="Label image of regions (e.g. containers outlined, 0: none): pooled per region."
+        ),
+    ] = None,
+    pool_mm: Annotated[
+        float, typer.Option(help="Pool the evidence over a disc of this radius (mm) around each pixel; 0: per pixel.")
+    ] = 2.5,
+    block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels, 1-16 (the library's: 2).")] = 2,
+    p_unknown: Annotated[
+        float, typer.Option(help="A pixel whose fit is less typical of every medium than this p-value is unknown (0).")
+    ] = 1e-3,
+    labels: Annotated[
+        Path | None,
+        typer.Option("--labels", help="Ground-truth class ids: score per class and by distance to the walls."),
+    ] = None,
+    mm_per_row: Annotated[
+        float | None,
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+    ] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace a recognition folder planeray wrote.")] = False,
+):
+    """Name each pixel's medium by its fitted mu_s' and mu_a against a library of known media."""
+    import json
+
+    import numpy as np
+
+    from ..errors import InputError
+    from ..experiments._report import jsonable
+    from ..figures.materials import recognition_by_distance_figure
+    from ..io import atomic_directory
+    from ..materials.labels import write_label_image
+    from ..materials.library import FLAGS, default_library, load_library
+    from ..materials.recognize import accuracy_by_distance, fit_image, recognize_image
+
+    if not 1 <= block <= 16:
+        raise ValueError(f"--block must be an integer in 1-16, got {block}")
+    if not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
+        raise ValueError(f"--pool-mm must be in 0-100 mm, got {pool_mm:g}")
+    if not 0.0 <= p_unknown < 1.0:
+        raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
+    if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
+        raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
+    if regions is not None and pool_mm != 2.5:
+        raise ValueError("--regions and --pool-mm: pool over the regions or over a disc, not both")
+    _not_an_input(
+        out_dir, [("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)]
+    )
+    _outputs((out_dir, "materials recognition"), overwrite=overwrite)
+    try:
+        lib = load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    transport, meta = _read_fit_input(input_path, "the capture")
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+    try:
+        lib.check_conditions(mm_per_row=mm, calibrated=False)
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
+    truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
+    H, W = transport.shape
+    mm_per_pixel = mm * float(transport.geometry.rows_per_camera_row)
+    with progress_bar() as bar:
+        task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
+        maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
+    rec = recognize_image(
+        lib,
+        maps,
+        mm_per_pixel=mm_per_pixel,
+        pool_mm=0.0 if reg is not None else pool_mm,
+        regions=reg,
+        p_unknown=p_unknown,
+    )
+    names = {e.class_id: e.name for e in lib.entries}
+    counts = {names[c]: int((rec.class_ids == c).sum()) for c in lib.class_ids}
+    counts["unclassified"] = int((rec.class_ids == 0).sum())
+    numbers = {
+        "format": "planeray-materials-recognition",
+        "format_version": 1,
+        "capture": str(input_path),
+        "library": str(library) if library is not None else "shipped (the five Fig. 10 media)",
+        "mm_per_row": mm,
+        "mm_per_pixel": mm_per_pixel,
+        "block_px": block,
+        "pooling": f"regions of {regions}" if reg is not None else (f"disc of {pool_mm:g} mm" if pool_mm else "none"),
+        "p_unknown": p_unknown,
+        "pixels": counts,
+        "flags": {text: int(((rec.flags & bit) > 0).sum()) for bit, text in FLAGS.items()},
+        "files": {"segmentation": "segmentation.png"},
+    }
+    table = None
+    if truth is not None:
+        wall = _wall_distance_from_labels(truth, mm_per_pixel)
+        scored = {c: n for c, n in names.items() if (truth == c).any()}
+        table = accuracy_by_distance(rec.class_ids, truth, wall, classes=scored)
+        numbers["score"] = {**table, "wall_distance": "from --labels: distance to the edge of each labelled region"}
+        numbers["files"]["figure"] = "recognition.png"
+    with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition") as tmp:
+        write_label_image(tmp / "segmentation.png", rec.class_ids.astype(np.uint8), kind="segmentation")
+        if table is not None:
+            recognition_by_distance_figure({"parameters": table}, out=tmp / "recognition.png")
+        (tmp / "planeray.json").write_text(json.dumps(jsonable(numbers), indent=1))
+    if json_out:
+        print_json(jsonable(numbers))
+        return
+    out.print(f"recognition: {out_dir}  ({numbers['pooling']}; library: {numbers['library']})")
+    for name, n in counts.items():
+        out.print(f"  {name}: {n} px")
+    for text, n in numbers["flags"].items():
+        if n:
+            out.print(f"  {n} px: {text}")
+    if table is not None:
+        for name, row in table["classes"].items():
+            bins = ", ".join(_acc(b["accuracy"]) for b in row["bins"])
+            out.print(f"  accuracy {name}: {_acc(row['all'])}  (by wall distance {table['bins_mm']} mm: {bins})")
+
+
+@materials_app.command("library-add")
+@_friendly_errors
+def library_add(
+    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    labels: Annotated[Path, typer.Option("--labels", help="Label image: the region(s) of the new medium.")],
+    class_name: Annotated[
+        list[str], typer.Option("--class-name", help="ID=NAME of a labelled region to add (repeatable), ID 1-255.")
+    ],
+    out_json: Annotated[Path, typer.Option("--out", "-o", help="The new library (JSON).")],
+    library: Annotated[
+        Path | None, typer.Option("--library", help="Library to add to; default: the shipped one.")
+    ] = None,
+    replace: Annotated[bool, typer.Option(help="Replace an entry of the same name or id.")] = False,
+    mm_per_row: Annotated[
+        float | None,
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace a library file planeray wrote.")] = False,
+):
+    """Add media to a library from labelled regions of a capture (fitted as the library's media were)."""
+    import numpy as np
+
+    from ..errors import InputError
+    from ..materials.library import default_library, load_library, save_library
+    from ..materials.recognize import entries_from_capture, fit_image
+
+    if out_json.suffix.lower() != ".json":
+        raise ValueError(f"--out must end in .json (a media library), got {out_json}")
+    names = _parse_class_names(class_name)
+    if not names:
+        raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
+    _not_an_input(out_json, [("the capture", input_path), ("--labels", labels), ("--library", library)])
+    _outputs((out_json, "media library"), overwrite=overwrite)
+    try:
+        lib = load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    transport, meta = _read_fit_input(input_path, "the capture")
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+    try:
+        lib.check_conditions(mm_per_row=mm, calibrated=False)
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    lab = _read_labels(labels, "--labels", transport.shape)
+    missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
+    if missing:
+        raise ValueError(f"--class-name {', '.join(missing)}: --labels {labels} has no pixel of that id")
+    block = int(lib.conditions.get("block_px", 2))
+    regions = np.where(np.isin(lab, list(names)), lab, 0)
+    with console.status("fitting the labelled regions"):
+        maps = fit_image(transport, mm_per_row=mm, block_px=block, regions=regions)
+    try:
+        entries = entries_from_capture(maps, regions, names, source=f"{input_path} ({labels})")
+        for e in entries:
+            lib = lib.add(e, replace=replace)
+    except InputError as exc:
+        raise ValueError(f"--class-name {exc}") from None
+    save_library(lib, out_json)
+    out.print(f"library: {out_json}  ({len(lib.entries)} media)")
+    for e in entries:
+        f = lambda v: "n/a" if v is None else f"{v:.4g}"  # noqa: E731
+        out.print(
+            f"  added {e.name} (class {e.class_id}): mu_s' {f(e.mu_s_prime_per_mm)} /mm (log sd "
+            f"{e.mu_s_prime_log_sd:.2f}), mu_a {f(e.mu_a_per_mm)} /mm, beyond the table: "
+            f"{e.beyond_table['above']:.0%} above, {e.beyond_table['below']:.0%} below ({e.blocks} blocks)",
+            highlight=False,
+        )

@@ -60,7 +60,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -364,15 +363,19 @@ def entry_from_fit(
 
 
 # ---------------------------------------------------------------- the file
-def save_library(library: MediaLibrary, path) -> Path:
-    """Write ``library`` as JSON (atomically: a temporary beside it, then renamed)."""
+def save_library(library: MediaLibrary, path, *, overwrite: bool = True) -> Path:
+    """Write ``library`` as JSON, marked as planeray's (``planeray_mark``: "media library"), atomically.
+
+    Callers check that an existing ``path`` may be replaced
+    (:func:`planeray.io.atomic.check_replaceable`, kind ``"media library"``) before any work.
+    """
+    from ..io import atomic_file
+    from ..io.marks import MARK_KEY, mark_text
+
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_text(json.dumps(library.to_json(), indent=1) + "\n")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    doc = {MARK_KEY: mark_text("media library"), **library.to_json()}
+    with atomic_file(path, overwrite=overwrite) as tmp:
+        Path(tmp).write_text(json.dumps(doc, indent=1) + "\n")
     return path
 
 

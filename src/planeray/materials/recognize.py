@@ -37,6 +37,7 @@ __all__ = [
     "DEFAULT_BLOCK_PX",
     "DEFAULT_POOL_MM",
     "fit_image",
+    "usable_parameters",
     "recognize_image",
     "entries_from_capture",
     "accuracy_by_distance",
@@ -48,6 +49,50 @@ WALL_BINS_MM = (0.0, 1.0, 2.0, 3.0, 5.0, math.inf)
 DEFAULT_BLOCK_PX = 2
 #: Radius (mm on the surface) over which the log-likelihoods are pooled by default.
 DEFAULT_POOL_MM = 2.5
+
+
+_RAW_NAMES = (
+    "mu_s_prime_raw_per_mm",
+    "mu_a_raw_per_mm",
+    "mu_s_prime_raw_se_per_mm",
+    "mu_a_raw_se_per_mm",
+)
+
+
+def usable_parameters(maps: dict):
+    """The parameters recognition uses: each estimate with its error, however poorly constrained.
+
+    A relative standard error above the fit's threshold makes the fit report NaN (reason bits
+    8 / 16); for *recognition* such an estimate still carries evidence, weighed by its error
+    in the likelihood.  Used: ``mu_s'`` unless no fit ran or it is beyond the table or
+    narrower than a bin (bits 1, 2, 32, 64); ``mu_a`` with a usable ``mu_s'`` unless at the
+    table's edge (bit 4).  Without the raw maps, the fit's identified values.
+
+    Returns
+    -------
+    (mu_s', mu_a, se mu_s', se mu_a, side), arrays like the maps (mm^-1; NaN: not used)
+    """
+    mask = np.asarray(maps["mask"]).astype(np.int64)
+    side = maps.get("side")
+    if "mu_s_prime_raw_per_mm" not in maps:
+        return (
+            maps["mu_s_prime_per_mm"],
+            maps["mu_a_per_mm"],
+            maps.get("mu_s_prime_se_per_mm"),
+            maps.get("mu_a_se_per_mm"),
+            side,
+        )
+    fitted = mask != 255
+    s_ok = fitted & ((mask & (1 | 2 | 32 | 64)) == 0)
+    a_ok = s_ok & ((mask & 4) == 0)
+    nan = np.float32(np.nan)
+    return (
+        np.where(s_ok, maps["mu_s_prime_raw_per_mm"], nan),
+        np.where(a_ok, maps["mu_a_raw_per_mm"], nan),
+        np.where(s_ok, maps["mu_s_prime_raw_se_per_mm"], nan),
+        np.where(a_ok, maps["mu_a_raw_se_per_mm"], nan),
+        side,
+    )
 
 
 def fit_image(transport, *, mm_per_row, block_px=DEFAULT_BLOCK_PX, regions=None, table=None, progress=None) -> dict:
@@ -98,6 +143,8 @@ def fit_image(transport, *, mm_per_row, block_px=DEFAULT_BLOCK_PX, regions=None,
                 sds.append(np.maximum(sd, 0.01 * max(float(np.abs(mean).max()), 1e-30)))
                 where.append((r0, c0, m))
     maps = {k: np.full((H, W), np.nan, np.float32) for k in _fit._MAP_NAMES}
+    for name in _RAW_NAMES:
+        maps[name] = np.full((H, W), np.nan, np.float32)
     maps["mask"] = np.full((H, W), 255, np.uint8)
     maps["side"] = np.zeros((H, W), np.int8)
     if not where:
@@ -118,9 +165,11 @@ def fit_image(transport, *, mm_per_row, block_px=DEFAULT_BLOCK_PX, regions=None,
         res.mu_s_prime_se_per_mm,
         res.mu_a_se_per_mm,
     )
+    est, se = np.exp(res.log_estimate_per_mm), np.exp(res.log_estimate_per_mm) * res.log_se
+    values = values + (est[:, 0], est[:, 1], se[:, 0], se[:, 1])
     for i, (r0, c0, m) in enumerate(where):
         sl = (slice(r0, r0 + b), slice(c0, c0 + b))
-        for name, v in zip(_fit._MAP_NAMES, values):
+        for name, v in zip(_fit._MAP_NAMES + _RAW_NAMES, values):
             maps[name][sl][m] = v[i]
         maps["mask"][sl][m] = res.mask[i]
         maps["side"][sl][m] = side[i]
@@ -159,14 +208,8 @@ def recognize_image(
     Recognition
         ``class_ids`` (H, W): 0 unclassified (not fitted or unknown by its own fit).
     """
-    ll, d2, dof, flags = log_likelihoods(
-        library,
-        maps["mu_s_prime_per_mm"],
-        maps["mu_a_per_mm"],
-        mu_s_prime_se_per_mm=maps.get("mu_s_prime_se_per_mm"),
-        mu_a_se_per_mm=maps.get("mu_a_se_per_mm"),
-        side=maps.get("side"),
-    )
+    s, a, se_s, se_a, side = usable_parameters(maps)
+    ll, d2, dof, flags = log_likelihoods(library, s, a, mu_s_prime_se_per_mm=se_s, mu_a_se_per_mm=se_a, side=side)
     own = decide(library, ll, d2, dof, flags, p_unknown=p_unknown)
     known = own.class_ids > 0
     if regions is not None:
@@ -202,6 +245,7 @@ def entries_from_capture(maps: dict, labels, names: dict, *, source="", publishe
     list of MediumEntry
     """
     labels = np.asarray(labels)
+    s, a, _, _, side = usable_parameters(maps)
     out = []
     for cid, name in names.items():
         m = labels == cid
@@ -209,9 +253,9 @@ def entries_from_capture(maps: dict, labels, names: dict, *, source="", publishe
             raise InputError(f"the labels have no pixel of class {cid} ({name})")
         out.append(
             entry_from_fit(
-                maps["mu_s_prime_per_mm"][m],
-                maps["mu_a_per_mm"][m],
-                maps["side"][m],
+                s[m],
+                a[m],
+                side[m],
                 name=name,
                 class_id=cid,
                 source=source,
