@@ -140,7 +140,7 @@ def test_the_library_file_round_trips(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "edit, why",
+    ("edit", "why"),
     [
         (lambda d: d.update(format="other"), "format"),
         (lambda d: d.update(version=99), "version"),
@@ -222,3 +222,108 @@ def test_the_beyond_table_side_is_read_from_the_fitted_kernel():
     mid = fit.line_kernel(1.2, 0.01, offsets_rows=u, mm_per_row=0.3)
     side = beyond_table_side(np.array([2, 2, 0], np.uint8), np.stack([hi, lo, mid]), offsets_rows=u, mm_per_row=0.3)
     assert side.tolist() == [1, -1, 0]
+
+
+# ---------------------------------------------------------------- the commands
+MM = 0.3
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    """A transport store of two media side by side (known coefficients), its labels and a two-entry library."""
+    from planeray.io import write_transport
+    from planeray.materials import fit, write_label_image
+    from planeray.transport import Transport
+
+    root = tmp_path_factory.mktemp("recogcli")
+    off = np.arange(-60, 61)
+    k1 = fit.line_kernel(0.8, 0.005, offsets_rows=off, mm_per_row=MM)
+    k2 = fit.line_kernel(2.5, 0.04, offsets_rows=off, mm_per_row=MM)
+    rng = np.random.default_rng(3)
+    dense = np.empty((8, 8, off.size), np.float32)
+    dense[:, :4] = k1 * 50.0
+    dense[:, 4:] = k2 * 50.0
+    dense *= 1.0 + 0.01 * rng.standard_normal(dense.shape)
+    path = write_transport(Transport(dense, off), root / "cap.zarr", attrs={"mm_per_row": MM})
+    labels = np.zeros((8, 8), np.uint8)
+    labels[:, :4], labels[:, 4:] = 1, 2
+    write_label_image(root / "labels.png", labels, kind="labels")
+    lib = MediaLibrary(
+        (MediumEntry("thin", 1, 0.8, 0.1, 0.005, 0.3), MediumEntry("thick", 2, 2.5, 0.1, 0.04, 0.3)),
+        {"mm_per_row": MM, "calibrated": False, "block_px": 2},
+    )
+    save_library(lib, root / "lib.json")
+    return root, path
+
+
+def _cli(args):
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    return CliRunner().invoke(app, ["materials", *args])
+
+
+def test_recognize_writes_a_segmentation_a_score_by_wall_distance_and_a_figure(capture):
+    from planeray.materials import read_label_image
+
+    root, cap = capture
+    out = root / "rec1"
+    args = ["recognize", str(cap), "--out", str(out), "--library", str(root / "lib.json")]
+    res = _cli([*args, "--labels", str(root / "labels.png"), "--json"])
+    assert res.exit_code == 0, res.output
+    meta = json.loads((out / "planeray.json").read_text())
+    seg = read_label_image(out / "segmentation.png")
+    assert (seg[:, :4] == 1).all() and (seg[:, 4:] == 2).all()
+    assert meta["score"]["min_class_accuracy"] == 1.0
+    assert meta["pixels"] == {"thin": 32, "thick": 32, "unclassified": 0}
+    # the wall distance from the labels: a region's edge pixels at half a pixel
+    assert meta["score"]["classes"]["thin"]["bins"][0]["pixels"] > 0
+    assert (out / "recognition.png").stat().st_size > 10_000
+    # data promises: refused without --overwrite, replaced with it; never over an input
+    again = _cli(args)
+    assert again.exit_code == 1 and "already exists" in again.output
+    assert _cli([*args, "--overwrite", "--pool-mm", "0"]).exit_code == 0
+    res = _cli(["recognize", str(cap), "--out", str(root / "lib.json")])
+    assert res.exit_code == 1 and "also an input" in res.output
+
+
+@pytest.mark.parametrize(
+    ("extra", "needle"),
+    [
+        (["--block", "0"], "--block"),
+        (["--pool-mm", "-1"], "--pool-mm"),
+        (["--p-unknown", "1"], "--p-unknown"),
+        (["--mm-per-row", "0.5"], "--library"),
+        (["--library", "{d}/nothing.json"], "--library"),
+        (["--library", "{d}/labels.png"], "--library"),
+        (["--regions", "{d}/nothing.png"], "--regions"),
+    ],
+)
+def test_recognize_refuses_bad_options_in_one_line_naming_them(capture, extra, needle):
+    root, cap = capture
+    extra = [e.format(d=root) for e in extra]
+    res = _cli(["recognize", str(cap), "--out", str(root / "bad"), *extra])
+    assert res.exit_code == 1, res.output
+    assert needle in res.output and "Traceback" not in res.output
+    assert len(res.output.strip().splitlines()) == 1
+    assert not (root / "bad").exists()
+
+
+def test_library_add_fits_a_labelled_region_into_a_new_entry(capture):
+    root, cap = capture
+    out = root / "lib2.json"
+    args = ["library-add", str(cap), "--labels", str(root / "labels.png"), "--out", str(out)]
+    res = _cli([*args, "--library", str(root / "lib.json"), "--class-name", "2=paste"])
+    assert res.exit_code == 1 and "already has" in res.output  # class 2 is taken: one line
+    res = _cli([*args, "--library", str(root / "lib.json"), "--class-name", "2=paste", "--replace"])
+    assert res.exit_code == 0, res.output
+    lib = load_library(out)
+    e = lib.entry("paste")
+    assert e.class_id == 2 and e.mu_s_prime_per_mm == pytest.approx(2.5, rel=0.1)
+    assert [x.name for x in lib.entries] == ["thin", "paste"]
+    again = _cli([*args, "--library", str(root / "lib.json"), "--class-name", "2=paste", "--replace"])
+    assert again.exit_code == 1 and "already exists" in again.output
+    (root / "user.json").write_text("{}")  # a user's file is never replaced
+    res = _cli([*args[:-1], str(root / "user.json"), "--class-name", "9=x", "--overwrite"])
+    assert res.exit_code == 1 and (root / "user.json").read_text() == "{}"

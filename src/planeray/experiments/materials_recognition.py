@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -45,6 +46,8 @@ __all__ = [
     "container_regions",
     "majority_by_region",
     "mode_filter",
+    "recognition_tables",
+    "write_recognition_study",
     "run_recognition_study",
 ]
 
@@ -138,6 +141,65 @@ def mode_filter(pred, *, radius_px, classes):
     return np.where(votes.max(-1) > 0, best, 0)
 
 
+def recognition_tables(library, maps, region_maps, svm, truth, wall_distance_mm, regions, *, mm_per_pixel) -> dict:
+    """Every recogniser variant's accuracy table on a held-out capture (the core of the study).
+
+    Parameters
+    ----------
+    library : MediaLibrary
+    maps, region_maps : dict
+        :func:`~planeray.materials.recognize.fit_image` of the held-out transport: blocks over
+        the whole image (one region), and one fit per container (``regions``).
+    svm : ndarray (H, W)
+        The SVM's per-pixel picks.
+    truth, wall_distance_mm : ndarray (H, W)
+        Ground truth class ids and distances to the nearest wall, mm.
+    regions : ndarray (H, W)
+        The containers' outlines (:func:`container_regions`).
+    mm_per_pixel : float
+
+    Returns
+    -------
+    dict
+        ``format``, ``mm_per_pixel``, ``pool_mm``, ``wall_bins_mm``, ``library`` (its JSON),
+        ``recognisers``: variant -> :func:`~planeray.materials.recognize.accuracy_by_distance`.
+    """
+    classes = {c: CLASS_NAMES[c] for c in MATERIAL_CLASSES}
+    pool_px = DEFAULT_POOL_MM / mm_per_pixel
+    preds = {
+        "parameters, per pixel": recognize_image(library, maps, pool_mm=0).class_ids,
+        f"parameters, pooled over {DEFAULT_POOL_MM:g} mm": recognize_image(
+            library, maps, mm_per_pixel=mm_per_pixel
+        ).class_ids,
+        "parameters, pooled over each container": recognize_image(library, maps, regions=regions).class_ids,
+        "parameters, each container's pooled fit": recognize_image(library, region_maps, pool_mm=0).class_ids,
+        "SVM, per pixel": np.asarray(svm),
+        f"SVM, majority over {DEFAULT_POOL_MM:g} mm": mode_filter(svm, radius_px=pool_px, classes=MATERIAL_CLASSES),
+        "SVM, majority over each container": majority_by_region(svm, regions),
+    }
+    tables = {k: accuracy_by_distance(v, truth, wall_distance_mm, classes=classes) for k, v in preds.items()}
+    return {
+        "format": RECOGNITION_FORMAT,
+        "mm_per_pixel": float(mm_per_pixel),
+        "pool_mm": DEFAULT_POOL_MM,
+        "wall_bins_mm": [None if not np.isfinite(v) else v for v in WALL_BINS_MM],
+        "library": library.to_json(),
+        "recognisers": tables,
+    }
+
+
+def write_recognition_study(out_dir, numbers, library, *, overwrite=False):
+    """Write ``recognition.json``, ``library.json`` and ``recognition_vs_wall_distance.png`` (atomically)."""
+    from ..materials.library import save_library
+
+    with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition study") as tmp:
+        (tmp / "recognition.json").write_text(json.dumps(jsonable(numbers), indent=1) + "\n")
+        (tmp / MARKER).write_text(json.dumps({"format": RECOGNITION_FORMAT, "format_version": 1}, indent=1))
+        save_library(library, tmp / "library.json")
+        figs.recognition_by_distance_figure(numbers["recognisers"], out=tmp / "recognition_vs_wall_distance.png")
+    return Path(out_dir)
+
+
 def run_recognition_study(out_dir=None, *, size=128, block_px=DEFAULT_BLOCK_PX, overwrite=False, progress=None) -> dict:
     """Both recognisers on a held-out arrangement, by distance to the wall; ``recognition.json`` and a figure.
 
@@ -194,39 +256,16 @@ def run_recognition_study(out_dir=None, *, size=128, block_px=DEFAULT_BLOCK_PX, 
     model = train_model([train.stack], [train.labels], ignore_classes=(6,), floor="edge")
     svm = model.predict(test.stack, unclassified_below=0.0)
     timings["svm_s"] = time.perf_counter() - t
-    classes = {c: CLASS_NAMES[c] for c in MATERIAL_CLASSES}
-    pool_px = DEFAULT_POOL_MM / mm_per_pixel
-    preds = {
-        "parameters, per pixel": recognize_image(library, maps, pool_mm=0).class_ids,
-        f"parameters, pooled over {DEFAULT_POOL_MM:g} mm": recognize_image(
-            library, maps, mm_per_pixel=mm_per_pixel
-        ).class_ids,
-        "parameters, pooled over each container": recognize_image(library, maps, regions=regions).class_ids,
-        "parameters, each container's pooled fit": recognize_image(library, region_maps, pool_mm=0).class_ids,
-        "SVM, per pixel": svm,
-        f"SVM, majority over {DEFAULT_POOL_MM:g} mm": mode_filter(svm, radius_px=pool_px, classes=MATERIAL_CLASSES),
-        "SVM, majority over each container": majority_by_region(svm, regions),
-    }
-    tables = {k: accuracy_by_distance(v, test.labels, test.wall_distance_mm, classes=classes) for k, v in preds.items()}
-    numbers = {
-        "format": RECOGNITION_FORMAT,
-        "size": list(shape),
-        "mm_per_pixel": mm_per_pixel,
-        "block_px": int(block_px),
-        "pool_mm": DEFAULT_POOL_MM,
-        "train": dict(TRAIN_SETTINGS),
-        "test": dict(TEST_SETTINGS),
-        "wall_bins_mm": [None if not np.isfinite(v) else v for v in WALL_BINS_MM],
-        "library": library.to_json(),
-        "recognisers": tables,
-        "timings_s": {**timings, "total": time.perf_counter() - t0},
-    }
+    numbers = recognition_tables(
+        library, maps, region_maps, svm, test.labels, test.wall_distance_mm, regions, mm_per_pixel=mm_per_pixel
+    )
+    numbers.update(
+        size=list(shape),
+        block_px=int(block_px),
+        train=dict(TRAIN_SETTINGS),
+        test=dict(TEST_SETTINGS),
+        timings_s={**timings, "total": time.perf_counter() - t0},
+    )
     if out_dir is not None:
-        from ..materials.library import save_library
-
-        with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition study") as tmp:
-            (tmp / "recognition.json").write_text(json.dumps(jsonable(numbers), indent=1) + "\n")
-            (tmp / MARKER).write_text(json.dumps({"format": RECOGNITION_FORMAT, "format_version": 1}, indent=1))
-            save_library(library, tmp / "library.json")
-            figs.recognition_by_distance_figure(tables, out=tmp / "recognition_vs_wall_distance.png")
+        write_recognition_study(out_dir, numbers, library, overwrite=overwrite)
     return numbers
