@@ -270,7 +270,7 @@ def test_recognize_writes_a_segmentation_a_score_by_wall_distance_and_a_figure(c
     root, cap = capture
     out = root / "rec1"
     args = ["recognize", str(cap), "--out", str(out), "--library", str(root / "lib.json")]
-    res = _cli([*args, "--labels", str(root / "labels.png"), "--json"])
+    res = _cli([*args, "--labels", str(root / "labels.png"), "--pool-mm", "0", "--json"])
     assert res.exit_code == 0, res.output
     meta = json.loads((out / "planeray.json").read_text())
     seg = read_label_image(out / "segmentation.png")
@@ -283,8 +283,11 @@ def test_recognize_writes_a_segmentation_a_score_by_wall_distance_and_a_figure(c
     # data promises: refused without --overwrite, replaced with it; never over an input
     again = _cli(args)
     assert again.exit_code == 1 and "already exists" in again.output
-    assert _cli([*args, "--overwrite", "--pool-mm", "0"]).exit_code == 0
-    res = _cli(["recognize", str(cap), "--out", str(root / "lib.json")])
+    res = _cli([*args, "--overwrite", "--regions", str(root / "labels.png")])
+    assert res.exit_code == 0, res.output
+    assert "regions of" in json.loads((out / "planeray.json").read_text())["pooling"]
+    assert (read_label_image(out / "segmentation.png") == seg).all()
+    res = _cli(["recognize", str(cap), "--library", str(root / "lib.json"), "--out", str(root / "lib.json")])
     assert res.exit_code == 1 and "also an input" in res.output
 
 

@@ -651,8 +651,11 @@ def recognize_cmd(
         ),
     ] = None,
     pool_mm: Annotated[
-        float, typer.Option(help="Pool the evidence over a disc of this radius (mm) around each pixel; 0: per pixel.")
-    ] = 2.5,
+        float | None,
+        typer.Option(
+            help="Pool the evidence over a disc of this radius (mm) around each pixel (default 2.5); 0: per pixel."
+        ),
+    ] = None,
     block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels, 1-16 (the library's: 2).")] = 2,
     p_unknown: Annotated[
         float, typer.Option(help="A pixel whose fit is less typical of every medium than this p-value is unknown (0).")
@@ -679,18 +682,25 @@ def recognize_cmd(
     from ..io import atomic_directory
     from ..materials.labels import write_label_image
     from ..materials.library import FLAGS, default_library, load_library
-    from ..materials.recognize import accuracy_by_distance, fit_image, recognize_image
+    from ..materials.recognize import (
+        DEFAULT_POOL_MM,
+        accuracy_by_distance,
+        fit_image,
+        recognize_image,
+        recognize_regions,
+    )
 
     if not 1 <= block <= 16:
         raise ValueError(f"--block must be an integer in 1-16, got {block}")
+    if regions is not None and pool_mm is not None:
+        raise ValueError("--regions and --pool-mm: pool over the regions or over a disc, not both")
+    pool_mm = DEFAULT_POOL_MM if pool_mm is None else pool_mm
     if not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
         raise ValueError(f"--pool-mm must be in 0-100 mm, got {pool_mm:g}")
     if not 0.0 <= p_unknown < 1.0:
         raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
     if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
         raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
-    if regions is not None and pool_mm != 2.5:
-        raise ValueError("--regions and --pool-mm: pool over the regions or over a disc, not both")
     _not_an_input(
         out_dir, [("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)]
     )
@@ -711,17 +721,14 @@ def recognize_cmd(
     truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
     H, W = transport.shape
     mm_per_pixel = mm * float(transport.geometry.rows_per_camera_row)
-    with progress_bar() as bar:
-        task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
-        maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
-    rec = recognize_image(
-        lib,
-        maps,
-        mm_per_pixel=mm_per_pixel,
-        pool_mm=0.0 if reg is not None else pool_mm,
-        regions=reg,
-        p_unknown=p_unknown,
-    )
+    if reg is not None:  # each region's pooled profile fitted once (measured best next to walls)
+        with console.status("fitting each region's pooled profile"):
+            rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
+    else:
+        with progress_bar() as bar:
+            task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
+            maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
+        rec = recognize_image(lib, maps, mm_per_pixel=mm_per_pixel, pool_mm=pool_mm, p_unknown=p_unknown)
     names = {e.class_id: e.name for e in lib.entries}
     counts = {names[c]: int((rec.class_ids == c).sum()) for c in lib.class_ids}
     counts["unclassified"] = int((rec.class_ids == 0).sum())
@@ -733,7 +740,11 @@ def recognize_cmd(
         "mm_per_row": mm,
         "mm_per_pixel": mm_per_pixel,
         "block_px": block,
-        "pooling": f"regions of {regions}" if reg is not None else (f"disc of {pool_mm:g} mm" if pool_mm else "none"),
+        "pooling": (
+            f"regions of {regions}: each region's pooled profile fitted"
+            if reg is not None
+            else (f"log-likelihoods over a disc of {pool_mm:g} mm" if pool_mm else "none: per pixel block")
+        ),
         "p_unknown": p_unknown,
         "pixels": counts,
         "flags": {text: int(((rec.flags & bit) > 0).sum()) for bit, text in FLAGS.items()},

@@ -36,6 +36,7 @@ from ..materials.recognize import (
     entries_from_capture,
     fit_image,
     recognize_image,
+    recognize_regions,
 )
 from ._report import jsonable
 from .materials import TEST_SETTINGS, TRAIN_SETTINGS, simulate_capture
@@ -68,7 +69,7 @@ def _published():
 
 
 def reference_library(
-    transport, labels, *, mm_per_row=_MM_PER_ROW, block_px=DEFAULT_BLOCK_PX, source="", progress=None
+    transport, labels, *, mm_per_row=_MM_PER_ROW, block_px=DEFAULT_BLOCK_PX, source="", maps=None, progress=None
 ):
     """The five Fig. 10 media as :func:`~planeray.materials.recognize.fit_image` returns them.
 
@@ -82,14 +83,18 @@ def reference_library(
         The fit's row size and block size.
     source : str
         Stored with the entries.
+    maps : dict, optional
+        The fit of ``transport`` within the labelled trays, if already made (``fit_image``
+        with ``regions`` the material labels, ``block_px``): not fitted again.
 
     Returns
     -------
     (MediaLibrary, maps)
     """
     lab = np.asarray(labels)
-    regions = np.where(np.isin(lab, MATERIAL_CLASSES), lab, 0)
-    maps = fit_image(transport, mm_per_row=mm_per_row, block_px=block_px, regions=regions, progress=progress)
+    regions = np.where(np.isin(lab, list(MATERIAL_CLASSES)), lab, 0)
+    if maps is None:
+        maps = fit_image(transport, mm_per_row=mm_per_row, block_px=block_px, regions=regions, progress=progress)
     names = {c: CLASS_NAMES[c] for c in MATERIAL_CLASSES}
     entries = entries_from_capture(maps, regions, names, source=source, published=_published())
     cond = {
@@ -250,7 +255,7 @@ def run_recognition_study(out_dir=None, *, size=128, block_px=DEFAULT_BLOCK_PX, 
     maps = fit_image(tr_test, mm_per_row=_MM_PER_ROW, block_px=block_px)
     timings["test_fit_s"] = time.perf_counter() - t
     regions = container_regions(test.labels)
-    region_maps = fit_image(tr_test, mm_per_row=_MM_PER_ROW, block_px=max(shape), regions=regions)
+    _, region_maps = recognize_regions(library, tr_test, regions, mm_per_row=_MM_PER_ROW)
     say("training the SVM")
     t = time.perf_counter()
     model = train_model([train.stack], [train.labels], ignore_classes=(6,), floor="edge")
