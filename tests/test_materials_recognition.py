@@ -178,10 +178,12 @@ def test_the_shipped_library_has_the_five_fig10_media_with_their_published_const
     assert lib.class_ids == [1, 2, 3, 4, 5]
     assert lib.conditions["mm_per_row"] == 0.3 and lib.conditions["calibrated"] is False
     s = {e.class_id: e.mu_s_prime_per_mm for e in lib.entries}
-    assert s[1] < s[2] < s[3]  # the milks by scattering
-    assert lib.entry(4).beyond_table["above"] > 0.5  # toothpaste scatters beyond the table
+    published = {e.class_id: e.published["mu_s_prime_per_mm"] for e in lib.entries}
+    # What the fit returns is biased (128 px: 5.6 projector rows per pixel, shape only), not the
+    # published value -- but it ranks the five media as their published mu_s' do.
+    assert sorted(s, key=s.get) == sorted(published, key=published.get) == [5, 1, 2, 3, 4]
     for e in lib.entries:
-        assert e.published and e.published["mu_s_prime_per_mm"] > 0
+        assert e.blocks > 1000 and 0.01 <= e.mu_s_prime_log_sd < 1.0
 
 
 def test_library_conditions_refuse_another_row_size():
