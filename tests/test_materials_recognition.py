@@ -332,3 +332,33 @@ def test_library_add_fits_a_labelled_region_into_a_new_entry(capture):
     (root / "user.json").write_text("{}")  # a user's file is never replaced
     res = _cli([*args[:-1], str(root / "user.json"), "--class-name", "9=x", "--overwrite"])
     assert res.exit_code == 1 and (root / "user.json").read_text() == "{}"
+
+
+def test_the_majority_vote_fixes_a_wall_row_and_keeps_unvoted_pixels():
+    from planeray.materials.recognize import majority_by_region, mode_filter
+
+    pred = np.full((6, 6), 3)
+    pred[0, :] = [2, 3, 2, 3, 2, 3]  # scattered wrong picks along a wall
+    pred[:, 5] = 0  # no pick: does not vote
+    voted = mode_filter(pred, radius_px=1.5, classes=[1, 2, 3])
+    # (0, 2): its 3x3 disc holds picks 3 2 3 / 3 3 3 -> 3; (0, 4): 3 2 / 3 3 (column 5 has none) -> 3
+    assert (voted[:, :5] == 3).all()
+    # a tie goes to the first class; a pixel with no vote in reach gets 0
+    assert mode_filter(np.array([[1, 2]]), radius_px=1.0, classes=[1, 2]).tolist() == [[1, 1]]
+    assert mode_filter(np.zeros((2, 2), int), radius_px=1.0, classes=[1, 2]).tolist() == [[0, 0], [0, 0]]
+    assert majority_by_region(pred, np.ones((6, 6), int))[0, 0] == 3
+
+
+def test_predict_refuses_a_bad_majority_radius_in_one_line(tmp_path):
+    res = _cli(
+        [
+            "predict",
+            str(tmp_path / "m.zip"),
+            str(tmp_path / "s.zarr"),
+            "--out",
+            str(tmp_path / "o.png"),
+            "--majority-px",
+            "-1",
+        ]
+    )
+    assert res.exit_code == 1 and "--majority-px" in res.output and len(res.output.strip().splitlines()) == 1

@@ -35,6 +35,8 @@ from ..materials.recognize import (
     accuracy_by_distance,
     entries_from_capture,
     fit_image,
+    majority_by_region,
+    mode_filter,
     recognize_image,
     recognize_regions,
 )
@@ -119,31 +121,6 @@ def container_regions(labels, *, background=6):
         out[comp > 0] = comp[comp > 0] + n
         n += k
     return out
-
-
-def majority_by_region(pred, regions):
-    """Each region's most frequent non-zero class (pixels outside regions keep theirs)."""
-    pred = np.asarray(pred)
-    out = np.array(pred, copy=True)
-    for r in np.unique(regions[regions > 0]):
-        m = regions == r
-        v = pred[m]
-        v = v[v > 0]
-        if v.size:
-            out[m] = np.bincount(v).argmax()
-    return out
-
-
-def mode_filter(pred, *, radius_px, classes):
-    """Most frequent class of ``classes`` in a disc around each pixel (0 and other ids do not vote)."""
-    pred = np.asarray(pred)
-    k = int(np.floor(radius_px))
-    yy, xx = np.mgrid[-k : k + 1, -k : k + 1]
-    disc = (yy * yy + xx * xx <= radius_px * radius_px + 1e-9).astype(np.float64)
-    classes = list(classes)
-    votes = np.stack([ndimage.correlate((pred == c).astype(np.float64), disc, mode="constant") for c in classes], -1)
-    best = np.asarray(classes)[votes.argmax(-1)]
-    return np.where(votes.max(-1) > 0, best, 0)
 
 
 def recognition_tables(library, maps, region_maps, svm, truth, wall_distance_mm, regions, *, mm_per_pixel) -> dict:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import ndimage
 
 from ..errors import InputError
 from . import fit as _fit
@@ -42,6 +43,8 @@ __all__ = [
     "recognize_regions",
     "entries_from_capture",
     "accuracy_by_distance",
+    "mode_filter",
+    "majority_by_region",
 ]
 
 #: Bins of distance to the nearest wall (mm) of the accuracy tables.
@@ -308,6 +311,31 @@ def entries_from_capture(maps: dict, labels, names: dict, *, source="", publishe
             )
         )
     return out
+
+
+def majority_by_region(pred, regions):
+    """Each region's most frequent non-zero class (pixels outside regions keep theirs)."""
+    pred = np.asarray(pred)
+    out = np.array(pred, copy=True)
+    for r in np.unique(regions[regions > 0]):
+        m = regions == r
+        v = pred[m]
+        v = v[v > 0]
+        if v.size:
+            out[m] = np.bincount(v).argmax()
+    return out
+
+
+def mode_filter(pred, *, radius_px, classes):
+    """Most frequent class of ``classes`` in a disc around each pixel (0 and other ids do not vote)."""
+    pred = np.asarray(pred)
+    k = int(np.floor(radius_px))
+    yy, xx = np.mgrid[-k : k + 1, -k : k + 1]
+    disc = (yy * yy + xx * xx <= radius_px * radius_px + 1e-9).astype(np.float64)
+    classes = list(classes)
+    votes = np.stack([ndimage.correlate((pred == c).astype(np.float64), disc, mode="constant") for c in classes], -1)
+    best = np.asarray(classes)[votes.argmax(-1)]
+    return np.where(votes.max(-1) > 0, best, 0)
 
 
 def accuracy_by_distance(pred, truth, wall_distance_mm, *, classes, bins_mm=WALL_BINS_MM) -> dict:
