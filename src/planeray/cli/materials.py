@@ -738,7 +738,17 @@ def recognize_cmd(
     reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
     truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
     H, W = transport.shape
-    mm_per_pixel = mm * float(transport.geometry.rows_per_camera_row)
+    rpc = float(transport.geometry.rows_per_camera_row)
+    mm_per_pixel = mm * rpc
+    lib_rpc = lib.conditions.get("rows_per_camera_row")
+    if isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+        console.print(
+            f"note: the library's media were fitted at {lib_rpc:g} projector rows per camera row, this capture has "
+            f"{rpc:g}: the fit's biases differ with the resolution, so its parameters may not match the entries; "
+            "make a library from such captures (planeray materials library-add)",
+            highlight=False,
+            markup=False,
+        )
     if reg is not None:  # each region's pooled profile fitted once (measured best next to walls)
         with console.status("fitting each region's pooled profile"):
             rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
@@ -790,9 +800,11 @@ def recognize_cmd(
         if n:
             out.print(f"  {n} px: {text}")
     if table is not None:
+        edges = table["bins_mm"]
+        spans = [f"{lo:g}-{hi:g} mm" if hi is not None else f">{lo:g} mm" for lo, hi in zip(edges[:-1], edges[1:])]
         for name, row in table["classes"].items():
-            bins = ", ".join(_acc(b["accuracy"]) for b in row["bins"])
-            out.print(f"  accuracy {name}: {_acc(row['all'])}  (by wall distance {table['bins_mm']} mm: {bins})")
+            bins = ", ".join(f"{span} {_acc(b['accuracy'])}" for span, b in zip(spans, row["bins"]))
+            out.print(f"  accuracy {name}: {_acc(row['all'])}  (by distance to the wall: {bins})", highlight=False)
 
 
 @materials_app.command("library-add")
