@@ -362,3 +362,18 @@ def test_predict_refuses_a_bad_majority_radius_in_one_line(tmp_path):
         ]
     )
     assert res.exit_code == 1 and "--majority-px" in res.output and len(res.output.strip().splitlines()) == 1
+
+
+def test_a_user_folder_or_file_is_never_the_output(capture, tmp_path):
+    from _new_user import run_bad, user_files
+
+    root, cap = capture
+    user_files(tmp_path)
+    lib = str(root / "lib.json")
+    run_bad(["materials", "recognize", cap, "--library", lib, "--out", "{d}", "--overwrite"], folder=tmp_path)
+    (tmp_path / "mine.json").write_text('{"format": "planeray-media-library"}')  # a user's, unmarked
+    run_bad(
+        ["materials", "library-add", cap, "--labels", root / "labels.png", "--class-name", "1=x"]
+        + ["--out", "{d}/mine.json", "--overwrite"],
+        folder=tmp_path,
+    )
