@@ -41,12 +41,23 @@ def test_the_shipped_table_is_found_without_tracing(monkeypatch):
     assert t.kernel.shape == (fit.TABLE_MU_S_PRIME_PER_MM.size, fit.TABLE_MU_A_PER_MM.size, fit.TABLE_REACH_ROWS + 1)
 
 
-@pytest.mark.parametrize(
-    ("mu_s_prime", "mu_a", "mm"),
-    [(1.0, 0.01, 0.3), (0.45, 0.003, 0.3), (3.0, 0.05, 0.3), (0.8, 0.004, 0.5)],  # off the grid; another row size
-)
-def test_the_forward_model_matches_direct_monte_carlo(table, mu_s_prime, mu_a, mm):
-    k_dir, e_dir = _direct(mu_s_prime, mu_a, mm=mm)
+def _scene_slab(class_id):
+    """The materials scene's shipped Monte Carlo slab kernel of a medium (10^6 photons, not the table's run)."""
+    from planeray.scenes.materials import material_tables
+
+    wt = material_tables()[class_id]
+    sel = np.searchsorted(wt.offsets_rows, OFFSETS)
+    return wt.medium, wt.slab[sel], wt.slab_stderr[sel]
+
+
+@pytest.mark.parametrize("case", ["2% milk", "0.5 mm per row"])
+def test_the_forward_model_matches_direct_monte_carlo(table, case):
+    if case == "2% milk":  # g 0.82 against the table's 0.8; off the grid
+        med, k_dir, e_dir = _scene_slab(2)
+        mu_s_prime, mu_a, mm = med.sigma_s_prime, med.sigma_a, 0.3
+    else:  # another row size: the per-row scaling (a small run: 10 000 photons)
+        mu_s_prime, mu_a, mm = 0.8, 0.004, 0.5
+        k_dir, e_dir = _direct(mu_s_prime, mu_a, mm=mm, n_photons=10_000)
     k_fit = fit.line_kernel(mu_s_prime, mu_a, offsets_rows=OFFSETS, mm_per_row=mm, table=table)
     # Groups of 9 rows (noise averages out), where the kernel carries light.
     groups = OFFSETS.reshape(-1, 1)[:198].reshape(22, 9)
@@ -62,8 +73,8 @@ def test_the_forward_model_matches_direct_monte_carlo(table, mu_s_prime, mu_a, m
 
 
 def test_a_kernel_outside_the_table_is_refused(table):
-    with pytest.raises(ValueError, match="outside the forward table"):
-        fit.line_kernel(50.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    with pytest.raises(ValueError, match="outside the forward model"):
+        fit.line_kernel(500.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
 
 
 @pytest.mark.parametrize("calibrated", [True, False])
@@ -81,9 +92,10 @@ def test_the_fit_recovers_the_parameters_of_noiseless_profiles(table, calibrated
 
 
 def test_the_fit_recovers_media_traced_by_direct_monte_carlo(table):
-    """A forward model the fit was not built from (other seed, more photons): the issue's targets."""
-    truth = [(0.6, 0.003), (2.0, 0.03)]
-    Y, S = zip(*(_direct(s, a, n_photons=100_000, seed=5) for s, a in truth))
+    """A forward model the fit was not built from (the scene's own Monte Carlo slabs of the three milks, g 0.93,
+    0.82, 0.75, 10^6 photons each): the issue's targets."""
+    meds, Y, S = zip(*(_scene_slab(c) for c in (1, 2, 3)))
+    truth = [(m.sigma_s_prime, m.sigma_a) for m in meds]
     r = fit.fit_profiles(np.stack(Y), offsets_rows=OFFSETS, mm_per_row=MM, sigma=np.stack(S), calibrated=True)
     s_true, a_true = np.array(truth).T
     assert np.all(np.abs(r.mu_s_prime_per_mm / s_true - 1) <= 0.10), r.mu_s_prime_per_mm
@@ -94,7 +106,7 @@ def test_the_standard_errors_match_the_spread_over_noise_seeds(table):
     clean = fit.line_kernel(1.2, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
     sigma = 0.003 * clean.max() * np.ones_like(clean)  # small noise: the linearized errors hold
     rng = np.random.default_rng(0)
-    Y = clean[None, :] + sigma[None, :] * rng.standard_normal((120, clean.size))
+    Y = clean[None, :] + sigma[None, :] * rng.standard_normal((50, clean.size))
     # data made by the table itself: its own error is not part of this noise
     r = fit.fit_profiles(
         Y, offsets_rows=OFFSETS, mm_per_row=MM, sigma=sigma, calibrated=False, table=table, model_relative_sd=0
@@ -105,11 +117,11 @@ def test_the_standard_errors_match_the_spread_over_noise_seeds(table):
         logs = np.log(est[ok])
         spread = 1.4826 * np.median(np.abs(logs - np.median(logs)))  # robust: a few fits land in a far minimum
         reported = np.median(se[ok] / est[ok])
-        # 120 seeds: the spread's own relative error is ~7 %; allow 25 %.
+        # 50 seeds: the spread's own relative error is ~10 %; allow 25 %.
         assert 0.75 < reported / spread < 1.25, (reported, spread)
     # and without sigma, the errors come from the residuals: about the same
-    r2 = fit.fit_profiles(Y[:40], offsets_rows=OFFSETS, mm_per_row=MM, calibrated=False, table=table)
-    ratio = np.median(r2.mu_s_prime_se_per_mm / r.mu_s_prime_se_per_mm[:40])
+    r2 = fit.fit_profiles(Y[:20], offsets_rows=OFFSETS, mm_per_row=MM, calibrated=False, table=table)
+    ratio = np.median(r2.mu_s_prime_se_per_mm / r.mu_s_prime_se_per_mm[:20])
     assert 0.8 < ratio < 1.2
 
 
@@ -134,15 +146,21 @@ def test_a_profile_without_signal_is_nan_with_its_reason(table):
     assert np.all(r.mask & 1)
 
 
-def test_a_profile_narrower_than_the_tables_reach_gives_no_mu_s_prime(table):
-    # Coarse rows (3 mm) of a strongly scattering, absorbing medium (per-row mu_s' 9, beyond the table's 2.4):
-    # nearly all the light returns within the line's own bin; the optimum sits at the table's edge.
+def test_a_profile_narrower_than_a_bin_gives_no_mu_s_prime(table):
+    # Coarse rows (3 mm) of a strongly scattering medium (per-row mu_s' 28.5, far beyond the table's 2.4: the
+    # dipole): 98 % of the light returns within the line's own bin, whose shape says nothing of mu_s'.
     coarse = np.arange(-20, 21)
-    y, e = _direct(3.0, 0.06, mm=3.0, n_photons=20_000, offsets=coarse)
-    r = fit.fit_profiles(y, offsets_rows=coarse, mm_per_row=3.0, sigma=np.maximum(e, 1e-6), table=table)
+    y = fit.line_kernel(9.5, 0.019, offsets_rows=coarse, mm_per_row=3.0, table=table)
+    assert y[21] < 0.03 * y[20]
+    y = y * (1 + 0.01 * np.random.default_rng(4).standard_normal(y.size))
+    r = fit.fit_profiles(y, offsets_rows=coarse, mm_per_row=3.0, sigma=0.01 * y + 1e-6, table=table)
     assert np.isnan(r.mu_s_prime_per_mm[0])
-    assert r.mask[0] & (2 | 8 | 32)
+    assert r.mask[0] & 32
     assert any("mu_s'" in why for why in fit.describe_reasons(int(r.mask[0])))
+    # a third of that (per-row 9, 11 % of the light in the next bin) is measured, by the dipole beyond the table
+    y = fit.line_kernel(3.0, 0.015, offsets_rows=coarse, mm_per_row=3.0, table=table)
+    r = fit.fit_profiles(y, offsets_rows=coarse, mm_per_row=3.0, sigma=0.01 * y + 1e-6, table=table)
+    assert r.mu_s_prime_per_mm[0] == pytest.approx(3.0, rel=0.02) and r.mask[0] == 0
 
 
 def test_the_calibrated_fit_constrains_mu_a_better_than_the_shape_alone(table):
@@ -205,11 +223,24 @@ def test_the_command_writes_maps_with_units_a_figure_and_a_summary(capture):
     root, cap = capture
     out = root / "fit1"
     res = cli_runner.invoke(
-        app, ["materials", "fit", str(cap), "--out", str(out), "--labels", str(root / "labels.png"), "--block", "2"]
-    )
+        app,
+        [
+            "materials",
+            "fit",
+            str(cap),
+            "--out",
+            str(out),
+            "--labels",
+            str(root / "labels.png"),
+            "--block",
+            "4",
+            "--no-walls",
+        ],
+    )  # two unbounded media side by side: no container walls
     assert res.exit_code == 0, res.output
     meta = json.loads((out / "planeray.json").read_text())
     assert meta["format"] == "planeray-materials-fit" and "shape only" in meta["calibration"]
+    assert meta["walls"].startswith("none")
     r1, r2 = meta["regions"]["1"], meta["regions"]["2"]
     assert abs(r1["mu_s_prime_per_mm"] / 0.8 - 1) < 0.05 and abs(r2["mu_s_prime_per_mm"] / 2.5 - 1) < 0.05
     assert abs(r2["mu_a_per_mm"] / 0.04 - 1) < 0.25
@@ -263,7 +294,7 @@ def test_the_white_reference_calibrates_the_magnitude(capture):
 
     root, cap = capture
     out = root / "fit_white"
-    args = ["materials", "fit", str(cap), "--out", str(out), "--labels", str(root / "labels.png")]
+    args = ["materials", "fit", str(cap), "--out", str(out), "--labels", str(root / "labels.png"), "--no-walls"]
     res = CliRunner().invoke(app, [*args, "--white-reference", str(root / "white.zarr"), "--white-albedo", "0.99"])
     assert res.exit_code == 0, res.output
     meta = json.loads((out / "planeray.json").read_text())
@@ -274,21 +305,76 @@ def test_the_white_reference_calibrates_the_magnitude(capture):
         assert abs(r["mu_a_per_mm"] / a_true - 1) < 0.10, r
 
 
-def test_a_stack_is_demultiplexed_and_orders_the_milks_by_scattering(tmp_path):
-    """The STACK path end to end on a small noisy capture: the milks' fitted mu_s' rank as their published ones."""
-    import json
+# ---------------------------------------------------------------- walls and beyond the table
+def test_container_wall_distances_are_halfway_to_the_next_label():
+    lab = np.zeros((6, 7), int)
+    lab[1:4, 2:6] = 1  # rows 1-3, columns 2-5
+    lab[4:, :] = 2  # touches the image's border below: no wall there
+    d = fit.container_wall_distances(lab, rows_per_camera_row=2.0)
+    # pixel (1, 2): 3 pixels of its run downward -> wall 2.5 px = 5 rows; up 0.5 px; right 3.5 px; left 0.5 px
+    np.testing.assert_allclose(d[1, 2], [5.0, 1.0, 7.0, 1.0])
+    np.testing.assert_allclose(d[2, 4], [3.0, 3.0, 3.0, 5.0])
+    assert np.all(np.isinf(d[5, 3, [0, 2, 3]])) and d[5, 3, 1] == pytest.approx(3.0)  # only the wall above
+    assert np.all(np.isnan(d[0, 0]))  # not a container
 
-    from typer.testing import CliRunner
 
-    from planeray.cli import app
-    from planeray.experiments.materials import simulate_capture
+@pytest.mark.parametrize("angle", [0.0, 90.0])
+def test_the_wall_model_carries_the_monte_carlo_walls_effect(table, angle):
+    """The fit's wall model (diffusion images on the table's kernel) against the scene's brute-force Monte Carlo
+    wall kernels (:mod:`planeray.mc.wall`, shipped): 2 % milk, a wall 12 rows (3.6 mm) from the pixel."""
+    from planeray.scenes.materials import material_tables
 
-    simulate_capture(tmp_path / "cap", size=(32, 32), seed=0)
-    out = tmp_path / "fit"
-    args = ["materials", "fit", str(tmp_path / "cap" / "stack.zarr"), "--out", str(out)]
-    res = CliRunner().invoke(app, [*args, "--labels", str(tmp_path / "cap" / "labels.png")])
-    assert res.exit_code == 0, (res.output, res.stderr if res.stderr_bytes else "", repr(res.exception))
-    regions = json.loads((out / "planeray.json").read_text())["regions"]
-    s = [regions[c]["mu_s_prime_per_mm"] for c in ("1", "2", "3")]  # fat-free, 2 %, whole: 0.89, 2.49, 4.55
-    assert None not in s and s[0] < s[1] < s[2], s
-    assert regions["6"]["mu_s_prime_per_mm"] is None  # the matte table is no scattering medium
+    wt = material_tables()[2]
+    med = wt.medium
+    u = np.arange(-120, 121)
+    sel = np.searchsorted(wt.offsets_rows, u)
+    mc_effect = wt.kernels(12.0, angle)[sel] - wt.slab[sel]
+    walls = np.array([[12.0, angle, 1.0, 1.0]])
+    kw = dict(offsets_rows=u, mm_per_row=wt.mm_per_row, table=table)
+    free = fit.line_kernel(med.sigma_s_prime, med.sigma_a, **kw)
+    effect = fit.line_kernel(med.sigma_s_prime, med.sigma_a, walls=walls, **kw) - free
+    size = np.abs(mc_effect).sum()
+    assert size > 0.05 * wt.slab[sel].sum()  # the wall matters: 8 % of the kernel
+    assert np.abs(effect - mc_effect).sum() < 0.2 * size  # and the model carries >= 80 % of it (measured 91-96 %)
+
+
+@pytest.mark.parametrize("class_id", [1, 2])  # fat-free and 2 % milk: the weakest absorbers, the largest wall effects
+def test_the_fit_with_walls_reads_mu_a_of_monte_carlo_pixels_beside_walls(table, class_id):
+    """A region of pixels 2.4-10 mm from a tray's walls, each pixel's kernel the scene's brute-force Monte Carlo
+    with its wall (shipped wall tables, g of the milk, not the table's 0.8): without the walls the light they
+    lose reads as absorption (mu_a ~2x too high); with them, the issue's targets hold."""
+    from planeray.scenes.materials import material_tables
+
+    wt = material_tables()[class_id]
+    med = wt.medium
+    sel = np.searchsorted(wt.offsets_rows, OFFSETS)
+    pixels = [(d, ang) for d in (8.0, 12.0, 17.0, 24.0, 33.0) for ang in (0.0, 90.0)]
+    y = np.mean([wt.kernels(d, ang)[sel] for d, ang in pixels], axis=0)
+    y[y <= 0] = np.nan  # lines beyond the wall
+    sd = np.mean([wt.kernel_stderr[list(wt.angles_deg).index(ang), list(wt.distances_rows).index(d)][sel]
+                  for d, ang in pixels], axis=0)  # fmt: skip
+    walls = np.array([[d, ang, 1.0, 1.0 / len(pixels)] for d, ang in pixels])
+    kw = dict(offsets_rows=OFFSETS, mm_per_row=wt.mm_per_row, sigma=np.maximum(sd, 1e-3 * np.nanmax(y)), table=table)
+    with_walls = fit.fit_profiles(y, walls=[walls], **kw)
+    without = fit.fit_profiles(y, **kw)
+    assert abs(with_walls.mu_s_prime_per_mm[0] / med.sigma_s_prime - 1) < 0.10, with_walls
+    assert abs(with_walls.mu_a_per_mm[0] / med.sigma_a - 1) < 0.25, with_walls
+    assert without.mu_a_per_mm[0] / med.sigma_a - 1 > 0.5, without  # the bias the walls' model removes
+
+
+def test_beyond_the_table_toothpaste_is_measured_by_the_dipole(table):
+    """Toothpaste (mu_s' 16 /mm: 4.8 per row, twice the table's largest; g 0.6, n 1.45): the scene's Monte Carlo
+    slab, shape only."""
+    med, y, e = _scene_slab(4)
+    r = fit.fit_profiles(y, offsets_rows=OFFSETS, mm_per_row=MM, sigma=np.maximum(e, 1e-4 * y.max()), table=table)
+    assert abs(r.mu_s_prime_per_mm[0] / med.sigma_s_prime - 1) < 0.10, r.mu_s_prime_per_mm
+
+
+def test_beyond_the_table_the_dipole_takes_over_continuously(table):
+    s1 = table.mu_s_prime_per_row[-1] / MM  # the table's largest mu_s', 1/mm
+    kw = dict(offsets_rows=np.arange(-30, 31), mm_per_row=MM, table=table)
+    at, beyond = fit.line_kernel(s1, 0.02, **kw), fit.line_kernel(s1 * 1.001, 0.02, **kw)
+    np.testing.assert_allclose(beyond, at, rtol=5e-3)
+    # and it narrows as mu_s' grows (more light near the line)
+    far = fit.line_kernel(4 * s1, 0.02, **kw)
+    assert far[30] / far.sum() > at[30] / at.sum()

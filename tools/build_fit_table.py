@@ -1,7 +1,7 @@
 """Regenerate the forward table of ``planeray materials fit`` shipped in src/planeray/mc/tables/ (``fit-*.npz``).
 
-81 Monte Carlo line kernels (:func:`planeray.materials.fit.build_forward_table`: 9 x 9 log grid of
-``mu_s'`` 0.2-8 /mm and ``mu_a`` 0.0005-0.2 /mm at 0.3 mm per row, g 0.8, n 1.33, 10^5 photons
+90 Monte Carlo line kernels (:func:`planeray.materials.fit.build_forward_table`: 10 x 9 log grid of
+``mu_s'`` 0.126-8 /mm and ``mu_a`` 0.0005-0.2 /mm at 0.3 mm per row, g 0.8, n 1.33, 10^5 photons
 each; about 6 minutes on 2 cores).  Run after any change to the Monte Carlo engine:
 
     python tools/build_fit_table.py
@@ -21,7 +21,7 @@ def main() -> None:
 
     def tick(k):
         done[0] += k
-        print(f"\r{done[0]} / 81 grid points, {time.time() - t0:.0f} s", end="", flush=True)
+        print(f"\r{done[0]} / 90 grid points, {time.time() - t0:.0f} s", end="", flush=True)
 
     table = fit.build_forward_table(progress=tick)
     s = fit.TABLE_MU_S_PRIME_PER_MM * fit.TABLE_MM_PER_ROW

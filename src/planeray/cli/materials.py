@@ -454,6 +454,13 @@ def fit_cmd(
         typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
     ] = None,
     block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels (1: every pixel), 1-64.")] = 4,
+    walls: Annotated[
+        bool,
+        typer.Option(
+            help="With --labels: each labelled region is a container whose boundary is a clear wall (air behind it); "
+            "the model includes the light lost through it. --no-walls: the media are unbounded.",
+        ),
+    ] = True,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a fit folder planeray wrote.")] = False,
 ):
@@ -495,7 +502,7 @@ def fit_cmd(
     if n != mfit.DEFAULT_N:
         console.print(
             f"note: --n {n:g} is not the shipped table's {mfit.DEFAULT_N:g}: tracing a forward table "
-            "(81 Monte Carlo runs, about 6 minutes on 2 cores; cached afterwards)",
+            "(90 Monte Carlo runs, about 6 minutes on 2 cores; cached afterwards)",
             highlight=False,
             markup=False,
         )
@@ -518,6 +525,7 @@ def fit_cmd(
             labels=lab,
             white_scale=scale,
             block_px=block,
+            containers=lab if walls else None,
             table=table,
             progress=lambda k: bar.advance(task, k),
         )
@@ -534,6 +542,11 @@ def fit_cmd(
             else "none: shape only (a free scale per block); mu_a is less identifiable"
         ),
         "block_px": block,
+        "walls": (
+            "modelled: each --labels region is a container with a clear wall at its boundary"
+            if walls and lab is not None
+            else "none: unbounded media"
+        ),
         "regions": {str(k): v for k, v in result.regions.items()},
         "mask_bits": {str(k): v for k, v in mfit.REASONS.items()} | {"255": "not fitted (outside every region)"},
         "files": {

@@ -20,7 +20,7 @@ interpolated smoothly (cubic) in ``log K`` over ``(log mu_s', sqrt(mu_a))``.
   kernel of a medium ``(mu_s', mu_a)`` binned in rows of ``h`` mm equals the kernel of
   ``(mu_s' h / h0, mu_a h / h0)`` binned in rows of ``h0`` (every length scaled by
   ``h / h0``; the binned fractions are dimensionless).  The table is therefore stored in
-  **per-row** coefficients ``mu h``; built over ``mu_s'`` 0.2-8 /mm and ``mu_a``
+  **per-row** coefficients ``mu h``; built over ``mu_s'`` 0.126-8 /mm and ``mu_a``
   0.0005-0.2 /mm at the materials scene's 0.3 mm per row (:data:`TABLE_MM_PER_ROW`), it
   serves any ``mm_per_row`` whose per-row coefficients fall inside it.
 * **Anisotropy ``g``: fixed** (:data:`DEFAULT_G` = 0.8, the table's ``g``), not fitted
@@ -79,9 +79,11 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import NdBSpline, make_interp_spline
 from scipy.optimize import least_squares
+from scipy.special import k1e
 
 from ..errors import InputError
 from ..mc.cache import TABLES_DIR, cache_dir, write_or_warn
+from ..mc.diffusion import boundary_mismatch_A
 from ..mc.engine import mc_line_profile
 from ..medium import Medium
 from ..timing import band_bin_weights
@@ -94,12 +96,15 @@ __all__ = [
     "TABLE_MU_A_PER_MM",
     "TABLE_REACH_ROWS",
     "MAX_RELATIVE_SE",
+    "DIPOLE_MU_S_PRIME_MAX_PER_ROW",
     "REASONS",
     "ForwardTable",
     "FitResult",
     "build_forward_table",
     "forward_table",
     "line_kernel",
+    "WALL_ANGLES_DEG",
+    "container_wall_distances",
     "fit_profiles",
     "describe_reasons",
     "TransportFit",
@@ -114,12 +119,16 @@ DEFAULT_N = 1.33
 #: Row size (mm) at which the table's mm^-1 ranges are stated.
 TABLE_MM_PER_ROW = 0.3
 #: Grid of the shipped table, mm^-1 at :data:`TABLE_MM_PER_ROW` (log spaced).
-TABLE_MU_S_PRIME_PER_MM = np.geomspace(0.2, 8.0, 9)
+TABLE_MU_S_PRIME_PER_MM = np.geomspace(0.2 / 40.0 ** (1 / 8), 8.0, 10)  # 0.126-8: the soap's 0.2 inside
 TABLE_MU_A_PER_MM = np.geomspace(0.0005, 0.2, 9)
 #: Offsets of the table, projector rows (the kernel is symmetric: 0 .. reach).
 TABLE_REACH_ROWS = 128
 #: Photons per grid point of the shipped table.
 TABLE_PHOTONS = 100_000
+#: Largest per-row ``mu_s' h`` of the fit (``100 /mm`` at 0.3 mm per row): beyond the table's (2.4 per
+#: row, 8 /mm at 0.3 mm per row) the kernel is the diffusion dipole's, handed off at the table's edge
+#: (times the table's kernel over the dipole's there, per offset).
+DIPOLE_MU_S_PRIME_MAX_PER_ROW = 30.0
 #: A parameter whose relative standard error exceeds this is not identifiable (NaN).
 MAX_RELATIVE_SE = 0.5
 #: Relative uncertainty of the forward model (table noise and interpolation; the forward-model
@@ -279,24 +288,29 @@ def build_forward_table(
     for name, v in (("mu_s_prime_per_mm", s), ("mu_a_per_mm", a)):
         if v.size < 4 or np.any(np.diff(v) <= 0) or v[0] <= 0:
             raise InputError(f"{name} must be >= 4 increasing positive values")
-    offsets = np.arange(-int(reach_rows), int(reach_rows) + 1)
     K = np.empty((s.size, a.size, int(reach_rows) + 1))
     E = np.empty_like(K)
-    mid = int(reach_rows)
     for i, si in enumerate(s):
         for j, aj in enumerate(a):
-            # Per-row coefficients are mm^-1 in rows of 1 mm: trace at mm_per_row = 1.
-            med = Medium.from_reduced(float(si), float(aj), g=float(g), n=float(n))
-            p = mc_line_profile(med, n_photons=int(n_photons), offsets_rows=offsets, mm_per_row=1.0, seed=seed)
-            r, e = p.radiance, p.radiance_stderr
-            K[i, j] = np.pi * 0.5 * (r[mid:] + r[mid::-1])
-            E[i, j] = np.pi * 0.5 * np.hypot(e[mid:], e[mid::-1])
-            K[i, j, 0] = np.pi * r[mid]
-            E[i, j, 0] = np.pi * e[mid]
+            K[i, j], E[i, j] = _trace_point(si, aj, reach_rows=reach_rows, g=g, n=n, n_photons=n_photons, seed=seed)
             if progress is not None:
                 progress(1)
     params = dict(n_photons=int(n_photons), seed=int(seed), table_version=_TABLE_VERSION, source="mc_line_profile")
     return ForwardTable(s, a, np.arange(int(reach_rows) + 1), K, E, float(g), float(n), params)
+
+
+def _trace_point(s_per_row, a_per_row, *, reach_rows, g, n, n_photons, seed):
+    """One grid point of the table: the kernel on offsets ``0 .. reach`` (sides averaged) and its error."""
+    offsets = np.arange(-int(reach_rows), int(reach_rows) + 1)
+    mid = int(reach_rows)
+    # Per-row coefficients are mm^-1 in rows of 1 mm: trace at mm_per_row = 1.
+    med = Medium.from_reduced(float(s_per_row), float(a_per_row), g=float(g), n=float(n))
+    p = mc_line_profile(med, n_photons=int(n_photons), offsets_rows=offsets, mm_per_row=1.0, seed=seed)
+    r, e = p.radiance, p.radiance_stderr
+    k = np.pi * 0.5 * (r[mid:] + r[mid::-1])
+    err = np.pi * 0.5 * np.hypot(e[mid:], e[mid::-1])
+    k[0], err[0] = np.pi * r[mid], np.pi * e[mid]
+    return k, err
 
 
 _LOADED: dict = {}
@@ -305,7 +319,7 @@ _LOADED: dict = {}
 def forward_table(*, g=DEFAULT_G, n=DEFAULT_N, n_photons=TABLE_PHOTONS, seed=0, progress=None) -> ForwardTable:
     """The default forward table: shipped (:data:`planeray.mc.cache.TABLES_DIR`), cached, or traced once.
 
-    Other ``g`` or ``n`` than the shipped ones trace the table (81 Monte Carlo runs,
+    Other ``g`` or ``n`` than the shipped ones trace the table (90 Monte Carlo runs,
     about 6 minutes on 2 cores) and cache it under :func:`planeray.mc.cache.cache_dir`.
     """
     s = TABLE_MU_S_PRIME_PER_MM * TABLE_MM_PER_ROW
@@ -336,15 +350,155 @@ def _footprint(rows_per_camera_row):
     return f, w / w.sum()
 
 
+def _dipole_binned(s, a, n, offsets):
+    """The dipole's line kernel binned to offsets ``0 .. reach`` (rows), per-row coefficients."""
+    t, wt = np.polynomial.legendre.leggauss(16)
+    x = np.asarray(offsets, np.float64)[:, None] + 0.5 * t[None, :]
+    return (_dipole_line(np.abs(x), _dipole_per_row(s, a, n)) * (0.5 * wt)).sum(axis=1)
+
+
+def _table_kernel(table: ForwardTable, log_s, log_a):
+    """``K`` on the table's offsets at per-row log-coefficients; beyond the table's largest ``mu_s'``
+    the dipole, handed off at the edge (:data:`DIPOLE_MU_S_PRIME_MAX_PER_ROW`)."""
+    ls1 = math.log(table.mu_s_prime_per_row[-1])
+    if np.ndim(log_s) == 0 and float(log_s) > ls1:
+        k1 = np.exp(table.log_kernel_per_row(ls1, log_a))
+        a = math.exp(float(log_a))
+        off = table.offsets_rows
+        d_s = _dipole_binned(math.exp(float(log_s)), a, table.n, off)
+        d_1 = _dipole_binned(math.exp(ls1), a, table.n, off)
+        return k1 * d_s / np.maximum(d_1, 1e-300)
+    return np.exp(table.log_kernel_per_row(log_s, log_a))
+
+
 def _kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot):
     """``K`` (not log) at per-row log-coefficients for the given signed offsets, footprint-averaged."""
     f, w = foot
     u = np.abs(np.asarray(offsets_rows, np.int64)[:, None] + f[None, :])  # (U, F)
     reach = table.offsets_rows[-1]
-    k = np.exp(table.log_kernel_per_row(log_s, log_a))  # (..., U_table)
+    k = _table_kernel(table, log_s, log_a)  # (..., U_table)
     inside = u <= reach
     vals = np.where(inside, k[..., np.minimum(u, reach)], 0.0)
     return (vals * w).sum(axis=-1)
+
+
+# ------------------------------------------------------------------ container walls
+# A pixel near a clear container wall loses the light that reaches the wall (Fresnel reflection
+# back, the rest lost): the materials scene's Monte Carlo wall kernels (planeray.mc.wall).  The fit
+# cannot trace a wall table for every trial medium, so it takes the *relative* wall effect from
+# diffusion theory -- the dipole of the half-space (Farrell et al. 1992; the engine's hand-off)
+# with its mirror images across the wall's extrapolated boundary, opposite sign (Haskell et al.
+# 1994; the same method of images as planeray.mc.wall's continuation) -- and applies it to the
+# Monte Carlo table kernel: K_wall(u) = K(u) * L_wall(u) / L(u), L the dipole's line kernels.
+# Against the scene's wall tables (tools/validate_fit.py --walls) this ratio carries 85-97 % of the
+# wall's effect.
+
+#: Wall angles the fit models: parallel to the projector's lines (0) and across them (90 degrees).
+WALL_ANGLES_DEG = (0.0, 90.0)
+_Y_GRID = 200  # points of the along-line grid of the half-line integrals (sinh spaced)
+_GL_X = (-0.25, 0.25)  # midpoints across an offset bin (the ratio of two binned kernels), parallel walls
+_WALL_BINS_PER_E_FOLD = 20  # wall distances of a group pooled within 5 % (1 + d)
+_WALL_PASSES = 12  # at most, of the fixed point of the walls' effect (fit_profiles)
+_L_STEP = 0.125  # rows: the dipole's line kernel is interpolated from this grid (parallel walls)
+
+
+def _dipole_per_row(s, a, n):
+    """Dipole constants of a medium of per-row coefficients ``s = mu_s' h``, ``a = mu_a h``."""
+    st = s + a
+    A = boundary_mismatch_A(n)
+    z_r = 1.0 / st
+    return dict(
+        albedo=s / st, sigma_tr=math.sqrt(3.0 * a * st), z=(z_r, z_r * (1.0 + 4.0 * A / 3.0)), z_b=2.0 * A / (3.0 * st)
+    )
+
+
+def _dipole_line(x, d):
+    """Line integral of the dipole's reflectance at lateral distance ``x`` (rows): closed form.
+
+    ``int R(sqrt(x^2 + y^2)) dy`` with ``z (sigma_tr r + 1) exp(-sigma_tr r) / r^3`` per source,
+    whose line integral is ``2 z sigma_tr K1(sigma_tr rho) / rho``, ``rho = sqrt(x^2 + z^2)``.
+    """
+    x = np.asarray(x, np.float64)
+    out = np.zeros_like(x)
+    st = d["sigma_tr"]
+    for z in d["z"]:
+        rho = np.sqrt(x * x + z * z)
+        if st > 0:
+            out += z * st * k1e(st * rho) * np.exp(-st * rho) / rho
+        else:
+            out += z / (rho * rho)
+    return d["albedo"] / (2.0 * np.pi) * out
+
+
+def _half_lines(x_abs, d, b_values):
+    """``int_b^inf R(sqrt(x^2 + y^2)) dy`` for every ``x`` (rows, >= 0) and every ``b >= 0``: ``(X, B)``."""
+    st = d["sigma_tr"]
+    y_max = float(np.max(b_values)) + 40.0 / max(st, 1e-3) + 50.0
+    c = 0.25
+    y = c * np.sinh(np.linspace(0.0, math.asinh(y_max / c), _Y_GRID))
+    r = np.sqrt(x_abs[:, None] ** 2 + y[None, :] ** 2)
+    R = np.zeros_like(r)
+    for z in d["z"]:
+        rr = np.sqrt(r * r + z * z)
+        R += z * (st * rr + 1.0) * np.exp(-st * rr) / rr**3
+    R *= d["albedo"] / (4.0 * np.pi)
+    seg = 0.5 * (R[:, 1:] + R[:, :-1]) * np.diff(y)[None, :]
+    tail = np.concatenate(
+        [np.cumsum(seg[:, ::-1], axis=1)[:, ::-1], np.zeros((x_abs.size, 1))], axis=1
+    )  # int_{y_k}^{y_max}
+    b = np.asarray(b_values, np.float64)
+    k = np.clip(np.searchsorted(y, b) - 1, 0, y.size - 2)
+    w = np.clip((b - y[k]) / (y[k + 1] - y[k]), 0.0, 1.0)
+    return tail[:, k] * (1.0 - w) + tail[:, k + 1] * w
+
+
+def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls):
+    """The walls' change of the footprint-averaged kernel (``(U,)``), to add to the wall-free kernel.
+
+    ``walls``: array ``(M, 4)`` of ``[distance_rows, angle_deg (0 or 90), side (+1/-1), weight]``;
+    each pixel's walls weigh ``1 / pixels`` of the profile (a block's mean profile: the mean of
+    its pixels' kernels), the effects of several walls add (as in the scene).
+    """
+    reach = k_table.size - 1
+    f, w = foot
+    d = _dipole_per_row(math.exp(log_s), math.exp(log_a), n)
+    x = np.asarray(offsets, np.float64)[:, None] - f[None, :]  # line offset seen by the pencil at f: (U, F)
+    kk = np.where(np.abs(x) <= reach, k_table[np.minimum(np.abs(x), reach).astype(np.int64)], 0.0)
+    term = np.zeros(x.shape[0])
+    sub = np.asarray(_GL_X)
+    par = walls[walls[:, 1] == 0.0]
+    if par.size:
+        dist, side, wt = par[:, 0], par[:, 2], par[:, 3]
+        # In the wall's frame (wall on the positive side): offset side * x, the pencil at f is side * f closer.
+        xx = side[:, None, None] * x[None] + sub[:, None, None, None]  # (S, M, U, F)
+        aa = dist[:, None, None] - side[:, None, None] * f[None, None, :]  # (M, 1, F)
+        img = 2.0 * (aa + d["z_b"]) - xx
+        grid = np.arange(0.0, max(float(np.abs(xx).max()), float(np.abs(img).max())) + 2 * _L_STEP, _L_STEP)
+        Lg = _dipole_line(grid, d)  # smooth in x; |xx| lies on the grid, the images between its points
+        L = np.interp(np.abs(xx), grid, Lg)
+        Lw = np.where(xx < aa, L - np.interp(np.abs(img), grid, Lg), 0.0)
+        ratio = Lw.sum(axis=0) / np.maximum(L.sum(axis=0), 1e-300)
+        term += (wt[:, None] * ((ratio - 1.0) * kk[None] * w).sum(axis=-1)).sum(axis=0)
+    per = walls[walls[:, 1] == 90.0]
+    if per.size:
+        dist, wt = per[:, 0], per[:, 3]
+        u = np.asarray(offsets, np.float64)
+        xs, back = np.unique(np.abs(u), return_inverse=True)  # the kernel is symmetric in x
+        M = dist.size
+        H = _half_lines(xs, d, np.concatenate([dist, dist + 2.0 * d["z_b"]]))
+        L = _dipole_line(xs, d)
+        ratio = ((L[:, None] - H[:, :M] - H[:, M:]) / np.maximum(L, 1e-300)[:, None])[back]  # (U, M)
+        term += ((ratio - 1.0) * wt[None, :]).sum(axis=1) * (kk * w).sum(axis=-1)
+    return term
+
+
+def _model_kernel(table: ForwardTable, log_s, log_a, offsets_rows, foot, walls=None):
+    """The pixel's (or block's) kernel at per-row log-coefficients: the table's, changed by the walls."""
+    base = _kernel_per_row(table, log_s, log_a, offsets_rows, foot)
+    if walls is None or not len(walls):
+        return base
+    k = _table_kernel(table, log_s, log_a)
+    return np.maximum(base + _wall_term(k, log_s, log_a, table.n, offsets_rows, foot, np.asarray(walls, float)), 0.0)
 
 
 def line_kernel(
@@ -355,6 +509,7 @@ def line_kernel(
     mm_per_row,
     rows_per_camera_row=1.0,
     table: ForwardTable | None = None,
+    walls=None,
 ) -> np.ndarray:
     """The forward model: line kernel of a semi-infinite medium at the capture's geometry.
 
@@ -370,6 +525,11 @@ def line_kernel(
         Projector rows one camera row spans (the kernel is averaged over them).
     table : ForwardTable, optional
         Default :func:`forward_table`.
+    walls : array_like (M, 4), optional
+        Clear container walls near the pixel, rows ``[distance_rows, angle_deg, side,
+        weight]`` (:func:`fit_profiles`, :func:`container_wall_distances`): the kernel is the table's times
+        the walls' relative effect in diffusion theory (the dipole and its mirror images
+        across the wall's extrapolated boundary, Haskell et al. 1994), ``K L_wall / L``.
 
     Returns
     -------
@@ -379,13 +539,89 @@ def line_kernel(
     table = table or forward_table()
     h = float(mm_per_row)
     (s0, s1), (a0, a1) = table.bounds_per_row
+    s1 = max(s1, DIPOLE_MU_S_PRIME_MAX_PER_ROW)
     s, a = float(mu_s_prime_per_mm) * h, float(mu_a_per_mm) * h
     if not (s0 <= s <= s1 and a0 <= a <= a1):
         raise InputError(
             f"mu_s' {mu_s_prime_per_mm:g} /mm, mu_a {mu_a_per_mm:g} /mm at {h:g} mm per row lie outside the "
-            f"forward table (mu_s' {s0 / h:g}-{s1 / h:g} /mm, mu_a {a0 / h:g}-{a1 / h:g} /mm at this row size)"
+            f"forward model (mu_s' {s0 / h:g}-{s1 / h:g} /mm, mu_a {a0 / h:g}-{a1 / h:g} /mm at this row size)"
         )
-    return _kernel_per_row(table, math.log(s), math.log(a), offsets_rows, _footprint(rows_per_camera_row))
+    w = None if walls is None else np.atleast_2d(np.asarray(walls, np.float64))
+    if w is not None and (w.shape[1] != 4 or not np.all(np.isin(w[:, 1], WALL_ANGLES_DEG)) or np.any(w[:, 0] < 0)):
+        raise InputError("walls must be rows of [distance_rows >= 0, angle_deg 0 or 90, side, weight]")
+    offsets = np.asarray(offsets_rows)
+    return _model_kernel(table, math.log(s), math.log(a), offsets, _footprint(rows_per_camera_row), w)
+
+
+def container_wall_distances(containers, *, rows_per_camera_row) -> np.ndarray:
+    """Distance from each pixel's centre to its container's walls, down, up, right and left.
+
+    A container is a connected run of one label; the wall lies halfway between its last
+    pixel and the first pixel of another label (a pixel's resolution); where the run
+    reaches the image's border there is no wall (``inf``: the medium goes on beyond the
+    field of view).  Camera pixels are square, ``rows_per_camera_row`` projector rows wide.
+
+    Parameters
+    ----------
+    containers : ndarray (H, W) of int
+        Container labels (0: not a container).
+    rows_per_camera_row : float
+        Projector rows one camera row spans.
+
+    Returns
+    -------
+    ndarray (H, W, 4) of float
+        Projector rows to the wall below (toward positive offsets), above, right and left of
+        the pixel; NaN outside the containers.
+    """
+    lab = np.asarray(containers)
+    if lab.ndim != 2:
+        raise InputError(f"containers must be a 2-D label image, got shape {lab.shape}")
+    rpc = float(rows_per_camera_row)
+
+    def forward(a):  # (N, L): pixels to the first other label after each pixel, along axis 1
+        n, m = a.shape
+        out = np.full(a.shape, np.inf)
+        idx = np.arange(m)
+        for i in range(n):
+            change = np.flatnonzero(a[i, 1:] != a[i, :-1]) + 1  # first pixel of each new run
+            if not change.size:
+                continue
+            j = np.searchsorted(change, idx, side="right")
+            has = j < change.size
+            out[i, has] = change[np.minimum(j, change.size - 1)][has] - idx[has]
+        return (out - 0.5) * rpc
+
+    down = forward(lab.T).T
+    up = forward(lab[::-1].T).T[::-1]
+    right = forward(lab)
+    left = forward(lab[:, ::-1])[:, ::-1]
+    d = np.stack([down, up, right, left], axis=-1)
+    d[lab == 0] = np.nan
+    return d
+
+
+# (angle_deg, side) of the four directions of :func:`container_wall_distances`.
+_WALL_DIRECTIONS = ((0.0, 1.0), (0.0, -1.0), (90.0, 1.0), (90.0, -1.0))
+
+
+def _group_walls(distances, per_e_fold=_WALL_BINS_PER_E_FOLD):
+    """The walls of a group of pixels (their mean kernel): ``(M, 4)`` rows of :func:`fit_profiles`' ``walls``.
+
+    Distances are pooled in bins of ``1 / per_e_fold`` in ``log(1 + d)`` (their weighted mean kept), so
+    a large region costs a few dozen walls per direction, not one per pixel row or column.
+    """
+    d = np.asarray(distances, np.float64).reshape(-1, 4)
+    n = d.shape[0]
+    rows = []
+    for k, (ang, side) in enumerate(_WALL_DIRECTIONS):
+        v = d[:, k][np.isfinite(d[:, k])]
+        if v.size:
+            key, inv = np.unique(np.round(np.log1p(v) * per_e_fold), return_inverse=True)
+            cnt = np.bincount(inv, minlength=key.size)
+            mean = np.bincount(inv, weights=v, minlength=key.size) / cnt
+            rows.append(np.stack([mean, np.full(key.size, ang), np.full(key.size, side), cnt / n], axis=1))
+    return np.concatenate(rows) if rows else np.zeros((0, 4))
 
 
 @dataclass(frozen=True)
@@ -434,6 +670,22 @@ def _cell_rel(table_rel, gs, ga, log_s, log_a):
     return table_rel[i : i + 2, j : j + 2].max(axis=(0, 1))
 
 
+def _forward_jac(resid, step=1e-4):
+    """Forward-difference Jacobian with an absolute step in the log-parameters (scipy's relative step
+    is 0 at a parameter that is exactly 0, e.g. ``log c`` of a perfectly calibrated profile)."""
+
+    def jac(x, *args):
+        r0 = resid(x)
+        cols = []
+        for i in range(len(x)):
+            xi = np.array(x, float)
+            xi[i] += step
+            cols.append((resid(xi) - r0) / step)
+        return np.stack(cols, axis=1)
+
+    return jac
+
+
 def describe_reasons(bits: int) -> list[str]:
     """The reasons (:data:`REASONS`) set in a mask value."""
     return [text for bit, text in REASONS.items() if int(bits) & bit]
@@ -450,6 +702,7 @@ def fit_profiles(
     table: ForwardTable | None = None,
     max_relative_se=MAX_RELATIVE_SE,
     model_relative_sd=MODEL_RELATIVE_SD,
+    walls=None,
 ) -> FitResult:
     """Fit ``mu_s'`` and ``mu_a`` to line-kernel profiles (weighted least squares in log-parameters).
 
@@ -479,6 +732,14 @@ def fit_profiles(
         ``sigma`` (as a share of the data): without it, precise samples would fit the table's
         own errors.  Only with ``sigma``; 0 leaves the model's error out (data made by the
         table itself).
+    walls : sequence of (ndarray (M, 4) or None), optional
+        Per profile, the container walls its pixels see (:func:`container_wall_distances`): rows of
+        ``[distance_rows, angle_deg, side, weight]`` -- a clear wall (air behind it) at
+        ``distance_rows`` projector rows from a pixel, parallel (``angle_deg`` 0; ``side`` +1
+        toward positive offsets, -1 negative) or perpendicular (90) to the lit lines, weighing
+        ``weight`` (the share of the profile's pixels that see it).  The model is then the
+        table's kernel times the walls' relative effect from diffusion theory (method of
+        images; :func:`line_kernel` with ``walls``).  None: a medium without walls.
 
     Returns
     -------
@@ -486,6 +747,8 @@ def fit_profiles(
     """
     table = table or forward_table()
     Y = np.atleast_2d(np.asarray(profiles, np.float64))
+    if walls is not None and len(walls) != Y.shape[0]:
+        raise InputError(f"walls has {len(walls)} entries, one per profile expected ({Y.shape[0]})")
     offsets = np.asarray(offsets_rows)
     if offsets.ndim != 1 or offsets.size != Y.shape[1]:
         raise InputError(f"offsets_rows has {offsets.size} values, the profiles {Y.shape[1]} samples")
@@ -501,6 +764,7 @@ def fit_profiles(
     h = float(mm_per_row)
     foot = _footprint(rows_per_camera_row)
     (s0, s1), (a0, a1) = table.bounds_per_row
+    s1 = max(s1, DIPOLE_MU_S_PRIME_MAX_PER_ROW)  # the dipole beyond the table
     lo = [math.log(s0), math.log(a0)]
     hi = [math.log(s1), math.log(a1)]
     P = Y.shape[0]
@@ -517,18 +781,28 @@ def fit_profiles(
     edge_tol = 0.02
     for p in range(P):
         y, sd = Y[p], S[p]
+        wp = None if walls is None or walls[p] is None or not len(walls[p]) else np.asarray(walls[p], np.float64)
         ok = np.isfinite(y)
         if np.count_nonzero(ok & (y > 0)) < 4:
             mask[p] |= 1
             continue
         wy = np.where(ok, y / sd, 0.0)
-        wK = np.where(ok, Kg / sd, 0.0)
-        if calibrated:
-            c_g = np.ones(len(Kg))
-        else:
-            c_g = np.maximum((wK @ wy) / np.maximum((wK * wK).sum(axis=1), 1e-300), 1e-300)
-        cost_g = ((wy[None, :] - c_g[:, None] * wK) ** 2).sum(axis=1)
-        g0 = int(np.argmin(cost_g))
+        rho_g, tried = 1.0, set()
+        for _ in range(4 if wp is not None else 1):
+            # With walls: the grid kernels times the walls' effect at the best point so far, until it stays.
+            wK = np.where(ok, Kg * rho_g / sd, 0.0)
+            if calibrated:
+                c_g = np.ones(len(Kg))
+            else:
+                c_g = np.maximum((wK @ wy) / np.maximum((wK * wK).sum(axis=1), 1e-300), 1e-300)
+            cost_g = ((wy[None, :] - c_g[:, None] * wK) ** 2).sum(axis=1)
+            g0 = int(np.argmin(cost_g))
+            if wp is None or g0 in tried:
+                break
+            tried.add(g0)
+            k_free = Kg[g0]
+            k_wall = _model_kernel(table, starts[g0, 0], starts[g0, 1], offsets, foot, wp)
+            rho_g = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
         sd0 = sd
         x0 = list(starts[g0])
         lo_p, hi_p = list(lo), list(hi)
@@ -540,20 +814,40 @@ def fit_profiles(
         # Two passes when sigma is given: the model's own error (the table's Monte Carlo error per
         # offset, largest of the grid cell around the estimate, plus the interpolation share) joins
         # the data's; first that of the start's cell, then of the first estimate's.
-        passes = 2 if sigma is not None and model_relative_sd > 0 else 1
+        # With walls, their relative effect (diffusion theory, costly) is evaluated at the current
+        # estimate and held during a pass, until the estimate stops moving (a fixed point, exact for
+        # data the model describes).
+        model_error = sigma is not None and model_relative_sd > 0
+        passes = _WALL_PASSES if wp is not None else 2 if model_error else 1
         try:
-            for _ in range(passes):
-                if passes == 2:
+            for i_pass in range(passes):
+                x_prev = np.array(x0, float)
+                if model_error:
                     rel = float(model_relative_sd) + _cell_rel(table_rel, gs, ga, x0[0], x0[1])[u_tab]
                     sd = np.hypot(sd0, rel * np.nan_to_num(np.abs(y)))
+                rho = 1.0
+                if wp is not None:
+                    k_free = _kernel_per_row(table, x0[0], x0[1], offsets, foot)
+                    k_wall = _model_kernel(table, x0[0], x0[1], offsets, foot, wp)
+                    rho = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
 
-                def resid(x, y=y, sd=sd, ok=ok):
-                    k = _kernel_per_row(table, x[0], x[1], offsets, foot)
+                def resid(x, y=y, sd=sd, ok=ok, rho=rho):
+                    k = _kernel_per_row(table, x[0], x[1], offsets, foot) * rho
                     c = math.exp(x[2]) if len(x) > 2 else 1.0
                     return np.where(ok, (c * k - y) / sd, 0.0)
 
-                res = least_squares(resid, x0, bounds=(lo_p, hi_p), method="trf", x_scale=1.0, diff_step=1e-4)
+                res = least_squares(resid, x0, jac=_forward_jac(resid), bounds=(lo_p, hi_p), method="trf", x_scale=1.0)
                 x0 = np.clip(res.x, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
+                if wp is not None and i_pass >= 1 and np.max(np.abs(x0[:2] - x_prev[:2])) < 1e-3:
+                    break
+            if wp is not None:  # polish with the walls' effect evaluated at every trial (the exact Jacobian)
+
+                def resid(x, y=y, sd=sd, ok=ok, wp=wp):
+                    k = _model_kernel(table, x[0], x[1], offsets, foot, wp)
+                    c = math.exp(x[2]) if len(x) > 2 else 1.0
+                    return np.where(ok, (c * k - y) / sd, 0.0)
+
+                res = least_squares(resid, x0, jac=_forward_jac(resid), bounds=(lo_p, hi_p), method="trf", x_scale=1.0)
         except (ValueError, np.linalg.LinAlgError):
             mask[p] |= 64
             continue
@@ -576,7 +870,7 @@ def fit_profiles(
         out["chi2"][p] = chi2
         raw[p], raw_se[p] = x[:2] - math.log(h), se_log[:2]
         scale[p] = math.exp(x[2]) if len(x) > 2 else 1.0
-        model[p] = scale[p] * _kernel_per_row(table, x[0], x[1], offsets, foot)
+        model[p] = scale[p] * _model_kernel(table, x[0], x[1], offsets, foot, wp)
         if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:
             mask[p] |= 2
         if min(x[1] - lo[1], hi[1] - x[1]) < edge_tol:
@@ -667,6 +961,7 @@ def fit_transport(
     labels=None,
     white_scale=None,
     block_px=4,
+    containers=None,
     table: ForwardTable | None = None,
     progress=None,
 ) -> TransportFit:
@@ -686,6 +981,13 @@ def fit_transport(
     block_px : int
         Pixels are averaged in ``block_px x block_px`` blocks (within a region) before
         fitting; the block's estimate fills its pixels.  1: every pixel.
+    containers : ndarray (H, W) of int, optional
+        The containers (labels; often ``labels`` itself): given, each container's boundary is
+        a clear wall (air behind it; the image's border is none) and every block's and
+        region's model is the mean kernel of its pixels with their walls
+        (:func:`container_wall_distances`, :func:`fit_profiles`' ``walls``).  Without it the
+        media are unbounded, and pixels near walls read the light lost through them as
+        absorption.
     table : ForwardTable, optional
     progress : callable, optional
         Called with the number of fits just done.
@@ -712,6 +1014,11 @@ def fit_transport(
     lab = np.ones((H, W), np.int64) if labels is None else np.asarray(labels, np.int64)
     if lab.shape != (H, W):
         raise InputError(f"labels have shape {lab.shape}, the transport {(H, W)}")
+    dist = None
+    if containers is not None:
+        if np.shape(containers) != (H, W):
+            raise InputError(f"containers have shape {np.shape(containers)}, the transport {(H, W)}")
+        dist = container_wall_distances(containers, rows_per_camera_row=rpc)
     b = int(block_px)
     if b < 1:
         raise InputError(f"block_px must be >= 1, got {block_px!r}")
@@ -720,7 +1027,7 @@ def fit_transport(
     regions, profiles = {}, {}
     for region in sorted(int(v) for v in np.unique(lab) if v != 0):
         inside = lab == region
-        blocks, means, sds = [], [], []
+        blocks, means, sds, walls = [], [], [], []
         for r0 in range(0, H, b):
             for c0 in range(0, W, b):
                 m = inside[r0 : r0 + b, c0 : c0 + b]
@@ -732,6 +1039,8 @@ def fit_transport(
                 means.append(mean)
                 sds.append(np.maximum(sd, 0.01 * max(float(np.abs(mean).max()), 1e-30)))
                 blocks.append((r0, c0, m))
+                if dist is not None:
+                    walls.append(_group_walls(dist[r0 : r0 + b, c0 : c0 + b][m]))
         if not blocks:
             continue
         Y = np.stack(means)
@@ -739,7 +1048,7 @@ def fit_transport(
         S = np.stack(sds)
         res = fit_profiles(
             Y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=S, calibrated=calibrated,
-            rows_per_camera_row=rpc, table=table,
+            rows_per_camera_row=rpc, table=table, walls=walls if dist is not None else None,
         )  # fmt: skip
         if progress is not None:
             progress(len(blocks))
@@ -760,9 +1069,16 @@ def fit_transport(
         s = np.sqrt(var) / np.sqrt(np.maximum(cnt, 1)) if len(blocks) > 2 else S[0]
         s = np.where(np.isfinite(s) & (s > 0) & (cnt > 2), s, np.nanmax(S))
         s = np.maximum(s, 1e-3 * np.nanmax(np.abs(y)))
+        rw = None
+        if dist is not None:
+            # With the walls modelled, the region's profile is the mean of its pixels, zeros (lines
+            # beyond a wall) included: its model is the mean of the pixels' kernels with their walls.
+            y = dense[inside].mean(axis=0)
+            y[y == 0] = np.nan
+            rw = [_group_walls(dist[inside])]
         rr = fit_profiles(
             y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=s, calibrated=calibrated,
-            rows_per_camera_row=rpc, table=table,
+            rows_per_camera_row=rpc, table=table, walls=rw,
         )  # fmt: skip
         regions[region] = {
             "pixels": int(inside.sum()),
