@@ -284,6 +284,13 @@ def predict(
             "(documentation: Material recognition)."
         ),
     ] = 0.01,
+    majority_px: Annotated[
+        float,
+        typer.Option(
+            help="Replace each classified pixel's pick by the majority of the picks within this radius (pixels; "
+            "0: off). 1.5 at 128x128 (2.5 mm) kept every class >= 0.95 next to walls (Recognition by parameters)."
+        ),
+    ] = 0.0,
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing segmentation planeray wrote.")] = False,
 ):
@@ -295,6 +302,8 @@ def predict(
     from ..materials.model import check_unclassified_below
 
     threshold = check_unclassified_below(unclassified_below)
+    if not 0.0 <= majority_px <= 50.0:
+        raise ValueError(f"--majority-px must be in 0-50 pixels, got {majority_px:g}")
     if out_png.suffix.lower() not in LABEL_SUFFIXES:
         raise ValueError(f"--out must end in .png, .tif or .tiff (a label image of class ids), got {out_png}")
     if near_wall is not None and labels is None:
@@ -328,6 +337,14 @@ def predict(
     else:
         with console.status("classifying pixels"):
             seg = model.segment(st, unclassified_below=threshold, source=str(stack_path))
+    if majority_px > 0:
+        import numpy as np
+
+        from ..materials.recognize import mode_filter
+
+        voted = mode_filter(seg.labels, radius_px=majority_px, classes=sorted(model.classes))
+        keep = (seg.labels > 0) & ~seg.no_profile & ~seg.unclassified
+        seg.labels[...] = np.where(keep & (voted > 0), voted, seg.labels)
     write_label_image(out_png, seg.labels, kind="segmentation")
     counts = {}
     for c in sorted(set(seg.labels[~seg.no_profile & ~seg.unclassified].ravel().tolist())):
@@ -338,6 +355,7 @@ def predict(
         "segmentation": str(out_png),
         "pixels": counts,
         "unclassified_below": threshold,
+        "majority_px": majority_px,
         "model": str(model_path),
         "features": model.definition.describe(),
     }
@@ -630,3 +648,244 @@ def report(
 
 def _pct(value) -> str:
     return "no pixels" if value is None else f"{value:.1%}"
+
+
+def _wall_distance_from_labels(labels, mm_per_pixel):
+    """Distance (mm) of each pixel's centre to the edge of its labelled region (the container's wall)."""
+    import numpy as np
+    from scipy import ndimage
+
+    lab = np.asarray(labels)
+    out = np.full(lab.shape, np.inf)
+    for c in np.unique(lab[lab > 0]):
+        m = lab == c
+        d = ndimage.distance_transform_edt(np.pad(m, 1, constant_values=False))[1:-1, 1:-1]
+        out[m] = (d[m] - 0.5) * mm_per_pixel
+    return out
+
+
+@materials_app.command("recognize")
+@_friendly_errors
+def recognize_cmd(
+    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    out_dir: Annotated[
+        Path, typer.Option("--out", "-o", help="Folder to write: segmentation.png, planeray.json, recognition.png.")
+    ],
+    library: Annotated[
+        Path | None,
+        typer.Option("--library", help="Media library (JSON); default: the five Fig. 10 media shipped."),
+    ] = None,
+    regions: Annotated[
+        Path | None,
+        typer.Option(
+            "--regions", help="Label image of regions (e.g. containers outlined, 0: none): pooled per region."
+        ),
+    ] = None,
+    pool_mm: Annotated[
+        float | None,
+        typer.Option(
+            help="Pool the evidence over a disc of this radius (mm) around each pixel (default 2.5); 0: per pixel."
+        ),
+    ] = None,
+    block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels, 1-16 (the library's: 2).")] = 2,
+    p_unknown: Annotated[
+        float, typer.Option(help="A pixel whose fit is less typical of every medium than this p-value is unknown (0).")
+    ] = 1e-3,
+    labels: Annotated[
+        Path | None,
+        typer.Option("--labels", help="Ground-truth class ids: score per class and by distance to the walls."),
+    ] = None,
+    mm_per_row: Annotated[
+        float | None,
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+    ] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace a recognition folder planeray wrote.")] = False,
+):
+    """Name each pixel's medium by its fitted mu_s' and mu_a against a library of known media."""
+    import json
+
+    import numpy as np
+
+    from ..errors import InputError
+    from ..experiments._report import jsonable
+    from ..figures.materials import recognition_by_distance_figure
+    from ..io import atomic_directory
+    from ..materials.labels import write_label_image
+    from ..materials.library import FLAGS, default_library, load_library
+    from ..materials.recognize import (
+        DEFAULT_POOL_MM,
+        accuracy_by_distance,
+        fit_image,
+        recognize_image,
+        recognize_regions,
+    )
+
+    if not 1 <= block <= 16:
+        raise ValueError(f"--block must be an integer in 1-16, got {block}")
+    if regions is not None and pool_mm is not None:
+        raise ValueError("--regions and --pool-mm: pool over the regions or over a disc, not both")
+    pool_mm = DEFAULT_POOL_MM if pool_mm is None else pool_mm
+    if not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
+        raise ValueError(f"--pool-mm must be in 0-100 mm, got {pool_mm:g}")
+    if not 0.0 <= p_unknown < 1.0:
+        raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
+    if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
+        raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
+    _not_an_input(
+        out_dir, [("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)]
+    )
+    _outputs((out_dir, "materials recognition"), overwrite=overwrite)
+    try:
+        lib = load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    transport, meta = _read_fit_input(input_path, "the capture")
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+    try:
+        lib.check_conditions(mm_per_row=mm, calibrated=False)
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
+    truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
+    H, W = transport.shape
+    rpc = float(transport.geometry.rows_per_camera_row)
+    mm_per_pixel = mm * rpc
+    lib_rpc = lib.conditions.get("rows_per_camera_row")
+    if isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+        console.print(
+            f"note: the library's media were fitted at {lib_rpc:g} projector rows per camera row, this capture has "
+            f"{rpc:g}: the fit's biases differ with the resolution, so its parameters may not match the entries; "
+            "make a library from such captures (planeray materials library-add)",
+            highlight=False,
+            markup=False,
+        )
+    if reg is not None:  # each region's pooled profile fitted once (measured best next to walls)
+        with console.status("fitting each region's pooled profile"):
+            rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
+    else:
+        with progress_bar() as bar:
+            task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
+            maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
+        rec = recognize_image(lib, maps, mm_per_pixel=mm_per_pixel, pool_mm=pool_mm, p_unknown=p_unknown)
+    names = {e.class_id: e.name for e in lib.entries}
+    counts = {names[c]: int((rec.class_ids == c).sum()) for c in lib.class_ids}
+    counts["unclassified"] = int((rec.class_ids == 0).sum())
+    numbers = {
+        "format": "planeray-materials-recognition",
+        "format_version": 1,
+        "capture": str(input_path),
+        "library": str(library) if library is not None else "shipped (the five Fig. 10 media)",
+        "mm_per_row": mm,
+        "mm_per_pixel": mm_per_pixel,
+        "block_px": block,
+        "pooling": (
+            f"regions of {regions}: each region's pooled profile fitted"
+            if reg is not None
+            else (f"log-likelihoods over a disc of {pool_mm:g} mm" if pool_mm else "none: per pixel block")
+        ),
+        "p_unknown": p_unknown,
+        "pixels": counts,
+        "flags": {text: int(((rec.flags & bit) > 0).sum()) for bit, text in FLAGS.items()},
+        "files": {"segmentation": "segmentation.png"},
+    }
+    table = None
+    if truth is not None:
+        wall = _wall_distance_from_labels(truth, mm_per_pixel)
+        scored = {c: n for c, n in names.items() if (truth == c).any()}
+        table = accuracy_by_distance(rec.class_ids, truth, wall, classes=scored)
+        numbers["score"] = {**table, "wall_distance": "from --labels: distance to the edge of each labelled region"}
+        numbers["files"]["figure"] = "recognition.png"
+    with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition") as tmp:
+        write_label_image(tmp / "segmentation.png", rec.class_ids.astype(np.uint8), kind="segmentation")
+        if table is not None:
+            recognition_by_distance_figure({"parameters": table}, out=tmp / "recognition.png")
+        (tmp / "planeray.json").write_text(json.dumps(jsonable(numbers), indent=1))
+    if json_out:
+        print_json(jsonable(numbers))
+        return
+    out.print(f"recognition: {out_dir}  ({numbers['pooling']}; library: {numbers['library']})")
+    for name, n in counts.items():
+        out.print(f"  {name}: {n} px")
+    for text, n in numbers["flags"].items():
+        if n:
+            out.print(f"  {n} px: {text}")
+    if table is not None:
+        edges = table["bins_mm"]
+        spans = [f"{lo:g}-{hi:g} mm" if hi is not None else f">{lo:g} mm" for lo, hi in zip(edges[:-1], edges[1:])]
+        for name, row in table["classes"].items():
+            bins = ", ".join(f"{span} {_acc(b['accuracy'])}" for span, b in zip(spans, row["bins"]))
+            out.print(f"  accuracy {name}: {_acc(row['all'])}  (by distance to the wall: {bins})", highlight=False)
+
+
+@materials_app.command("library-add")
+@_friendly_errors
+def library_add(
+    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    labels: Annotated[Path, typer.Option("--labels", help="Label image: the region(s) of the new medium.")],
+    class_name: Annotated[
+        list[str], typer.Option("--class-name", help="ID=NAME of a labelled region to add (repeatable), ID 1-255.")
+    ],
+    out_json: Annotated[Path, typer.Option("--out", "-o", help="The new library (JSON).")],
+    library: Annotated[
+        Path | None, typer.Option("--library", help="Library to add to; default: the shipped one.")
+    ] = None,
+    replace: Annotated[bool, typer.Option(help="Replace an entry of the same name or id.")] = False,
+    mm_per_row: Annotated[
+        float | None,
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace a library file planeray wrote.")] = False,
+):
+    """Add media to a library from labelled regions of a capture (fitted as the library's media were)."""
+    import numpy as np
+
+    from ..errors import InputError
+    from ..materials.library import default_library, load_library, save_library
+    from ..materials.recognize import entries_from_capture, fit_image
+
+    if out_json.suffix.lower() != ".json":
+        raise ValueError(f"--out must end in .json (a media library), got {out_json}")
+    names = _parse_class_names(class_name)
+    if not names:
+        raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
+    _not_an_input(out_json, [("the capture", input_path), ("--labels", labels), ("--library", library)])
+    _outputs((out_json, "media library"), overwrite=overwrite)
+    try:
+        lib = load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    transport, meta = _read_fit_input(input_path, "the capture")
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+    try:
+        lib.check_conditions(mm_per_row=mm, calibrated=False)
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    lab = _read_labels(labels, "--labels", transport.shape)
+    missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
+    if missing:
+        raise ValueError(f"--class-name {', '.join(missing)}: --labels {labels} has no pixel of that id")
+    block = int(lib.conditions.get("block_px", 2))
+    regions = np.where(np.isin(lab, list(names)), lab, 0)
+    with console.status("fitting the labelled regions"):
+        maps = fit_image(transport, mm_per_row=mm, block_px=block, regions=regions)
+    try:
+        entries = entries_from_capture(maps, regions, names, source=f"{input_path} ({labels})")
+        for e in entries:
+            lib = lib.add(e, replace=replace)
+    except InputError as exc:
+        raise ValueError(f"--class-name {exc}") from None
+    save_library(lib, out_json)
+    out.print(f"library: {out_json}  ({len(lib.entries)} media)")
+    for e in entries:
+        f = lambda v: "n/a" if v is None else f"{v:.4g}"  # noqa: E731
+        out.print(
+            f"  added {e.name} (class {e.class_id}): mu_s' {f(e.mu_s_prime_per_mm)} /mm (log sd "
+            f"{e.mu_s_prime_log_sd:.2f}), mu_a {f(e.mu_a_per_mm)} /mm, beyond the table: "
+            f"{e.beyond_table['above']:.0%} above, {e.beyond_table['below']:.0%} below ({e.blocks} blocks)",
+            highlight=False,
+        )

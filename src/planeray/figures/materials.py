@@ -21,6 +21,7 @@ __all__ = [
     "confusion_figure",
     "accuracy_curves_figure",
     "accuracy_by_distance_figure",
+    "recognition_by_distance_figure",
     "wall_kernels_figure",
     "fit_figure",
 ]
@@ -260,6 +261,43 @@ def accuracy_by_distance_figure(results, *, out=None, ax=None):
     ax.set_title("where the errors fall", fontsize=9)
     if own:
         fig.tight_layout()
+    return finish(fig, out)
+
+
+def recognition_by_distance_figure(tables, *, out=None):
+    """Per-class accuracy against the distance to the nearest wall, one panel per recogniser variant.
+
+    Parameters
+    ----------
+    tables : dict of str -> dict
+        Variant name -> :func:`planeray.materials.recognize.accuracy_by_distance` table.
+    """
+    n = len(tables)
+    cols = min(n, 4)
+    rows = (n + cols - 1) // cols
+    fig = new_figure((3.1 * cols, 2.8 * rows + 0.4))
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    for ax, (name, tab) in zip(axes, tables.items()):
+        edges = [np.inf if v is None else v for v in tab["bins_mm"]]
+        labels = [f"{lo:g}-{hi:g}" if np.isfinite(hi) else f">{lo:g}" for lo, hi in zip(edges[:-1], edges[1:])]
+        x = np.arange(len(labels))
+        for cname, row in tab["classes"].items():
+            cid = next((c for c, v in CLASS_NAMES.items() if v == cname), 0)
+            acc = [np.nan if b["accuracy"] is None else b["accuracy"] for b in row["bins"]]
+            ax.plot(x, acc, "-o", ms=3, lw=1.2, color=_rgb(cid) if cid else None, label=cname)
+        ax.axhline(0.9, color="0.5", lw=0.8, ls=":")
+        ax.set_ylim(-0.02, 1.04)
+        ax.set_xticks(x)
+        ax.set_xticklabels(labels, fontsize=7)
+        ax.set_xlabel("distance to the wall (mm)", fontsize=8)
+        worst = tab.get("min_class_accuracy")
+        ax.set_title(f"{name}\nworst class {worst:.2f}" if worst is not None else name, fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    axes[0].set_ylabel("accuracy (per class)", fontsize=8)
+    axes[0].legend(fontsize=6, frameon=False, loc="lower right")
+    fig.tight_layout()
     return finish(fig, out)
 
 

@@ -41,6 +41,8 @@ _FOLDER_KINDS = {
     "planeray-materials-capture": "materials capture",
     "planeray-materials-report": "materials report",
     "planeray-materials-fit": "materials fit",
+    "planeray-materials-recognition": "materials recognition",
+    "planeray-materials-recognition-study": "materials recognition study",
     "planeray-skin-report": "skin report",
     "planeray-skin-veins": "skin veins",
     "planeray-skin-enhance": "skin enhance",

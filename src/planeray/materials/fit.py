@@ -657,6 +657,10 @@ class FitResult:
         The fitted kernels ``c K`` (for plots).
     calibrated : bool
         Whether the magnitude was used (absolute reflectance) or only the shape.
+    log_estimate_per_mm, log_se : ndarray (P, 2) or None
+        ``ln mu_s'``, ``ln mu_a`` (mm^-1) at the optimum and their standard errors, *before*
+        the identifiability NaNs (NaN only where no fit ran): for recognition, which weighs
+        a poorly constrained estimate by its error (:mod:`planeray.materials.library`).
     """
 
     mu_s_prime_per_mm: np.ndarray
@@ -668,6 +672,8 @@ class FitResult:
     chi2_per_dof: np.ndarray
     model: np.ndarray
     calibrated: bool
+    log_estimate_per_mm: np.ndarray | None = None
+    log_se: np.ndarray | None = None
 
 
 def _cell_rel(table_rel, gs, ga, log_s, log_a):
@@ -779,6 +785,7 @@ def fit_profiles(
     scale = np.ones(P)
     mask = np.zeros(P, np.uint8)
     model = np.full(Y.shape, np.nan)
+    raw, raw_se = np.full((P, 2), np.nan), np.full((P, 2), np.nan)
     # A coarse start: the grid point of least misfit (shape only, scale solved in closed form).
     gs, ga = np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row)
     GS, GA = np.meshgrid(gs, ga, indexing="ij")
@@ -874,6 +881,7 @@ def fit_profiles(
         out["s"][p], out["a"][p] = s_est, a_est
         out["se_s"][p], out["se_a"][p] = s_est * se_log[0], a_est * se_log[1]
         out["chi2"][p] = chi2
+        raw[p], raw_se[p] = x[:2] - math.log(h), se_log[:2]
         scale[p] = math.exp(x[2]) if len(x) > 2 else 1.0
         model[p] = scale[p] * _model_kernel(table, x[0], x[1], offsets, foot, wp)
         if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:
@@ -903,6 +911,8 @@ def fit_profiles(
         chi2_per_dof=out["chi2"],
         model=model,
         calibrated=bool(calibrated),
+        log_estimate_per_mm=raw,
+        log_se=raw_se,
     )
 
 
