@@ -259,6 +259,8 @@ CASES = [
     ((*PREDICT, "--unclassified-below", -0.1), "--unclassified-below", ()),
     ((*PREDICT, "--unclassified-below", 1.5), "--unclassified-below", ()),
     ((*PREDICT, "--unclassified-below", "nan"), "--unclassified-below", ()),
+    ((*PREDICT, "--majority-px", -1), "--majority-px", ()),
+    ((*PREDICT, "--majority-px", 51), "--majority-px", ()),
     (
         ("materials", "predict", "{d}/notes.json", "{c}/stack.zarr", "--out", "{d}/seg.png"),
         None,
