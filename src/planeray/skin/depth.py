@@ -1,0 +1,650 @@
+"""Vein depth and diameter from how a vein's contrast changes over a delay-exposure sweep.
+
+Model
+-----
+The forward model is the skin scene's own (:mod:`planeray.scenes.skin`): a pixel at the
+signed distance ``rho`` from a vein's axis, whose direction makes the angle ``a`` with the
+projector rows, receives in the image of band ``k``::
+
+    S_k(rho) = sum_u w_k(t, u) c(t, u) [(K0 R(rho, . ; a, depth, diameter)) * F](u)
+
+``K0`` the background line kernel of the skin's layers (tone, wavelength), ``R`` the
+vein's perturbation table (:class:`planeray.mc.layered.VeinTable`, bilinear in depth and
+diameter, the same interpolation the simulator uses), ``F`` the camera row's footprint,
+``w_k`` the band's weights (Eq. 3 with the recorded jitter) and ``c`` the projector's
+edge rule.  The vein's **contrast** in image ``k`` is ``C_k(rho) = 1 - S_k(rho) /
+S_k(no vein)``.  ``depth`` is the depth of the vessel's **top** (its wall nearest the
+surface), as in the tables and the scene's ground truth; the axis lies ``diameter / 2``
+deeper.
+
+Fit (per vein)
+--------------
+A vein is a connected component of a mask.  Its centre line is traced by the local centroid of
+the mask (within 5 mm or 2.5 pixels); each pixel within ``reach_mm`` of it (and at least ``guard_mm`` from every
+other vein) gets its signed distance ``rho`` from the nearest centre-line point, measured
+along the local normal (the principal direction of the mask in the same disc), and the
+local angle to the rows.  The images of the sweep that carry no direct light (band clear
+of the camera row's footprint) and are not excluded are fitted together::
+
+    I_k(p) = B_k (1 + g . (x_p - x_0)) (1 - C_k(rho_p + delta)) + A t_e,k (1 - C_amb(rho_p))
+
+``B_k`` (background of image ``k``) and ``A`` (ambient light per microsecond of exposure,
+whose flood-lit contrast ``C_amb`` is the same model summed over all offsets) are linear
+and solved exactly for each trial of the nonlinear parameters (variable projection):
+``depth``, ``diameter``, ``delta`` (the centre line's offset from the mask's centre line,
++-1 pixel) and ``g`` (a linear gradient of the skin's tint across the neighbourhood).
+Weights are the camera's noise model (shot, read and quantization noise of the averaged
+frames; :func:`image_variance`).  Standard errors come from the Jacobian of all parameters
+at the optimum, scaled by the reduced chi-square when it exceeds 1.
+
+Identifiability: a vein is **unresolved** (depth and diameter NaN, with the reason) when
+the delay images do not detect it (the vein model improves chi-square over "no vein" by
+less than ``detect_dchi2`` after scaling by the reduced chi-square), when the fit sits on
+the edge of the tabulated range, or when depth and diameter trade off (standard error of
+the depth above ``max_depth_se_mm``, or their correlation above ``max_correlation``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.ndimage import convolve1d, distance_transform_edt, label
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+
+from ..camera import CameraModel
+from ..errors import InputError
+from ..mc.layered import VeinTable
+from ..scenes.base import DEFAULT_MM_PER_ROW, footprint_kernel
+from ..scenes.skin import SKIN_BAND_ROWS, _table_slice, _vein_ratio, skin_tables
+from ..timing import Band, RowGeometry, band_weights_at_row
+
+__all__ = [
+    "VeinModel",
+    "VeinFit",
+    "vein_model",
+    "vein_signals",
+    "vein_contrast",
+    "image_variance",
+    "usable_bands",
+    "vein_geometry",
+    "fit_vein",
+    "fit_veins",
+]
+
+
+# ---------------------------------------------------------------- the forward model
+@dataclass(frozen=True)
+class VeinModel:
+    """What the contrast model needs: the skin's vein table, its kernel, the sweep and the geometry."""
+
+    table: VeinTable
+    kernel: np.ndarray  # K0 over table.offsets_rows
+    geometry: RowGeometry
+    bands: tuple  # of timing.Band
+    mm_per_row: float
+    band_rows: int = SKIN_BAND_ROWS
+    params: dict = field(default_factory=dict)
+
+    @property
+    def exposures_us(self) -> np.ndarray:
+        return np.array([b.exposure_us for b in self.bands])
+
+
+def vein_model(
+    bands,
+    geometry: RowGeometry,
+    *,
+    tone="fair",
+    wavelength_nm: int = 638,
+    mm_per_row: float = DEFAULT_MM_PER_ROW,
+    band_rows: int = SKIN_BAND_ROWS,
+) -> VeinModel:
+    """The contrast model of a skin (tone, wavelength) seen through a sweep's bands.
+
+    Parameters
+    ----------
+    bands : sequence of planeray.timing.Band
+        The images' illumination (e.g. ``stack.bands()``).
+    geometry : planeray.timing.RowGeometry
+        Camera rows and projector rows.
+    tone : str or float
+        Skin tone (name or epidermal melanosome fraction).
+    wavelength_nm : {638, 850}
+        Wavelength, nm.
+    mm_per_row : float
+        Size of a projector row on the skin, mm.
+    band_rows : int
+        Half-width of the offset band the scene models (rows).
+
+    Returns
+    -------
+    VeinModel
+    """
+    table, kernel, _ = skin_tables(wavelength_nm, tone, mm_per_row=mm_per_row)
+    return VeinModel(
+        table=table,
+        kernel=np.asarray(kernel, float),
+        geometry=geometry,
+        bands=tuple(bands),
+        mm_per_row=float(mm_per_row),
+        band_rows=int(band_rows),
+        params={"tone": tone, "wavelength_nm": int(wavelength_nm), "mm_per_row": float(mm_per_row)},
+    )
+
+
+def _offsets(model: VeinModel):
+    rpc = model.geometry.rows_per_camera_row
+    band = max(int(model.band_rows), int(np.ceil(rpc)) + 1)
+    offsets = np.arange(-band, band + 1)
+    half = int(np.ceil(0.5 * rpc + 0.5))
+    wide = np.arange(offsets[0] - half, offsets[-1] + half + 1)
+    foot = footprint_kernel(np.arange(-half, half + 1), rpc)
+    return offsets, wide, half, foot
+
+
+def _row_weights(model: VeinModel, rows, offsets):
+    """``(n_rows, K, U)``: band weights times the edge rule's coverage, per distinct camera row."""
+    out = []
+    for t in rows:
+        w = band_weights_at_row(model.bands, model.geometry, int(t), offsets)
+        w = w * model.geometry.coverage(int(t), offsets)[None, :]
+        out.append(w)
+    return np.stack(out) if out else np.zeros((0, len(model.bands), offsets.size))
+
+
+def vein_signals(model: VeinModel, rows, rho_mm, angle_deg, depth_mm, diameter_mm, *, _cache=None):
+    """Subsurface signal of each image at pixels near one vein, relative to the vein-free skin.
+
+    Parameters
+    ----------
+    model : VeinModel
+    rows : array_like of int, shape (n,)
+        Camera row of each pixel.
+    rho_mm : array_like, shape (n,)
+        Signed distance of each pixel from the vein's axis, mm (the scene's convention:
+        ``rho = (x, y) . (cos a, -sin a)``, ``x`` down, ``y`` right).
+    angle_deg : array_like, shape (n,)
+        Angle between the vein and the projector rows, degrees in [0, 180).
+    depth_mm : float
+        Depth of the vessel's top, mm (1-5, the tables' range).
+    diameter_mm : float
+        Vessel diameter, mm (1-4).
+
+    Returns
+    -------
+    ratio : ndarray (K, n)
+        ``S_k(rho) / S_k(no vein)`` for every band ``k``: one minus the contrast (Sec. 10's
+        short-range images; NaN where the band holds no light).
+    flood : ndarray (n,)
+        The same ratio for flood (ambient) light, all offsets summed.
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    rho = np.asarray(rho_mm, float) / model.mm_per_row
+    ang = np.broadcast_to(np.asarray(angle_deg, float), rho.shape)
+    offsets, wide, half, foot = _offsets(model)
+    cache = _cache if _cache is not None else {}
+    if "W" not in cache:
+        urows, inv = np.unique(rows, return_inverse=True)
+        cache["W"] = _row_weights(model, urows, offsets)
+        cache["inv"] = inv
+        k_row = np.interp(wide.astype(float), model.table.offsets_rows, model.kernel, left=0.0, right=0.0)
+        cache["k_row"] = k_row
+        base = convolve1d(k_row[None, :], foot[::-1], axis=1, mode="constant")[:, half:-half][0]
+        cache["base"] = base
+        cache["S0"] = np.einsum("rku,u->rk", cache["W"], base)  # (n_rows, K)
+    sl = _table_slice(model.table, float(depth_mm), float(diameter_mm))
+    u_t = np.broadcast_to(wide.astype(float)[None, :], (rho.size, wide.size))
+    r = _vein_ratio(sl, model.table, rho, ang, u_t)
+    sub = convolve1d(cache["k_row"][None, :] * r, foot[::-1], axis=1, mode="constant")[:, half:-half]
+    W = cache["W"][cache["inv"]]  # (n, K, U)
+    S = np.einsum("nku,nu->kn", W, sub)
+    S0 = cache["S0"][cache["inv"]].T
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(S0 > 0, S / S0, np.nan)
+    flood = sub.sum(axis=1) / cache["base"].sum()
+    return ratio, flood
+
+
+def vein_contrast(model: VeinModel, rho_mm, angle_deg, depth_mm, diameter_mm, *, row=None) -> np.ndarray:
+    """Contrast ``1 - vein / background`` of a vein in each image, ``(K, n)``, at camera row ``row``.
+
+    ``row`` defaults to the middle camera row (where no band is cut by the projector's end).
+    """
+    rho = np.atleast_1d(np.asarray(rho_mm, float))
+    t = model.geometry.camera_rows // 2 if row is None else int(row)
+    ratio, _ = vein_signals(model, np.full(rho.size, t), rho, angle_deg, depth_mm, diameter_mm)
+    return 1.0 - ratio
+
+
+# ---------------------------------------------------------------- noise
+def image_variance(image, camera: CameraModel) -> np.ndarray:
+    """Variance of a stack image's pixels (normalized units) under the camera's noise model.
+
+    ``frames_averaged`` frames of Poisson electrons (``image * full_well``), Gaussian read
+    noise and a uniform rounding to ADC codes per frame, averaged:
+    ``var = (e + r^2) / (n FW^2) + 1 / (12 n span^2)``.
+    """
+    e = np.maximum(np.asarray(image, float), 0.0) * camera.full_well_e
+    n = camera.frames_averaged
+    span = camera.max_code - camera.black_level
+    return (e + camera.read_noise_e**2) / (n * camera.full_well_e**2) + 1.0 / (12.0 * n * span**2)
+
+
+def usable_bands(bands, geometry: RowGeometry, *, excluded=None, band_rows: int = SKIN_BAND_ROWS) -> np.ndarray:
+    """Which images the depth fit uses: not excluded, no direct light, inside the modelled offsets.
+
+    An image carries direct (surface) light when its band, widened by 3 jitter sigmas, reaches
+    the camera row's footprint (``|u| <= rows_per_camera_row / 2 + 1``); its band must end
+    within ``band_rows`` (where the model has the kernel).
+    """
+    reach = 0.5 * geometry.rows_per_camera_row + 1.0
+    ok = []
+    for b in bands:
+        sigma = 3.0 * b.jitter_us * 1e-6 * b.lines_per_second
+        lo = abs(b.centre_rows) - 0.5 * b.width_rows - sigma
+        hi = abs(b.centre_rows) + 0.5 * b.width_rows + sigma
+        ok.append(lo > reach and hi <= band_rows)
+    ok = np.array(ok, bool)
+    if excluded is not None:
+        ok &= ~np.asarray(excluded, bool)
+    return ok
+
+
+# ---------------------------------------------------------------- the vein's geometry from a mask
+@dataclass
+class VeinPixels:
+    """Pixels around one vein: index, row, signed distance from the centre line and local angle."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    rho_mm: np.ndarray
+    angle_deg: np.ndarray
+    x_mm: np.ndarray  # position (for the tint gradient), mm, relative to the vein's centre
+    y_mm: np.ndarray
+    width_mm: float  # the mask's width across the vein (area / centre-line length)
+
+
+def _pixel_mm(geometry: RowGeometry, mm_per_row: float, shape):
+    H, W = shape
+    x = (geometry.projector_row_of(np.arange(H)) + 0.5) * mm_per_row
+    col = geometry.projector_rows * mm_per_row / H
+    y = (np.arange(W) + 0.5) * col
+    return x, y, col
+
+
+def vein_geometry(
+    component, others, geometry: RowGeometry, *, mm_per_row: float, reach_mm: float = 12.0, guard_mm: float = 5.0
+) -> VeinPixels:
+    """Centre line of one vein's mask and the signed distance of every pixel near it.
+
+    Parameters
+    ----------
+    component : ndarray (H, W) bool
+        The vein's pixels (one connected component of a mask).
+    others : ndarray (H, W) bool
+        Every other vein's pixels: pixels within ``guard_mm`` of them are left out.
+    geometry : RowGeometry
+    mm_per_row : float
+        Size of a projector row on the skin, mm.
+    reach_mm : float
+        Pixels up to this distance from the centre line are used, mm.
+    guard_mm : float
+        Distance kept from other veins, mm.
+    """
+    shape = component.shape
+    xs, ys, col_mm = _pixel_mm(geometry, mm_per_row, shape)
+    row_mm = geometry.rows_per_camera_row * mm_per_row
+    ci_, cj_ = np.nonzero(component)
+    comp_pts = np.stack([xs[ci_], ys[cj_]], axis=1)
+    # centre line: the local centroid of the mask within a disc (on the axis of a locally straight
+    # band) and the local direction, the principal axis of the mask in the same disc
+    radius = max(5.0, 2.5 * max(row_mm, col_mm))
+    ctree = cKDTree(comp_pts)
+    S = np.empty_like(comp_pts)
+    dirs = np.empty_like(comp_pts)
+    for k, nb in enumerate(ctree.query_ball_point(comp_pts, r=radius)):
+        P = comp_pts[nb] if len(nb) >= 3 else comp_pts
+        S[k] = P.mean(axis=0)
+        _, _, vt = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)
+        dirs[k] = vt[0]
+    tree = cKDTree(S)
+    ang = np.degrees(np.arctan2(dirs[:, 0], dirs[:, 1])) % 180.0
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    dist_other = distance_transform_edt(~others, sampling=(row_mm, col_mm)) if others.any() else np.full(shape, np.inf)
+    near = dist_other > guard_mm
+    P = np.stack([X[near], Y[near]], axis=1)
+    d, idx = tree.query(P)
+    keep = d <= reach_mm
+    P, idx = P[keep], idx[keep]
+    a = np.radians(ang[idx])
+    dx, dy = P[:, 0] - S[idx, 0], P[:, 1] - S[idx, 1]
+    rho = dx * np.cos(a) - dy * np.sin(a)
+    along = dx * np.sin(a) + dy * np.cos(a)
+    ok = np.abs(along) <= 0.75 * max(row_mm, col_mm)  # beyond the ends of the centre line: left out
+    ri, ci = np.nonzero(near)
+    ri, ci = ri[keep][ok], ci[keep][ok]
+    centre = S.mean(axis=0)
+    _, _, vt = np.linalg.svd(comp_pts - comp_pts.mean(axis=0), full_matrices=False)
+    along_all = comp_pts @ vt[0]
+    length = float(along_all.max() - along_all.min()) + min(row_mm, col_mm)
+    return VeinPixels(
+        rows=ri,
+        cols=ci,
+        rho_mm=rho[ok],
+        angle_deg=ang[idx][ok],
+        x_mm=P[ok, 0] - centre[0],
+        y_mm=P[ok, 1] - centre[1],
+        width_mm=float(component.sum() * row_mm * col_mm / length),
+    )
+
+
+# ---------------------------------------------------------------- the fit
+@dataclass
+class VeinFit:
+    """Depth and diameter of one vein, with standard errors, or why they are not resolved."""
+
+    id: int
+    resolved: bool
+    reason: str
+    depth_mm: float  # of the top of the vessel
+    diameter_mm: float
+    depth_se_mm: float
+    diameter_se_mm: float
+    correlation: float
+    delta_chi2: float  # chi-square of "no vein" minus the fit's (scaled by the reduced chi-square)
+    reduced_chi2: float
+    n_pixels: int
+    n_images: int
+    fit_depth_mm: float = math.nan  # the fit's values even when unresolved (for diagnosis)
+    fit_diameter_mm: float = math.nan
+    curves: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def axis_depth_mm(self) -> float:
+        return self.depth_mm + 0.5 * self.diameter_mm
+
+    def to_json(self) -> dict:
+        def num(x):
+            return None if not np.isfinite(x) else round(float(x), 4)
+
+        return {
+            "id": self.id,
+            "resolved": self.resolved,
+            "reason": self.reason,
+            "depth_mm": num(self.depth_mm),
+            "depth_se_mm": num(self.depth_se_mm),
+            "axis_depth_mm": num(self.axis_depth_mm),
+            "diameter_mm": num(self.diameter_mm),
+            "diameter_se_mm": num(self.diameter_se_mm),
+            "correlation": num(self.correlation),
+            "delta_chi2": num(self.delta_chi2),
+            "reduced_chi2": num(self.reduced_chi2),
+            "n_pixels": self.n_pixels,
+            "n_images": self.n_images,
+            "fit_depth_mm": num(self.fit_depth_mm),
+            "fit_diameter_mm": num(self.fit_diameter_mm),
+        }
+
+
+def _linear_solve(cols_k, amb, data, wts, te):
+    """Weighted least squares of ``data[k, n] = B_k cols_k[k, n] + A te_k amb[n]``; returns residuals, B, A."""
+    K, n = data.shape
+    # normal equations: block structure (K diagonal entries + one shared column)
+    a_kk = np.sum(wts * cols_k * cols_k, axis=1)
+    a_kA = np.sum(wts * cols_k * (te[:, None] * amb[None, :]), axis=1)
+    a_AA = np.sum(wts * (te[:, None] * amb[None, :]) ** 2)
+    b_k = np.sum(wts * cols_k * data, axis=1)
+    b_A = np.sum(wts * (te[:, None] * amb[None, :]) * data)
+    M = np.zeros((K + 1, K + 1))
+    M[np.arange(K), np.arange(K)] = a_kk
+    M[:K, K] = M[K, :K] = a_kA
+    M[K, K] = a_AA
+    rhs = np.concatenate([b_k, [b_A]])
+    sol = np.linalg.lstsq(M, rhs, rcond=None)[0]
+    B, A = sol[:K], sol[K]
+    pred = B[:, None] * cols_k + A * te[:, None] * amb[None, :]
+    return (data - pred) * np.sqrt(wts), B, A
+
+
+def fit_vein(
+    model: VeinModel,
+    images,
+    variance,
+    pix: VeinPixels,
+    *,
+    vein_id: int = 1,
+    detect_dchi2: float = 25.0,
+    max_depth_se_mm: float = 0.5,
+    max_correlation: float = 0.98,
+    ambient: bool = True,
+) -> VeinFit:
+    """Fit one vein's depth and diameter to the images of a sweep (see the module's docstring).
+
+    Parameters
+    ----------
+    model : VeinModel
+        The skin and the bands of ``images`` (one band per image).
+    images : ndarray (K, H, W)
+        The sweep's usable images (normalized).
+    variance : ndarray (K, H, W)
+        Their noise variance (:func:`image_variance`).
+    pix : VeinPixels
+        The vein's neighbourhood (:func:`vein_geometry`).
+    vein_id : int
+    detect_dchi2 : float
+        Least improvement of chi-square over "no vein" (scaled by the reduced chi-square)
+        for the vein to count as detected.
+    max_depth_se_mm : float
+        A larger standard error of the depth (mm) reports the vein unresolved.
+    max_correlation : float
+        A larger |correlation| of depth and diameter reports the vein unresolved.
+    ambient : bool
+        Fit an ambient term proportional to the exposure.
+
+    Returns
+    -------
+    VeinFit
+    """
+    images = np.asarray(images, float)
+    K = images.shape[0]
+    n = pix.rows.size
+    nan = math.nan
+
+    def unresolved(reason, **kw):
+        return VeinFit(vein_id, False, reason, nan, nan, nan, nan, nan, nan, nan, n, K, **kw)
+
+    if n < 8:
+        return unresolved(f"too few pixels near the vein's centre line ({n})")
+    if K < 2:
+        return unresolved(f"too few usable delay images ({K}; need 2 without direct light)")
+    data = images[:, pix.rows, pix.cols]
+    wts = 1.0 / np.maximum(variance[:, pix.rows, pix.cols], 1e-30)
+    te = model.exposures_us / 1000.0  # ms, to keep A of order 1
+    cache: dict = {}
+    row_mm = model.geometry.rows_per_camera_row * model.mm_per_row
+    col_mm = model.geometry.projector_rows * model.mm_per_row / model.geometry.camera_rows
+    px = max(row_mm, col_mm)
+    ang = pix.angle_deg
+    d_lo, d_hi = float(model.table.depths_mm[0]), float(model.table.depths_mm[-1])
+    D_lo, D_hi = float(model.table.diameters_mm[0]), float(model.table.diameters_mm[-1])
+    amb_on = 1.0 if ambient else 0.0
+
+    def columns(theta):
+        depth, diam, delta, gx, gy = theta
+        ratio, flood = vein_signals(model, pix.rows, pix.rho_mm + delta, ang, depth, diam, _cache=cache)
+        tint = 1.0 + gx * pix.x_mm / 10.0 + gy * pix.y_mm / 10.0
+        return np.nan_to_num(ratio) * tint[None, :], flood * tint * amb_on
+
+    def resid(theta):
+        c, f = columns(theta)
+        return _linear_solve(c, f, data, wts, te)[0].ravel()
+
+    def chi2(theta):
+        r = resid(theta)
+        return float(r @ r)
+
+    # "no vein": the kernel ratio is 1 everywhere (tint gradient still fitted)
+    def resid_null(g):
+        tint = 1.0 + g[0] * pix.x_mm / 10.0 + g[1] * pix.y_mm / 10.0
+        c = np.broadcast_to(tint, data.shape).copy()
+        return _linear_solve(c, tint * amb_on, data, wts, te)[0].ravel()
+
+    null = least_squares(resid_null, np.zeros(2), method="lm")
+    chi2_null = float(null.fun @ null.fun)
+
+    # coarse grid, then a bounded local fit
+    best = None
+    for depth in np.arange(d_lo, d_hi + 1e-9, 0.5):
+        for diam in np.arange(D_lo, D_hi + 1e-9, 0.5):
+            for delta in (-0.5 * px, 0.0, 0.5 * px):
+                c = chi2((depth, diam, delta, 0.0, 0.0))
+                if best is None or c < best[0]:
+                    best = (c, (depth, diam, delta, 0.0, 0.0))
+    lo = [d_lo, D_lo, -px, -0.5, -0.5]
+    hi = [d_hi, D_hi, px, 0.5, 0.5]
+    x0 = np.clip(best[1], np.array(lo) + 1e-6, np.array(hi) - 1e-6)
+    sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=[0.5, 0.5, 0.5 * px, 0.05, 0.05], diff_step=1e-3)
+    theta = sol.x
+    chi2_fit = float(sol.fun @ sol.fun)
+    dof = max(data.size - (K + 1 + 5), 1)
+    red = chi2_fit / dof
+    scale = max(red, 1.0)
+    dchi2 = (chi2_null - chi2_fit) / scale
+
+    # Jacobian of all parameters (nonlinear + the linear ones) for the covariance
+    c, f = columns(theta)
+    _, B, A = _linear_solve(c, f, data, wts, te)
+    full0 = np.concatenate([theta, B, [A]])
+    sw = np.sqrt(wts)
+
+    def resid_full(p):
+        cc, ff = columns(p[:5])
+        pred = p[5 : 5 + K, None] * cc + p[-1] * te[:, None] * ff[None, :]
+        return ((data - pred) * sw).ravel()
+
+    steps = np.concatenate(
+        [[0.02, 0.02, 0.02 * px, 1e-3, 1e-3], 1e-4 * np.maximum(np.abs(B), 1e-6), [1e-4 * max(abs(A), 1e-6)]]
+    )
+    J = np.empty((data.size, full0.size))
+    for i, h in enumerate(steps):
+        p1, p2 = full0.copy(), full0.copy()
+        p1[i] += h
+        p2[i] -= h
+        if i == 0:  # keep depth inside the table for the difference
+            p1[i], p2[i] = min(p1[i], d_hi), max(p2[i], d_lo)
+        if i == 1:
+            p1[i], p2[i] = min(p1[i], D_hi), max(p2[i], D_lo)
+        J[:, i] = (resid_full(p1) - resid_full(p2)) / (p1[i] - p2[i])
+    JTJ = J.T @ J
+    try:
+        cov = np.linalg.pinv(JTJ) * scale
+        se_d, se_D = math.sqrt(max(cov[0, 0], 0.0)), math.sqrt(max(cov[1, 1], 0.0))
+        corr = cov[0, 1] / (se_d * se_D) if se_d > 0 and se_D > 0 else nan
+    except np.linalg.LinAlgError:
+        se_d = se_D = corr = nan
+    curves = {"theta": theta.tolist(), "B": B.tolist(), "A": float(A)}
+    out = dict(fit_depth_mm=float(theta[0]), fit_diameter_mm=float(theta[1]), curves=curves)
+    base = dict(
+        correlation=float(corr),
+        delta_chi2=float(dchi2),
+        reduced_chi2=float(red),
+        n_pixels=n,
+        n_images=K,
+        **out,
+    )
+    reason = ""
+    if dchi2 < detect_dchi2:
+        reason = f"not detected by the delay images (chi-square gain {dchi2:.1f} < {detect_dchi2:g})"
+    elif theta[0] >= d_hi - 0.05 or theta[0] <= d_lo + 0.05:
+        reason = f"depth at the edge of the modelled {d_lo:g}-{d_hi:g} mm ({theta[0]:.2f} mm)"
+    elif not np.isfinite(se_d) or se_d > max_depth_se_mm:
+        reason = f"depth not identifiable (standard error {se_d:.2f} mm > {max_depth_se_mm:g} mm)"
+    elif np.isfinite(corr) and abs(corr) > max_correlation:
+        reason = f"depth and diameter trade off (correlation {corr:.3f})"
+    if reason:
+        return VeinFit(vein_id, False, reason, nan, nan, se_d, se_D, **base)
+    return VeinFit(vein_id, True, "", float(theta[0]), float(theta[1]), se_d, se_D, **base)
+
+
+def fit_veins(
+    stack_images,
+    bands,
+    geometry,
+    mask,
+    *,
+    camera: CameraModel,
+    excluded=None,
+    tone="fair",
+    wavelength_nm: int = 638,
+    mm_per_row: float = DEFAULT_MM_PER_ROW,
+    progress=None,
+    **fit_options,
+):
+    """Depth and diameter of every vein of a mask (one per connected component) from a sweep.
+
+    Parameters
+    ----------
+    stack_images : array_like (N, H, W)
+        The sweep's images (normalized, as in :class:`planeray.stack.Stack`).
+    bands : sequence of Band
+        Their illumination (``stack.bands()``).
+    geometry : RowGeometry
+    mask : ndarray (H, W) bool or int
+        Vein pixels; each 8-connected component is one vein (an integer mask's ids are kept).
+    camera : CameraModel
+        The camera's noise model.
+    excluded : array_like of bool, optional
+        Images to leave out (the stack's boundary images).
+    tone, wavelength_nm, mm_per_row
+        The skin (see :func:`vein_model`).
+    progress : callable, optional
+        Called once per vein fitted.
+    **fit_options
+        Passed to :func:`fit_vein`.
+
+    Returns
+    -------
+    fits : list of VeinFit
+    model : VeinModel
+        The model of the usable images (for figures).
+    use : ndarray of bool
+        Which images were used.
+    """
+    mask = np.asarray(mask)
+    if mask.dtype == bool or mask.max() <= 1:
+        lab, nlab = label(mask.astype(bool), structure=np.ones((3, 3)))
+        ids = list(range(1, nlab + 1))
+    else:
+        lab = mask.astype(np.int64)
+        ids = [int(v) for v in np.unique(lab) if v > 0]
+    if not ids:
+        raise InputError("the vein mask has no vein pixels")
+    use = usable_bands(bands, geometry, excluded=excluded)
+    if not use.any():
+        raise InputError(
+            "no image of the sweep is usable for the depth fit (every band holds direct light or is excluded)"
+        )
+    idx = np.nonzero(use)[0]
+    model = vein_model([bands[i] for i in idx], geometry, tone=tone, wavelength_nm=wavelength_nm, mm_per_row=mm_per_row)
+    imgs = np.stack([np.asarray(stack_images[i], float) for i in idx])
+    var = image_variance(imgs, camera)
+    fits = []
+    for vid in ids:
+        comp = lab == vid
+        others = (lab > 0) & ~comp
+        pix = vein_geometry(comp, others, geometry, mm_per_row=mm_per_row)
+        fits.append(fit_vein(model, imgs, var, pix, vein_id=vid, **fit_options))
+        if progress is not None:
+            progress(vid)
+    return fits, model, use
+
+
+def bands_of(delay_us, exposure_us, lines_per_second, *, jitter_us=0.0) -> list:
+    """Bands of a sweep's (delay, exposure) pairs (convenience for synthetic captures)."""
+    return [
+        Band(float(d), float(e), float(lines_per_second), jitter_us=float(jitter_us))
+        for d, e in zip(np.atleast_1d(delay_us), np.atleast_1d(exposure_us))
+    ]
