@@ -26,13 +26,14 @@ along the local normal (the principal direction of the mask in the same disc), a
 local angle to the rows.  The images of the sweep that carry no direct light (band clear
 of the camera row's footprint) and are not excluded are fitted together::
 
-    I_k(p) = B_k (1 + g . (x_p - x_0)) (1 - C_k(rho_p + delta)) + A t_e,k (1 - C_amb(rho_p))
+    I_k(p) = B_k (1 + g . phi(p)) (1 - C_k(rho_p + delta)) + A t_e,k (1 - C_amb(rho_p))
 
 ``B_k`` (background of image ``k``) and ``A`` (ambient light per microsecond of exposure,
 whose flood-lit contrast ``C_amb`` is the same model summed over all offsets) are linear
 and solved exactly for each trial of the nonlinear parameters (variable projection):
-``depth``, ``diameter``, ``delta`` (the centre line's offset from the mask's centre line,
-+-1 pixel) and ``g`` (a linear gradient of the skin's tint across the neighbourhood).
+``depth``, ``diameter``, ``delta`` (the vein's offset from the mask's centre line, +-1
+pixel) and ``g`` (the skin's smooth tint over the neighbourhood: a quadratic in the
+coordinates along and across the vein; the skin scene's tint varies ~5 % over ~3 cm).
 Weights are the camera's noise model (shot, read and quantization noise of the averaged
 frames; :func:`image_variance`).  Standard errors come from the Jacobian of all parameters
 at the optimum, scaled by the reduced chi-square when it exceeds 1.
@@ -420,6 +421,7 @@ def fit_vein(
     max_depth_se_mm: float = 0.5,
     max_correlation: float = 0.98,
     ambient: bool = True,
+    max_pixels: int = 600,
 ) -> VeinFit:
     """Fit one vein's depth and diameter to the images of a sweep (see the module's docstring).
 
@@ -443,6 +445,8 @@ def fit_vein(
         A larger |correlation| of depth and diameter reports the vein unresolved.
     ambient : bool
         Fit an ambient term proportional to the exposure.
+    max_pixels : int
+        At most this many pixels of the neighbourhood are used (evenly spread, for speed).
 
     Returns
     -------
@@ -450,6 +454,17 @@ def fit_vein(
     """
     images = np.asarray(images, float)
     K = images.shape[0]
+    if pix.rows.size > max_pixels:
+        pick = np.unique(np.linspace(0, pix.rows.size - 1, int(max_pixels)).astype(np.int64))
+        pix = VeinPixels(
+            pix.rows[pick],
+            pix.cols[pick],
+            pix.rho_mm[pick],
+            pix.angle_deg[pick],
+            pix.x_mm[pick],
+            pix.y_mm[pick],
+            pix.width_mm,
+        )
     n = pix.rows.size
     nan = math.nan
 
@@ -472,10 +487,19 @@ def fit_vein(
     D_lo, D_hi = float(model.table.diameters_mm[0]), float(model.table.diameters_mm[-1])
     amb_on = 1.0 if ambient else 0.0
 
+    # the skin's smooth tint over the neighbourhood: a quadratic in the coordinates along and across
+    # the vein (units of 10 mm), its coefficients fitted with the vein
+    xy = np.stack([pix.x_mm, pix.y_mm], axis=1)
+    _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
+    al, ac = (xy @ vt[0]) / 10.0, (xy @ vt[1]) / 10.0
+    phi = np.stack([al, ac, al * al, ac * ac, al * ac], axis=1)
+    n_tint = phi.shape[1]
+    n_nl = 3 + n_tint
+
     def columns(theta):
-        depth, diam, delta, gx, gy = theta
+        depth, diam, delta = theta[:3]
         ratio, flood = vein_signals(model, pix.rows, pix.rho_mm + delta, ang, depth, diam, _cache=cache)
-        tint = 1.0 + gx * pix.x_mm / 10.0 + gy * pix.y_mm / 10.0
+        tint = 1.0 + phi @ np.asarray(theta[3:])
         return np.nan_to_num(ratio) * tint[None, :], flood * tint * amb_on
 
     def resid(theta):
@@ -488,28 +512,27 @@ def fit_vein(
 
     # "no vein": the kernel ratio is 1 everywhere (tint gradient still fitted)
     def resid_null(g):
-        tint = 1.0 + g[0] * pix.x_mm / 10.0 + g[1] * pix.y_mm / 10.0
+        tint = 1.0 + phi @ g
         c = np.broadcast_to(tint, data.shape).copy()
         return _linear_solve(c, tint * amb_on, data, wts, te)[0].ravel()
 
-    null = least_squares(resid_null, np.zeros(2), method="lm")
+    null = least_squares(resid_null, np.zeros(n_tint), method="lm")
     chi2_null = float(null.fun @ null.fun)
 
     # coarse grid, then a bounded local fit
     best = None
     for depth in np.arange(d_lo, d_hi + 1e-9, 0.5):
         for diam in np.arange(D_lo, D_hi + 1e-9, 0.5):
-            for delta in (-0.5 * px, 0.0, 0.5 * px):
-                c = chi2((depth, diam, delta, 0.0, 0.0))
-                if best is None or c < best[0]:
-                    best = (c, (depth, diam, delta, 0.0, 0.0))
-    lo = [d_lo, D_lo, -px, -0.5, -0.5]
-    hi = [d_hi, D_hi, px, 0.5, 0.5]
+            c = chi2((depth, diam, 0.0, *null.x))
+            if best is None or c < best[0]:
+                best = (c, (depth, diam, 0.0, *null.x))
+    lo = [d_lo, D_lo, -px] + [-0.5] * n_tint
+    hi = [d_hi, D_hi, px] + [0.5] * n_tint
     x0 = np.clip(best[1], np.array(lo) + 1e-6, np.array(hi) - 1e-6)
-    sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=[0.5, 0.5, 0.5 * px, 0.05, 0.05], diff_step=1e-3)
+    sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=[0.5, 0.5, 0.5 * px] + [0.02] * n_tint, diff_step=1e-3)
     theta = sol.x
     chi2_fit = float(sol.fun @ sol.fun)
-    dof = max(data.size - (K + 1 + 5), 1)
+    dof = max(data.size - (K + 1 + n_nl), 1)
     red = chi2_fit / dof
     scale = max(red, 1.0)
     dchi2 = (chi2_null - chi2_fit) / scale
@@ -521,12 +544,12 @@ def fit_vein(
     sw = np.sqrt(wts)
 
     def resid_full(p):
-        cc, ff = columns(p[:5])
-        pred = p[5 : 5 + K, None] * cc + p[-1] * te[:, None] * ff[None, :]
+        cc, ff = columns(p[:n_nl])
+        pred = p[n_nl : n_nl + K, None] * cc + p[-1] * te[:, None] * ff[None, :]
         return ((data - pred) * sw).ravel()
 
     steps = np.concatenate(
-        [[0.02, 0.02, 0.02 * px, 1e-3, 1e-3], 1e-4 * np.maximum(np.abs(B), 1e-6), [1e-4 * max(abs(A), 1e-6)]]
+        [[0.02, 0.02, 0.02 * px] + [1e-3] * n_tint, 1e-4 * np.maximum(np.abs(B), 1e-6), [1e-4 * max(abs(A), 1e-6)]]
     )
     J = np.empty((data.size, full0.size))
     for i, h in enumerate(steps):
@@ -558,15 +581,20 @@ def fit_vein(
     reason = ""
     if dchi2 < detect_dchi2:
         reason = f"not detected by the delay images (chi-square gain {dchi2:.1f} < {detect_dchi2:g})"
-    elif theta[0] >= d_hi - 0.05 or theta[0] <= d_lo + 0.05:
-        reason = f"depth at the edge of the modelled {d_lo:g}-{d_hi:g} mm ({theta[0]:.2f} mm)"
+    elif theta[0] >= d_hi - 0.05:
+        reason = f"depth at the deep edge of the modelled {d_lo:g}-{d_hi:g} mm (it may be deeper)"
     elif not np.isfinite(se_d) or se_d > max_depth_se_mm:
         reason = f"depth not identifiable (standard error {se_d:.2f} mm > {max_depth_se_mm:g} mm)"
     elif np.isfinite(corr) and abs(corr) > max_correlation:
         reason = f"depth and diameter trade off (correlation {corr:.3f})"
     if reason:
         return VeinFit(vein_id, False, reason, nan, nan, se_d, se_D, **base)
-    return VeinFit(vein_id, True, "", float(theta[0]), float(theta[1]), se_d, se_D, **base)
+    notes = []
+    if theta[0] <= d_lo + 0.05:
+        notes.append(f"depth at the shallowest modelled {d_lo:g} mm (it may be shallower)")
+    if theta[1] <= D_lo + 0.05 or theta[1] >= D_hi - 0.05:
+        notes.append(f"diameter at the edge of the modelled {D_lo:g}-{D_hi:g} mm")
+    return VeinFit(vein_id, True, "; ".join(notes), float(theta[0]), float(theta[1]), se_d, se_D, **base)
 
 
 def fit_veins(
