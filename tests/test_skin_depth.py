@@ -14,6 +14,7 @@ from planeray.camera import CameraModel
 from planeray.experiments.skin_capture import simulate_skin
 from planeray.scenes.skin import skin_veins
 from planeray.skin.depth import (
+    background_signals,
     fit_vein,
     fit_veins,
     image_variance,
@@ -82,9 +83,86 @@ def test_fit_recovers_depth_and_diameter_from_a_noiseless_capture(noiseless):
     cap, _ = noiseless
     st = cap.stack
     cam = CameraModel(**st.metadata["camera"])
-    fits, _, _ = fit_veins(st.images, st.bands(), st.geometry, _truth_ids(cap.scene), camera=cam,
-                           excluded=st.excluded, mm_per_row=0.3, ambient=False)
+    fits, _, _ = fit_veins(
+        st.images,
+        st.bands(),
+        st.geometry,
+        _truth_ids(cap.scene),
+        camera=cam,
+        excluded=st.excluded,
+        mm_per_row=0.3,
+        ambient=False,
+    )
     for f, v in zip(fits, skin_veins(cap.scene)):
         assert f.resolved, f.reason
         assert abs(f.depth_mm - v.depth_mm) < 0.15, (f.depth_mm, v.depth_mm)
         assert abs(f.diameter_mm - v.diameter_mm) < 0.5, (f.diameter_mm, v.diameter_mm)
+
+
+# ---------------------------------------------------------------- synthetic captures from the model
+GEOM = RowGeometry(128, 720)
+Y0_MM = 101.0  # the vein's axis runs down the image (angle 90 deg to the rows) at y = 101 mm
+
+
+def _synthetic(depth_mm, diameter_mm, seed, *, vein=True, noise=True):
+    """Images of a straight vein down the image: B_k (1 - C_k(rho)) x a smooth tint, with camera noise."""
+    from planeray.timing import paper_sweep
+
+    sweep = paper_sweep()
+    bands = sweep.bands(54_000.0, jitter_us=5.0)
+    use = usable_bands(bands, GEOM, excluded=sweep.excluded)
+    bands = [b for b, u in zip(bands, use) if u]
+    model = vein_model(bands, GEOM, mm_per_row=0.3)
+    H, W = 128, 128
+    col_mm = 720 * 0.3 / H
+    rows = np.repeat(np.arange(H), W)
+    y = (np.tile(np.arange(W), H) + 0.5) * col_mm
+    rho = -(y - Y0_MM)
+    sel = np.abs(rho) < 20.0
+    ratio = np.ones((len(bands), H * W))
+    if vein:
+        ratio[:, sel], _ = vein_signals(model, rows[sel], rho[sel], np.full(sel.sum(), 90.0), depth_mm, diameter_mm)
+    ratio = np.nan_to_num(ratio, nan=1.0)
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:H, 0:W]
+    tint = 1.0 + 0.03 * np.sin(2 * np.pi * (xx / 97.0 + yy / 131.0) + seed)
+    bg = 0.6 * background_signals(model, np.arange(H))  # (K, H): laser electrons / full well = 0.6
+    images = bg[:, :, None] * ratio.reshape(len(bands), H, W) * tint[None]
+    cam = CameraModel()
+    var = image_variance(images, cam)
+    if noise:
+        images = images + rng.normal(0.0, np.sqrt(var))
+    mask = (np.abs(rho) <= 0.5 * diameter_mm).reshape(H, W) & (yy >= 20) & (yy < 108)
+    pix = vein_geometry(mask, np.zeros((H, W), bool), GEOM, mm_per_row=0.3)
+    return model, images, var, pix
+
+
+@pytest.mark.parametrize(("depth_mm", "diameter_mm"), [(1.5, 3.0), (2.5, 2.0)])
+def test_fit_recovers_a_known_vein_from_a_noiseless_synthetic_capture(depth_mm, diameter_mm):
+    model, images, var, pix = _synthetic(depth_mm, diameter_mm, 0, noise=False)
+    f = fit_vein(model, images, var, pix, ambient=False, max_pixels=400)
+    assert f.resolved, f.reason
+    assert abs(f.depth_mm - depth_mm) < 0.2
+    assert abs(f.diameter_mm - diameter_mm) < 0.6
+
+
+def test_noisy_fit_recovers_depth_within_its_standard_error():
+    errs, ses = [], []
+    for seed in range(3):
+        model, images, var, pix = _synthetic(2.0, 3.0, seed)
+        f = fit_vein(model, images, var, pix, ambient=False, max_pixels=400)
+        assert f.resolved, f.reason
+        errs.append(f.depth_mm - 2.0)
+        ses.append(f.depth_se_mm)
+    errs, ses = np.array(errs), np.array(ses)
+    assert np.all(np.abs(errs) < 4.0 * ses + 0.1), (errs, ses)
+    assert np.all(np.abs(errs) < 0.5)
+
+
+def test_a_mask_over_skin_without_a_vein_is_reported_not_detected():
+    model, images, var, pix = _synthetic(2.0, 3.0, 0, vein=False)
+    f = fit_vein(model, images, var, pix, ambient=False, max_pixels=400)
+    assert not f.resolved
+    assert "not detected" in f.reason
+    assert np.isnan(f.depth_mm) and np.isnan(f.diameter_mm)
+    assert f.to_json()["depth_mm"] is None

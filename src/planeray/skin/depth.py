@@ -68,6 +68,7 @@ __all__ = [
     "vein_model",
     "vein_signals",
     "vein_contrast",
+    "background_signals",
     "image_variance",
     "usable_bands",
     "vein_geometry",
@@ -207,6 +208,21 @@ def vein_signals(model: VeinModel, rows, rho_mm, angle_deg, depth_mm, diameter_m
         ratio = np.where(S0 > 0, S / S0, np.nan)
     flood = sub.sum(axis=1) / cache["base"].sum()
     return ratio, flood
+
+
+def background_signals(model: VeinModel, rows) -> np.ndarray:
+    """Subsurface signal of each image of vein-free skin at camera rows ``rows``, ``(K, n)``.
+
+    ``sum_u w_k(t, u) c(t, u) (K0 * F)(u)`` in transport units (light per unit of the
+    projector's line power; multiply by the camera's ``signal_scale`` for a normalized image).
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    offsets, wide, half, foot = _offsets(model)
+    urows, inv = np.unique(rows, return_inverse=True)
+    W = _row_weights(model, urows, offsets)
+    k_row = np.interp(wide.astype(float), model.table.offsets_rows, model.kernel, left=0.0, right=0.0)
+    base = convolve1d(k_row[None, :], foot[::-1], axis=1, mode="constant")[:, half:-half][0]
+    return np.einsum("rku,u->kr", W, base)[:, inv]
 
 
 def vein_contrast(model: VeinModel, rho_mm, angle_deg, depth_mm, diameter_mm, *, row=None) -> np.ndarray:
@@ -422,6 +438,7 @@ def fit_vein(
     max_correlation: float = 0.98,
     ambient: bool = True,
     max_pixels: int = 600,
+    tint_knot_mm: float = 10.0,
 ) -> VeinFit:
     """Fit one vein's depth and diameter to the images of a sweep (see the module's docstring).
 
@@ -447,6 +464,8 @@ def fit_vein(
         Fit an ambient term proportional to the exposure.
     max_pixels : int
         At most this many pixels of the neighbourhood are used (evenly spread, for speed).
+    tint_knot_mm : float
+        Spacing of the knots of the skin's tint along the vein, mm.
 
     Returns
     -------
@@ -487,83 +506,96 @@ def fit_vein(
     D_lo, D_hi = float(model.table.diameters_mm[0]), float(model.table.diameters_mm[-1])
     amb_on = 1.0 if ambient else 0.0
 
-    # the skin's smooth tint over the neighbourhood: a quadratic in the coordinates along and across
-    # the vein (units of 10 mm), its coefficients fitted with the vein
+    # the skin's smooth tint over the neighbourhood: piecewise linear along the vein (knots every
+    # ``tint_knot_mm``) times a quadratic across it (units of 10 mm); solved with B and A for each trial
     xy = np.stack([pix.x_mm, pix.y_mm], axis=1)
     _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
-    al, ac = (xy @ vt[0]) / 10.0, (xy @ vt[1]) / 10.0
-    phi = np.stack([al, ac, al * al, ac * ac, al * ac], axis=1)
-    n_tint = phi.shape[1]
-    n_nl = 3 + n_tint
+    al, ac = xy @ vt[0], (xy @ vt[1]) / 10.0
+    knots = np.arange(al.min(), al.max() + tint_knot_mm, tint_knot_mm)
+    if knots.size < 2:
+        knots = np.array([al.min(), al.min() + tint_knot_mm])
+    hat = np.clip(1.0 - np.abs(al[:, None] - knots[None, :]) / tint_knot_mm, 0.0, None)
+    hat = hat[:, hat.sum(axis=0) > 0]
+    phi = np.concatenate([hat, hat * ac[:, None], hat * (ac * ac)[:, None]], axis=1)
+    c_flat = np.concatenate([np.ones(hat.shape[1]), np.zeros(2 * hat.shape[1])])
 
-    def columns(theta):
-        depth, diam, delta = theta[:3]
+    def inner(R, F, c0):
+        """Alternating weighted least squares of (B, A) and the tint's coefficients c (6 rounds)."""
+        c = c0.copy()
+        for _ in range(6):
+            tint = phi @ c
+            _, B, A = _linear_solve(R * tint, F * tint, data, wts, te)
+            G = B[:, None] * R + A * te[:, None] * F[None, :]
+            q = np.sum(wts * G * G, axis=0)
+            r = np.sum(wts * G * data, axis=0)
+            c = np.linalg.lstsq(phi.T @ (q[:, None] * phi), phi.T @ r, rcond=None)[0]
+            c /= max(float(np.mean(phi @ c)), 1e-12)
+        tint = phi @ c
+        res, B, A = _linear_solve(R * tint, F * tint, data, wts, te)
+        return res, B, A, c
+
+    ones = np.ones_like(data)
+    res_null, _, _, c_null = inner(ones, np.full(n, amb_on), c_flat)
+    chi2_null = float(np.sum(res_null**2))
+
+    def model_of(theta):
+        depth, diam, delta = theta
         ratio, flood = vein_signals(model, pix.rows, pix.rho_mm + delta, ang, depth, diam, _cache=cache)
-        tint = 1.0 + phi @ np.asarray(theta[3:])
-        return np.nan_to_num(ratio) * tint[None, :], flood * tint * amb_on
+        return np.nan_to_num(ratio), flood * amb_on
 
     def resid(theta):
-        c, f = columns(theta)
-        return _linear_solve(c, f, data, wts, te)[0].ravel()
-
-    def chi2(theta):
-        r = resid(theta)
-        return float(r @ r)
-
-    # "no vein": the kernel ratio is 1 everywhere (tint gradient still fitted)
-    def resid_null(g):
-        tint = 1.0 + phi @ g
-        c = np.broadcast_to(tint, data.shape).copy()
-        return _linear_solve(c, tint * amb_on, data, wts, te)[0].ravel()
-
-    null = least_squares(resid_null, np.zeros(n_tint), method="lm")
-    chi2_null = float(null.fun @ null.fun)
+        R, F = model_of(theta)
+        return inner(R, F, c_null)[0].ravel()
 
     # coarse grid, then a bounded local fit
     best = None
     for depth in np.arange(d_lo, d_hi + 1e-9, 0.5):
         for diam in np.arange(D_lo, D_hi + 1e-9, 0.5):
-            c = chi2((depth, diam, 0.0, *null.x))
-            if best is None or c < best[0]:
-                best = (c, (depth, diam, 0.0, *null.x))
-    lo = [d_lo, D_lo, -px] + [-0.5] * n_tint
-    hi = [d_hi, D_hi, px] + [0.5] * n_tint
+            r = resid((depth, diam, 0.0))
+            c2 = float(r @ r)
+            if best is None or c2 < best[0]:
+                best = (c2, (depth, diam, 0.0))
+    lo = [d_lo, D_lo, -px]
+    hi = [d_hi, D_hi, px]
     x0 = np.clip(best[1], np.array(lo) + 1e-6, np.array(hi) - 1e-6)
-    sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=[0.5, 0.5, 0.5 * px] + [0.02] * n_tint, diff_step=1e-3)
+    sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=[0.5, 0.5, 0.5 * px], diff_step=1e-3)
     theta = sol.x
-    chi2_fit = float(sol.fun @ sol.fun)
-    dof = max(data.size - (K + 1 + n_nl), 1)
+    R, F = model_of(theta)
+    res, B, A, c = inner(R, F, c_null)
+    chi2_fit = float(np.sum(res**2))
+    n_par = 3 + K + 1 + phi.shape[1] - 1
+    dof = max(data.size - n_par, 1)
     red = chi2_fit / dof
     scale = max(red, 1.0)
     dchi2 = (chi2_null - chi2_fit) / scale
 
-    # Jacobian of all parameters (nonlinear + the linear ones) for the covariance
-    c, f = columns(theta)
-    _, B, A = _linear_solve(c, f, data, wts, te)
-    full0 = np.concatenate([theta, B, [A]])
+    # Jacobian of every parameter at the optimum: theta by central differences, B, A and the tint's
+    # coefficients analytically; the covariance of (depth, diameter) from its pseudo-inverse (the
+    # tint's scale against B's is a gauge direction with no theta component)
     sw = np.sqrt(wts)
+    tint = phi @ c
 
-    def resid_full(p):
-        cc, ff = columns(p[:n_nl])
-        pred = p[n_nl : n_nl + K, None] * cc + p[-1] * te[:, None] * ff[None, :]
-        return ((data - pred) * sw).ravel()
+    def pred_of(th):
+        Rt, Ft = model_of(th)
+        return (B[:, None] * Rt + A * te[:, None] * Ft[None, :]) * tint[None, :]
 
-    steps = np.concatenate(
-        [[0.02, 0.02, 0.02 * px] + [1e-3] * n_tint, 1e-4 * np.maximum(np.abs(B), 1e-6), [1e-4 * max(abs(A), 1e-6)]]
-    )
-    J = np.empty((data.size, full0.size))
-    for i, h in enumerate(steps):
-        p1, p2 = full0.copy(), full0.copy()
-        p1[i] += h
-        p2[i] -= h
-        if i == 0:  # keep depth inside the table for the difference
-            p1[i], p2[i] = min(p1[i], d_hi), max(p2[i], d_lo)
-        if i == 1:
-            p1[i], p2[i] = min(p1[i], D_hi), max(p2[i], D_lo)
-        J[:, i] = (resid_full(p1) - resid_full(p2)) / (p1[i] - p2[i])
-    JTJ = J.T @ J
+    cols = []
+    for i, h in enumerate((0.02, 0.02, 0.02 * px)):
+        t1, t2 = theta.copy(), theta.copy()
+        t1[i] = min(t1[i] + h, hi[i])
+        t2[i] = max(t2[i] - h, lo[i])
+        cols.append(((pred_of(t1) - pred_of(t2)) / (t1[i] - t2[i]) * sw).ravel())
+    for k in range(K):
+        col = np.zeros_like(data)
+        col[k] = R[k] * tint
+        cols.append((col * sw).ravel())
+    cols.append((te[:, None] * F[None, :] * tint[None, :] * sw).ravel())
+    G = B[:, None] * R + A * te[:, None] * F[None, :]
+    for j in range(phi.shape[1]):
+        cols.append((G * phi[None, :, j] * sw).ravel())
+    J = np.stack(cols, axis=1)
     try:
-        cov = np.linalg.pinv(JTJ) * scale
+        cov = np.linalg.pinv(J.T @ J) * scale
         se_d, se_D = math.sqrt(max(cov[0, 0], 0.0)), math.sqrt(max(cov[1, 1], 0.0))
         corr = cov[0, 1] / (se_d * se_D) if se_d > 0 and se_D > 0 else nan
     except np.linalg.LinAlgError:
