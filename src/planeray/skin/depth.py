@@ -71,6 +71,7 @@ __all__ = [
     "background_signals",
     "image_variance",
     "usable_bands",
+    "far_bands",
     "vein_geometry",
     "fit_vein",
     "fit_veins",
@@ -248,6 +249,16 @@ def image_variance(image, camera: CameraModel) -> np.ndarray:
     n = camera.frames_averaged
     span = camera.max_code - camera.black_level
     return (e + camera.read_noise_e**2) / (n * camera.full_well_e**2) + 1.0 / (12.0 * n * span**2)
+
+
+def far_bands(model: VeinModel, *, excluded=None, level: float = 1e-4) -> np.ndarray:
+    """Images that see (almost) only ambient light: their band holds less than ``level`` of the
+    vein-free skin's signal in the brightest image of the sweep (the middle camera row)."""
+    s0 = background_signals(model, [model.geometry.camera_rows // 2])[:, 0]
+    ok = s0 < level * s0.max()
+    if excluded is not None:
+        ok &= ~np.asarray(excluded, bool)
+    return ok
 
 
 def usable_bands(bands, geometry: RowGeometry, *, excluded=None, band_rows: int = SKIN_BAND_ROWS) -> np.ndarray:
@@ -682,15 +693,33 @@ def fit_veins(
         ids = [int(v) for v in np.unique(lab) if v > 0]
     if not ids:
         raise InputError("the vein mask has no vein pixels")
-    use = usable_bands(bands, geometry, excluded=excluded)
+    everything = vein_model(bands, geometry, tone=tone, wavelength_nm=wavelength_nm, mm_per_row=mm_per_row)
+    far = far_bands(everything, excluded=excluded)
+    use = usable_bands(bands, geometry, excluded=excluded) & ~far
     if not use.any():
         raise InputError(
-            "no image of the sweep is usable for the depth fit (every band holds direct light or is excluded)"
+            "no image of the sweep is usable for the depth fit (every band holds direct light, is excluded "
+            "or lies beyond the skin's kernel)"
         )
     idx = np.nonzero(use)[0]
     model = vein_model([bands[i] for i in idx], geometry, tone=tone, wavelength_nm=wavelength_nm, mm_per_row=mm_per_row)
     imgs = np.stack([np.asarray(stack_images[i], float) for i in idx])
     var = image_variance(imgs, camera)
+    # ambient light: measured per pixel from the images whose band lies beyond the skin's kernel
+    # (they hold only the ambient light, proportional to the exposure, with its own vein shadow), and
+    # subtracted; without such images it is fitted (one rate per microsecond, the flood-lit contrast)
+    ambient_note = "fitted (one rate per microsecond of exposure, the flood-lit contrast)"
+    if far.any() and fit_options.get("ambient") is not False:
+        fi = np.nonzero(far)[0]
+        te_far = np.array([bands[i].exposure_us for i in fi])
+        far_imgs = np.stack([np.asarray(stack_images[i], float) for i in fi])
+        rate = far_imgs.sum(axis=0) / te_far.sum()
+        rate_var = image_variance(far_imgs, camera).sum(axis=0) / te_far.sum() ** 2
+        te = model.exposures_us[:, None, None]
+        imgs = imgs - rate[None] * te
+        var = var + rate_var[None] * te**2
+        fit_options = {**fit_options, "ambient": False}
+        ambient_note = f"measured per pixel from {fi.size} images whose band lies beyond the skin's kernel, subtracted"
     fits = []
     for vid in ids:
         comp = lab == vid
@@ -699,6 +728,8 @@ def fit_veins(
         fits.append(fit_vein(model, imgs, var, pix, vein_id=vid, **fit_options))
         if progress is not None:
             progress(vid)
+    for f in fits:
+        f.curves["ambient"] = ambient_note
     return fits, model, use
 
 
