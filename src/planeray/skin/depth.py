@@ -54,6 +54,7 @@ import numpy as np
 from scipy.ndimage import convolve1d, distance_transform_edt, label
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
+from threadpoolctl import threadpool_limits
 
 from ..camera import CameraModel
 from ..errors import InputError
@@ -482,6 +483,37 @@ def fit_vein(
     -------
     VeinFit
     """
+    # small matrices in a loop: one BLAS thread (a spinning pool made the fit 7x slower on 2 busy cores)
+    with threadpool_limits(1, user_api="blas"):
+        return _fit_vein(
+            model,
+            images,
+            variance,
+            pix,
+            vein_id=vein_id,
+            detect_dchi2=detect_dchi2,
+            max_depth_se_mm=max_depth_se_mm,
+            max_correlation=max_correlation,
+            ambient=ambient,
+            max_pixels=max_pixels,
+            tint_knot_mm=tint_knot_mm,
+        )
+
+
+def _fit_vein(
+    model,
+    images,
+    variance,
+    pix,
+    *,
+    vein_id,
+    detect_dchi2,
+    max_depth_se_mm,
+    max_correlation,
+    ambient,
+    max_pixels,
+    tint_knot_mm,
+):
     images = np.asarray(images, float)
     K = images.shape[0]
     if pix.rows.size > max_pixels:
