@@ -166,3 +166,40 @@ def test_a_mask_over_skin_without_a_vein_is_reported_not_detected():
     assert "not detected" in f.reason
     assert np.isnan(f.depth_mm) and np.isnan(f.diameter_mm)
     assert f.to_json()["depth_mm"] is None
+
+
+@pytest.mark.slow
+def test_contrast_model_against_brute_force_monte_carlo_of_a_vein():
+    """The fit's contrast model (perturbation tables) against brute force: blood in the medium with its own
+    scattering (mc_vein_kernel_brute), a pixel over a vein 1 mm deep, 2 mm wide, across the rows, the
+    500 us / 200 us band through the camera row's footprint; tolerance 10 % (the documented model error in
+    this regime) + 3 standard errors of the brute-force contrast."""
+    from planeray.mc.layered import mc_layered_profile, mc_vein_kernel_brute
+    from planeray.optical_data_skin import skin_layers
+    from planeray.scenes.base import footprint_kernel
+    from planeray.timing import Band
+
+    band = Band(500.0, 200.0, 54_000.0)
+    geom = RowGeometry(128, 720)
+    model = vein_model([band], geom, mm_per_row=0.3)
+    fast = 1.0 - vein_signals(model, [64], [0.0], [90.0], 1.0, 2.0)[0][0, 0]
+
+    skin = skin_layers(638, "fair")
+    n = 40_000
+    brute = mc_vein_kernel_brute(skin.layers, skin.blood, depth_mm=1.0, diameter_mm=2.0, angle_deg=90.0, n_photons=n)
+    plain = mc_layered_profile(skin.layers, n_photons=n, offsets_rows=brute.offsets_rows, mm_per_row=0.3)
+    u = brute.offsets_rows
+    rpc = geom.rows_per_camera_row
+    half = int(np.ceil(0.5 * rpc + 0.5))
+    foot = footprint_kernel(np.arange(-half, half + 1), rpc)
+    w = band.profile(u)
+    vein = np.convolve(brute.values, foot, mode="same") @ w
+    bare = np.convolve(plain.values, foot, mode="same") @ w
+    contrast = 1.0 - vein / bare
+    # standard error of the ratio from the two kernels' batch errors (independent runs)
+    se = (vein / bare) * np.hypot(
+        np.sqrt(np.convolve(brute.stderr**2, foot**2, mode="same") @ w**2) / vein,
+        np.sqrt(np.convolve(plain.stderr**2, foot**2, mode="same") @ w**2) / bare,
+    )
+    assert fast > 0.5  # a strong vein: the comparison means something
+    assert abs(fast - contrast) <= 0.1 * contrast + 3.0 * se, (fast, contrast, se)
