@@ -683,6 +683,7 @@ def fit_veins(
     tone="fair",
     wavelength_nm: int = 638,
     mm_per_row: float = DEFAULT_MM_PER_ROW,
+    guard_mm: float = 5.0,
     progress=None,
     **fit_options,
 ):
@@ -703,6 +704,8 @@ def fit_veins(
         Images to leave out (the stack's boundary images).
     tone, wavelength_nm, mm_per_row
         The skin (see :func:`vein_model`).
+    guard_mm : float
+        Pixels closer than this to another vein are left out, mm.
     progress : callable, optional
         Called once per vein fitted.
     **fit_options
@@ -756,7 +759,7 @@ def fit_veins(
     for vid in ids:
         comp = lab == vid
         others = (lab > 0) & ~comp
-        pix = vein_geometry(comp, others, geometry, mm_per_row=mm_per_row)
+        pix = vein_geometry(comp, others, geometry, mm_per_row=mm_per_row, guard_mm=guard_mm)
         fits.append(fit_vein(model, imgs, var, pix, vein_id=vid, **fit_options))
         if progress is not None:
             progress(vid)
