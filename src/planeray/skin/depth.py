@@ -47,6 +47,7 @@ the depth above ``max_depth_se_mm``, or their correlation above ``max_correlatio
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -73,6 +74,7 @@ __all__ = [
     "image_variance",
     "usable_bands",
     "far_bands",
+    "row_jitter_sigma",
     "vein_geometry",
     "fit_vein",
     "fit_veins",
@@ -252,6 +254,29 @@ def image_variance(image, camera: CameraModel) -> np.ndarray:
     return (e + camera.read_noise_e**2) / (n * camera.full_well_e**2) + 1.0 / (12.0 * n * span**2)
 
 
+def row_jitter_sigma(model: VeinModel, camera: CameraModel) -> np.ndarray:
+    """Relative standard deviation of each image's signal, per camera row, from the device's row jitter.
+
+    The trigger of every frame and camera row is offset by ``camera.row_jitter_us`` (Gaussian sigma),
+    moving the band by ``sigma_rows = row_jitter_us * lines_per_second`` projector rows along the
+    kernel; averaged over ``frames_averaged`` frames, the signal of the whole camera row changes by
+    ``|d ln S_k / du| sigma_rows / sqrt(frames)`` (the slope from the vein-free model, +-1 row).
+    """
+    t = model.geometry.camera_rows // 2
+    out = []
+    for b in model.bands:
+        step_us = 1e6 / b.lines_per_second
+        s = [
+            background_signals(
+                dataclasses.replace(model, bands=(dataclasses.replace(b, delay_us=b.delay_us + d),)), [t]
+            )[0, 0]
+            for d in (-step_us, step_us)
+        ]
+        slope = abs(math.log(max(s[1], 1e-300)) - math.log(max(s[0], 1e-300))) / 2.0
+        out.append(slope * camera.row_jitter_us * 1e-6 * b.lines_per_second / math.sqrt(camera.frames_averaged))
+    return np.array(out)
+
+
 def far_bands(model: VeinModel, *, excluded=None, level: float = 1e-4) -> np.ndarray:
     """Images that see (almost) only ambient light: their band holds less than ``level`` of the
     vein-free skin's signal in the brightest image of the sweep (the middle camera row)."""
@@ -421,12 +446,13 @@ class VeinFit:
 def _linear_solve(cols_k, amb, data, wts, te):
     """Weighted least squares of ``data[k, n] = B_k cols_k[k, n] + A te_k amb[n]``; returns residuals, B, A."""
     K, n = data.shape
+    amb2 = te[:, None] * (amb if np.ndim(amb) == 2 else amb[None, :])
     # normal equations: block structure (K diagonal entries + one shared column)
     a_kk = np.sum(wts * cols_k * cols_k, axis=1)
-    a_kA = np.sum(wts * cols_k * (te[:, None] * amb[None, :]), axis=1)
-    a_AA = np.sum(wts * (te[:, None] * amb[None, :]) ** 2)
+    a_kA = np.sum(wts * cols_k * amb2, axis=1)
+    a_AA = np.sum(wts * amb2**2)
     b_k = np.sum(wts * cols_k * data, axis=1)
-    b_A = np.sum(wts * (te[:, None] * amb[None, :]) * data)
+    b_A = np.sum(wts * amb2 * data)
     M = np.zeros((K + 1, K + 1))
     M[np.arange(K), np.arange(K)] = a_kk
     M[:K, K] = M[K, :K] = a_kA
@@ -434,7 +460,7 @@ def _linear_solve(cols_k, amb, data, wts, te):
     rhs = np.concatenate([b_k, [b_A]])
     sol = np.linalg.lstsq(M, rhs, rcond=None)[0]
     B, A = sol[:K], sol[K]
-    pred = B[:, None] * cols_k + A * te[:, None] * amb[None, :]
+    pred = B[:, None] * cols_k + A * amb2
     return (data - pred) * np.sqrt(wts), B, A
 
 
@@ -451,6 +477,7 @@ def fit_vein(
     ambient: bool = True,
     max_pixels: int = 600,
     tint_knot_mm: float = 10.0,
+    row_sigma=None,
 ) -> VeinFit:
     """Fit one vein's depth and diameter to the images of a sweep (see the module's docstring).
 
@@ -478,6 +505,9 @@ def fit_vein(
         At most this many pixels of the neighbourhood are used (evenly spread, for speed).
     tint_knot_mm : float
         Spacing of the knots of the skin's tint along the vein, mm.
+    row_sigma : array_like (K,), optional
+        Relative standard deviation of each image's per-camera-row factor from the device's row
+        jitter (:func:`row_jitter_sigma`); ``None``: no row factors.
 
     Returns
     -------
@@ -497,6 +527,7 @@ def fit_vein(
             ambient=ambient,
             max_pixels=max_pixels,
             tint_knot_mm=tint_knot_mm,
+            row_sigma=row_sigma,
         )
 
 
@@ -513,6 +544,7 @@ def _fit_vein(
     ambient,
     max_pixels,
     tint_knot_mm,
+    row_sigma,
 ):
     images = np.asarray(images, float)
     K = images.shape[0]
@@ -562,23 +594,39 @@ def _fit_vein(
     phi = np.concatenate([hat, hat * ac[:, None], hat * (ac * ac)[:, None]], axis=1)
     c_flat = np.concatenate([np.ones(hat.shape[1]), np.zeros(2 * hat.shape[1])])
 
+    row_of = np.unique(pix.rows, return_inverse=True)[1]
+    n_rows = int(row_of.max()) + 1
+    rsig = None if row_sigma is None else np.maximum(np.asarray(row_sigma, float), 1e-9)
+
+    def row_sum(x):
+        return np.stack([np.bincount(row_of, weights=xk, minlength=n_rows) for xk in x])
+
     def inner(R, F, c0):
-        """Alternating weighted least squares of (B, A) and the tint's coefficients c (6 rounds)."""
+        """Alternating weighted least squares of (B, A), the tint's coefficients c and the per-(image, camera
+        row) factors f of the device's row jitter (Gaussian prior, sigma ``row_sigma``); 6 rounds.
+        Returns the weighted residuals (data, then the prior's f / sigma), B, A, c, f."""
         c = c0.copy()
+        f = np.zeros((K, n_rows))
         for _ in range(6):
             tint = phi @ c
-            _, B, A = _linear_solve(R * tint, F * tint, data, wts, te)
-            G = B[:, None] * R + A * te[:, None] * F[None, :]
+            m = 1.0 + f[:, row_of]
+            _, B, A = _linear_solve(R * tint * m, F[None, :] * tint * m, data, wts, te)
+            G = (B[:, None] * R + A * te[:, None] * F[None, :]) * m
             q = np.sum(wts * G * G, axis=0)
             r = np.sum(wts * G * data, axis=0)
             c = np.linalg.lstsq(phi.T @ (q[:, None] * phi), phi.T @ r, rcond=None)[0]
             c /= max(float(np.mean(phi @ c)), 1e-12)
+            if rsig is not None:
+                P = (B[:, None] * R + A * te[:, None] * F[None, :]) * (phi @ c)[None, :]
+                f = row_sum(wts * P * (data - P)) / (row_sum(wts * P * P) + 1.0 / rsig[:, None] ** 2)
         tint = phi @ c
-        res, B, A = _linear_solve(R * tint, F * tint, data, wts, te)
-        return res, B, A, c
+        m = 1.0 + f[:, row_of]
+        res, B, A = _linear_solve(R * tint * m, F[None, :] * tint * m, data, wts, te)
+        prior = (f / rsig[:, None]).ravel() if rsig is not None else np.zeros(0)
+        return np.concatenate([res.ravel(), prior]), B, A, c, f
 
     ones = np.ones_like(data)
-    res_null, _, _, c_null = inner(ones, np.full(n, amb_on), c_flat)
+    res_null, _, _, c_null, _ = inner(ones, np.full(n, amb_on), c_flat)
     chi2_null = float(np.sum(res_null**2))
 
     def model_of(theta):
@@ -588,7 +636,7 @@ def _fit_vein(
 
     def resid(theta):
         R, F = model_of(theta)
-        return inner(R, F, c_null)[0].ravel()
+        return inner(R, F, c_null)[0]
 
     # coarse grid, then a bounded local fit
     best = None
@@ -604,7 +652,7 @@ def _fit_vein(
     sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=[0.5, 0.5, 0.5 * px], diff_step=1e-3)
     theta = sol.x
     R, F = model_of(theta)
-    res, B, A, c = inner(R, F, c_null)
+    res, B, A, c, f = inner(R, F, c_null)
     chi2_fit = float(np.sum(res**2))
     n_par = 3 + K + 1 + phi.shape[1] - 1
     dof = max(data.size - n_par, 1)
@@ -617,25 +665,43 @@ def _fit_vein(
     # tint's scale against B's is a gauge direction with no theta component)
     sw = np.sqrt(wts)
     tint = phi @ c
+    m = 1.0 + f[:, row_of]
 
     def pred_of(th):
         Rt, Ft = model_of(th)
-        return (B[:, None] * Rt + A * te[:, None] * Ft[None, :]) * tint[None, :]
+        return (B[:, None] * Rt + A * te[:, None] * Ft[None, :]) * tint[None, :] * m
+
+    n_prior = 0 if rsig is None else K * n_rows
+
+    def col_of(x, prior=None):
+        out = np.zeros(data.size + n_prior)
+        out[: data.size] = (x * sw).ravel()
+        if prior is not None:
+            out[data.size + prior[0]] = prior[1]
+        return out
 
     cols = []
     for i, h in enumerate((0.02, 0.02, 0.02 * px)):
         t1, t2 = theta.copy(), theta.copy()
         t1[i] = min(t1[i] + h, hi[i])
         t2[i] = max(t2[i] - h, lo[i])
-        cols.append(((pred_of(t1) - pred_of(t2)) / (t1[i] - t2[i]) * sw).ravel())
+        cols.append(col_of((pred_of(t1) - pred_of(t2)) / (t1[i] - t2[i])))
     for k in range(K):
         col = np.zeros_like(data)
-        col[k] = R[k] * tint
-        cols.append((col * sw).ravel())
-    cols.append((te[:, None] * F[None, :] * tint[None, :] * sw).ravel())
-    G = B[:, None] * R + A * te[:, None] * F[None, :]
+        col[k] = R[k] * tint * m[k]
+        cols.append(col_of(col))
+    cols.append(col_of(te[:, None] * F[None, :] * tint[None, :] * m))
+    G = (B[:, None] * R + A * te[:, None] * F[None, :]) * m
     for j in range(phi.shape[1]):
-        cols.append((G * phi[None, :, j] * sw).ravel())
+        cols.append(col_of(G * phi[None, :, j]))
+    if rsig is not None:
+        P = (B[:, None] * R + A * te[:, None] * F[None, :]) * tint[None, :]
+        for k in range(K):
+            for t in range(n_rows):
+                col = np.zeros_like(data)
+                sel = row_of == t
+                col[k, sel] = P[k, sel]
+                cols.append(col_of(col, (k * n_rows + t, 1.0 / rsig[k])))
     J = np.stack(cols, axis=1)
     try:
         cov = np.linalg.pinv(J.T @ J) * scale
@@ -755,6 +821,8 @@ def fit_veins(
         var = var + rate_var[None] * te**2
         fit_options = {**fit_options, "ambient": False}
         ambient_note = f"measured per pixel from {fi.size} images whose band lies beyond the skin's kernel, subtracted"
+    if camera.row_jitter_us > 0 and "row_sigma" not in fit_options:
+        fit_options = {**fit_options, "row_sigma": row_jitter_sigma(model, camera)}
     fits = []
     for vid in ids:
         comp = lab == vid
