@@ -35,7 +35,11 @@ and solved exactly for each trial of the nonlinear parameters (variable projecti
 pixel) and ``g`` (the skin's smooth tint over the neighbourhood: a quadratic in the
 coordinates along and across the vein; the skin scene's tint varies ~5 % over ~3 cm).
 Weights are the camera's noise model (shot, read and quantization noise of the averaged
-frames; :func:`image_variance`).  Standard errors come from the Jacobian of all parameters
+frames; :func:`image_variance`); the device's row jitter, which moves a whole camera row's band
+(a few per cent of a short-range image), enters as a factor ``1 + f_kt`` per image and camera
+row with a Gaussian prior (:func:`row_jitter_sigma`), fitted with the rest.  Ambient light is
+measured per pixel from the sweep's images whose band lies beyond the skin's kernel
+(:func:`far_bands`) and subtracted by :func:`fit_veins`; without such images it is fitted.  Standard errors come from the Jacobian of all parameters
 at the optimum, scaled by the reduced chi-square when it exceeds 1.
 
 Identifiability: a vein is **unresolved** (depth and diameter NaN, with the reason) when
