@@ -50,8 +50,8 @@ if _WORKERS > 1:
 
     import numba
 
-    # Numba's parallel kernels (Monte Carlo): the pool keeps its size (tests that compare thread
-    # counts still can), the kernels called from this worker use its share
+    # Numba's thread count, which sizes the Monte Carlo batch pool (planeray.mc._batches): the
+    # launched pool keeps its size (tests that compare thread counts still can), this worker uses its share
     numba.set_num_threads(min(THREADS_PER_WORKER, numba.config.NUMBA_NUM_THREADS))
 
 

@@ -115,8 +115,11 @@ def test_smooth_transport_gets_strong_smoothing_and_a_lower_error_than_the_paper
     choice = choose_weights(stack)
     assert choice.alpha >= 100.0
     err = {}
-    for name, (a, b) in {"auto": (choice.alpha, choice.beta), "paper": (0.01, 0.01)}.items():
-        T = demultiplex(stack, alpha=a, beta=b).transport.dense
+    for name, (a, b, amb) in {
+        "auto": (choice.alpha, choice.beta, choice.ambient),
+        "paper": (0.01, 0.01, "none"),
+    }.items():
+        T = demultiplex(stack, alpha=a, beta=b, ambient=amb).transport.dense
         problem = DemuxProblem.from_stack(stack)
         g = problem.groups[problem.row_group[6]]
         err[name] = np.linalg.norm(T[6][:, g.valid] - truth[6]) / np.linalg.norm(truth[6])
@@ -127,7 +130,7 @@ def test_pure_noise_chooses_strong_regularization():
     stack, _ = synthetic("noise", noise=0.02)
     choice = choose_weights(stack)
     assert choice.alpha >= 100.0 or choice.beta >= 0.1, choice.summary()
-    auto = demultiplex(stack, alpha=choice.alpha, beta=choice.beta).transport.dense
+    auto = demultiplex(stack, alpha=choice.alpha, beta=choice.beta, ambient=choice.ambient).transport.dense
     paper = demultiplex(stack).transport.dense
     assert np.linalg.norm(auto) < 0.2 * np.linalg.norm(paper)
 
@@ -164,8 +167,10 @@ def test_store_records_the_choice_and_the_command_prints_and_draws_it(tmp_path):
     assert r.exit_code == 0, r.output
     lines = [line for line in r.output.splitlines() if line.startswith("weights:")]
     assert len(lines) == 1 and "alpha = " in lines[0] and "within 1 SE" in lines[0]
+    assert "pairs tried); ambient light estimated per pixel (" in lines[0]  # the default with auto weights, said so
     attrs = zarr.open_group(str(out), mode="r").attrs.asdict()
     rec = attrs["weights_choice"]
+    assert attrs["ambient"] == rec["ambient"] == "estimate"
     assert rec["requested"] == {"alpha": "auto", "beta": "auto"} and rec["criterion"] == "cv-images"
     assert attrs["alpha"] == rec["alpha"] and attrs["beta"] == rec["beta"]
     curve = rec["curve"]
@@ -208,6 +213,7 @@ def test_interrupted_auto_run_resumes_only_on_identical_inputs(tmp_path):
     assert seen == [True]
     T, attrs = read_transport(out)
     assert attrs["weights_choice"] == rec and (attrs["alpha"], attrs["beta"]) == (rec["alpha"], rec["beta"])
-    # the same bytes as an uninterrupted run at those weights
-    ref = demultiplex(stack, alpha=rec["alpha"], beta=rec["beta"], chunk_rows=4).transport.dense
+    # the same bytes as an uninterrupted run at those weights (on the same problem: the ambient estimated)
+    assert rec["ambient"] == "estimate" == attrs["ambient"]
+    ref = demultiplex(stack, alpha=rec["alpha"], beta=rec["beta"], ambient="estimate", chunk_rows=4).transport.dense
     np.testing.assert_array_equal(T.dense, ref)

@@ -15,6 +15,9 @@ from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack
 
 #: The solvers of ``--method``.
 METHODS = ("fast", "pinv", "nnls", "cvxpy")
+#: The values of ``--ambient`` and the methods that estimate the ambient.
+AMBIENT = ("none", "estimate")
+AMBIENT_METHODS = ("fast", "cvxpy")
 #: Largest smoothness or sparsity weight (the Sec. 5.2 study sweeps up to 1e4).
 MAX_WEIGHT = 1e6
 #: Most Dask workers of a local cluster.
@@ -43,6 +46,14 @@ def demux(
     beta: Annotated[
         str, typer.Option(help="Sparsity weight (paper: 0.01), or 'auto': chosen by cross-validation over the images.")
     ] = "0.01",
+    ambient: Annotated[
+        str | None,
+        typer.Option(
+            help="none: the paper's problem; estimate: an ambient-light unknown per pixel, kept out of T "
+            "(the store's 'ambient' map). Default: estimate with 'auto' weights (unless --beta 0), none otherwise.",
+            show_default=False,
+        ),
+    ] = None,
     method: Annotated[str, typer.Option(help="fast | pinv | nnls | cvxpy.")] = "fast",
     workers: Annotated[int | None, typer.Option(help="Run on a Dask LocalCluster with N workers.")] = None,
     scheduler: Annotated[str | None, typer.Option(help="Address of an existing Dask scheduler.")] = None,
@@ -61,6 +72,7 @@ def demux(
     import time
 
     from ..demux import demultiplex_to_store
+    from ..demux.auto import resolve_ambient
     from ..io import read_transport_maps
 
     if workers is not None and scheduler is not None:
@@ -77,6 +89,19 @@ def demux(
     _check_outputs((out_path, "transport"), (figure, "figure"), overwrite=overwrite)
     if method not in METHODS:
         raise InputError(f"--method {method}: unknown demultiplexing method; choose one of {', '.join(METHODS)}")
+    if ambient is not None and ambient.strip().lower() not in AMBIENT:
+        raise InputError(f"--ambient {ambient}: choose one of {', '.join(AMBIENT)}")
+    ambient = resolve_ambient(ambient, alpha, beta)
+    if ambient == "estimate" and method not in AMBIENT_METHODS:
+        raise InputError(
+            f"--ambient estimate: --method {method} cannot estimate the ambient light; use "
+            f"{' or '.join(AMBIENT_METHODS)}, or --ambient none"
+        )
+    if ambient == "estimate" and beta == 0:
+        raise InputError(
+            "--ambient estimate needs --beta > 0: with --beta 0 a flat transport and the ambient light "
+            "fit the images alike (not identifiable)"
+        )
     lim.optional(lim.integer, workers, "--workers", minimum=1, maximum=MAX_WORKERS)
     lim.integer(chunk_rows, "--chunk-rows", minimum=1, maximum=lim.MAX_SIDE)
     lim.optional(lim.number, tol, "--tol", minimum=0.0, maximum=1.0, min_inclusive=False, max_inclusive=False)
@@ -98,6 +123,7 @@ def demux(
             out_path,
             alpha=alpha,
             beta=beta,
+            ambient=ambient,
             method=method,
             chunk_rows=chunk_rows,
             tol=tol,
@@ -118,9 +144,10 @@ def demux(
     elapsed = time.perf_counter() - t0
     maps = read_transport_maps(path)
     conv = maps["converged"]
+    amb = "" if "ambient" not in maps else f", median ambient {np.median(maps['ambient']):.2e} per row of exposure"
     out.print(
         f"transport: {path}  ({st.shape[0]}x{st.shape[1]} pixels in {elapsed:.1f} s; "
-        f"converged {conv.mean() * 100:.2f} %, median residual RMS {np.median(maps['residual_rms']):.2e})",
+        f"converged {conv.mean() * 100:.2f} %, median residual RMS {np.median(maps['residual_rms']):.2e}{amb})",
         markup=False,
         highlight=False,
     )

@@ -8,7 +8,15 @@ chosen by name) and :mod:`~planeray.demux.driver` (chunked, resumable, Dask runs
 """
 
 from .auto import WeightChoice, choose_weights
-from .driver import DEFAULT_CHUNK_ROWS, MAP_NAMES, DemuxResult, demultiplex, demultiplex_to_store, solve_chunk
+from .driver import (
+    AMBIENT_MAP,
+    DEFAULT_CHUNK_ROWS,
+    MAP_NAMES,
+    DemuxResult,
+    demultiplex,
+    demultiplex_to_store,
+    solve_chunk,
+)
 from .fast import solve_fast
 from .problem import DemuxProblem, RowGroup, difference_matrix
 from .reference import solve_cvxpy, solve_nnls, solve_pinv
@@ -16,6 +24,7 @@ from .result import SolveResult
 from .solvers import SOLVERS, get_solver
 
 __all__ = [
+    "AMBIENT_MAP",
     "SOLVERS",
     "DEFAULT_CHUNK_ROWS",
     "MAP_NAMES",

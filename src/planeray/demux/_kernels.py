@@ -16,7 +16,9 @@ one pass, and two Python threads run two pixel batches at once (``nogil``):
 * :func:`woodbury_factors`, :func:`woodbury_quad`: the same for the certificate's
   ``Q_p^{-1}``;
 * :func:`split_dual`, :func:`finish_residual`, :func:`finish_gradient`, :func:`half_norms`:
-  the certificate's per-pixel parts (objective, gradient, KKT residual, gap bound).
+  the certificate's per-pixel parts (objective, gradient, KKT residual, gap bound);
+  :func:`null_adjust` the multiplier's move that keeps the bound finite when ``Q`` is
+  singular (the ambient term of Eq. 6a).
 
 Compiled by Numba on first use and cached on disk.
 
@@ -40,6 +42,7 @@ __all__ = [
     "split_dual",
     "finish_residual",
     "finish_gradient",
+    "null_adjust",
     "half_norms",
     "warm_up",
 ]
@@ -315,11 +318,12 @@ def finish_residual(R, B, keep, R32, rr):  # pragma: no cover - compiled
 
 
 @numba.njit(**_JIT)
-def finish_gradient(G, Z, Lam, alpha, beta, rr, f, kkt, lamz):  # pragma: no cover - compiled
+def finish_gradient(G, Z, Lam, alpha, beta, n_x, rr, f, kkt, lamz):  # pragma: no cover - compiled
     """From ``G = R^T A`` (float32, in place) to ``G - Lam`` with ``G`` the objective's gradient at ``Z``.
 
     Also the objective ``f`` (float64), the unscaled KKT residual ``max |min(z, g)|`` and
-    ``lamz = Lam^T Z`` per pixel.
+    ``lamz = Lam^T Z`` per pixel.  The first ``n_x`` unknowns are the transport (smoothness
+    and sparsity); any further one is the ambient of Eq. 6a (neither).
     """
     P, U = G.shape
     a2 = 2.0 * alpha
@@ -330,14 +334,17 @@ def finish_gradient(G, Z, Lam, alpha, beta, rr, f, kkt, lamz):  # pragma: no cov
         lz = 0.0
         for u in range(U):
             z = Z[p, u]
-            g = 2.0 * G[p, u] + beta
-            if u > 0:
-                d = z - Z[p, u - 1]
-                smooth += d * d
-                g += a2 * d
-            if u < U - 1:
-                g -= a2 * (Z[p, u + 1] - z)
-            total += z
+            if u < n_x:
+                g = 2.0 * G[p, u] + beta
+                if u > 0:
+                    d = z - Z[p, u - 1]
+                    smooth += d * d
+                    g += a2 * d
+                if u < n_x - 1:
+                    g -= a2 * (Z[p, u + 1] - z)
+                total += z
+            else:
+                g = 2.0 * G[p, u]
             m = abs(min(z, g))
             if m > worst:
                 worst = m
@@ -346,6 +353,39 @@ def finish_gradient(G, Z, Lam, alpha, beta, rr, f, kkt, lamz):  # pragma: no cov
         f[p] = rr[p] + alpha * smooth + beta * total
         kkt[p] = worst
         lamz[p] = lz
+
+
+@numba.njit(**_JIT)
+def null_adjust(H, Z, n, lamz):  # pragma: no cover - compiled
+    """Move each pixel's multiplier along ``Q``'s null direction ``n`` so that ``n^T (g - lam) = 0``.
+
+    ``H`` (P, U) float32 holds ``g - lam`` (in place), ``Z`` (P, U) the iterate, ``n`` (U,)
+    the unit null vector, ``lamz`` (P,) ``lam^T z`` (updated).  Weak duality bounds the gap
+    by ``1/2 h^T Q^+ h + lam^T z`` only when ``h = g - lam`` is orthogonal to ``n``; with
+    ``d = n^T h`` the multiplier of one unknown ``j`` (``n_j d > 0``) grows by ``d / n_j``
+    (it stays >= 0), the one with the smallest ``z_j / |n_j|``, which adds the least to
+    ``lam^T z``.  The dual optimum has ``d = 0``, so near it the move is small.
+    """
+    P, U = H.shape
+    for p in range(P):
+        d = 0.0
+        for u in range(U):
+            d += H[p, u] * n[u]
+        if d == 0.0:
+            continue
+        best = np.inf
+        j = -1
+        for u in range(U):
+            if n[u] * d > 0.0:
+                c = Z[p, u] / abs(n[u])
+                if c < best:
+                    best = c
+                    j = u
+        if j < 0:
+            continue
+        delta = d / n[j]
+        H[p, j] = H[p, j] - delta
+        lamz[p] += delta * Z[p, j]
 
 
 @numba.njit(**_JIT)
@@ -371,5 +411,6 @@ def warm_up() -> None:
     relaxed_step(V, V.copy(), V.copy(), np.float32(0.1), V.copy(), True, z.copy(), z.copy())
     split_dual(V, np.ones(1, np.float32), np.zeros((1, 4)), V.copy())
     finish_residual(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((0, 0), bool), np.zeros((1, 2), np.float32), z.copy())
-    finish_gradient(V.copy(), np.zeros((1, 4)), V.copy(), 0.01, 0.01, z.copy(), z.copy(), z.copy(), z.copy())
+    finish_gradient(V.copy(), np.zeros((1, 4)), V.copy(), 0.01, 0.01, 4, z.copy(), z.copy(), z.copy(), z.copy())
+    null_adjust(V.copy(), np.zeros((1, 4)), np.full(4, 0.5), z.copy())
     half_norms(V, z.copy(), z.copy())

@@ -11,12 +11,15 @@ and the left-out images are predicted through the illumination matrix,
 .. math::
 
     \\mathrm{CV}(\\alpha, \\beta) = \\frac{1}{|O|} \\sum_F \\sum_{(p, i) \\in O_F}
-        \\frac{(I_{p,i} - A_{i} \\, \\hat T_p^{(-F)})^2}{\\sigma_{p,i}^2},
+        \\frac{(I_{p,i} - A_{i} \\, \\hat T_p^{(-F)} - \\hat a_p^{(-F)} I_{w,i})^2}{\\sigma_{p,i}^2},
 
 ``sigma^2`` the variance of an observation under the stack's camera model (shot
 noise of its signal plus read and quantization noise, averaged frames; equal
 weights for a stack without one), ``O`` the observations scored (saturated ones
-are neither fitted nor scored).  The weights with the smallest score are chosen;
+are neither fitted nor scored), ``a`` each pixel's ambient when it is estimated (Eq. 6a
+of :mod:`planeray.demux.problem`, the default of an automatic run: ambient light is a
+flat floor of ``T`` that every image predicts, so a criterion that predicts images
+keeps it unless the problem has a place for it; 0 otherwise).  The weights with the smallest score are chosen;
 how sure the choice is, is the range of weights whose score lies within one standard
 error (over pixels) of their paired difference to the best.
 
@@ -41,7 +44,7 @@ import numpy as np
 from ..errors import InputError, PlanerayError
 from ..stack import Stack
 from .fast import AdmmRowSolver, _threads, blas_one_thread
-from .problem import DemuxProblem, read_observations
+from .problem import AMBIENT_MODES, DemuxProblem, read_observations
 
 __all__ = [
     "AUTO",
@@ -54,6 +57,7 @@ __all__ = [
     "DEFAULT_BETAS",
     "search",
     "summarize",
+    "resolve_ambient",
 ]
 
 #: The value of ``alpha``/``beta`` that asks for the data's choice.
@@ -82,6 +86,35 @@ DEFAULT_WEIGHTING = "noise"
 def is_auto(value) -> bool:
     """Whether a weight asks for the automatic choice (the string ``"auto"``, any case)."""
     return isinstance(value, str) and value.strip().lower() == AUTO
+
+
+def resolve_ambient(ambient, alpha="auto", beta="auto") -> str:
+    """The ambient mode of a run: ``"none"`` (the paper's problem) or ``"estimate"`` (Eq. 6a).
+
+    ``None`` is the default: ``"estimate"`` when a weight is ``"auto"`` (the data choose
+    the weights; the ambient light is then modelled instead of kept in ``T`` as a flat
+    floor that every image predicts) and ``beta`` is not an explicit 0 (which cannot
+    split a flat transport from the ambient), otherwise ``"none"``, so that explicit
+    weights mean exactly the paper's problem.
+
+    Raises
+    ------
+    InputError
+        Anything but None, ``"none"`` or ``"estimate"``.
+    """
+    if ambient is None:
+        beta_zero = not is_auto(beta) and _is_zero(beta)
+        return "estimate" if (is_auto(alpha) or is_auto(beta)) and not beta_zero else "none"
+    if isinstance(ambient, str) and ambient.strip().lower() in AMBIENT_MODES:
+        return ambient.strip().lower()
+    raise InputError(f"ambient must be one of {', '.join(AMBIENT_MODES)}, got {ambient!r}")
+
+
+def _is_zero(value) -> bool:
+    try:
+        return float(value) == 0.0
+    except (TypeError, ValueError):
+        return False
 
 
 def _weight(value, name: str) -> float:
@@ -120,6 +153,9 @@ class WeightChoice:
         Smallest and largest tried weight (the other at its chosen value) whose score
         exceeds the best by at most one standard error of the paired difference over
         pixels: how sure the choice is.
+    ambient : str
+        ``"estimate"`` (each pixel's ambient is an unknown of the solves, Eq. 6a, and part
+        of every prediction) or ``"none"`` (the paper's problem).
     """
 
     alpha: float
@@ -136,6 +172,7 @@ class WeightChoice:
     score_se: np.ndarray = field(default_factory=lambda: np.zeros(0))
     alpha_range: tuple = (0.0, 0.0)
     beta_range: tuple = (0.0, 0.0)
+    ambient: str = "none"
     #: (P, 2) camera (row, column) of the scored pixels, in the order of the scores (not stored)
     pixels: np.ndarray | None = None
 
@@ -158,6 +195,7 @@ class WeightChoice:
             },
             "alpha_range": [float(v) for v in self.alpha_range],
             "beta_range": [float(v) for v in self.beta_range],
+            "ambient": self.ambient,
         }
 
     @classmethod
@@ -179,6 +217,7 @@ class WeightChoice:
             score_se=np.asarray(c["score_se"], float),
             alpha_range=tuple(d["alpha_range"]),
             beta_range=tuple(d["beta_range"]),
+            ambient=d.get("ambient", "none"),
         )
 
     def summary(self) -> str:
@@ -191,9 +230,10 @@ class WeightChoice:
                 parts.append(f"{name} = {value:.3g} (auto; {lo:.3g}-{hi:.3g} within 1 SE)")
             else:
                 parts.append(f"{name} = {value:.3g}")
+        amb = "; ambient light estimated per pixel" if self.ambient == "estimate" else ""
         return (
             f"weights: {', '.join(parts)}; {self.folds}-fold cross-validation over images "
-            f"({self.weighting} weighting, {self.n_pixels} pixels, {len(self.scores)} pairs tried)"
+            f"({self.weighting} weighting, {self.n_pixels} pixels, {len(self.scores)} pairs tried){amb}"
         )
 
 
@@ -297,7 +337,9 @@ def _folds(n_images: int, folds: int, seed: int) -> list[np.ndarray]:
     return [np.sort(perm[k::folds]) for k in range(folds)]
 
 
-def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, tol: float = CV_TOL, threads=None):
+def cv_score(
+    groups, Bs, masks, weights, folds, alpha: float, beta: float, *, tol: float = CV_TOL, threads=None, ambient=None
+):
     """Noise-weighted K-fold prediction error of every pixel at ``(alpha, beta)``.
 
     Parameters
@@ -308,6 +350,9 @@ def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, to
     folds : list of ndarray of int
         Left-out observations (columns of ``B``) of each fold.
     alpha, beta : float
+    ambient : ndarray (N,), optional
+        The ambient column ``I_w`` of Eq. 6a: each pixel's ambient is solved with its
+        transport and the left-out images are predicted with it (``A T + a I_w``).
 
     Returns
     -------
@@ -328,7 +373,8 @@ def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, to
             entry = solvers.setdefault((g, f), [threading.Lock(), None])
         with entry[0]:
             if entry[1] is None:
-                entry[1] = AdmmRowSolver(groups[g].A[train], alpha, beta)
+                e = None if ambient is None else np.asarray(ambient, np.float64)[train]
+                entry[1] = AdmmRowSolver(groups[g].A[train], alpha, beta, ambient=e)
         return entry[1]
 
     def run(task):
@@ -340,14 +386,16 @@ def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, to
         P = B.shape[0]
         part = slice(k * P // n_parts, (k + 1) * P // n_parts)
         Bp = B[part]
-        X = np.zeros((Bp.shape[0], group.A.shape[1]))
+        X = np.zeros((Bp.shape[0], solver.A.shape[1]))
         for s in range(0, Bp.shape[0], 512):
             sl = slice(s, min(s + 512, Bp.shape[0]))
             m = None if mask is None else mask[part][sl][:, train]
             if m is not None and m.all():
                 m = None
             X[sl] = solver.solve(Bp[sl][:, train], tol, mask=m)[0]
-        R = Bp[:, test] - X @ group.A[test].T
+        # the prediction of the left-out images (with the ambient: its scaled column, the solver's a')
+        A_test = group.A[test] if ambient is None else _test_columns(solver, group.A[test], np.asarray(ambient)[test])
+        R = Bp[:, test] - X @ A_test.T
         wt = w[part][:, test]
         return (g, part), (wt * R * R).sum(axis=1), (wt > 0).sum(axis=1)
 
@@ -364,6 +412,16 @@ def cv_score(groups, Bs, masks, weights, folds, alpha: float, beta: float, *, to
         n[g][part] += n_
     out = [a / np.maximum(b, 1) for a, b in zip(ss, n)]
     return np.concatenate(out)
+
+
+def _test_columns(solver: AdmmRowSolver, A_test, e_test) -> np.ndarray:
+    """``[A, I_w / s]`` of left-out images in the solver's variables (``a' = s a``).
+
+    Where the solver took the ambient column as ``A 1`` (bands inside the projector), so do
+    the predictions.
+    """
+    e = A_test.sum(axis=1) if solver.null is not None else np.asarray(e_test, np.float64)
+    return np.column_stack([A_test, e / solver.ambient_scale])
 
 
 def search(score, requested: dict, alphas, betas) -> dict:
@@ -454,6 +512,7 @@ def choose_weights(
     tol: float = CV_TOL,
     problem: DemuxProblem | None = None,
     weighting: str | None = None,
+    ambient: str | None = None,
 ) -> WeightChoice:
     """Choose ``alpha`` and/or ``beta`` by K-fold cross-validation over the stack's images.
 
@@ -474,6 +533,9 @@ def choose_weights(
         of the stack and these settings).
     tol : float
         Certified relative objective gap of the cross-validation solves.
+    ambient : {'none', 'estimate'}, optional
+        Whether each pixel's ambient light is an unknown of the solves (Eq. 6a) and part
+        of the predictions; default ``"estimate"`` (:func:`resolve_ambient`).
 
     Returns
     -------
@@ -487,6 +549,9 @@ def choose_weights(
         v = requested[name]
         if v != AUTO and (not np.isfinite(v) or v < 0):
             raise InputError(f"{name} must be a non-negative number or 'auto', got {v!r}")
+    ambient = resolve_ambient(ambient, alpha, beta)
+    if ambient == "estimate" and requested["beta"] == 0:
+        raise InputError("ambient estimation needs beta > 0 (with beta = 0 the split is not identifiable)")
     alphas = DEFAULT_ALPHAS if alphas is None else alphas
     betas = DEFAULT_BETAS if betas is None else betas
     folds = DEFAULT_FOLDS if folds is None else int(folds)
@@ -504,8 +569,11 @@ def choose_weights(
         raise InputError(f"weighting must be 'noise' or 'equal', got {weighting!r}")
     sample = _sample(stack, problem, seed=seed, n_pixels=n_pixels, weighting=weighting)
     split = _folds(problem.n_images, folds, seed)
+    column = problem.exposure_rows if ambient == "estimate" else None
     curve = search(
-        lambda a, b: cv_score(sample.groups, sample.B, sample.mask, sample.weight, split, a, b, tol=tol),
+        lambda a, b: cv_score(
+            sample.groups, sample.B, sample.mask, sample.weight, split, a, b, tol=tol, ambient=column
+        ),
         requested,
         alphas,
         betas,
@@ -528,4 +596,5 @@ def choose_weights(
         alpha_range=alpha_range,
         beta_range=beta_range,
         pixels=np.concatenate(sample.pixels),
+        ambient=ambient,
     )

@@ -33,10 +33,10 @@ from ..stack import Stack
 from ..timing import RowGeometry
 from ..transport import Transport
 from ._kernels import warm_up
-from .auto import WeightChoice, choose_weights, is_auto
+from .auto import WeightChoice, choose_weights, is_auto, resolve_ambient
 from .fast import _threads, blas_one_thread
 from .problem import DemuxProblem, RowGroup, read_observations
-from .solvers import get_solver, options
+from .solvers import SOLVERS, get_solver, options
 
 __all__ = [
     "DEFAULT_CHUNK_ROWS",
@@ -46,6 +46,8 @@ __all__ = [
     "demultiplex",
     "demultiplex_to_store",
     "MAP_NAMES",
+    "AMBIENT_MAP",
+    "resolve_ambient",
 ]
 
 DEFAULT_CHUNK_ROWS = 16
@@ -60,6 +62,8 @@ MAP_NAMES = {
     "converged": "bool",  # certified to the tolerance; False where no observation was usable
     "n_observations": "int16",  # observations used (saturated ones dropped); 0: T is 0, not an estimate
 }
+#: The per-pixel ambient map (Eq. 6a's ``a``, float32) stored beside ``T`` when the ambient is estimated.
+AMBIENT_MAP = "ambient"
 
 
 @dataclass
@@ -73,11 +77,20 @@ class ChunkResult:
 
 @dataclass
 class DemuxResult:
-    """An in-memory demultiplexing result."""
+    """An in-memory demultiplexing result.
+
+    ``maps`` holds the per-pixel maps of :data:`MAP_NAMES` and, when the ambient was
+    estimated, :data:`AMBIENT_MAP` (also :attr:`ambient`).
+    """
 
     transport: Transport
     maps: dict
     attrs: dict
+
+    @property
+    def ambient(self) -> np.ndarray | None:
+        """The ambient image ``a`` (H, W) of Eq. 6a (normalized value per projector row of exposure), or None."""
+        return self.maps.get(AMBIENT_MAP)
 
 
 def _storage_rows(stack: Stack) -> int:
@@ -196,23 +209,30 @@ def _run_task(problem: DemuxProblem, task: _Task, method: str, tol):
     group, B, mask = task.group, task.B, task.mask
     opts = options(solve)
     res = None
+    amb = None
     if mask is None or "mask" in opts:  # dropped observations (if any) in the same batch
         extra = {"threads": 1} if "threads" in opts else {}
         if mask is not None:
             extra["mask"] = mask
+        if problem.ambient:
+            extra["ambient"] = problem.exposure_rows
         res = solve(group, B, problem.alpha, problem.beta, tol, **extra)
-        X, iters, conv = res.X, res.iterations, res.converged
+        X, iters, conv, amb = res.X, res.iterations, res.converged, res.ambient
     else:  # a solver without masks: pixels with dropped observations one by one
-        X, iters, conv = _solve_masked_one_by_one(solve, problem, group, B, mask, tol)
+        X, iters, conv, amb = _solve_masked_one_by_one(solve, problem, group, B, mask, tol)
     n_obs = np.full(B.shape[0], B.shape[1]) if mask is None else mask.sum(axis=1)
     X = np.where(n_obs[:, None] > 0, X, 0.0)  # nothing usable: T is 0, flagged (never "converged")
+    if amb is not None:
+        amb = np.where(n_obs > 0, amb, 0.0)
     if res is not None and res.objective is not None:  # the solver's own (its last certificate)
         kkt = np.where(n_obs > 0, res.kkt_residual, np.nan)
         rms = np.sqrt(res.residual_ss / np.maximum(n_obs, 1))
         maps = {"residual_rms": rms, "objective": res.objective, "kkt_residual": kkt}
     else:
-        maps = problem.diagnostics(group, X, B, mask)
+        maps = problem.diagnostics(group, X, B, mask, ambient=amb)
     maps |= {"iterations": iters, "converged": conv & (n_obs > 0), "n_observations": n_obs}
+    if problem.ambient:
+        maps[AMBIENT_MAP] = amb
     return X, maps
 
 
@@ -220,7 +240,7 @@ def _assemble(problem: DemuxProblem, rows: slice, W: int, tasks, results) -> Chu
     r = rows.stop - rows.start
     U = problem.n_offsets
     T = np.zeros((r, W, U), np.float32)
-    maps = {name: np.zeros((r, W), dtype) for name, dtype in MAP_NAMES.items()}
+    maps = {name: np.zeros((r, W), dtype) for name, dtype in _map_names(problem).items()}
     flatT = T.reshape(r * W, U)
     flat = {name: m.reshape(r * W) for name, m in maps.items()}
     for task, (X, pix_maps) in zip(tasks, results):
@@ -237,18 +257,30 @@ def _solve_masked_one_by_one(solve, problem, group, B, mask, tol):
     X = np.zeros((B.shape[0], group.A.shape[1]))
     iters = np.zeros(B.shape[0], np.int32)
     conv = np.zeros(B.shape[0], bool)
+    amb = np.zeros(B.shape[0]) if problem.ambient else None
     full = mask.all(axis=1)
+    e = problem.exposure_rows
     if full.any():
-        res = solve(group, B[full], problem.alpha, problem.beta, tol)
+        res = solve(group, B[full], problem.alpha, problem.beta, tol, **({"ambient": e} if problem.ambient else {}))
         X[full], iters[full], conv[full] = res.X, res.iterations, res.converged
+        if amb is not None:
+            amb[full] = res.ambient
     for p in np.flatnonzero(~full):
         keep = mask[p]
         if not keep.any():
             continue
         sub = RowGroup(group.rows, group.A[keep], group.valid, group.on_projector)
-        res = solve(sub, B[p : p + 1, keep], problem.alpha, problem.beta, tol)
+        extra = {"ambient": e[keep]} if problem.ambient else {}
+        res = solve(sub, B[p : p + 1, keep], problem.alpha, problem.beta, tol, **extra)
         X[p], iters[p], conv[p] = res.X[0], res.iterations[0], res.converged[0]
-    return X, iters, conv
+        if amb is not None:
+            amb[p] = res.ambient[0]
+    return X, iters, conv, amb
+
+
+def _map_names(problem: DemuxProblem) -> dict:
+    """The per-pixel maps of a run: :data:`MAP_NAMES`, and the ambient when estimated."""
+    return MAP_NAMES | ({AMBIENT_MAP: "float32"} if problem.ambient else {})
 
 
 def _solve_in_order(problem: DemuxProblem, read, chunks, method, tol, done):
@@ -303,9 +335,12 @@ def _cache_release(problem: DemuxProblem, order: list[slice]):
     return release
 
 
-def _check_run_options(method, chunk_rows, tol, workers=None) -> None:
+def _check_run_options(method, chunk_rows, tol, workers=None, ambient="none") -> None:
     """Options of a run, checked before any work (one line naming the option)."""
-    get_solver(method)
+    solve = get_solver(method)
+    if ambient == "estimate" and "ambient" not in options(solve):
+        able = sorted(m for m, f in SOLVERS.items() if "ambient" in options(f))
+        raise InputError(f"method {method!r} cannot estimate the ambient light; use one of {', '.join(able)}")
     check_integer(chunk_rows, "chunk_rows", minimum=1)
     if tol is not None:
         check_number(tol, "tol", minimum=0.0, min_inclusive=False, maximum=1.0, max_inclusive=False)
@@ -325,6 +360,7 @@ def _attrs(problem: DemuxProblem, method: str, tol, choice: WeightChoice | None 
         "lines_per_second": problem.lines_per_second,
         "alpha": problem.alpha,
         "beta": problem.beta,
+        "ambient": "estimate" if problem.ambient else "none",
         "method": method,
         "tol": tol,
         "n_images": int(problem.n_images),
@@ -338,6 +374,7 @@ def demultiplex(
     *,
     alpha: float | str = 0.01,
     beta: float | str = 0.01,
+    ambient: str | None = None,
     method: str = "fast",
     chunk_rows: int = DEFAULT_CHUNK_ROWS,
     tol: float | None = None,
@@ -353,6 +390,14 @@ def demultiplex(
         weight from the stack by cross-validation over its images
         (:func:`planeray.demux.auto.choose_weights`), recorded in
         ``attrs["weights_choice"]``.
+    ambient : {'none', 'estimate'}, optional
+        ``"estimate"``: each pixel also has an ambient unknown (Eq. 6a,
+        :mod:`planeray.demux.problem`), returned as ``maps["ambient"]``
+        (:attr:`DemuxResult.ambient`; normalized image value per projector row of
+        exposure) and kept out of ``T``; ``"none"``: the paper's problem.  Default: the
+        paper's problem with explicit weights, ``"estimate"`` when a weight is
+        ``"auto"`` (:func:`resolve_ambient`).  Needs ``beta > 0`` and a method that
+        models it (``fast``, ``cvxpy``).
     method : {'fast', 'pinv', 'nnls', 'cvxpy'}
     chunk_rows : int
         Camera rows per chunk (bounds memory).
@@ -376,15 +421,17 @@ def demultiplex(
     >>> result.transport.dense.shape, bool(result.maps["converged"].all())
     ((8, 8, 229), True)
     """
-    _check_run_options(method, chunk_rows, tol)
+    ambient = resolve_ambient(ambient, alpha, beta)
+    _check_run_options(method, chunk_rows, tol, ambient=ambient)
+    _check_ambient_weights(ambient, beta)
     choice = None
     if is_auto(alpha) or is_auto(beta):
-        choice = choose_weights(stack, alpha=alpha, beta=beta)
+        choice = choose_weights(stack, alpha=alpha, beta=beta, ambient=ambient)
         alpha, beta = choice.alpha, choice.beta
-    problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
+    problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta, ambient=ambient == "estimate")
     H, W = stack.shape
     T = np.zeros((H, W, problem.n_offsets), np.float32)
-    maps = {name: np.zeros((H, W), dtype) for name, dtype in MAP_NAMES.items()}
+    maps = {name: np.zeros((H, W), dtype) for name, dtype in _map_names(problem).items()}
 
     def done(i, res):
         T[res.rows] = res.T
@@ -419,6 +466,8 @@ def _fingerprint(
         "chunk_rows": chunk_rows,
         "offsets": [int(problem.offsets_rows[0]), int(problem.offsets_rows[-1])],
     }
+    if problem.ambient:  # only then: the fingerprints of the paper's problem are those of before
+        meta["ambient"] = "estimate"
     if choice is not None:
         meta["weights_choice"] = {
             "requested": choice.requested,
@@ -429,6 +478,8 @@ def _fingerprint(
             "alpha": choice.alpha,
             "beta": choice.beta,
         }
+        if choice.ambient != "none":
+            meta["weights_choice"]["ambient"] = choice.ambient
     h.update(json.dumps(meta, sort_keys=True).encode())
     return h.hexdigest()
 
@@ -451,7 +502,7 @@ def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
         fill_value=0.0,
         compressors=(ZstdCodec(level=1, checksum=True),),
     )
-    for name, dtype in MAP_NAMES.items():
+    for name, dtype in _map_names(problem).items():
         create_array(group, name, shape=(H, W), chunks=(DEFAULT_CHUNK_ROWS, W), dtype=dtype, fill_value=0)
     group.attrs.update(transport_attrs(problem.offsets_rows, problem.projector_rows, attrs=attrs))
     return group
@@ -459,7 +510,7 @@ def _create_store(directory, shape, problem: DemuxProblem, attrs: dict):
 
 def _write_chunk(group, res: ChunkResult, index: int) -> None:
     writable(group, "T")[res.rows] = res.T  # every chunk stored: the store is marked all_chunks_stored
-    for name in MAP_NAMES:
+    for name in res.maps:
         writable(group, name)[res.rows] = res.maps[name]
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
@@ -470,6 +521,7 @@ def demultiplex_to_store(
     *,
     alpha: float | str = 0.01,
     beta: float | str = 0.01,
+    ambient: str | None = None,
     method: str = "fast",
     chunk_rows: int = DEFAULT_CHUNK_ROWS,
     tol: float | None = None,
@@ -498,6 +550,10 @@ def demultiplex_to_store(
         stored in the attribute ``weights_choice``; a resumed run takes it from the
         unfinished store (the run's fingerprint includes it and the stack's content,
         so only an identical run continues).
+    ambient : {'none', 'estimate'}, optional
+        As in :func:`demultiplex`; with ``"estimate"`` the store also has the (H, W)
+        float32 array ``ambient`` and the attribute ``ambient = "estimate"``.  Part of
+        the run's fingerprint: a resumed run with another ``ambient`` is refused.
     on_choice : callable, optional
         Called with the :class:`~planeray.demux.auto.WeightChoice` of an automatic run
         (and whether it was taken from an unfinished run) before any chunk is solved.
@@ -527,7 +583,9 @@ def demultiplex_to_store(
     """
     out = Path(out)
     check_replaceable(out, overwrite=overwrite, kind="transport", error=TransportError)
-    _check_run_options(method, chunk_rows, tol, workers)
+    ambient = resolve_ambient(ambient, alpha, beta)
+    _check_run_options(method, chunk_rows, tol, workers, ambient=ambient)
+    _check_ambient_weights(ambient, beta)
     choice = None
     if is_auto(alpha) or is_auto(beta):
         requested = {
@@ -537,11 +595,11 @@ def demultiplex_to_store(
         choice = None if restart else _recorded_choice(out, requested)
         resumed = choice is not None
         if choice is None:
-            choice = choose_weights(stack, alpha=alpha, beta=beta)
+            choice = choose_weights(stack, alpha=alpha, beta=beta, ambient=ambient)
         if on_choice is not None:
             on_choice(choice, resumed)
         alpha, beta = choice.alpha, choice.beta
-    problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta)
+    problem = DemuxProblem.from_stack(stack, alpha=alpha, beta=beta, ambient=ambient == "estimate")
     H, W = stack.shape
     chunks = _chunks(H, chunk_rows)
     fingerprint = _fingerprint(stack, problem, method, tol, chunk_rows, choice)
@@ -570,11 +628,26 @@ def demultiplex_to_store(
     return resumable.promote(out, overwrite=overwrite, kind="transport", error=TransportError)
 
 
+def _check_ambient_weights(ambient: str, beta) -> None:
+    """The ambient term with an explicit ``beta = 0`` is refused before any work (not identifiable)."""
+    if ambient == "estimate" and not is_auto(beta):
+        try:
+            value = float(beta)
+        except (TypeError, ValueError):
+            return  # checked with the weights
+        if value == 0:
+            raise InputError(
+                "ambient estimation needs beta > 0: with beta = 0 a flat transport and the ambient light "
+                "fit the images alike (the split is not identifiable)"
+            )
+
+
 def _recorded_choice(out, requested: dict) -> WeightChoice | None:
     """The weights an unfinished automatic run of ``out`` chose (None: no such run).
 
     Taken as they are only because the run's fingerprint (checked next) covers the
-    stack's content, the request and the choice: a different stack or request is refused.
+    stack's content, the request, the ambient mode and the choice: a different stack,
+    request or ambient mode is refused.
     """
     partial = resumable.partial_path(out)
     if not partial.exists():

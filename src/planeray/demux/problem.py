@@ -4,11 +4,30 @@ For every camera pixel ``(s, t)`` the transport over offset bins is
 
 .. math::
 
-    T^* = \\arg\\min_{T \\ge 0} \\sum_i \\| I_i - \\sum_u L_i(u) T(u) \\|^2
+    T^*, a^* = \\arg\\min_{T \\ge 0,\\; a \\ge 0} \\sum_i \\| I_i - \\sum_u L_i(u) T(u) - a\\, I_{w,i} \\|^2
           + \\alpha \\| \\partial T / \\partial v \\|^2 + \\beta \\| T \\|_1
+    \\qquad \\text{(Eq. 6a)}
 
-(the paper's optimization problem after Eq. 6; ``alpha = beta = 0.01`` on images
-normalized to [0, 1]).  The illumination matrix ``A[i, u] = L_i(u)`` comes from
+This is the paper's optimization problem after Eq. 6 (``alpha = beta = 0.01`` on
+images normalized to [0, 1]) when the ambient term is off (``a = 0``, the default);
+with ``ambient=True`` (planeray's extension, "Eq. 6a") every pixel also has an
+**ambient** unknown ``a >= 0``: room light integrated over the row exposure adds
+``a * I_w,i`` to image ``i`` (``I_w,i = t_e,i * lines_per_second``, the band width of
+Eq. 2 in projector rows: :attr:`DemuxProblem.exposure_rows`).  ``a`` is in the units of
+``T`` -- normalized image value per projector row of exposure -- so the ambient image
+is a flat transport of height ``a`` over a whole exposure; the simulated camera's
+ambient is ``a = ambient_e_per_us * albedo * 1e6 / (lines_per_second * full_well_e)``
+(:class:`planeray.camera.CameraModel`).  ``a`` is not penalized by ``alpha`` or ``beta``.
+
+*Identifiability.*  Where every band lies inside the projector, the band weights of
+an image sum to its width (Eq. 2), so ``a I_w = A (a 1)``: the ambient column is
+collinear with a flat transport, and no image can tell them apart.  The split is
+decided by the sparsity term alone: moving a floor ``c`` from ``T`` into ``a`` leaves
+every residual and the smoothness term unchanged and lowers ``beta ||T||_1`` by
+``beta U c``, so at the optimum ``min_u T(u) = 0`` there -- the flat floor of ``T``
+goes into ``a``.  With ``beta = 0`` the split is not identifiable (a whole
+segment of optima) and the ambient term is refused.  In the rows near the
+projector's ends, where bands are cut and ``a`` is not, the data see ``a`` directly.  The illumination matrix ``A[i, u] = L_i(u)`` comes from
 the stack's own metadata through :mod:`planeray.timing` -- the same
 discretization, sign convention and edge rule as the simulator; in the top and
 bottom rows the unknown of a bin the projector's end cuts is its light per
@@ -19,7 +38,10 @@ matrices form a :class:`RowGroup`; solvers work group by group.
 
 Because ``T >= 0``, ``||T||_1 = 1^T T`` and the problem is the strictly convex
 QP ``min 1/2 x^T Q x - c^T x, x >= 0`` with ``Q = 2 (A^T A + alpha D^T D)`` and
-``c = 2 A^T b - beta 1``.
+``c = 2 A^T b - beta 1``.  With the ambient term ``x = (T, a)``, ``A = [A_T, I_w]``,
+``D`` acts on ``T`` only and ``c = 2 A^T b - beta (1, 0)``; ``Q`` is then (nearly)
+singular along ``(1, -1)`` and the QP convex, not strictly (the solvers treat that
+direction explicitly).
 
 References
 ----------
@@ -37,7 +59,10 @@ from ..errors import InputError
 from ..stack import Stack
 from ..timing import band_weights_at_row, sweep_support_rows
 
-__all__ = ["RowGroup", "DemuxProblem", "difference_matrix", "read_observations"]
+__all__ = ["RowGroup", "DemuxProblem", "difference_matrix", "read_observations", "pixel_terms", "AMBIENT_MODES"]
+
+#: Values of the ``ambient`` option: the paper's problem, or Eq. 6a with an ambient unknown per pixel.
+AMBIENT_MODES = ("none", "estimate")
 
 #: Fewer used images than this cannot say anything about a 1-D profile.
 MIN_IMAGES = 4
@@ -104,10 +129,27 @@ class DemuxProblem:
     groups : list of RowGroup
     row_group : ndarray (H,) int
         Group of each camera row.
+    ambient : bool
+        Whether each pixel has an ambient unknown (Eq. 6a).
+    exposure_rows : ndarray (N,) float64
+        Row exposure of each used image in projector rows (``I_w``, Eq. 2): the
+        ambient column.
     """
 
     def __init__(
-        self, offsets_rows, image_index, groups, row_group, alpha, beta, shape, lines_per_second, projector_rows
+        self,
+        offsets_rows,
+        image_index,
+        groups,
+        row_group,
+        alpha,
+        beta,
+        shape,
+        lines_per_second,
+        projector_rows,
+        *,
+        exposure_rows=None,
+        ambient: bool = False,
     ):
         self.offsets_rows = np.asarray(offsets_rows, dtype=np.int64)
         self.image_index = np.asarray(image_index, dtype=np.int64)
@@ -118,6 +160,15 @@ class DemuxProblem:
         self.shape = tuple(shape)
         self.lines_per_second = float(lines_per_second)
         self.projector_rows = int(projector_rows)
+        self.exposure_rows = None if exposure_rows is None else np.asarray(exposure_rows, dtype=np.float64)
+        self.ambient = bool(ambient)
+        if self.ambient and self.exposure_rows is None:
+            raise ValueError("the ambient term needs the images' exposures (exposure_rows)")
+
+    @property
+    def ambient_column(self) -> np.ndarray | None:
+        """The ambient column ``I_w`` (N,) of Eq. 6a, or None for the paper's problem."""
+        return self.exposure_rows if self.ambient else None
 
     @property
     def epipolar_resolution_rows(self) -> float:
@@ -142,7 +193,13 @@ class DemuxProblem:
 
     @classmethod
     def from_stack(
-        cls, stack: Stack, *, alpha: float = 0.01, beta: float = 0.01, support_rows: int | None = None
+        cls,
+        stack: Stack,
+        *,
+        alpha: float = 0.01,
+        beta: float = 0.01,
+        support_rows: int | None = None,
+        ambient: bool = False,
     ) -> DemuxProblem:
         """Assemble the problem from a stack's metadata.
 
@@ -154,15 +211,23 @@ class DemuxProblem:
         support_rows : int, optional
             Half-width ``K`` of the unknown offsets ``-K..K``; default: the sweep's
             full support ``max |I_d| + I_w / 2``.
+        ambient : bool
+            Add the ambient unknown of each pixel (Eq. 6a; default: the paper's problem).
 
         Raises
         ------
         InputError
-            Negative weights, too few images, or a sweep whose bands leave offsets
-            inside its support unlit.
+            Negative weights, too few images, a sweep whose bands leave offsets
+            inside its support unlit, or the ambient term with ``beta = 0`` (the split
+            between a flat transport and the ambient is then not identifiable).
         """
         if not (np.isfinite(alpha) and np.isfinite(beta)) or alpha < 0 or beta < 0:
             raise InputError(f"alpha and beta must be non-negative numbers, got alpha={alpha}, beta={beta}")
+        if ambient and beta == 0:
+            raise InputError(
+                "the ambient term needs beta > 0: with beta = 0 a flat transport and the ambient light are "
+                "not identifiable (every split fits the images alike)"
+            )
         for name in ("jitter_us", "line_width_us"):
             value = getattr(stack, name)
             if not np.isfinite(value) or value < 0:
@@ -210,15 +275,25 @@ class DemuxProblem:
             partial = None if np.all(on == 1.0) else on
             groups.append(RowGroup(members, (W_lit[:, valid] * on).astype(np.float64), valid, partial))
         problem = cls(
-            offsets, used, groups, row_group, alpha, beta, stack.shape, stack.lines_per_second, stack.projector_rows
+            offsets,
+            used,
+            groups,
+            row_group,
+            alpha,
+            beta,
+            stack.shape,
+            stack.lines_per_second,
+            stack.projector_rows,
+            exposure_rows=np.array([b.width_rows for b in bands]),
+            ambient=ambient,
         )
         edges = np.concatenate([[b.centre_rows - b.width_rows / 2, b.centre_rows + b.width_rows / 2] for b in bands])
         problem._epipolar_resolution = float(np.abs(edges).min())
         return problem
 
     # ------------------------------------------------------------ evaluation
-    def objective(self, group: RowGroup, X, B, mask=None) -> np.ndarray:
-        """The objective of each pixel, in float64.
+    def objective(self, group: RowGroup, X, B, mask=None, ambient=None) -> np.ndarray:
+        """The objective of each pixel (Eq. 6a; the paper's problem without ``ambient``), in float64.
 
         Parameters
         ----------
@@ -229,60 +304,95 @@ class DemuxProblem:
             Observations (normalized images).
         mask : ndarray (P, N) bool, optional
             Observations to count (False: dropped, e.g. saturated).
+        ambient : ndarray (P,), optional
+            Each pixel's ambient ``a`` (normalized value per projector row of exposure);
+            only for a problem with the ambient term.
         """
-        X = np.asarray(X, dtype=np.float64)
-        r = X @ group.A.T - np.asarray(B, dtype=np.float64)
-        if mask is not None:
-            r = np.where(mask, r, 0.0)
-        dx = np.diff(X, axis=1)
-        return (r * r).sum(axis=1) + self.alpha * (dx * dx).sum(axis=1) + self.beta * np.abs(X).sum(axis=1)
+        return self._pixels(group, X, B, mask, ambient, kkt=False)["objective"]
 
-    def diagnostics(self, group: RowGroup, X, B, mask=None) -> dict:
+    def diagnostics(self, group: RowGroup, X, B, mask=None, ambient=None) -> dict:
         """Residual RMS, objective and scaled KKT residual of each pixel, from one residual.
 
-        The driver's per-pixel maps (:data:`planeray.demux.MAP_NAMES`); ``mask`` as in
-        :meth:`objective`.  A pixel without any observation gets RMS 0 and KKT NaN.
+        The driver's per-pixel maps (:data:`planeray.demux.MAP_NAMES`); ``mask`` and
+        ``ambient`` as in :meth:`objective`.  A pixel without any observation gets RMS 0
+        and KKT NaN.
         """
-        X, R, B = _masked_residual(group, X, B, mask)
-        n_obs = np.full(X.shape[0], B.shape[1]) if mask is None else mask.sum(axis=1)
-        rr = np.einsum("ij,ij->i", R, R)
-        dx = np.diff(X, axis=1)
-        objective = rr + self.alpha * np.einsum("ij,ij->i", dx, dx) + self.beta * np.abs(X).sum(axis=1)
-        kkt = self._kkt(group, X, R, B, dx)
-        kkt[n_obs == 0] = np.nan
-        return {"residual_rms": np.sqrt(rr / np.maximum(n_obs, 1)), "objective": objective, "kkt_residual": kkt}
+        d = self._pixels(group, X, B, mask, ambient)
+        n_obs = np.full(d["objective"].shape[0], np.shape(B)[1]) if mask is None else mask.sum(axis=1)
+        d["kkt_residual"][n_obs == 0] = np.nan
+        rss = d.pop("residual_ss")
+        return {"residual_rms": np.sqrt(rss / np.maximum(n_obs, 1))} | d
 
-    def _kkt(self, group, X, R, Bm, dx):
-        g = 2.0 * R @ group.A + self.beta
-        if X.shape[1] > 1:
-            dX = (2.0 * self.alpha) * dx
-            g[:, :-1] -= dX
-            g[:, 1:] += dX
-        c = 2.0 * Bm @ group.A - self.beta
-        return np.abs(np.minimum(X, g)).max(axis=1) / (1.0 + np.abs(c).max(axis=1))
-
-    def kkt_residual(self, group: RowGroup, X, B, mask=None) -> np.ndarray:
+    def kkt_residual(self, group: RowGroup, X, B, mask=None, ambient=None) -> np.ndarray:
         """Scaled KKT violation of each pixel (0 at the exact optimum).
 
-        ``max |min(x, g)|`` over offsets, with ``g = Q x - c`` the QP gradient,
-        divided by ``1 + max |c|``; it vanishes iff ``x >= 0``, ``g >= 0`` and
-        ``x g = 0``.  With ``mask`` (P, N) the dropped observations count in neither
-        ``Q`` nor ``c`` (the pixel's own problem).  Costs two ``(P, N) x (N, V)``
-        products: the Hessian is never formed.
+        ``max |min(x, g)|`` over the unknowns (offsets, and the ambient with
+        ``ambient``), with ``g = Q x - c`` the QP gradient, divided by ``1 + max |c|``;
+        it vanishes iff ``x >= 0``, ``g >= 0`` and ``x g = 0``.  With ``mask`` (P, N)
+        the dropped observations count in neither ``Q`` nor ``c`` (the pixel's own
+        problem).  Costs two ``(P, N) x (N, V)`` products: the Hessian is never formed.
         """
-        X, R, B = _masked_residual(group, X, B, mask)
-        return self._kkt(group, X, R, B, np.diff(X, axis=1))
+        return self._pixels(group, X, B, mask, ambient)["kkt_residual"]
+
+    def _pixels(self, group, X, B, mask, ambient, kkt=True):
+        if ambient is not None and not self.ambient:
+            raise ValueError("ambient values given for a problem without the ambient term")
+        e = self.exposure_rows if ambient is not None else None
+        return pixel_terms(group.A, X, B, self.alpha, self.beta, mask=mask, exposure_rows=e, ambient=ambient, kkt=kkt)
 
 
-def _masked_residual(group: RowGroup, X, B, mask):
-    """``X``, the residual ``A x - b`` and ``B`` in float64, dropped observations set to 0 in both."""
+def pixel_terms(A, X, B, alpha, beta, *, mask=None, exposure_rows=None, ambient=None, kkt=True) -> dict:
+    """Residual sum of squares, objective and scaled KKT residual of each pixel, in float64.
+
+    The evaluation of Eq. 6a (the paper's problem without ``ambient``) behind
+    :meth:`DemuxProblem.diagnostics`, also used by solvers that change variables
+    internally (:func:`planeray.demux.fast.solve_fast` with the ambient term).
+
+    Parameters
+    ----------
+    A : ndarray (N, V)
+        Illumination matrix of the pixels' row group.
+    X : ndarray (P, V)
+        Transport over the group's valid offsets.
+    B : ndarray (P, N)
+        Observations.
+    alpha, beta : float
+    mask : ndarray (P, N) bool, optional
+        Observations to count (False: dropped).
+    exposure_rows, ambient : ndarray (N,) and (P,), optional
+        The ambient column ``I_w`` (projector rows) and each pixel's ambient ``a``.
+    kkt : bool
+        Also the scaled KKT residual (two more products).
+
+    Returns
+    -------
+    dict
+        ``residual_ss``, ``objective`` and (with ``kkt``) ``kkt_residual``, each (P,).
+    """
     X = np.asarray(X, dtype=np.float64)
     B = np.asarray(B, dtype=np.float64)
-    R = X @ group.A.T - B
+    R = X @ A.T - B
+    if ambient is not None:
+        R += np.asarray(ambient, np.float64)[:, None] * exposure_rows[None, :]
     if mask is not None:
         R = np.where(mask, R, 0.0)
         B = np.where(mask, B, 0.0)
-    return X, R, B
+    rr = np.einsum("ij,ij->i", R, R)
+    dx = np.diff(X, axis=1)
+    out = {"residual_ss": rr, "objective": rr + alpha * np.einsum("ij,ij->i", dx, dx) + beta * np.abs(X).sum(axis=1)}
+    if kkt:
+        g = 2.0 * R @ A + beta
+        if X.shape[1] > 1:
+            dX = (2.0 * alpha) * dx
+            g[:, :-1] -= dX
+            g[:, 1:] += dX
+        c = 2.0 * B @ A - beta
+        worst = np.abs(np.minimum(X, g)).max(axis=1, initial=0.0)
+        if ambient is not None:  # the ambient unknown: gradient 2 R . I_w, no penalty
+            worst = np.maximum(worst, np.abs(np.minimum(np.asarray(ambient, np.float64), 2.0 * R @ exposure_rows)))
+            c = np.concatenate([c, (2.0 * B @ exposure_rows)[:, None]], axis=1)
+        out["kkt_residual"] = worst / (1.0 + np.abs(c).max(axis=1))
+    return out
 
 
 def read_observations(stack: Stack, problem: DemuxProblem, rows: slice, *, source=None):

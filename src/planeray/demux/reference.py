@@ -5,7 +5,8 @@
 * ``nnls`` -- non-negative least squares without regularization (Lawson-Hanson,
   :func:`scipy.optimize.nnls`);
 * ``cvxpy`` -- the paper's full formulation solved by CVXPY (the paper's own
-  tool) with the Clarabel interior-point solver: the trusted, slow reference.
+  tool) with the Clarabel interior-point solver: the trusted, slow reference
+  (also with the ambient term of Eq. 6a).
   The problem is compiled once per row group with the observations as a
   ``cp.Parameter`` -- CVXPY's fastest honest use.
 """
@@ -44,16 +45,18 @@ def solve_nnls(group: RowGroup, B, alpha=0.0, beta=0.0, tol=None) -> SolveResult
 
 
 class _CvxpyRow:
-    """The paper's problem compiled once for one illumination matrix."""
+    """The paper's problem (or Eq. 6a, with ``ambient``) compiled once for one illumination matrix."""
 
-    def __init__(self, A, alpha, beta):
+    def __init__(self, A, alpha, beta, ambient=None):
         import cvxpy as cp
 
         self.cp = cp
         N, V = A.shape
         self.x = cp.Variable(V)
         self.b = cp.Parameter(N)
-        objective = cp.sum_squares(A @ self.x - self.b)
+        self.a = None if ambient is None else cp.Variable(nonneg=True)
+        prediction = A @ self.x if ambient is None else A @ self.x + self.a * np.asarray(ambient, np.float64)
+        objective = cp.sum_squares(prediction - self.b)
         if V > 1:
             objective = objective + alpha * cp.sum_squares(cp.diff(self.x))
         objective = objective + beta * cp.norm1(self.x)
@@ -64,23 +67,31 @@ class _CvxpyRow:
         self.problem.solve(solver=self.cp.CLARABEL)
         ok = self.problem.status in ("optimal", "optimal_inaccurate")
         x = np.maximum(np.asarray(self.x.value, np.float64), 0.0) if self.x.value is not None else None
+        a = None if self.a is None or self.a.value is None else max(float(self.a.value), 0.0)
         iters = self.problem.solver_stats.num_iters or 0
-        return x, ok, iters
+        return x, a, ok, iters
 
 
-def solve_cvxpy(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None) -> SolveResult:
-    """The paper's formulation with CVXPY + Clarabel, compiled once per row group."""
+def solve_cvxpy(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None, *, ambient=None) -> SolveResult:
+    """The paper's formulation with CVXPY + Clarabel, compiled once per row group.
+
+    ``ambient``: the ambient column ``I_w`` (N,) of Eq. 6a (each pixel's ambient in
+    ``SolveResult.ambient``); None: the paper's problem.
+    """
     try:
         import cvxpy  # noqa: F401
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError("method 'cvxpy' needs cvxpy and clarabel: pip install 'planeray[reference]'") from exc
     B = np.asarray(B, np.float64)
-    solver = _CvxpyRow(group.A, alpha, beta)
+    solver = _CvxpyRow(group.A, alpha, beta, ambient)
     X = np.zeros((B.shape[0], group.A.shape[1]))
+    amb = None if ambient is None else np.zeros(B.shape[0])
     ok = np.zeros(B.shape[0], bool)
     iters = np.zeros(B.shape[0], np.int32)
     for p, b in enumerate(B):  # the reference: one interior-point solve per pixel
-        x, ok[p], iters[p] = solver.solve(b)
+        x, a, ok[p], iters[p] = solver.solve(b)
         if x is not None:
             X[p] = x
-    return SolveResult(X, iters, ok)
+        if amb is not None and a is not None:
+            amb[p] = a
+    return SolveResult(X, iters, ok, ambient=amb)

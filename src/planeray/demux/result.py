@@ -25,6 +25,9 @@ class SolveResult:
         The objective, the residual sum of squares over the observations used and the
         scaled KKT residual of ``X``, when the solver has them (the driver's maps;
         otherwise it computes them).
+    ambient : ndarray (P,), optional
+        Each pixel's ambient ``a`` (normalized value per projector row of exposure) when
+        the problem has the ambient term (Eq. 6a); None otherwise.
     """
 
     X: np.ndarray
@@ -33,3 +36,4 @@ class SolveResult:
     objective: np.ndarray | None = None
     residual_ss: np.ndarray | None = None
     kkt_residual: np.ndarray | None = None
+    ambient: np.ndarray | None = None

@@ -9,10 +9,12 @@
 The last three are in :mod:`planeray.demux.reference`.  Every solver has the
 signature ``solve(group, B, alpha, beta, tol) -> SolveResult``; it may also take the
 keyword-only options ``mask=`` (the observations to use: the driver then leaves
-pixels with saturated observations to it, in the same batch) and ``threads=`` (the
-driver then runs its batches on solver threads, calling it with ``threads=1``).  The
-driver passes only the options a solver declares (:func:`options`); without ``mask=``
-it solves each pixel with dropped observations on its own rows.
+pixels with saturated observations to it, in the same batch), ``threads=`` (the
+driver then runs its batches on solver threads, calling it with ``threads=1``) and
+``ambient=`` (the ambient column of Eq. 6a: only such solvers serve ``ambient="estimate"``;
+they return each pixel's ambient in ``SolveResult.ambient``).  The driver passes only
+the options a solver declares (:func:`options`); without ``mask=`` it solves each pixel
+with dropped observations on its own rows.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ def get_solver(method: str) -> Callable:
 
 
 def options(solve: Callable) -> frozenset:
-    """The keyword-only options (``mask``, ``threads``) a registered solver accepts."""
+    """The keyword-only options (``mask``, ``threads``, ``ambient``) a registered solver accepts."""
     import inspect
 
     try:

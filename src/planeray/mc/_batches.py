@@ -17,7 +17,7 @@ import numba
 import numpy as np
 
 
-def trace_batches(kernel, per_batch, shared, *, progress=None, photons=None):
+def trace_batches(kernel, per_batch, shared, *, progress=None):
     """Tallies of ``kernel`` over every batch, concatenated in batch order.
 
     Parameters
@@ -30,9 +30,8 @@ def trace_batches(kernel, per_batch, shared, *, progress=None, photons=None):
     shared : tuple
         The kernel's other arguments (the same for every batch).
     progress : callable, optional
-        ``progress(n)`` after each batch (in batch order), ``n`` its photons (``photons[b]``).
-    photons : ndarray of int, optional
-        Photons of each batch, for ``progress`` (default: ``per_batch[-1]``).
+        ``progress(n)`` after each batch (in batch order), ``n`` its photons (the batch's
+        entry of ``per_batch[-1]``, the photon counts).
 
     Returns
     -------
@@ -42,7 +41,7 @@ def trace_batches(kernel, per_batch, shared, *, progress=None, photons=None):
     threads = max(1, min(B, numba.get_num_threads()))
     if threads == 1 and progress is None:
         return kernel(*per_batch, *shared)
-    photons = per_batch[-1] if photons is None else photons
+    photons = per_batch[-1]
 
     def one(b):
         return kernel(*(a[b : b + 1] for a in per_batch), *shared)
