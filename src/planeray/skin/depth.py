@@ -664,6 +664,28 @@ def _fit_vein(
     scale = max(red, 1.0)
     dchi2 = (chi2_null - chi2_fit) / scale
 
+    def _core_contrast(th, R, F):
+        """Measured and fitted contrast per image over the vein's core (``|rho + delta| <= D / 2``, at least
+        the nearest pixels): the weighted mean of data / vein-free prediction and of the model's ratio."""
+        rr = np.abs(pix.rho_mm + th[2])
+        core = rr <= max(0.5 * th[1], float(np.min(rr)) + 0.5 * px)
+        bg = B[:, None] * tint[None, :] * m
+        dc = data - A * te[:, None] * F[None, :] * tint[None, :] * m
+        w, g = wts[:, core], bg[:, core]
+        den = np.sum(w * g * g, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            meas = np.sum(w * g * dc[:, core], axis=1) / den
+            fitted = np.sum(w * g * g * R[:, core], axis=1) / den
+            se = 1.0 / np.sqrt(den)
+        return {
+            "delays_us": [float(b.delay_us) for b in model.bands],
+            "exposures_us": [float(b.exposure_us) for b in model.bands],
+            "contrast_measured": (1.0 - meas).tolist(),
+            "contrast_se": (se * np.sqrt(scale)).tolist(),
+            "contrast_fit": (1.0 - fitted).tolist(),
+            "core_pixels": int(core.sum()),
+        }
+
     # Jacobian of every parameter at the optimum: theta by central differences, B, A and the tint's
     # coefficients analytically; the covariance of (depth, diameter) from its pseudo-inverse (the
     # tint's scale against B's is a gauge direction with no theta component)
@@ -713,7 +735,7 @@ def _fit_vein(
         corr = cov[0, 1] / (se_d * se_D) if se_d > 0 and se_D > 0 else nan
     except np.linalg.LinAlgError:
         se_d = se_D = corr = nan
-    curves = {"theta": theta.tolist(), "B": B.tolist(), "A": float(A)}
+    curves = {"theta": theta.tolist(), "B": B.tolist(), "A": float(A), **_core_contrast(theta, R, F)}
     out = dict(fit_depth_mm=float(theta[0]), fit_diameter_mm=float(theta[1]), curves=curves)
     base = dict(
         correlation=float(corr),
