@@ -366,7 +366,7 @@ def depth_fit_figure(veins, *, truth=None, title=None, out=None):
         ax.set_ylabel("contrast over the vein's core", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.axhline(0.0, color="k", lw=0.5)
-    if veins:
+    if veins and axes[0].get_legend_handles_labels()[0]:
         axes[0].legend(fontsize=6, frameon=False)
     if truth:
         ax = axes[-1]
