@@ -18,6 +18,7 @@ from planeray.skin.depth import (
     fit_vein,
     fit_veins,
     image_variance,
+    row_jitter_sigma,
     usable_bands,
     vein_geometry,
     vein_model,
@@ -97,6 +98,36 @@ def test_fit_recovers_depth_and_diameter_from_a_noiseless_capture(noiseless):
         assert f.resolved, f.reason
         assert abs(f.depth_mm - v.depth_mm) < 0.15, (f.depth_mm, v.depth_mm)
         assert abs(f.diameter_mm - v.diameter_mm) < 0.5, (f.diameter_mm, v.diameter_mm)
+
+
+def _row_spread(row_jitter_us):
+    """Excess variance of the camera-row means of flat skin's short-range images (noisy over noiseless
+    capture of the same skin, shot noise of the row means subtracted), and row_jitter_sigma squared,
+    pooled over the images whose row means' shot noise is below half the predicted sigma."""
+    cam = CameraModel(ambient_e_per_us=0.0, row_jitter_us=row_jitter_us)
+    noisy = simulate_skin(None, size=(128, 24), seed=5, veins=[], camera=cam).stack
+    clean = simulate_skin(None, size=(128, 24), seed=5, veins=[], camera=cam, noise=False).stack
+    idx = np.nonzero(usable_bands(noisy.bands(), noisy.geometry, excluded=noisy.excluded))[0]
+    model = vein_model([noisy.bands()[i] for i in idx], noisy.geometry, mm_per_row=0.3)
+    sigma = row_jitter_sigma(model, CameraModel(row_jitter_us=10.0))  # the default device's
+    excess, predicted = [], []
+    for k, i in enumerate(idx):
+        a, b = (np.asarray(st.images[i], float)[8:-8] for st in (noisy, clean))  # away from the projector's ends
+        rel = a.mean(axis=1) / b.mean(axis=1) - 1.0
+        shot = np.mean(image_variance(b, cam).sum(axis=1) / b.shape[1] ** 2 / b.mean(axis=1) ** 2)
+        if np.sqrt(shot) < 0.5 * sigma[k]:
+            excess.append(rel.var() - shot)
+            predicted.append(sigma[k] ** 2)
+    assert len(excess) >= 4
+    return np.sum(excess) / np.sum(predicted)
+
+
+def test_row_jitter_sigma_is_the_spread_of_the_row_means_of_flat_skin():
+    """The device's row jitter (10 us per frame and camera row) moves a whole camera row's band: the row
+    means of a short-range image of flat skin scatter by row_jitter_sigma (variance ratio 1 +- 0.25: ~5
+    standard errors of a variance pooled over >= 4 images of 112 rows); without the jitter they do not."""
+    assert 0.75 < _row_spread(10.0) < 1.33
+    assert _row_spread(0.0) < 0.1
 
 
 # ---------------------------------------------------------------- synthetic captures from the model
