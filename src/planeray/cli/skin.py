@@ -718,6 +718,10 @@ def _truth_depths(stack_path: Path, vein_id) -> dict:
     return out
 
 
+#: Rounds of refitting each vein with its neighbours' shadows (skin.depth.fit_veins).
+JOINT_ROUNDS = 1
+
+
 @skin_app.command("depth")
 @_friendly_errors
 def depth(
@@ -784,7 +788,8 @@ def depth(
         raise ValueError("--mask: the vein mask marks no vein")
     true_depths = _truth_depths(stack_path, vein_id)
     with progress_bar() as bar:
-        task = bar.add_task(f"fitting {n_veins} vein(s)", total=n_veins)
+        rounds = 1 + (JOINT_ROUNDS if n_veins > 1 else 0)  # each vein alone, then with the others' shadows
+        task = bar.add_task(f"fitting {n_veins} vein(s)", total=n_veins * rounds)
         try:
             fits, model, use = fit_veins(
                 stack.images,
@@ -796,6 +801,7 @@ def depth(
                 tone=tone_value,
                 wavelength_nm=wl,
                 mm_per_row=mpr,
+                joint_rounds=JOINT_ROUNDS,
                 progress=lambda vid: bar.advance(task),
             )
         except InputError as exc:

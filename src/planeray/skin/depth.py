@@ -56,7 +56,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import convolve1d, distance_transform_edt, label
+from scipy.ndimage import binary_dilation, convolve1d, distance_transform_edt, label
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
@@ -80,6 +80,8 @@ __all__ = [
     "far_bands",
     "row_jitter_sigma",
     "vein_geometry",
+    "centre_line",
+    "other_vein_ratio",
     "fit_vein",
     "fit_veins",
 ]
@@ -323,6 +325,7 @@ class VeinPixels:
     x_mm: np.ndarray  # position (for the tint gradient), mm, relative to the vein's centre
     y_mm: np.ndarray
     width_mm: float  # the mask's width across the vein (area / centre-line length)
+    line: CentreLine | None = None  # the centre line the distances are measured from
 
 
 def _pixel_mm(geometry: RowGeometry, mm_per_row: float, shape):
@@ -331,6 +334,76 @@ def _pixel_mm(geometry: RowGeometry, mm_per_row: float, shape):
     col = geometry.projector_rows * mm_per_row / H
     y = (np.arange(W) + 0.5) * col
     return x, y, col
+
+
+@dataclass(frozen=True)
+class CentreLine:
+    """A vein's centre line from its mask: points (mm, surface ``(x down, y right)``) and local angles."""
+
+    points_mm: np.ndarray  # (m, 2), one per mask pixel: the local centroid
+    angle_deg: np.ndarray  # (m,), direction to the rows, in [0, 180)
+    px_mm: float  # the larger side of a camera pixel on the skin, mm
+    mask_points_mm: np.ndarray  # (m, 2), the mask's pixel centres
+
+
+def centre_line(component, geometry: RowGeometry, *, mm_per_row: float) -> CentreLine:
+    """The centre line of one vein's mask: the local centroid of the mask within a disc (on the axis of a
+    locally straight band; radius ``max(5 mm, 2.5 pixels)``) and the local direction, the principal axis of
+    the mask in the same disc.
+
+    Parameters
+    ----------
+    component : ndarray (H, W) bool
+        The vein's pixels.
+    geometry : RowGeometry
+    mm_per_row : float
+        Size of a projector row on the skin, mm.
+    """
+    xs, ys, col_mm = _pixel_mm(geometry, mm_per_row, component.shape)
+    row_mm = geometry.rows_per_camera_row * mm_per_row
+    ci_, cj_ = np.nonzero(component)
+    comp_pts = np.stack([xs[ci_], ys[cj_]], axis=1)
+    radius = max(5.0, 2.5 * max(row_mm, col_mm))
+    ctree = cKDTree(comp_pts)
+    S = np.empty_like(comp_pts)
+    dirs = np.empty_like(comp_pts)
+    for k, nb in enumerate(ctree.query_ball_point(comp_pts, r=radius)):
+        P = comp_pts[nb] if len(nb) >= 3 else comp_pts
+        S[k] = P.mean(axis=0)
+        _, _, vt = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)
+        dirs[k] = vt[0]
+    ang = np.degrees(np.arctan2(dirs[:, 0], dirs[:, 1])) % 180.0
+    return CentreLine(S, ang, float(max(row_mm, col_mm)), comp_pts)
+
+
+def _line_coords(line: CentreLine, P):
+    """Distance (mm) of points ``P`` (n, 2) from the nearest centre-line point, their signed ``rho`` (mm)
+    along its normal, its angle, and whether they lie beside the line (not beyond its ends)."""
+    S = line.points_mm
+    d, idx = cKDTree(S).query(P)
+    a = np.radians(line.angle_deg[idx])
+    dx, dy = P[:, 0] - S[idx, 0], P[:, 1] - S[idx, 1]
+    rho = dx * np.cos(a) - dy * np.sin(a)
+    along = dx * np.sin(a) + dy * np.cos(a)
+    return d, rho, line.angle_deg[idx], np.abs(along) <= 0.75 * line.px_mm
+
+
+def other_vein_ratio(model: VeinModel, line: CentreLine, rows, cols, depth_mm, diameter_mm):
+    """Ratio (K, n) and flood ratio (n,) of another vein (its centre line, depth, diameter) at pixels
+    ``(rows, cols)``: 1 beyond its ends and beyond the vein table's reach (the skin scene multiplies the
+    ratios of all veins)."""
+    rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
+    K = len(model.bands)
+    ratio, flood = np.ones((K, rows.size)), np.ones(rows.size)
+    xs, ys, _ = _pixel_mm(model.geometry, model.mm_per_row, (model.geometry.camera_rows, cols.max(initial=0) + 1))
+    P = np.stack([xs[rows], ys[cols]], axis=1)
+    _, rho, angle, ok = _line_coords(line, P)
+    ok &= np.abs(rho) <= (model.table.rho_rows[-1] + 1) * model.mm_per_row
+    if ok.any():
+        r, f = vein_signals(model, rows[ok], rho[ok], angle[ok], depth_mm, diameter_mm)
+        ratio[:, ok] = np.nan_to_num(r, nan=1.0)
+        flood[ok] = f
+    return ratio, flood
 
 
 def vein_geometry(
@@ -355,36 +428,19 @@ def vein_geometry(
     shape = component.shape
     xs, ys, col_mm = _pixel_mm(geometry, mm_per_row, shape)
     row_mm = geometry.rows_per_camera_row * mm_per_row
-    ci_, cj_ = np.nonzero(component)
-    comp_pts = np.stack([xs[ci_], ys[cj_]], axis=1)
-    # centre line: the local centroid of the mask within a disc (on the axis of a locally straight
-    # band) and the local direction, the principal axis of the mask in the same disc
-    radius = max(5.0, 2.5 * max(row_mm, col_mm))
-    ctree = cKDTree(comp_pts)
-    S = np.empty_like(comp_pts)
-    dirs = np.empty_like(comp_pts)
-    for k, nb in enumerate(ctree.query_ball_point(comp_pts, r=radius)):
-        P = comp_pts[nb] if len(nb) >= 3 else comp_pts
-        S[k] = P.mean(axis=0)
-        _, _, vt = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)
-        dirs[k] = vt[0]
-    tree = cKDTree(S)
-    ang = np.degrees(np.arctan2(dirs[:, 0], dirs[:, 1])) % 180.0
+    line = centre_line(component, geometry, mm_per_row=mm_per_row)
+    S = line.points_mm
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     dist_other = distance_transform_edt(~others, sampling=(row_mm, col_mm)) if others.any() else np.full(shape, np.inf)
     near = dist_other > guard_mm
     P = np.stack([X[near], Y[near]], axis=1)
-    d, idx = tree.query(P)
+    d, rho, angle, ok = _line_coords(line, P)
     keep = d <= reach_mm
-    P, idx = P[keep], idx[keep]
-    a = np.radians(ang[idx])
-    dx, dy = P[:, 0] - S[idx, 0], P[:, 1] - S[idx, 1]
-    rho = dx * np.cos(a) - dy * np.sin(a)
-    along = dx * np.sin(a) + dy * np.cos(a)
-    ok = np.abs(along) <= 0.75 * max(row_mm, col_mm)  # beyond the ends of the centre line: left out
+    P, rho, angle, ok = P[keep], rho[keep], angle[keep], ok[keep]
     ri, ci = np.nonzero(near)
     ri, ci = ri[keep][ok], ci[keep][ok]
     centre = S.mean(axis=0)
+    comp_pts = line.mask_points_mm
     _, _, vt = np.linalg.svd(comp_pts - comp_pts.mean(axis=0), full_matrices=False)
     along_all = comp_pts @ vt[0]
     length = float(along_all.max() - along_all.min()) + min(row_mm, col_mm)
@@ -392,10 +448,11 @@ def vein_geometry(
         rows=ri,
         cols=ci,
         rho_mm=rho[ok],
-        angle_deg=ang[idx][ok],
+        angle_deg=angle[ok],
         x_mm=P[ok, 0] - centre[0],
         y_mm=P[ok, 1] - centre[1],
         width_mm=float(component.sum() * row_mm * col_mm / length),
+        line=line,
     )
 
 
@@ -482,6 +539,7 @@ def fit_vein(
     max_pixels: int = 600,
     tint_knot_mm: float = 10.0,
     row_sigma=None,
+    other=None,
 ) -> VeinFit:
     """Fit one vein's depth and diameter to the images of a sweep (see the module's docstring).
 
@@ -512,6 +570,10 @@ def fit_vein(
     row_sigma : array_like (K,), optional
         Relative standard deviation of each image's per-camera-row factor from the device's row
         jitter (:func:`row_jitter_sigma`); ``None``: no row factors.
+    other : tuple of ndarray, optional
+        ``(ratio (K, n), flood (n,))`` of the other veins at the pixels of ``pix``
+        (:func:`other_vein_ratio`, multiplied over the veins), multiplied into the model (and into
+        "no vein" for the detection); ``None``: no other vein.
 
     Returns
     -------
@@ -532,6 +594,7 @@ def fit_vein(
             max_pixels=max_pixels,
             tint_knot_mm=tint_knot_mm,
             row_sigma=row_sigma,
+            other=other,
         )
 
 
@@ -549,11 +612,15 @@ def _fit_vein(
     max_pixels,
     tint_knot_mm,
     row_sigma,
+    other,
 ):
     images = np.asarray(images, float)
     K = images.shape[0]
+    if other is None:
+        other = (np.ones((K, pix.rows.size)), np.ones(pix.rows.size))
     if pix.rows.size > max_pixels:
         pick = np.unique(np.linspace(0, pix.rows.size - 1, int(max_pixels)).astype(np.int64))
+        other = (other[0][:, pick], other[1][pick])
         pix = VeinPixels(
             pix.rows[pick],
             pix.cols[pick],
@@ -562,6 +629,7 @@ def _fit_vein(
             pix.x_mm[pick],
             pix.y_mm[pick],
             pix.width_mm,
+            pix.line,
         )
     n = pix.rows.size
     nan = math.nan
@@ -629,14 +697,14 @@ def _fit_vein(
         prior = (f / rsig[:, None]).ravel() if rsig is not None else np.zeros(0)
         return np.concatenate([res.ravel(), prior]), B, A, c, f
 
-    ones = np.ones_like(data)
-    res_null, _, _, c_null, _ = inner(ones, np.full(n, amb_on), c_flat)
+    o_ratio, o_flood = np.asarray(other[0], float), np.asarray(other[1], float)
+    res_null, _, _, c_null, _ = inner(o_ratio, o_flood * amb_on, c_flat)
     chi2_null = float(np.sum(res_null**2))
 
     def model_of(theta):
         depth, diam, delta = theta
         ratio, flood = vein_signals(model, pix.rows, pix.rho_mm + delta, ang, depth, diam, _cache=cache)
-        return np.nan_to_num(ratio), flood * amb_on
+        return np.nan_to_num(ratio) * o_ratio, flood * o_flood * amb_on
 
     def resid(theta):
         R, F = model_of(theta)
@@ -776,6 +844,8 @@ def fit_veins(
     wavelength_nm: int = 638,
     mm_per_row: float = DEFAULT_MM_PER_ROW,
     guard_mm: float = 5.0,
+    joint_rounds: int = 1,
+    max_alongside: float = 0.5,
     progress=None,
     **fit_options,
 ):
@@ -798,8 +868,14 @@ def fit_veins(
         The skin (see :func:`vein_model`).
     guard_mm : float
         Pixels closer than this to another vein are left out, mm.
+    joint_rounds : int
+        Rounds of refitting each vein with the other veins' current estimates multiplied into its
+        model (their shadows reach ~10 mm; the skin scene multiplies the ratios of all veins).
+    max_alongside : float
+        A vein whose mask touches another vein's along more than this fraction of its pixels is
+        reported unresolved (the two form one band: neither's own shadow can be told apart).
     progress : callable, optional
-        Called once per vein fitted.
+        Called once per vein fitted (``n_veins * (1 + joint_rounds)`` times with several veins).
     **fit_options
         Passed to :func:`fit_vein`.
 
@@ -849,14 +925,48 @@ def fit_veins(
         ambient_note = f"measured per pixel from {fi.size} images whose band lies beyond the skin's kernel, subtracted"
     if camera.row_jitter_us > 0 and "row_sigma" not in fit_options:
         fit_options = {**fit_options, "row_sigma": row_jitter_sigma(model, camera)}
-    fits = []
+    pixs, alongside = {}, {}
     for vid in ids:
         comp = lab == vid
         others = (lab > 0) & ~comp
-        pix = vein_geometry(comp, others, geometry, mm_per_row=mm_per_row, guard_mm=guard_mm)
-        fits.append(fit_vein(model, imgs, var, pix, vein_id=vid, **fit_options))
+        pixs[vid] = vein_geometry(comp, others, geometry, mm_per_row=mm_per_row, guard_mm=guard_mm)
+        touching = binary_dilation(others, structure=np.ones((3, 3), bool)) & comp
+        alongside[vid] = float(touching.sum() / max(comp.sum(), 1))
+
+    def fit(vid, other):
+        f = fit_vein(model, imgs, var, pixs[vid], vein_id=vid, other=other, **fit_options)
         if progress is not None:
             progress(vid)
+        return f
+
+    fits = {vid: fit(vid, None) for vid in ids}
+    for _ in range(int(joint_rounds) if len(ids) > 1 else 0):
+        shadows = {
+            vid: (f.fit_depth_mm, f.fit_diameter_mm)
+            for vid, f in fits.items()
+            if np.isfinite(f.fit_depth_mm) and "not detected" not in f.reason
+        }
+        new = {}
+        for vid in ids:
+            p = pixs[vid]
+            o_ratio, o_flood = np.ones((len(model.bands), p.rows.size)), np.ones(p.rows.size)
+            for j, (d, D) in shadows.items():
+                if j != vid:
+                    r, fl = other_vein_ratio(model, pixs[j].line, p.rows, p.cols, d, D)
+                    o_ratio *= r
+                    o_flood *= fl
+            new[vid] = fit(vid, (o_ratio, o_flood))
+        fits = new
+    fits = list(fits.values())
+    for f in fits:
+        if f.resolved and alongside[f.id] > max_alongside:
+            f.resolved = False
+            f.reason = (
+                f"runs alongside another vein ({alongside[f.id]:.0%} of its mask touches another's): the two "
+                "form one band and cannot be told apart"
+            )
+            f.depth_mm = f.diameter_mm = math.nan
+        f.curves["alongside"] = alongside[f.id]
     for f in fits:
         f.curves["ambient"] = ambient_note
     return fits, model, use
