@@ -6,7 +6,7 @@ and the counts against the issue's target (resolved veins 1-3 mm deep within 0.5
 
 Run (nice: ~3-20 s per vein on 2 busy cores):
 ``nice -n 19 .venv/bin/python tools/skin_depth_table.py --layout forearm --seeds 0 1 [--conditions fair:638 dark:850]
-[--json out.json]``
+[--json out.json --figure out.png]``
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ def main(argv=None) -> None:
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--joint-rounds", type=int, default=1)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--figure", type=Path, default=None, help="PNG of estimated against true depth")
     a = ap.parse_args(argv)
     conds = [(c.split(":")[0], int(c.split(":")[1])) for c in a.conditions]
     rows = depth_validation(
@@ -40,6 +41,10 @@ def main(argv=None) -> None:
     print(json.dumps(depth_summary(rows)))
     if a.json is not None:
         a.json.write_text(json.dumps(rows, indent=1))
+    if a.figure is not None:
+        from planeray.figures.skin import depth_validation_figure
+
+        depth_validation_figure(rows, title=f"Vein depth, {a.layout}: estimated vs true", out=a.figure)
 
 
 if __name__ == "__main__":

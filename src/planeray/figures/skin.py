@@ -23,6 +23,7 @@ __all__ = [
     "headline_figure",
     "delay_map_figure",
     "depth_fit_figure",
+    "depth_validation_figure",
 ]
 
 _LABELS = {
@@ -401,6 +402,44 @@ def depth_fit_figure(veins, *, truth=None, title=None, out=None):
         ax.legend(fontsize=6, frameon=False, loc="upper left")
     if title:
         fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return finish(fig, out)
+
+
+def depth_validation_figure(rows, *, title=None, out=None):
+    """Estimated against true depth of the vein's top over a validation (:mod:`planeray.experiments.skin_depth`).
+
+    One colour per (tone, wavelength); resolved veins with 1-standard-error bars, unresolved ones hollow at
+    the fit's value (grey edge); the identity and the +-0.5 mm band; the target's 1-3 mm shaded.
+    """
+    fig = new_figure((5.6, 4.6))
+    ax = fig.add_subplot(1, 1, 1)
+    conds = sorted({(r["tone"], r["wavelength_nm"]) for r in rows})
+    xs = [r["true_depth_mm"] for r in rows] + [r["fit_depth_mm"] for r in rows if r["fit_depth_mm"] is not None]
+    lo, hi = (min(xs) - 0.3, max(xs) + 0.3) if xs else (0.5, 5.5)
+    x = np.array([lo, hi])
+    ax.fill_between(x, x - 0.5, x + 0.5, color="0.88", zorder=0, label="+- 0.5 mm")
+    ax.axvspan(1.0, 3.0, color="tab:green", alpha=0.06, zorder=0, label="target depths (1-3 mm)")
+    ax.plot(x, x, "k-", lw=0.8)
+    for i, c in enumerate(conds):
+        sel = [r for r in rows if (r["tone"], r["wavelength_nm"]) == c]
+        res = [r for r in sel if r["resolved"]]
+        unr = [r for r in sel if not r["resolved"] and r["fit_depth_mm"] is not None]
+        if res:
+            ax.errorbar([r["true_depth_mm"] for r in res], [r["depth_mm"] for r in res],
+                        yerr=[r["depth_se_mm"] for r in res], fmt="o", ms=4, color=f"C{i}",
+                        label=f"{c[0]}, {c[1]} nm")  # fmt: skip
+        if unr:
+            ax.plot([r["true_depth_mm"] for r in unr], [r["fit_depth_mm"] for r in unr], "o", ms=5, mfc="none",
+                    color=f"C{i}", mec="0.4")  # fmt: skip
+    ax.plot([], [], "o", mfc="none", mec="0.4", color="0.4", label="unresolved (the fit's value)")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_xlabel("true depth of the vein's top (mm)")
+    ax.set_ylabel("estimated depth of the top (mm)")
+    n_res = sum(r["resolved"] for r in rows)
+    ax.set_title(title or f"Vein depth: {n_res}/{len(rows)} fits resolved", fontsize=9)
+    ax.legend(fontsize=7, frameon=False, loc="upper left")
     fig.tight_layout()
     return finish(fig, out)
 
