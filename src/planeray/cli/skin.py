@@ -747,7 +747,14 @@ def depth(
         int | None,
         typer.Option("--wavelength", "--wavelength-nm", help="638 or 850 (nm); default: the stack's record."),
     ] = None,
-    mm_per_row: MmPerRowOpt = None,
+    mm_per_row: Annotated[
+        float | None,
+        typer.Option(
+            "--mm-per-row",
+            help="Size of a projector row on the skin (mm, > 0 and <= 10; the vein tables' scale); default: the "
+            "stack's record, else 0.3 (assumed).",
+        ),
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an output folder planeray wrote.")] = False,
 ):
     """Depth (of the vessel's top and axis) and diameter of each vein, with standard errors, from the delay sweep.
