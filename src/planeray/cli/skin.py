@@ -751,7 +751,7 @@ def depth(
         float | None,
         typer.Option(
             "--mm-per-row",
-            help="Size of a projector row on the skin (mm, > 0 and <= 10; the vein tables' scale); default: the "
+            help="Size of a projector row on the skin (mm, > 0 and <= 10; other than 0.3 traces the vein tables); default: the "
             "stack's record, else 0.3 (assumed).",
         ),
     ] = None,
