@@ -705,6 +705,13 @@ def _fit_vein(
         return np.concatenate([res.ravel(), prior]), B, A, c, f
 
     o_ratio, o_flood = np.asarray(other[0], float), np.asarray(other[1], float)
+    # the vein-free signal of each image per camera row relative to the middle row's: 1 inside, less where the
+    # projector's ends cut the band (the first and last ~10 rows); B_k is the middle row's
+    s0 = background_signals(model, pix.rows)
+    s0_mid = background_signals(model, [model.geometry.camera_rows // 2])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        edge = np.nan_to_num(s0 / s0_mid, nan=0.0, posinf=0.0)
+    o_ratio = o_ratio * edge
     res_null, _, _, c_null, _ = inner(o_ratio, o_flood * amb_on, c_flat)
     chi2_null = float(np.sum(res_null**2))
 
@@ -744,13 +751,14 @@ def _fit_vein(
         the nearest pixels): the weighted mean of data / vein-free prediction and of the model's ratio."""
         rr = np.abs(pix.rho_mm + th[2])
         core = rr <= max(0.5 * th[1], float(np.min(rr)) + 0.5 * px)
-        bg = B[:, None] * tint[None, :] * m
+        bg = B[:, None] * tint[None, :] * m * edge
         dc = data - A * te[:, None] * F[None, :] * tint[None, :] * m
         w, g = wts[:, core], bg[:, core]
         den = np.sum(w * g * g, axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
             meas = np.sum(w * g * dc[:, core], axis=1) / den
-            fitted = np.sum(w * g * g * R[:, core], axis=1) / den
+            r_vein = np.where(edge > 0, R / np.where(edge > 0, edge, 1.0), 1.0)  # the veins' ratio alone
+            fitted = np.sum(w * g * g * r_vein[:, core], axis=1) / den
             se = 1.0 / np.sqrt(den)
         return {
             "delays_us": [float(b.delay_us) for b in model.bands],
