@@ -4,7 +4,7 @@
 fast vein model against brute-force Monte Carlo, the layers against adding-doubling), ``veins``
 (the short-range indirect delay image of a stack or transport store, its t_d = 0 band image and
 the epipolar image where a transport is given, each named for its band, and their metrics on a
-vein mask), ``enhance``
+vein mask), ``depth`` (each vein's depth and diameter from the delay sweep), ``enhance``
 (Eq. 7's contrast enhancement over a stack's delay images), ``compare`` (the whole study on the
 simulated skin scene: methods, ambient light, best delay against depth, Eq. 7).
 """
@@ -667,6 +667,207 @@ def enhance(
             f"  enhanced: CNR {_num(e['cnr'])}, {e['n_detected']}/{e['n_veins']} veins; best single delay "
             f"({b['delay_us']:g} us): CNR {_num(b['cnr'])}, {b['n_detected']}/{b['n_veins']} veins"
         )
+
+
+def _recorded(option, option_name: str, metadata, key: str, parse):
+    """An option's value and where it came from: as given, else the stack's scene record; one line if neither."""
+    if option is not None:
+        return parse(option), option_name
+    scene = metadata.get("scene") if isinstance(metadata, dict) else None
+    value = scene.get(key) if isinstance(scene, dict) else None
+    if value is None or isinstance(value, bool):
+        raise ValueError(f"{option_name}: the stack records no {key}; give {option_name}")
+    try:
+        return parse(value), "stack metadata"
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"the stack's recorded {key} {value!r} is not usable ({exc}); give {option_name}") from None
+
+
+def _stack_camera(metadata):
+    """The camera noise model the stack records, else the default one (and which)."""
+    from ..camera import CameraModel
+
+    cam = metadata.get("camera") if isinstance(metadata, dict) else None
+    if isinstance(cam, dict):
+        try:
+            return CameraModel(**cam), "stack metadata"
+        except (TypeError, ValueError):
+            pass
+    return CameraModel(), "assumed (planeray's default camera; the stack records none)"
+
+
+def _truth_depths(stack_path: Path, vein_id) -> dict:
+    """``{fitted vein id: (true top depth, true diameter) mm}`` from the ground truth beside a simulated
+    stack (each fitted vein matched to the true vein it overlaps most); ``{}`` without truth."""
+    from ..experiments.skin_capture import read_skin_truth, truth_paths
+
+    if not truth_paths(stack_path)["veins"].is_file():
+        return {}
+    meta, maps = read_skin_truth(stack_path)
+    true_id = np.asarray(maps.get("vein_id", np.zeros(0)))
+    if true_id.shape != np.shape(vein_id):
+        return {}
+    spec = {int(v["id"]): (float(v["depth_mm"]), float(v["diameter_mm"])) for v in meta.get("veins", [])}
+    out = {}
+    for vid in np.unique(vein_id[vein_id > 0]):
+        hits = true_id[(vein_id == vid) & (true_id > 0)]
+        if hits.size:
+            best = int(np.bincount(hits).argmax())
+            if best in spec:
+                out[int(vid)] = spec[best]
+    return out
+
+
+#: Rounds of refitting each vein with its neighbours' shadows (skin.depth.fit_veins).
+JOINT_ROUNDS = 1
+
+
+@skin_app.command("depth")
+@_friendly_errors
+def depth(
+    stack_path: StackArg,
+    out_dir: Annotated[
+        Path, typer.Option("--out", "-o", help="Folder to write (per-vein JSON and CSV, images, figure).")
+    ],
+    mask: Annotated[
+        Path | None,
+        typer.Option(
+            "--mask",
+            help="Vein mask (PNG/TIFF, image size; 0 skin, nonzero vein; several values = vein ids, else one vein per "
+            "connected region); default: the ground truth `planeray skin simulate` wrote beside the stack.",
+        ),
+    ] = None,
+    tone: Annotated[
+        str | None,
+        typer.Option(
+            help="Skin tone (very_fair ... dark or a melanosome fraction 0-0.5); default: the stack's record."
+        ),
+    ] = None,
+    wavelength: Annotated[
+        int | None,
+        typer.Option("--wavelength", "--wavelength-nm", help="638 or 850 (nm); default: the stack's record."),
+    ] = None,
+    mm_per_row: Annotated[
+        float | None,
+        typer.Option(
+            "--mm-per-row",
+            help="Size of a projector row on the skin (mm, > 0 and <= 10; other than 0.3 traces the vein tables); default: the "
+            "stack's record, else 0.3 (assumed).",
+        ),
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace an output folder planeray wrote.")] = False,
+):
+    """Depth (of the vessel's top and axis) and diameter of each vein, with standard errors, from the delay sweep.
+
+    Veins the delay images cannot resolve are reported with the reason, never with a number.
+    """
+    from ..errors import InputError
+    from ..experiments._report import jsonable
+    from ..figures.skin import depth_fit_figure
+    from ..io import atomic_directory
+    from ..io.atomic import MARKER
+    from ..skin.depth import fit_veins
+
+    if tone is not None:
+        _tone(tone)
+    if wavelength is not None:
+        _wavelength(wavelength)
+    if mm_per_row is not None:
+        _mm_per_row_option(mm_per_row)
+    _check_outputs((out_dir, "skin depth"), overwrite=overwrite)
+    if _source_kind(stack_path, "STACK") != "stack":
+        raise InputError("a transport store has no delay sweep: give the stack (STACK)", stack_path)
+    stack = _load_stack(stack_path)
+    tone_value, tone_source = _recorded(tone, "--tone", stack.metadata, "tone", lambda v: _tone(str(v)))
+    wl, wl_source = _recorded(
+        wavelength, "--wavelength", stack.metadata, "wavelength_nm", lambda v: _wavelength(int(v))
+    )
+    mpr, mpr_source = _scale(mm_per_row, ("stack metadata", stack.metadata))
+    camera, camera_source = _stack_camera(stack.metadata)
+    truth = _truth_for(stack.shape, stack_path, mask)
+    if truth is None:
+        raise ValueError("--mask: give a vein mask (there is no ground truth beside the stack)")
+    vein_id = np.asarray(truth["vein_id"])
+    if truth.get("exclude") is not None:  # the truth's veins under hair or off the skin: not fitted
+        vein_id = np.where(np.asarray(truth["exclude"], bool), 0, vein_id)
+    n_veins = int(np.unique(vein_id[vein_id > 0]).size)
+    if n_veins == 0:
+        raise ValueError("--mask: the vein mask marks no vein")
+    true_depths = _truth_depths(stack_path, vein_id)
+    with progress_bar() as bar:
+        rounds = 1 + (JOINT_ROUNDS if n_veins > 1 else 0)  # each vein alone, then with the others' shadows
+        task = bar.add_task(f"fitting {n_veins} vein(s)", total=n_veins * rounds)
+        try:
+            fits, model, use = fit_veins(
+                stack.images,
+                stack.bands(),
+                stack.geometry,
+                vein_id,
+                camera=camera,
+                excluded=stack.excluded,
+                tone=tone_value,
+                wavelength_nm=wl,
+                mm_per_row=mpr,
+                joint_rounds=JOINT_ROUNDS,
+                progress=lambda vid: bar.advance(task),
+            )
+        except InputError as exc:
+            raise InputError(f"{stack_path}: {exc}") from None
+    veins_json = []
+    for f in fits:
+        j = f.to_json()
+        if true_depths:
+            j["true_depth_mm"], j["true_diameter_mm"] = true_depths.get(f.id, (None, None))
+        veins_json.append(j)
+    result = {
+        "format": "planeray-skin-depth",
+        "format_version": 1,
+        "stack": str(stack_path),
+        "depth_is": "depth_mm: of the vessel's top (its wall nearest the surface); axis_depth_mm = depth_mm + "
+        "diameter_mm / 2; mm below the skin's surface",
+        "tone": tone_value,
+        "tone_source": tone_source,
+        "wavelength_nm": wl,
+        "wavelength_source": wl_source,
+        "mm_per_row": mpr,
+        "mm_per_row_source": mpr_source,
+        "camera_source": camera_source,
+        "mask": truth["source"],
+        "images_used": [int(i) for i in np.nonzero(use)[0]],
+        "ambient": fits[0].curves.get("ambient") if fits else None,
+        "veins": veins_json,
+    }
+    depth_map = np.full(vein_id.shape, np.nan, np.float32)
+    for f in fits:
+        if f.resolved:
+            depth_map[vein_id == f.id] = f.depth_mm
+    with atomic_directory(out_dir, overwrite=overwrite, kind="skin depth") as tmp:
+        from PIL import Image
+
+        Image.fromarray(vein_id.astype(np.uint16)).save(tmp / "vein_ids.png", format="PNG")
+        _write_tiff(tmp / "depth_mm.tif", depth_map)
+        _write_csv(tmp / "veins.csv", veins_json)
+        depth_fit_figure(
+            [{**f.to_json(), "curves": f.curves} for f in fits],
+            truth=true_depths or None,
+            title=f"Vein depth: {stack_path.name} ({tone_value}, {wl} nm)",
+            out=tmp / "depth_fit.png",
+        )
+        (tmp / MARKER).write_text(json.dumps(jsonable(result), indent=1))
+    n_res = sum(f.resolved for f in fits)
+    out.print(f"{out_dir}: {n_res}/{len(fits)} veins resolved (depth of the vessel's top, mm below the surface)")
+    for j in veins_json:
+        line = f"  vein {j['id']}: "
+        if j["resolved"]:
+            line += (
+                f"top {j['depth_mm']:.2f} +- {j['depth_se_mm']:.2f} mm (axis {j['axis_depth_mm']:.2f}), "
+                f"diameter {j['diameter_mm']:.2f} +- {j['diameter_se_mm']:.2f} mm"
+            )
+        else:
+            line += f"unresolved: {j['reason']}"
+        if j.get("true_depth_mm") is not None:
+            line += f" [true: top {j['true_depth_mm']:.2f}, diameter {j['true_diameter_mm']:.2f} mm]"
+        out.print(line)
 
 
 @skin_app.command("compare")

@@ -22,6 +22,8 @@ __all__ = [
     "enhancement_figure",
     "headline_figure",
     "delay_map_figure",
+    "depth_fit_figure",
+    "depth_validation_figure",
 ]
 
 _LABELS = {
@@ -319,3 +321,130 @@ def delay_map_figure(delay_map_us, *, vein_id=None, used_us=None, title=None, ou
     ax.set_title(title or "Eq. 7: delay of the strongest edge per pixel (blurred)", fontsize=8)
     fig.tight_layout()
     return finish(fig, out)
+
+
+def depth_fit_figure(veins, *, truth=None, title=None, out=None):
+    """The depth fit of each vein: measured and fitted contrast per delay; estimated against true depth.
+
+    ``veins``: one dict per vein (:meth:`planeray.skin.depth.VeinFit.to_json` with ``curves``: the
+    ``delays_us``, ``exposures_us``, ``contrast_measured`` +- ``contrast_se`` over the vein's core
+    and ``contrast_fit``).  ``truth``: ``{vein id: (true depth of the top, true diameter) in mm}``
+    (a simulated capture), which adds a panel of the estimated against the true depth with
+    1-standard-error bars, the identity and the +-0.5 mm band (unresolved veins drawn at the fit's
+    value, hollow, in grey).
+    """
+    n = len(veins) + (1 if truth else 0)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig = new_figure((3.4 * cols, 2.9 * rows))
+    axes = [fig.add_subplot(rows, cols, i + 1) for i in range(n)]
+    for ax, v in zip(axes, veins):
+        c = v.get("curves", {})
+        d = np.asarray(c.get("delays_us", []), float)
+        e = np.asarray(c.get("exposures_us", []), float)
+        for j, te in enumerate(sorted(set(e.tolist()))):
+            sel = e == te
+            o = np.argsort(d[sel])
+            color = f"C{j}"
+            ax.errorbar(d[sel][o], np.asarray(c["contrast_measured"], float)[sel][o],
+                        yerr=np.asarray(c["contrast_se"], float)[sel][o], fmt="o", ms=3, color=color,
+                        label=f"measured, t_e {te:g} us")  # fmt: skip
+            fit = np.asarray(c["contrast_fit"], float)[sel][o]
+            for side in (d[sel][o] < 0, d[sel][o] > 0):  # no line across the epipolar plane (no image there)
+                ax.plot(d[sel][o][side], fit[side], "-", color=color, lw=1)
+            ax.plot([], [], "-", color=color, lw=1, label=f"fit, t_e {te:g} us")
+        if v["resolved"]:
+            head = (
+                f"vein {v['id']}: top {v['depth_mm']:.2f} +- {v['depth_se_mm']:.2f} mm, "
+                f"D {v['diameter_mm']:.1f} +- {v['diameter_se_mm']:.1f} mm"
+            )
+        else:
+            head = f"vein {v['id']}: unresolved\n({_wrap(v['reason'])})"
+        if truth and v["id"] in truth:
+            head += f"\ntrue: top {truth[v['id']][0]:.2f} mm, D {truth[v['id']][1]:.1f} mm"
+        ax.set_title(head, fontsize=7)
+        ax.set_xlabel("delay t_d (us)", fontsize=8)
+        ax.set_ylabel("contrast over the vein's core", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.axhline(0.0, color="k", lw=0.5)
+    if veins and axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(fontsize=6, frameon=False)
+    if truth:
+        ax = axes[-1]
+        lo_hi = [t[0] for t in truth.values()]
+        for v in veins:
+            if v["id"] not in truth:
+                continue
+            t = truth[v["id"]][0]
+            if v["resolved"]:
+                ax.errorbar([t], [v["depth_mm"]], yerr=[v["depth_se_mm"]], fmt="o", ms=4, color="tab:red")
+                y = v["depth_mm"]
+            else:
+                y = v.get("fit_depth_mm")
+                if y is None:
+                    continue
+                ax.plot([t], [y], "o", ms=4, mfc="none", color="0.5")
+            ax.annotate(str(v["id"]), (t, y), xytext=(3, 3), textcoords="offset points", fontsize=7)
+            lo_hi += [y]
+        lo, hi = min(lo_hi) - 0.5, max(lo_hi) + 0.5
+        x = np.array([lo, hi])
+        ax.plot(x, x, "k-", lw=0.8)
+        ax.fill_between(x, x - 0.5, x + 0.5, color="0.85", zorder=0)
+        ax.plot([], [], "o", color="tab:red", label="resolved (+- 1 se)")
+        ax.plot([], [], "o", mfc="none", color="0.5", label="unresolved (the fit's value)")
+        ax.fill_between([], [], [], color="0.85", label="+- 0.5 mm")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
+        ax.set_xlabel("true depth of the top (mm)", fontsize=8)
+        ax.set_ylabel("estimated depth of the top (mm)", fontsize=8)
+        ax.set_title("estimated against true depth", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=6, frameon=False, loc="upper left")
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return finish(fig, out)
+
+
+def depth_validation_figure(rows, *, title=None, out=None):
+    """Estimated against true depth of the vein's top over a validation (:mod:`planeray.experiments.skin_depth`).
+
+    One colour per (tone, wavelength); resolved veins with 1-standard-error bars, unresolved ones hollow at
+    the fit's value (grey edge); the identity and the +-0.5 mm band; the target's 1-3 mm shaded.
+    """
+    fig = new_figure((5.6, 4.6))
+    ax = fig.add_subplot(1, 1, 1)
+    conds = sorted({(r["tone"], r["wavelength_nm"]) for r in rows})
+    xs = [r["true_depth_mm"] for r in rows] + [r["fit_depth_mm"] for r in rows if r["fit_depth_mm"] is not None]
+    lo, hi = (min(xs) - 0.3, max(xs) + 0.3) if xs else (0.5, 5.5)
+    x = np.array([lo, hi])
+    ax.fill_between(x, x - 0.5, x + 0.5, color="0.88", zorder=0, label="+- 0.5 mm")
+    ax.axvspan(1.0, 3.0, color="tab:green", alpha=0.06, zorder=0, label="target depths (1-3 mm)")
+    ax.plot(x, x, "k-", lw=0.8)
+    for i, c in enumerate(conds):
+        sel = [r for r in rows if (r["tone"], r["wavelength_nm"]) == c]
+        res = [r for r in sel if r["resolved"]]
+        unr = [r for r in sel if not r["resolved"] and r["fit_depth_mm"] is not None]
+        if res:
+            ax.errorbar([r["true_depth_mm"] for r in res], [r["depth_mm"] for r in res],
+                        yerr=[r["depth_se_mm"] for r in res], fmt="o", ms=4, color=f"C{i}",
+                        label=f"{c[0]}, {c[1]} nm")  # fmt: skip
+        if unr:
+            ax.plot([r["true_depth_mm"] for r in unr], [r["fit_depth_mm"] for r in unr], "o", ms=5, mfc="none",
+                    color=f"C{i}", mec="0.4")  # fmt: skip
+    ax.plot([], [], "o", mfc="none", mec="0.4", color="0.4", label="unresolved (the fit's value)")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_xlabel("true depth of the vein's top (mm)")
+    ax.set_ylabel("estimated depth of the top (mm)")
+    n_res = sum(r["resolved"] for r in rows)
+    ax.set_title(title or f"Vein depth: {n_res}/{len(rows)} fits resolved", fontsize=9)
+    ax.legend(fontsize=7, frameon=False, loc="upper left")
+    fig.tight_layout()
+    return finish(fig, out)
+
+
+def _wrap(text: str, width: int = 48) -> str:
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width))

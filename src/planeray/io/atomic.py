@@ -46,6 +46,7 @@ _FOLDER_KINDS = {
     "planeray-skin-report": "skin report",
     "planeray-skin-veins": "skin veins",
     "planeray-skin-enhance": "skin enhance",
+    "planeray-skin-depth": "skin depth",
     "planeray-skin-validation": "skin validation",
     "planeray-pulse-report": "pulse report",  # `planeray skin pulse` / `skin pulse-report`
     "planeray-paper": "paper report",  # `planeray paper`: the folder, its manifest
