@@ -567,7 +567,7 @@ def fit_vein(
         (default :data:`MAX_DEPTH_SE_MM`)
         A larger standard error of the depth (mm) reports the vein unresolved.
     max_correlation : float
-        A larger |correlation| of depth and diameter reports the vein unresolved.
+        A larger absolute correlation of depth and diameter reports the vein unresolved.
     ambient : bool
         Fit an ambient term proportional to the exposure.
     max_pixels : int
