@@ -67,7 +67,12 @@ def inputs(tmp_path_factory):
     rng = np.random.default_rng(0)
     frames = (0.5 + 0.01 * rng.standard_normal((120, 16, 16))).astype(np.float32)
     write_video(d / "v.tif", Video(frames, 30.0, "test"))
-    return {"stack": d / "s.zarr", "video": d / "v.tif"}
+    from PIL import Image
+
+    mask = np.zeros((48, 48), np.uint8)
+    mask[:, [7, 8, 9, 23, 24, 25, 39, 40, 41]] = 255  # the toy scene's three veins
+    Image.fromarray(mask).save(d / "mask.png")
+    return {"stack": d / "s.zarr", "video": d / "v.tif", "mask": d / "mask.png"}
 
 
 @pytest.fixture
@@ -91,6 +96,12 @@ def small_studies(monkeypatch):
         return rows
 
     monkeypatch.setattr(sp, "vein_validation", vein_validation)
+    import planeray.skin.depth as sd
+
+    def fit_vein(model, images, variance, pix, *, vein_id=1, **kw):  # a vein's fit, answered at once
+        return sd.VeinFit(vein_id, True, "", 2.0, 2.5, 0.1, 0.3, 0.2, 100.0, 1.1, pix.rows.size, len(images))
+
+    monkeypatch.setattr(sd, "fit_vein", fit_vein)
     monkeypatch.setattr(sp, "layered_adding_doubling", lambda **kw: {"mc": 0.41, "mc_stderr": 0.001, "ad": 0.41})
     monkeypatch.setattr(
         es, "skin_scene", lambda shape, seed=0, **kw: toy_vein_scene(shape, projector_rows=90, columns=(3, 8, 13))
@@ -121,6 +132,7 @@ SPECS = {
     ),
     "skin validate": ("skin validate --out {d}/val --n-photons 32", ("val",)),
     "skin veins": ("skin veins {stack} --out {d}/veins --delay-us 750", ("veins",)),
+    "skin depth": ("skin depth {stack} --mask {mask} --out {d}/depth --tone fair --wavelength 638", ("depth",)),
     "skin enhance": ("skin enhance {stack} --out {d}/enh", ("enh",)),
     "skin compare": ("skin compare --out {d}/cmp --size 16 --quick", ("cmp",)),
     "skin pulse": ("skin pulse {video} --out {d}/p --magnified {d}/mag.tif", ("p", "mag.tif")),
@@ -223,6 +235,7 @@ WORK = {
     "skin simulate": ("planeray.experiments.skin_capture", "make_scene"),
     "skin validate": ("planeray.experiments.skin_physics", "vein_validation"),
     "skin veins": ("planeray.skin.imaging", "stack_images"),
+    "skin depth": ("planeray.skin.depth", "fit_veins"),
     "skin enhance": ("planeray.skin.imaging", "delay_sweep_images"),
     "skin compare": ("planeray.experiments.skin", "skin_scene"),
     "skin pulse": ("planeray.experiments.pulse", "analyze_pulse"),
@@ -313,6 +326,7 @@ INTERRUPT = {
     "skin simulate": ("planeray.experiments.skin_capture", "write_stack"),  # the truth files are in temporaries
     "skin validate": ("planeray.experiments.skin_physics", "vein_validation_figure"),
     "skin veins": ("planeray.figures.skin", "headline_figure"),
+    "skin depth": ("planeray.figures.skin", "depth_fit_figure"),
     "skin enhance": ("planeray.figures.skin", "delay_map_figure"),
     "skin compare": ("planeray.figures.skin", "best_delay_figure"),
     "skin pulse": ("planeray.experiments.pulse", "_region_png"),  # the magnified video is in its temporary
