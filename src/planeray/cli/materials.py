@@ -399,6 +399,35 @@ def _unclassified_by_class(seg, truth, confusion) -> dict:
     return out
 
 
+def _capture_and_row_size(input_path: Path, mm_per_row: float | None):
+    """The capture's transport (a stack demultiplexed), its record, and its row size (mm per projector row).
+
+    The row size is ``--mm-per-row`` where given, else the capture's record; neither: one line naming the option.
+    """
+    transport, meta = _read_fit_input(input_path, "the capture")
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+    return transport, meta, mm
+
+
+def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None):
+    """``--library`` (else the shipped one), read before the capture, then checked against its row size."""
+    from ..errors import InputError
+    from ..materials.library import default_library, load_library
+
+    try:
+        lib = load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
+    try:
+        lib.check_conditions(mm_per_row=mm, calibrated=False)
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    return lib, transport, meta, mm
+
+
 def _read_fit_input(path: Path, option: str, *, with_progress: bool = True):
     """``(transport, metadata)`` of a transport store, or of a stack demultiplexed (floor removed) first."""
     from ..io.atomic import planeray_output_kind
@@ -484,10 +513,7 @@ def fit_cmd(
         raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
     _not_an_input(out_dir, [("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)])
     _outputs((out_dir, "materials fit"), overwrite=overwrite)
-    transport, meta = _read_fit_input(input_path, "the capture")
-    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
-    if mm is None:
-        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+    transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
     lab = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
     scale = None
     if white_reference is not None:
@@ -707,12 +733,11 @@ def recognize_cmd(
 
     import numpy as np
 
-    from ..errors import InputError
     from ..experiments._report import jsonable
     from ..figures.materials import recognition_by_distance_figure
     from ..io import atomic_directory
     from ..materials.labels import write_label_image
-    from ..materials.library import FLAGS, default_library, load_library
+    from ..materials.library import FLAGS
     from ..materials.recognize import (
         DEFAULT_POOL_MM,
         accuracy_by_distance,
@@ -736,18 +761,7 @@ def recognize_cmd(
         out_dir, [("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)]
     )
     _outputs((out_dir, "materials recognition"), overwrite=overwrite)
-    try:
-        lib = load_library(library) if library is not None else default_library()
-    except InputError as exc:
-        raise ValueError(f"--library {exc}") from None
-    transport, meta = _read_fit_input(input_path, "the capture")
-    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
-    if mm is None:
-        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
-    try:
-        lib.check_conditions(mm_per_row=mm, calibrated=False)
-    except InputError as exc:
-        raise ValueError(f"--library {exc}") from None
+    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
     reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
     truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
     H, W = transport.shape
@@ -843,7 +857,7 @@ def library_add(
     import numpy as np
 
     from ..errors import InputError
-    from ..materials.library import default_library, load_library, save_library
+    from ..materials.library import save_library
     from ..materials.recognize import entries_from_capture, fit_image
 
     if out_json.suffix.lower() != ".json":
@@ -853,18 +867,7 @@ def library_add(
         raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
     _not_an_input(out_json, [("the capture", input_path), ("--labels", labels), ("--library", library)])
     _outputs((out_json, "media library"), overwrite=overwrite)
-    try:
-        lib = load_library(library) if library is not None else default_library()
-    except InputError as exc:
-        raise ValueError(f"--library {exc}") from None
-    transport, meta = _read_fit_input(input_path, "the capture")
-    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
-    if mm is None:
-        raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
-    try:
-        lib.check_conditions(mm_per_row=mm, calibrated=False)
-    except InputError as exc:
-        raise ValueError(f"--library {exc}") from None
+    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
     lab = _read_labels(labels, "--labels", transport.shape)
     missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
     if missing:

@@ -86,7 +86,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -96,7 +95,7 @@ from scipy.optimize import least_squares
 from scipy.special import k1e
 
 from ..errors import InputError
-from ..mc.cache import TABLES_DIR, cache_dir, write_or_warn
+from ..mc.cache import TABLES_DIR, cache_dir, save_table, write_or_warn
 from ..mc.diffusion import boundary_mismatch_A
 from ..mc.engine import mc_line_profile
 from ..medium import Medium
@@ -216,24 +215,16 @@ class ForwardTable:
 
     def save(self, path) -> Path:
         """Write the table as one compressed ``.npz`` (no pickle), atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
         meta = {"g": self.g, "n": self.n, "params": self.params}
-        try:
-            np.savez_compressed(
-                tmp,
-                meta=np.array(json.dumps(meta, sort_keys=True)),
-                mu_s_prime_per_row=self.mu_s_prime_per_row,
-                mu_a_per_row=self.mu_a_per_row,
-                offsets_rows=self.offsets_rows,
-                kernel=self.kernel,
-                kernel_stderr=self.kernel_stderr,
-            )
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
-        return path
+        return save_table(
+            path,
+            meta=np.array(json.dumps(meta, sort_keys=True)),
+            mu_s_prime_per_row=self.mu_s_prime_per_row,
+            mu_a_per_row=self.mu_a_per_row,
+            offsets_rows=self.offsets_rows,
+            kernel=self.kernel,
+            kernel_stderr=self.kernel_stderr,
+        )
 
     @classmethod
     def load(cls, path) -> ForwardTable:

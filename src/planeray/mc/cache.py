@@ -75,6 +75,22 @@ def write_or_warn(write: Callable[[Path], None], path: Path) -> None:
         )
 
 
+def save_table(path, **arrays) -> Path:
+    """Write ``arrays`` as one compressed ``.npz`` (no pickle), atomically: a temporary beside it, then a rename.
+
+    The precomputed tables (wall kernels, vein tables, the fit's forward table) are written this way.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
+    try:
+        np.savez_compressed(tmp, **arrays)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
 def save_profile(path: Path, prof: MCProfile) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + f".{os.getpid()}.tmp.npz")

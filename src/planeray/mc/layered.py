@@ -69,7 +69,7 @@ import numpy as np
 from ..errors import InputError
 from ..medium import Medium, as_medium
 from ._batches import trace_batches
-from .cache import TABLES_DIR, cache_dir, cache_key, write_or_warn
+from .cache import TABLES_DIR, cache_dir, cache_key, save_table, write_or_warn
 from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _batch_stats, _uniform
 from .physics import fresnel_jit, hg_scatter_jit
 
@@ -800,22 +800,14 @@ class VeinTable:
 
     def save(self, path) -> Path:
         """Write the table as an ``.npz`` (no pickle); atomic (a temporary, then a rename)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
-        try:
-            np.savez_compressed(
-                tmp,
-                **{k: getattr(self, k) for k in self._ARRAYS},
-                ratio=self.ratio.astype(np.float32),
-                mm_per_row=np.float64(self.mm_per_row),
-                total_reflectance=np.float64(self.total_reflectance),
-                params=np.array(json.dumps(self.params, sort_keys=True)),
-            )
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
-        return path
+        return save_table(
+            path,
+            **{k: getattr(self, k) for k in self._ARRAYS},
+            ratio=self.ratio.astype(np.float32),
+            mm_per_row=np.float64(self.mm_per_row),
+            total_reflectance=np.float64(self.total_reflectance),
+            params=np.array(json.dumps(self.params, sort_keys=True)),
+        )
 
     @classmethod
     def load(cls, path) -> VeinTable:

@@ -76,7 +76,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -88,7 +87,16 @@ from scipy.special import k1e
 from ..errors import InputError
 from ..medium import Medium, as_medium
 from ._batches import trace_batches
-from .cache import ENGINE_VERSION, TABLES_DIR, cache_dir, cache_key, load_profile, save_profile, write_or_warn
+from .cache import (
+    ENGINE_VERSION,
+    TABLES_DIR,
+    cache_dir,
+    cache_key,
+    load_profile,
+    save_profile,
+    save_table,
+    write_or_warn,
+)
 from .diffusion import boundary_mismatch_A, diffusion_exit, diffusion_normal_radiance_ratio
 from .engine import (
     _N_BATCHES,
@@ -990,9 +998,6 @@ class WallKernelTable:
     # ------------------------------------------------------------ storage
     def save(self, path) -> Path:
         """Write the table as one compressed ``.npz`` (no pickle), atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
         meta = {
             "medium": self.medium.to_dict(),
             "wall": self.wall,
@@ -1001,12 +1006,7 @@ class WallKernelTable:
         }
         arrays = {k: getattr(self, k) for k in _TABLE_ARRAYS}
         arrays = {k: (v.astype(np.float32) if v.dtype.kind == "f" else v) for k, v in arrays.items()}
-        try:
-            np.savez_compressed(tmp, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
-        return path
+        return save_table(path, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
 
     @classmethod
     def load(cls, path) -> WallKernelTable:
