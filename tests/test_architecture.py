@@ -112,7 +112,10 @@ def _imports(module: str, path: Path) -> set[str]:
     return {m for m in (_resolve(n) for n in found) if m is not None and m != module}
 
 
-GRAPH = {m: _imports(m, p) for m, p in MODULES.items()}
+@pytest.fixture(scope="module")
+def graph():
+    """planeray's import graph (parsed when a test needs it, not at collection by every pytest worker)."""
+    return {m: _imports(m, p) for m, p in MODULES.items()}
 
 
 def _unit(module: str) -> str | None:
@@ -125,10 +128,10 @@ def test_every_unit_has_a_layer():
     assert units <= set(LAYERS), f"add {sorted(units - set(LAYERS))} to LAYERS"
 
 
-def test_no_upward_import():
+def test_no_upward_import(graph):
     rank = {u: i for i, u in enumerate(LAYERS)}
     bad = []
-    for mod, deps in GRAPH.items():
+    for mod, deps in graph.items():
         u = _unit(mod)
         if u is None:  # planeray/__init__.py: the front door may import anything
             continue
@@ -142,7 +145,7 @@ def test_no_upward_import():
     assert not bad, "upward imports:\n" + "\n".join(sorted(bad))
 
 
-def test_no_import_cycle():
+def test_no_import_cycle(graph):
     # Tarjan's strongly connected components over the module graph.
     index, low, on_stack, stack, cycles = {}, {}, set(), [], []
     counter = [0]
@@ -152,7 +155,7 @@ def test_no_import_cycle():
         counter[0] += 1
         stack.append(v)
         on_stack.add(v)
-        for w in GRAPH.get(v, ()):
+        for w in graph.get(v, ()):
             if w not in index:
                 visit(w)
                 low[v] = min(low[v], low[w])
@@ -169,7 +172,7 @@ def test_no_import_cycle():
             if len(comp) > 1:
                 cycles.append(sorted(comp))
 
-    for v in sorted(GRAPH):
+    for v in sorted(graph):
         if v not in index:
             visit(v)
     assert not cycles, f"import cycles: {cycles}"

@@ -399,6 +399,21 @@ def test_labels_agree_with_ground_truth_in_every_scene_at_every_size(name, size)
     assert wrong.max(initial=0.0) <= 0.25, (name, size, np.flatnonzero(rows)[wrong > 0.25])
 
 
+def test_a_reused_reference_gives_what_a_fresh_one_gives_for_every_setting():
+    """The widths measured on a white target are kept on it: per settings, never across them."""
+    wax = make_scene("wax", (32, 32), projector_rows=360, seed=0).transport
+    kept = dataclasses.replace(wax)  # as its own white target: the widths of its diffuse pixels
+    settings = [{}, {"broadening": 1.05, "core_broadening": 1.02}, {"smooth_bins": 3}, {}]
+    labels = []
+    for kw in settings:
+        fresh = dataclasses.replace(kept)  # the same arrays, nothing remembered
+        expected = classify_transport(wax, support_rows=114, direct_reference=fresh, **kw)
+        labels.append(classify_transport(wax, support_rows=114, direct_reference=kept, **kw))
+        np.testing.assert_array_equal(labels[-1], expected)
+    assert len(kept.__dict__["_direct_widths"]) == 3
+    assert not np.array_equal(labels[0], labels[1])  # the settings matter here
+
+
 def test_a_direct_reference_must_match_the_geometry():
     _, result = _demuxed("diffuse_plane", 64)
     other = make_scene("diffuse_plane", (32, 32), projector_rows=720, seed=0).transport

@@ -120,6 +120,7 @@ def test_pulse_report_writes_fig15_and_its_numbers(tmp_path, monkeypatch):
 
     import planeray.experiments.pulse as pulse_experiment
     from planeray.cli import app
+    from planeray.experiments.pulse import QUICK_REPORT
 
     steps, run = [], pulse_experiment.run_pulse_report
 
@@ -129,8 +130,10 @@ def test_pulse_report_writes_fig15_and_its_numbers(tmp_path, monkeypatch):
     monkeypatch.setattr(pulse_experiment, "run_pulse_report", counted)
     res = CliRunner().invoke(app, ["skin", "pulse-report", "--out", str(tmp_path / "r"), "--quick"])
     assert res.exit_code == 0, res.output
-    # The bar's total is the number of steps taken (it used to end at 31/30); --quick: 3 rates, 1 seed, 3 nulls.
-    assert len(steps) == pulse_experiment.pulse_report_steps(rates_bpm=(50, 80, 110), seeds=(0,), null_seeds=range(3))
+    # The bar's total is the number of steps taken (it used to end at 31/30).  --quick: the scene and Fig. 15,
+    # 3 rates x 1 seed, 3 pulse-free videos, 3 noise conditions x 1 seed, 3 delays x 1 exposure + the regular
+    # light, 2 resolution studies, the false-alarm study, the figures.
+    assert len(steps) == 2 + 3 + 3 + 3 + 3 + 1 + 2 + 1 + 1 == pulse_experiment.pulse_report_steps(**QUICK_REPORT)
     rep = json.loads((tmp_path / "r" / "report.json").read_text())
     assert rep["accuracy"]["detected"] == rep["accuracy"]["total"] and rep["accuracy"]["max_abs_error_bpm"] < 2
     assert rep["pulse_free"]["false_alarms"] == 0

@@ -550,6 +550,21 @@ def _direct_width(character: ProfileCharacter, field: str) -> float | None:
     return float(np.median(values[direct])) if direct.sum() >= MIN_DIRECT_PIXELS else None
 
 
+def _reference_widths(reference, resolution_rows, support_rows, chunk_rows, thresholds, th) -> tuple:
+    """The direct-peak widths (FWHM, core) of a ``direct_reference``, measured once per settings.
+
+    They are kept on the reference transport (as it keeps its prefix sums, see
+    :class:`planeray.transport.Transport`): one white target classifies every
+    scene of a figure, and characterizing it again for each was half the work.
+    """
+    key = (float(resolution_rows), None if support_rows is None else float(support_rows), tuple(sorted(th.items())))
+    memo = reference.__dict__.setdefault("_direct_widths", {})
+    if key not in memo:
+        character = _characterize_transport(reference, resolution_rows, support_rows, chunk_rows, thresholds)
+        memo[key] = (_direct_width(character, "fwhm_rows"), _direct_width(character, "core_spread_rows"))
+    return memo[key]
+
+
 def classify_transport(
     transport,
     *,
@@ -615,7 +630,6 @@ def classify_transport(
     few rows of the epipolar plane: skin, whole milk).
     """
     ch = _characterize_transport(transport, resolution_rows, support_rows, chunk_rows, thresholds)
-    reference = ch
     if direct_reference is not None:
         same = (
             direct_reference.geometry.rows_per_camera_row == transport.geometry.rows_per_camera_row
@@ -628,10 +642,11 @@ def classify_transport(
                 f"{transport.offsets_rows.size} offsets); got "
                 f"{direct_reference.geometry.rows_per_camera_row:g} and {direct_reference.offsets_rows.size}"
             )
-        reference = _characterize_transport(direct_reference, resolution_rows, support_rows, chunk_rows, thresholds)
     th = {**CLASSIFY_THRESHOLDS, **{key: val for key, val in thresholds.items() if val is not None}}
-    fwhm = _direct_width(reference, "fwhm_rows")
-    core = _direct_width(reference, "core_spread_rows")
+    if direct_reference is None:
+        fwhm, core = _direct_width(ch, "fwhm_rows"), _direct_width(ch, "core_spread_rows")
+    else:
+        fwhm, core = _reference_widths(direct_reference, resolution_rows, support_rows, chunk_rows, thresholds, th)
     first = ch.label.copy()
     if fwhm is not None:
         ch.label[(first == 3) & (ch.fwhm_rows >= float(th["broadening"]) * fwhm)] = 2

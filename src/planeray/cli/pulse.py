@@ -350,7 +350,10 @@ def pulse_report(
     fps: Annotated[
         float, typer.Option(help="Camera frame rate (Hz; above 7.4 = twice 110 bpm, at most the projector's 75).")
     ] = 30.0,
-    quick: Annotated[bool, typer.Option(help="Fewer rates, seeds and pulse-free videos.")] = False,
+    quick: Annotated[
+        bool,
+        typer.Option(help="Fewer rates, seeds and pulse-free videos; one seed per noise condition, three delays."),
+    ] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a report folder planeray wrote.")] = False,
 ):
     """The simulated pulse study: Fig. 15a/b, rate accuracy over rates and seeds, SNR per method, false alarms."""

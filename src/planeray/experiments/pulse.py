@@ -56,8 +56,17 @@ DELAY_STUDY_EXPOSURES_US = (300, 600)
 REPORT_RATES_BPM = (50, 60, 70, 80, 90, 100, 110)
 REPORT_SEEDS = (0, 1, 2)
 REPORT_NULL_SEEDS = range(10)
-#: ``skin pulse-report --quick`` (and ``planeray paper --quick``): three rates, one seed, three pulse-free videos.
-QUICK_REPORT = {"rates_bpm": (50, 80, 110), "seeds": (0,), "null_seeds": range(3), "null_runs": 100}
+#: ``skin pulse-report --quick`` (and ``planeray paper --quick``): three rates, one seed, three pulse-free videos,
+#: one seed per noise condition, three delays at the longer exposure.
+QUICK_REPORT = {
+    "rates_bpm": (50, 80, 110),
+    "seeds": (0,),
+    "null_seeds": range(3),
+    "null_runs": 100,
+    "noise_seeds": (0,),
+    "delays_us": (0, 250, 550),
+    "exposures_us": (600,),
+}
 
 
 def _write_csv(path: Path, header, rows) -> None:
@@ -286,7 +295,14 @@ def noise_study(model, base, *, seeds=NOISE_SEEDS, progress=None) -> dict:
 
 
 def pulse_report_steps(
-    *, rates_bpm=REPORT_RATES_BPM, seeds=REPORT_SEEDS, null_seeds=REPORT_NULL_SEEDS, null_runs=None
+    *,
+    rates_bpm=REPORT_RATES_BPM,
+    seeds=REPORT_SEEDS,
+    null_seeds=REPORT_NULL_SEEDS,
+    null_runs=None,
+    noise_seeds=NOISE_SEEDS,
+    delays_us=DELAY_STUDY_US,
+    exposures_us=DELAY_STUDY_EXPOSURES_US,
 ) -> int:
     """Progress steps :func:`run_pulse_report` reports: the scene, Fig. 15, every rate x seed, every
     pulse-free video, the noise and delay studies' captures, the synthetic studies, the figures."""
@@ -295,8 +311,8 @@ def pulse_report_steps(
         2
         + len(rates_bpm) * len(seeds)
         + len(null_seeds)
-        + len(NOISE_CONDITIONS) * len(NOISE_SEEDS)
-        + len(DELAY_STUDY_US) * len(DELAY_STUDY_EXPOSURES_US)
+        + len(NOISE_CONDITIONS) * len(noise_seeds)
+        + len(delays_us) * len(exposures_us)
         + 1  # the delay study's regular light
         + 2  # the resolution study at two noise levels
         + 1  # the synthetic false-alarm study
@@ -316,6 +332,9 @@ def run_pulse_report(
     seeds=REPORT_SEEDS,
     null_seeds=REPORT_NULL_SEEDS,
     null_runs: int = 1000,
+    noise_seeds=NOISE_SEEDS,
+    delays_us=DELAY_STUDY_US,
+    exposures_us=DELAY_STUDY_EXPOSURES_US,
     seed: int = 0,
     scene_params: dict | None = None,
     build=None,
@@ -405,8 +424,8 @@ def run_pulse_report(
         "false_alarms": sum(r["rate_bpm"] is not None for r in null),
         "max_band_snr_db": float(max(r["band_snr_db"] for r in null)) if null else None,
     }
-    report["noise_study"] = noise_study(model, base, progress=step)
-    report["delay_study"] = delay_study(build, progress=step)
+    report["noise_study"] = noise_study(model, base, seeds=noise_seeds, progress=step)
+    report["delay_study"] = delay_study(build, delays_us=delays_us, exposures_us=exposures_us, progress=step)
     report["resolution"] = {}
     for nz in (0.1, 0.5):
         report["resolution"][f"noise {nz:g}"] = resolution_study(fps=fps, noise=nz)
