@@ -30,11 +30,13 @@ MS_OFFSETS = np.arange(-10, 11)
 
 @pytest.fixture(scope="module")
 def ms_profiles():
-    # ~1e6 camera paths (49k per bin; 1024 rows along the line keep the row-spread
-    # standard error honest for the skewed far bins) and 3e5 MC photons: ~10 s.
-    mi = mitsuba_line_profile(MS, MS_OFFSETS, mm_per_row=MS_MM_PER_ROW, spp=48, along_pixels=1024, seed=1)
+    # ~5e5 camera paths (24k per bin; 1024 rows along the line keep the row-spread
+    # standard error honest for the skewed far bins) and 1.5e5 MC photons: ~6 s.  The
+    # tolerances are in standard errors: at these counts, seeds 1-4 gave mean z^2
+    # 0.93-1.39 and |z| <= 3.5 (half of the samples the test used to take).
+    mi = mitsuba_line_profile(MS, MS_OFFSETS, mm_per_row=MS_MM_PER_ROW, spp=24, along_pixels=1024, seed=1)
     mc = mc_line_profile(
-        MS, n_photons=300_000, offsets_rows=MS_OFFSETS, mm_per_row=MS_MM_PER_ROW, source_width_mm=MS_MM_PER_ROW, seed=0
+        MS, n_photons=150_000, offsets_rows=MS_OFFSETS, mm_per_row=MS_MM_PER_ROW, source_width_mm=MS_MM_PER_ROW, seed=1
     )
     return mi, mc
 
