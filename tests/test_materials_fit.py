@@ -305,6 +305,23 @@ def test_the_white_reference_calibrates_the_magnitude(capture):
         assert abs(r["mu_a_per_mm"] / a_true - 1) < 0.10, r
 
 
+def test_regions_only_gives_the_same_regions_without_the_maps(capture, table):
+    from planeray.io import read_transport
+
+    transport, _ = read_transport(capture[1])
+    labels = np.zeros((8, 8), int)
+    labels[:, :4], labels[:, 4:] = 1, 2
+    kw = {"mm_per_row": MM, "labels": labels, "block_px": 2, "table": table}
+    full = fit.fit_transport(transport, **kw)
+    quick = fit.fit_transport(transport, regions_only=True, **kw)
+    for region in (1, 2):
+        for key in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm", "pixels"):
+            assert quick.regions[region][key] == full.regions[region][key], (region, key)
+        assert quick.regions[region]["blocks_identified"] is None
+    assert np.isfinite(full.maps["mu_s_prime_per_mm"]).all()
+    assert np.isnan(quick.maps["mu_s_prime_per_mm"]).all() and (quick.maps["mask"] == 255).all()
+
+
 # ---------------------------------------------------------------- walls and beyond the table
 def test_container_wall_distances_are_halfway_to_the_next_label():
     lab = np.zeros((6, 7), int)
@@ -378,3 +395,55 @@ def test_beyond_the_table_the_dipole_takes_over_continuously(table):
     # and it narrows as mu_s' grows (more light near the line)
     far = fit.line_kernel(4 * s1, 0.02, **kw)
     assert far[30] / far.sum() > at[30] / at.sum()
+
+
+# ---------------------------------------------------------------- Fig. 10 extended (`materials report`, `paper`)
+def test_the_report_measures_each_container_away_from_its_walls_with_its_walls_modelled(monkeypatch, tmp_path):
+    """`materials report` (full) fits each tray's pixels >= 3 mm from its walls as one region, the walls from
+    every tray pixel; the numbers are the fit's, beside the published constants (the fit itself: above)."""
+    from types import SimpleNamespace
+
+    from planeray.experiments.materials import media_fit_numbers
+    from planeray.figures.materials import measured_media_figure
+    from planeray.optical_data import MATERIAL_CLASSES, material_medium
+    from planeray.scenes import make_scene
+
+    scene = make_scene("materials", (24, 24), projector_rows=720, seed=0)
+    seen = []
+
+    def fake_fit(transport, *, mm_per_row, labels, block_px, containers, regions_only):
+        assert regions_only  # the maps are not needed
+        seen.append((transport, mm_per_row, labels, block_px, containers))
+        regions = {}
+        for cid in MATERIAL_CLASSES:  # mu_s' 10 x cid % high; mu_a not identified for cid 3
+            med = material_medium(cid)
+            regions[cid] = {
+                "mu_s_prime_per_mm": med.sigma_s_prime * (1 + 0.1 * cid),
+                "mu_s_prime_se_per_mm": 0.01,
+                "mu_a_per_mm": np.nan if cid == 3 else med.sigma_a * (1 - 0.05 * cid),
+                "mu_a_se_per_mm": 0.001,
+            }
+        return SimpleNamespace(regions=regions)
+
+    monkeypatch.setattr(fit, "fit_transport", fake_fit)
+    out = media_fit_numbers(scene, {"truth": scene.transport, "other": "T"}, near_wall_mm=3.0)
+    material = scene.maps["material"]
+    trays = np.where((material >= 1) & (material <= 5), material, 0)
+    away = np.where(scene.maps["wall_distance_mm"] >= 3.0, trays, 0)
+    assert [s[0] for s in seen] == [scene.transport, "T"]
+    for _, mm, labels, block_px, containers in seen:
+        assert mm == 0.3 and block_px == 8  # the blocks give each region's noise, as in tools/validate_fit.py
+        np.testing.assert_array_equal(labels, away)
+        np.testing.assert_array_equal(containers, trays)
+    assert 0 < (away > 0).sum() < (trays > 0).sum()
+    for cid, name in MATERIAL_CLASSES.items():
+        row = out["media"][name]["truth"]
+        assert row["mu_s_prime_rel_err"] == pytest.approx(0.1 * cid)
+        assert row["pixels"] == (away == cid).sum()
+        if cid == 3:
+            assert row["mu_a_per_mm"] is None and row["mu_a_rel_err"] is None
+        else:
+            assert row["mu_a_rel_err"] == pytest.approx(-0.05 * cid)
+        assert out["media"][name]["published"]["mu_a_per_mm"] == material_medium(cid).sigma_a
+    fig = measured_media_figure(out["media"], out=tmp_path / "m.png")
+    assert len(fig.axes) == 2 and (tmp_path / "m.png").stat().st_size > 10_000

@@ -231,6 +231,22 @@ class Capture:
     settings: dict
 
 
+def _capture_scene(cap: Capture):
+    """The ``materials`` scene a capture was simulated from (its ground truth), rebuilt from its settings."""
+    s = cap.settings
+    return make_scene(
+        "materials",
+        tuple(s["size"]),
+        projector_rows=s["projector_rows"],
+        seed=s["seed"],
+        placement=s["placement"],
+        container=s["container"],
+        wall=s["wall"],
+        source=s["source"],
+        channel=s["channel"],
+    )
+
+
 def simulate_capture(
     out=None,
     *,
@@ -506,10 +522,74 @@ def check_report_options(*, size: int = 128, quick: bool = False) -> None:
     _check_memory(6 * capture_memory_bytes((n, n)), "size", f"the {n}x{n} report")
 
 
+#: Pixels at least this far from every wall of their container are measured (the issue's target region).
+MEDIA_FIT_NEAR_WALL_MM = 3.0
+#: Blocks (pixels a side) whose spread gives each region's noise (as in the fit's validation, tools/validate_fit.py).
+MEDIA_FIT_BLOCK_PX = 8
+
+
+def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FIT_NEAR_WALL_MM) -> dict:
+    """``mu_s'`` and ``mu_a`` (1/mm) of each medium of a ``materials`` scene, fitted, beside the published ones.
+
+    Each container's pixels at least ``near_wall_mm`` from its walls are fitted as one region
+    (:func:`planeray.materials.fit.fit_transport`, ``regions_only``, its noise from the spread of
+    :data:`MEDIA_FIT_BLOCK_PX` blocks; shape only -- the scene has no white target --,
+    the containers' walls modelled from the scene's material map), once per transport of
+    ``transports`` (``{source: Transport}``, e.g. the scene's ground truth and the demultiplexed
+    capture).  Extends Fig. 10 (Sec. 8: "to use delay profiles to better model or inverse render
+    subsurface scattering").
+
+    Returns
+    -------
+    dict
+        ``{"near_wall_mm", "mm_per_row", "calibration", "media": {name: {"published": {...},
+        source: {"mu_s_prime_per_mm", "mu_s_prime_se_per_mm", "mu_a_per_mm", "mu_a_se_per_mm",
+        "mu_s_prime_rel_err", "mu_a_rel_err", "pixels"}}}}`` (None where a parameter is not identified).
+    """
+    from ..materials.fit import fit_transport
+    from ..optical_data import material_medium
+    from ..scenes.base import DEFAULT_MM_PER_ROW
+
+    mm = float(scene.params.get("mm_per_row", DEFAULT_MM_PER_ROW))
+    material = np.asarray(scene.maps["material"], np.int64)
+    containers = np.where(np.isin(material, list(MATERIAL_CLASSES)), material, 0)
+    regions = np.where(np.asarray(scene.maps["wall_distance_mm"]) >= near_wall_mm, containers, 0)
+    media = {
+        name: {
+            "published": {
+                "mu_s_prime_per_mm": material_medium(cid).sigma_s_prime,
+                "mu_a_per_mm": material_medium(cid).sigma_a,
+            }
+        }
+        for cid, name in MATERIAL_CLASSES.items()
+    }
+    for source, transport in transports.items():
+        res = fit_transport(
+            transport,
+            mm_per_row=mm,
+            labels=regions,
+            block_px=MEDIA_FIT_BLOCK_PX,
+            containers=containers,
+            regions_only=True,
+        )
+        for cid, name in MATERIAL_CLASSES.items():
+            reg = res.regions.get(cid) or {}
+            row = {"pixels": int((regions == cid).sum())}
+            for key in ("mu_s_prime_per_mm", "mu_a_per_mm"):
+                value, se = reg.get(key), reg.get(key.replace("_per_mm", "_se_per_mm"))
+                ok = value is not None and np.isfinite(value)
+                row[key] = float(value) if ok else None
+                row[key.replace("_per_mm", "_se_per_mm")] = float(se) if ok and se is not None else None
+                truth = media[name]["published"][key]
+                row[key.replace("_per_mm", "_rel_err")] = float(value / truth - 1.0) if ok else None
+            media[name][source] = row
+    return {"near_wall_mm": float(near_wall_mm), "mm_per_row": mm, "calibration": "shape only", "media": media}
+
+
 def report_tasks(*, quick: bool = False) -> int:
     """Tasks of :func:`run_materials_report` (captures simulated, models trained, transports demultiplexed, figures)."""
     noises, ambients = _report_curves(quick)
-    return 12 + len(noises) + len(ambients) + (0 if quick else 6)
+    return 12 + len(noises) + len(ambients) + (0 if quick else 7)
 
 
 def _report_curves(quick: bool):
@@ -728,6 +808,14 @@ def run_materials_report(
             te_c = capture(container="cup", **TEST_SETTINGS)
             model_c = fit([tr_c.stack], [tr_c.labels])
             numbers["cups"] = {"training": model_c.training, "test": evaluate(model_c, te_c)[1]}
+            # --- beyond Fig. 10: the media measured (mu_s', mu_a), not only named ----------------
+            start("measuring the media (mu_s', mu_a)")
+            truth_scene = _capture_scene(test)
+            numbers["media_fit"] = tick(
+                media_fit_numbers(
+                    truth_scene, {"ground-truth transport": truth_scene.transport, "demultiplexed capture": T_test}
+                )
+            )
 
         # --- figures ------------------------------------------------------------------------
         start("figures")
@@ -765,6 +853,8 @@ def run_materials_report(
         from ..scenes.materials import material_tables
 
         figs.wall_kernels_figure(material_tables(), out=tmp / "wall_kernels.png")
+        if "media_fit" in numbers:
+            figs.measured_media_figure(numbers["media_fit"]["media"], out=tmp / "fig10e_measured_media.png")
         for f in sorted(tmp.glob("*.png")):
             files[f.stem] = f.name
         numbers["files"] = files

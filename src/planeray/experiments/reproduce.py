@@ -325,6 +325,9 @@ def _fig10(folder: Path, s: dict, advance) -> dict:
         "accuracy_interior": test["accuracy_interior"],
     }
     pngs = [f"fig10{p}" for p in ("a_photo", "b_profiles", "c_segmentation", "d_confusion")]
+    if "media_fit" in r:  # beyond Fig. 10: the media measured (the full run; --quick skips it)
+        measured["media_fit"] = r["media_fit"]
+        pngs.append("fig10e_measured_media")
     return {"fig10": {"measured": measured, "figures": [_rel(folder, folder / "materials" / f"{p}.png") for p in pngs]}}
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
+from matplotlib.ticker import NullFormatter
 
 from ..materials.labels import class_colour
 from ..optical_data import CLASS_NAMES, MATERIAL_CLASSES
@@ -24,6 +25,7 @@ __all__ = [
     "recognition_by_distance_figure",
     "wall_kernels_figure",
     "fit_figure",
+    "measured_media_figure",
 ]
 
 
@@ -442,4 +444,53 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
     )
     axp.legend(fontsize=7, frameon=True, framealpha=0.85, loc="upper right")
     fig.tight_layout()
+    return finish(fig, out)
+
+
+def measured_media_figure(media, *, out=None):
+    """Fitted against published ``mu_s'`` and ``mu_a`` (1/mm) of each medium, log-log, with standard errors.
+
+    ``media``: ``{name: {"published": {"mu_s_prime_per_mm", "mu_a_per_mm"}, SOURCE: {"mu_s_prime_per_mm",
+    "mu_s_prime_se_per_mm", "mu_a_per_mm", "mu_a_se_per_mm"}, ...}}`` -- one marker per source (e.g. the
+    ground-truth transport and the demultiplexed capture); a parameter not identified (None) is left out.
+    """
+    fig = new_figure((8.4, 3.8))
+    axes = fig.subplots(1, 2)
+    names = list(media)
+    sources = [k for k in media[names[0]] if k != "published"] if names else []
+    markers = ("o", "s", "^", "D")
+    for ax, key, label in zip(axes, ("mu_s_prime_per_mm", "mu_a_per_mm"), ("$\\mu_s'$ (1/mm)", "$\\mu_a$ (1/mm)")):
+        lo, hi = np.inf, 0.0
+        for name in names:
+            cid = next((c for c, n in CLASS_NAMES.items() if n == name), None)
+            colour = _rgb(cid) if cid is not None else "0.3"
+            truth = media[name]["published"][key]
+            for src, marker in zip(sources, markers):
+                got = (media[name].get(src) or {}).get(key)
+                if got is None or truth is None:
+                    continue
+                se = (media[name][src] or {}).get(key.replace("_per_mm", "_se_per_mm")) or 0.0
+                ax.errorbar(truth, got, yerr=se, fmt=marker, color=colour, ms=6, mec="k", mew=0.5, capsize=2)
+                lo, hi = min(lo, truth, got), max(hi, truth, got)
+        if hi > 0:
+            span = np.array([lo / 1.6, hi * 1.6])
+            ax.plot(span, span, color="0.5", lw=0.8)
+            ax.fill_between(span, span / 1.25, span * 1.25, color="0.9", zorder=0, label="within 25 %")
+            ax.set_xlim(*span)
+            ax.set_ylim(*span)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        for axis in (ax.xaxis, ax.yaxis):  # decades only: minor labels of a narrow span collide
+            axis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("published " + label)
+        ax.set_ylabel("fitted " + label)
+    handles = [Patch(color=_rgb(c), label=n) for c, n in CLASS_NAMES.items() if n in names]
+    handles += [
+        axes[0].plot([], [], m, color="0.4", mec="k", mew=0.5, label=src)[0] for src, m in zip(sources, markers)
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
+    fig.suptitle(
+        "the Fig. 10 media measured: fitted vs published (walls modelled, shape only; grey: within 25 %)", fontsize=9
+    )
+    fig.tight_layout(rect=(0, 0.12, 1, 0.95))
     return finish(fig, out)

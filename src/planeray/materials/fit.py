@@ -967,6 +967,7 @@ def fit_transport(
     block_px=4,
     containers=None,
     table: ForwardTable | None = None,
+    regions_only: bool = False,
     progress=None,
 ) -> TransportFit:
     """Fit ``mu_s'`` and ``mu_a`` over a transport: maps (per pixel block) and per-region results.
@@ -993,6 +994,9 @@ def fit_transport(
         media are unbounded, and pixels near walls read the light lost through them as
         absorption.
     table : ForwardTable, optional
+    regions_only : bool
+        Fit the regions only (the maps stay NaN, mask 255): the blocks still give each
+        region's noise, but are not fitted themselves (with walls, most of the time).
     progress : callable, optional
         Called with the number of fits just done.
 
@@ -1050,13 +1054,15 @@ def fit_transport(
         Y = np.stack(means)
         Y[Y == 0] = np.nan
         S = np.stack(sds)
-        res = fit_profiles(
-            Y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=S, calibrated=calibrated,
-            rows_per_camera_row=rpc, table=table, walls=walls if dist is not None else None,
-        )  # fmt: skip
-        if progress is not None:
-            progress(len(blocks))
-        for i, (r0, c0, m) in enumerate(blocks):
+        res = None
+        if not regions_only:
+            res = fit_profiles(
+                Y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=S, calibrated=calibrated,
+                rows_per_camera_row=rpc, table=table, walls=walls if dist is not None else None,
+            )  # fmt: skip
+            if progress is not None:
+                progress(len(blocks))
+        for i, (r0, c0, m) in enumerate(blocks if res is not None else ()):
             sl = (slice(r0, r0 + b), slice(c0, c0 + b))
             for name, val in zip(
                 _MAP_NAMES,
@@ -1093,9 +1099,11 @@ def fit_transport(
             "mu_a_se_per_mm": _num(rr.mu_a_se_per_mm[0]),
             "not_identifiable": describe_reasons(int(rr.mask[0])),
             "chi2_per_dof": _num(rr.chi2_per_dof[0]),
-            "blocks_median_mu_s_prime_per_mm": _nanmedian(res.mu_s_prime_per_mm),
-            "blocks_median_mu_a_per_mm": _nanmedian(res.mu_a_per_mm),
-            "blocks_identified": {
+            "blocks_median_mu_s_prime_per_mm": None if res is None else _nanmedian(res.mu_s_prime_per_mm),
+            "blocks_median_mu_a_per_mm": None if res is None else _nanmedian(res.mu_a_per_mm),
+            "blocks_identified": None
+            if res is None
+            else {
                 "mu_s_prime": float(np.isfinite(res.mu_s_prime_per_mm).mean()),
                 "mu_a": float(np.isfinite(res.mu_a_per_mm).mean()),
             },
