@@ -639,7 +639,7 @@ def _write_map_tiff(path: Path, image, key: str) -> None:
 def report(
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder for the figures (Fig. 10) and materials.json.")],
     size: Annotated[int, typer.Option(help="Image size (size x size of a 720-row projector), 16 to 4096.")] = 128,
-    quick: Annotated[bool, typer.Option(help="Fewer curve points, no Jensen or cup runs.")] = False,
+    quick: Annotated[bool, typer.Option(help="Fewer curve points, no Jensen or cup runs, a 2 x 2 SVM grid.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing report folder planeray wrote.")] = False,
 ):
     """The whole experiment end to end: simulate, train, test, curves, figures (Fig. 10b, c, d)."""

@@ -522,6 +522,10 @@ def check_report_options(*, size: int = 128, quick: bool = False) -> None:
     _check_memory(6 * capture_memory_bytes((n, n)), "size", f"the {n}x{n} report")
 
 
+#: The SVM grid of a ``--quick`` report: the middle of the default grid, where the full report's best
+#: parameters lie (C 100, gamma_scale 1 at 128 x 128), a quarter of its fits.
+QUICK_PARAM_GRID = {"C": (10.0, 100.0), "gamma_scale": (0.3, 1.0)}
+
 #: Pixels at least this far from every wall of their container are measured (the issue's target region).
 MEDIA_FIT_NEAR_WALL_MM = 3.0
 #: Blocks (pixels a side) whose spread gives each region's noise (as in the fit's validation, tools/validate_fit.py).
@@ -662,9 +666,10 @@ def run_materials_report(
     size : int
         Image size (``size x size`` of a 720-row projector), :data:`MIN_REPORT_SIZE` or more.
     quick : bool
-        Fewer points on the curves, no Jensen or cup runs (for tests).
+        Fewer points on the curves, no Jensen or cup runs, the SVM grid :data:`QUICK_PARAM_GRID`
+        (for tests).
     param_grid : dict, optional
-        SVM grid (:data:`planeray.materials.model.DEFAULT_PARAM_GRID`).
+        SVM grid (:data:`planeray.materials.model.DEFAULT_PARAM_GRID`; :data:`QUICK_PARAM_GRID` with ``quick``).
     progress : callable, optional
         Called as ``progress(done, total, description)`` before the first task and
         after each (``total``: :func:`report_tasks`).
@@ -722,7 +727,8 @@ def run_materials_report(
 
     def fit(stacks, labels, **kw):
         kw.setdefault("ignore_classes", ignore)
-        return tick(train_model(stacks, labels, param_grid=param_grid, **kw))
+        grid = param_grid if param_grid is not None else (QUICK_PARAM_GRID if quick else None)
+        return tick(train_model(stacks, labels, param_grid=grid, **kw))
 
     with atomic_directory(out_dir, overwrite=overwrite, kind="materials report") as tmp:
         # --- stack profiles: the paper's features -------------------------------------------
