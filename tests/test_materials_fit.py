@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from planeray.errors import InputError
 from planeray.materials import fit
 from planeray.mc import mc_line_profile
 from planeray.medium import Medium
@@ -395,6 +396,56 @@ def test_beyond_the_table_the_dipole_takes_over_continuously(table):
     # and it narrows as mu_s' grows (more light near the line)
     far = fit.line_kernel(4 * s1, 0.02, **kw)
     assert far[30] / far.sum() > at[30] / at.sum()
+
+
+def test_a_layers_bottom_is_the_slab_image_series_integrated_along_the_line(table):
+    """`walls` row of angle BOTTOM_ANGLE_DEG: the kernel's change is the slab dipole's (Contini et al. 1997) over
+    the semi-infinite one, the line integral checked here by quadrature of the point-source reflectance."""
+    from scipy.integrate import quad
+
+    s, a, n = 0.06, 0.0012, 1.33  # per row: soap-like (0.2 /mm, 0.004 /mm at 0.3 mm per row)
+    d = fit._dipole_per_row(s, a, n)
+    st, z_r, z_b = d["sigma_tr"], d["z"][0], d["z_b"]
+    depth = 100.0
+    period = 2.0 * (depth + z_b + 2.0 / (3.0 * (s + a)))
+
+    def reflectance(rho):  # the slab's image series, point source: sum of sign * z (st r + 1) exp(-st r) / r^3
+        out = 0.0
+        for m in range(-4, 5):
+            for z, sign in ((z_r + m * period, 1.0), (-2.0 * z_b - z_r + m * period, -1.0)):
+                r = np.hypot(rho, z)
+                out += sign * z * (st * r + 1.0) * np.exp(-st * r) / r**3
+        return d["albedo"] / (4.0 * np.pi) * out
+
+    for x in (0.5, 10.0, 60.0):
+        line = 2.0 * quad(lambda y, x=x: reflectance(np.hypot(x, y)), 0.0, np.inf, limit=200)[0]
+        assert fit._layer_line(np.array([x]), d, depth)[0] == pytest.approx(line, rel=1e-6)
+    off = np.arange(0, 101)
+    free = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table)
+    deep = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table, walls=[[1e5, 180.0, 0, 1]])
+    layer = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table, walls=[[depth, 180.0, 0, 1]])
+    np.testing.assert_allclose(deep, free, rtol=1e-9)  # a bottom far below changes nothing
+    ratio = layer / free
+    assert 0.98 < ratio[0] < 1.0 and ratio[100] < 0.9 and np.all(np.diff(ratio[::10]) < 0)  # the far light is lost
+
+
+def test_a_layer_fitted_with_its_depth_is_recovered_and_biased_without(table):
+    from planeray.transport import Transport
+
+    off = np.arange(-60, 61)
+    bottom = [[10.0 / MM, fit.BOTTOM_ANGLE_DEG, 0.0, 1.0]]  # a 10 mm layer of a medium 2 transport paths deep
+    k = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table, walls=bottom)
+    rng = np.random.default_rng(5)
+    dense = (k * 50.0 * (1.0 + 0.002 * rng.standard_normal((4, 4, off.size)))).astype(np.float32)
+    transport = Transport(dense, off)
+    got = {}
+    for depth in (10.0, None):
+        r = fit.fit_transport(transport, mm_per_row=MM, block_px=2, table=table, depth_mm=depth, regions_only=True)
+        got[depth] = (r.regions[1]["mu_s_prime_per_mm"] / 0.2 - 1, r.regions[1]["mu_a_per_mm"] / 0.004 - 1)
+    assert abs(got[10.0][0]) < 0.03 and abs(got[10.0][1]) < 0.05, got
+    assert abs(got[None][1]) > 0.3, got  # the light lost at the bottom read as absorption
+    with pytest.raises(InputError, match="depth_mm"):
+        fit.fit_transport(transport, mm_per_row=MM, table=table, depth_mm=-1.0)
 
 
 # ---------------------------------------------------------------- Fig. 10 extended (`materials report`, `paper`)

@@ -117,6 +117,7 @@ __all__ = [
     "forward_table",
     "line_kernel",
     "WALL_ANGLES_DEG",
+    "BOTTOM_ANGLE_DEG",
     "container_wall_distances",
     "fit_profiles",
     "describe_reasons",
@@ -399,6 +400,9 @@ def _kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot):
 
 #: Wall angles the fit models: parallel to the projector's lines (0) and across them (90 degrees).
 WALL_ANGLES_DEG = (0.0, 90.0)
+#: The ``angle_deg`` of a ``walls`` row that is a layer's **bottom** (``distance_rows``: the layer's depth):
+#: light that reaches it is lost (a layer on a dark or clear support, e.g. the 30 mm of liquid soap).
+BOTTOM_ANGLE_DEG = 180.0
 _Y_GRID = 200  # points of the along-line grid of the half-line integrals (sinh spaced)
 _GL_X = (-0.25, 0.25)  # midpoints across an offset bin (the ratio of two binned kernels), parallel walls
 _WALL_BINS_PER_E_FOLD = 20  # wall distances of a group pooled within 5 % (1 + d)
@@ -434,6 +438,32 @@ def _dipole_line(x, d):
     return d["albedo"] / (2.0 * np.pi) * out
 
 
+def _layer_line(x, d, depth_rows, images=4):
+    """Line integral of the reflectance of a layer ``depth_rows`` deep whose bottom loses the light.
+
+    The dipole's image series for a slab (Contini et al. 1997, Appl. Opt. 36, 4587): the
+    top's extrapolated boundary ``z_b`` above the surface (its Fresnel mismatch), the bottom's
+    ``2 / (3 sigma_t')`` below the bottom (index-matched: nothing returns); sources ``z_r + m P``
+    and images ``-2 z_b - z_r + m P``, period ``P = 2 (t + z_b + z_b')``, ``|m| <= images``.
+    Each source's line integral is :func:`_dipole_line`'s ``2 z sigma_tr K1(sigma_tr rho) / rho``
+    with its signed depth ``z``; ``images = 0`` of a deep layer is the semi-infinite dipole.
+    """
+    x = np.asarray(x, np.float64)
+    st = d["sigma_tr"]
+    z_r, z_b = d["z"][0], d["z_b"]
+    z_b2 = 2.0 * z_r / 3.0  # 2 / (3 sigma_t'), A = 1
+    period = 2.0 * (float(depth_rows) + z_b + z_b2)
+    out = np.zeros_like(x)
+    for m in range(-images, images + 1):
+        for z, sign in ((z_r + m * period, 1.0), (-2.0 * z_b - z_r + m * period, -1.0)):
+            rho = np.sqrt(x * x + z * z)
+            if st > 0:
+                out += sign * z * st * k1e(st * rho) * np.exp(-st * rho) / rho
+            else:
+                out += sign * z / (rho * rho)
+    return d["albedo"] / (2.0 * np.pi) * out
+
+
 def _half_lines(x_abs, d, b_values):
     """``int_b^inf R(sqrt(x^2 + y^2)) dy`` for every ``x`` (rows, >= 0) and every ``b >= 0``: ``(X, B)``."""
     st = d["sigma_tr"]
@@ -459,7 +489,7 @@ def _half_lines(x_abs, d, b_values):
 def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls):
     """The walls' change of the footprint-averaged kernel (``(U,)``), to add to the wall-free kernel.
 
-    ``walls``: array ``(M, 4)`` of ``[distance_rows, angle_deg (0 or 90), side (+1/-1), weight]``;
+    ``walls``: array ``(M, 4)`` of ``[distance_rows, angle_deg (0 or 90; 180: a bottom), side (+1/-1), weight]``;
     each pixel's walls weigh ``1 / pixels`` of the profile (a block's mean profile: the mean of
     its pixels' kernels), the effects of several walls add (as in the scene).
     """
@@ -493,6 +523,13 @@ def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls):
         L = _dipole_line(xs, d)
         ratio = ((L[:, None] - H[:, :M] - H[:, M:]) / np.maximum(L, 1e-300)[:, None])[back]  # (U, M)
         term += ((ratio - 1.0) * wt[None, :]).sum(axis=1) * (kk * w).sum(axis=-1)
+    bottom = walls[walls[:, 1] == BOTTOM_ANGLE_DEG]
+    if bottom.size:
+        u = np.abs(np.asarray(offsets, np.float64))
+        L = _dipole_line(u, d)
+        for depth, wt in bottom[:, [0, 3]]:
+            ratio = _layer_line(u, d, depth) / np.maximum(L, 1e-300)
+            term += wt * (ratio - 1.0) * (kk * w).sum(axis=-1)
     return term
 
 
@@ -533,7 +570,9 @@ def line_kernel(
         Clear container walls near the pixel, rows ``[distance_rows, angle_deg, side,
         weight]`` (:func:`fit_profiles`, :func:`container_wall_distances`): the kernel is the table's times
         the walls' relative effect in diffusion theory (the dipole and its mirror images
-        across the wall's extrapolated boundary, Haskell et al. 1994), ``K L_wall / L``.
+        across the wall's extrapolated boundary, Haskell et al. 1994), ``K L_wall / L``.  A row
+        of angle :data:`BOTTOM_ANGLE_DEG` is a layer's bottom ``distance_rows`` deep that loses
+        the light (the slab's image series, Contini et al. 1997), its effect added likewise.
 
     Returns
     -------
@@ -551,8 +590,9 @@ def line_kernel(
             f"forward model (mu_s' {s0 / h:g}-{s1 / h:g} /mm, mu_a {a0 / h:g}-{a1 / h:g} /mm at this row size)"
         )
     w = None if walls is None else np.atleast_2d(np.asarray(walls, np.float64))
-    if w is not None and (w.shape[1] != 4 or not np.all(np.isin(w[:, 1], WALL_ANGLES_DEG)) or np.any(w[:, 0] < 0)):
-        raise InputError("walls must be rows of [distance_rows >= 0, angle_deg 0 or 90, side, weight]")
+    angles = (*WALL_ANGLES_DEG, BOTTOM_ANGLE_DEG)
+    if w is not None and (w.shape[1] != 4 or not np.all(np.isin(w[:, 1], angles)) or np.any(w[:, 0] < 0)):
+        raise InputError("walls must be rows of [distance_rows >= 0, angle_deg 0, 90 or 180 (a bottom), side, weight]")
     offsets = np.asarray(offsets_rows)
     return _model_kernel(table, math.log(s), math.log(a), offsets, _footprint(rows_per_camera_row), w)
 
@@ -743,7 +783,9 @@ def fit_profiles(
         toward positive offsets, -1 negative) or perpendicular (90) to the lit lines, weighing
         ``weight`` (the share of the profile's pixels that see it).  The model is then the
         table's kernel times the walls' relative effect from diffusion theory (method of
-        images; :func:`line_kernel` with ``walls``).  None: a medium without walls.
+        images; :func:`line_kernel` with ``walls``); a row of angle :data:`BOTTOM_ANGLE_DEG` is
+        the bottom of a layer ``distance_rows`` deep (weight 1).  None: a semi-infinite medium
+        without walls.
 
     Returns
     -------
@@ -967,6 +1009,7 @@ def fit_transport(
     block_px=4,
     containers=None,
     table: ForwardTable | None = None,
+    depth_mm=None,
     regions_only: bool = False,
     progress=None,
 ) -> TransportFit:
@@ -994,6 +1037,10 @@ def fit_transport(
         media are unbounded, and pixels near walls read the light lost through them as
         absorption.
     table : ForwardTable, optional
+    depth_mm : float or dict, optional
+        Depth (mm) of a layer whose bottom loses the light (``walls`` row of angle
+        :data:`BOTTOM_ANGLE_DEG`): one value for every region, or ``{region: depth_mm}``;
+        default every medium semi-infinite.
     regions_only : bool
         Fit the regions only (the maps stay NaN, mask 255): the blocks still give each
         region's noise, but are not fitted themselves (with walls, most of the time).
@@ -1030,11 +1077,26 @@ def fit_transport(
     b = int(block_px)
     if b < 1:
         raise InputError(f"block_px must be >= 1, got {block_px!r}")
+
+    def depth_of(region):
+        v = depth_mm.get(region) if isinstance(depth_mm, dict) else depth_mm
+        if v is None or not np.isfinite(float(v)):
+            return None
+        if not float(v) > 0:
+            raise InputError(f"depth_mm must be positive, got {v!r}")
+        return np.array([[float(v) / float(mm_per_row), BOTTOM_ANGLE_DEG, 0.0, 1.0]])
+
+    def with_bottom(walls, bottom):
+        if bottom is None:
+            return walls
+        return bottom if walls is None else np.concatenate([np.asarray(walls, np.float64).reshape(-1, 4), bottom])
+
     maps = {k: np.full((H, W), np.nan, np.float32) for k in _MAP_NAMES}
     maps["mask"] = np.full((H, W), 255, np.uint8)
     regions, profiles = {}, {}
     for region in sorted(int(v) for v in np.unique(lab) if v != 0):
         inside = lab == region
+        bottom = depth_of(region)
         blocks, means, sds, walls = [], [], [], []
         for r0 in range(0, H, b):
             for c0 in range(0, W, b):
@@ -1047,8 +1109,9 @@ def fit_transport(
                 means.append(mean)
                 sds.append(np.maximum(sd, 0.01 * max(float(np.abs(mean).max()), 1e-30)))
                 blocks.append((r0, c0, m))
-                if dist is not None:
-                    walls.append(_group_walls(dist[r0 : r0 + b, c0 : c0 + b][m]))
+                if dist is not None or bottom is not None:
+                    wb = None if dist is None else _group_walls(dist[r0 : r0 + b, c0 : c0 + b][m])
+                    walls.append(with_bottom(wb, bottom))
         if not blocks:
             continue
         Y = np.stack(means)
@@ -1058,7 +1121,7 @@ def fit_transport(
         if not regions_only:
             res = fit_profiles(
                 Y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=S, calibrated=calibrated,
-                rows_per_camera_row=rpc, table=table, walls=walls if dist is not None else None,
+                rows_per_camera_row=rpc, table=table, walls=walls or None,
             )  # fmt: skip
             if progress is not None:
                 progress(len(blocks))
@@ -1086,6 +1149,8 @@ def fit_transport(
             y = dense[inside].mean(axis=0)
             y[y == 0] = np.nan
             rw = [_group_walls(dist[inside])]
+        if bottom is not None:
+            rw = [with_bottom(None if rw is None else rw[0], bottom)]
         rr = fit_profiles(
             y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=s, calibrated=calibrated,
             rows_per_camera_row=rpc, table=table, walls=rw,
