@@ -251,3 +251,41 @@ def test_step_settings_follow_the_options():
     assert reproduce.step_settings("fig10", quick=False) == {"size": 128, "quick": False}
     assert "seed" not in reproduce.step_settings("study", quick=True, seed=3)
     assert reproduce.step_settings("fig8", quick=True, seed=3)["seed"] == 3
+
+
+def test_the_extensions_report_what_was_measured():
+    """Figs. 10 and 14 extended (the full run): the media's fitted coefficients and the veins' depths, in the
+    comparison rows beside the paper's words; --quick says they were not measured."""
+    from planeray.experiments.paper_report import comparisons
+    from planeray.experiments.skin_depth import depth_summary
+
+    veins = [  # (true depth of the top mm, resolved, error mm)
+        (1.3, False, None),
+        (2.1, True, -0.01),
+        (1.6, True, 0.42),
+        (4.1, True, 0.7),
+        (3.6, False, None),
+    ]
+    rows = [
+        {"true_depth_mm": d, "resolved": ok, "error_mm": e, "depth_se_mm": 0.1, "tone": "fair", "wavelength_nm": 850,
+         "seed": 0, "id": i}
+        for i, (d, ok, e) in enumerate(veins)
+    ]  # fmt: skip
+    depth = {"condition": {"tone": "fair", "wavelength_nm": 850}, "summary": depth_summary(rows), "veins": rows}
+    base = {"ladder": {"gain": None, "enhanced_cnr": None, "best_single_cnr": None, "best_single_delay_us": 0.0}}
+    base["forearm"] = base["ladder"]
+    (_, row) = comparisons("fig14", {**base, "vein_depth": depth})
+    assert "2 of 3 veins 1-3 mm deep resolved, 2 of them within 0.5 mm (worst 0.42 mm)" in row["planeray"]
+    assert "deeper: 1 of 2 resolved" in row["planeray"] and row["verdict"] == "qualitative"
+    assert comparisons("fig14", base)[1]["verdict"] == "not measured"
+    media = {"fat-free milk": {"published": {}, "truth": {"mu_s_prime_rel_err": -0.016, "mu_a_rel_err": None}}}
+    fig10 = {
+        "accuracy": {"fat-free milk": 1.0},
+        "min_material_accuracy": 1.0,
+        "share_of_errors_near_wall": None,
+        "near_wall_pixel_share": 0.4,
+        "misclassified": 0,
+    }
+    row = comparisons("fig10", {**fig10, "media_fit": {"near_wall_mm": 3.0, "media": media}})[-1]
+    assert "truth: fat-free milk -2% / not identified" in row["planeray"] and row["verdict"] == "qualitative"
+    assert comparisons("fig10", fig10)[-1]["verdict"] == "not measured"

@@ -371,10 +371,13 @@ def _skin(folder: Path, s: dict, advance) -> dict:
                 "forearm": {k: ef[k] for k in ("best_single_delay_us", "best_single_cnr", "enhanced_cnr", "gain")},
                 "ladder_detected": {"enhanced": e["enhanced_detected"], "best_single": e["best_single_detected"]},
                 "veins": e["n_veins"],
+                # beyond the paper (the full run): each vein's depth fitted from a sweep
+                **({"vein_depth": r["vein_depth"]} if "vein_depth" in r else {}),
             },
             "figures": [
                 _rel(folder, base / "fig14_skin_enhance.png"),
                 _rel(folder, base / "fig14_skin_enhance_forearm.png"),
+                *([_rel(folder, base / "fig14_vein_depth.png")] if "vein_depth" in r else []),
             ],
         },
         "fig16": {

@@ -59,6 +59,7 @@ from ..skin.imaging import (
 from ..skin.metrics import band_definition, vein_metrics
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
 from ._report import jsonable
+from .skin_depth import DEPTH_CONDITION, depth_summary, depth_validation
 
 __all__ = [
     "REPORT_FORMAT",
@@ -314,7 +315,7 @@ def compare_steps(quick: bool = False) -> int:
     """Progress steps of :func:`run_skin_compare` (conditions, ambient levels, sweep, enhancement, figures)."""
     n_cond = len(QUICK_CONDITIONS) if quick else len(CONDITIONS)
     n_lev = sum(1 for k in AMBIENT_LEVELS if (k in QUICK_LEVELS or not quick))
-    return n_cond + n_lev + 3
+    return n_cond + n_lev + 3 + (0 if quick else 1)  # the full run also measures the veins' depth
 
 
 def _csv(rows: list[dict]) -> str:
@@ -558,6 +559,15 @@ def run_skin_compare(
     valid_f = valid_rows(base_scene, float(sweep[-1]), SWEEP_EXPOSURE_US, lines_per_second=lps)
     forearm_sweep = capture_delay_sweep(base_scene, cam_room, sweep, exposure_us=SWEEP_EXPOSURE_US, seed=seed + 50)
     enh_f, numbers["enhancement_forearm"] = enhancement(base_scene, forearm_sweep, valid_f)
+    depth_rows = None
+    if not quick:  # 5. beyond the paper: each vein's depth, fitted from a whole sweep (planeray skin depth)
+        step("vein depth (skin depth)")
+        depth_rows = depth_validation("forearm", conditions=(DEPTH_CONDITION,), seeds=(seed,), size=shape)
+        numbers["vein_depth"] = {
+            "condition": {"tone": DEPTH_CONDITION[0], "wavelength_nm": DEPTH_CONDITION[1]},
+            "summary": depth_summary(depth_rows),
+            "veins": depth_rows,
+        }
     numbers["seconds"] = time.perf_counter() - t0
 
     if out_dir is not None:
@@ -593,6 +603,10 @@ def run_skin_compare(
                 out=p,
             ),
         }
+        if depth_rows is not None:
+            figures_out["fig14_vein_depth.png"] = lambda p: figs.depth_validation_figure(
+                depth_rows, title=f"Vein depth, forearm, {DEPTH_CONDITION[0]} skin, {DEPTH_CONDITION[1]} nm", out=p
+            )
         with atomic_directory(Path(out_dir), overwrite=overwrite, kind="skin report") as tmp:
             (tmp / MARKER).write_text(json.dumps({"format": REPORT_FORMAT, "format_version": 1}, indent=1))
             (tmp / "skin.json").write_text(json.dumps(jsonable(numbers), indent=1))

@@ -25,12 +25,14 @@ from ..scenes.skin import skin_veins
 from ..skin.depth import fit_veins
 from .skin_capture import simulate_skin
 
-__all__ = ["STRAIGHT_VEINS", "CONDITIONS", "depth_validation", "depth_summary"]
+__all__ = ["STRAIGHT_VEINS", "CONDITIONS", "DEPTH_CONDITION", "depth_validation", "depth_summary"]
 
 #: (depth of the top, diameter) of the straight layout's veins, mm.
 STRAIGHT_VEINS = ((1.0, 2.0), (2.0, 3.0), (3.0, 1.5), (1.5, 4.0))
 #: The issue's conditions: (tone, wavelength in nm).
 CONDITIONS = (("fair", 638), ("fair", 850), ("dark", 638), ("dark", 850))
+#: The condition ``skin compare`` (full) and ``planeray paper`` measure the forearm's vein depths in.
+DEPTH_CONDITION = ("fair", 850)
 #: The issue's target: resolved veins this deep (mm, top) within TARGET_ERROR_MM.
 TARGET_DEPTHS_MM = (1.0, 3.0)
 TARGET_ERROR_MM = 0.5
