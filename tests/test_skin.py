@@ -97,6 +97,39 @@ def test_explicit_vein_ground_truth():
     assert 0.002 < ca < c / 2
 
 
+def test_a_vein_ends_where_its_centreline_ends():
+    """Beyond a vein's end its shadow fades as from a round cap; it does not run on along the last
+    segment's line to the image's edge, where the ground truth has no vein (issue 27)."""
+    H = W = 32
+    P, mm = 160, 0.3  # 48 mm field, 1.5 mm pixels
+    a, b = np.array([-10.0, 8.0]), np.array([24.0, 30.0])  # from above the image to its middle, 57 deg to the rows
+    vein = dict(depth_mm=2.0, diameter_mm=3.0, points_mm=[a.tolist(), b.tolist()])
+    s = make_scene("skin", (H, W), projector_rows=P, seed=0, veins=[vein])
+    none = make_scene("skin", (H, W), projector_rows=P, seed=0, veins=[])
+    # The geometry, independently: pixel centres, distance to the segment and to its line, position along it.
+    c = (np.arange(H) + 0.5) * P * mm / H
+    Q = np.stack(np.meshgrid(c, c, indexing="ij"), axis=-1)
+    d = b - a
+    t = (Q - a) @ d / (d @ d)
+    d_seg = np.linalg.norm(Q - a - np.clip(t, 0.0, 1.0)[..., None] * d, axis=-1)
+    d_line = np.abs((Q - a) @ np.array([d[1], -d[0]])) / np.linalg.norm(d)
+    reach_mm = (48 + 1) * mm  # the vein tables' rho grid ends at 48 rows
+    # Farther than the reach from the segment: exactly the vein-free skin, also on the line's continuation.
+    far = d_seg > reach_mm + 0.5
+    assert (far & (d_line < 3.0)).sum() >= 8  # pixels on the line beyond the end are tested
+    assert np.array_equal(s.transport.dense[far], none.transport.dense[far])
+    # The short-range image: full shadow beside the middle, weaker at the end, fading beyond it.
+    img, ref = (x.transport.render(Band(500.0, 200.0, LPS)) for x in (s, none))
+    lit = ref > 0  # the band misses the projector in the first and last camera rows
+    C = 1.0 - img / np.where(lit, ref, 1.0)
+    mid = C[lit & (d_line < 1.0) & (t > 0.3) & (t < 0.7)].mean()
+    end = C[lit & (t > 1.0) & (d_seg < 1.5)].mean()
+    beyond = C[lit & (t > 1.0) & (d_seg > 4.5) & (d_seg < 7.5) & (d_line < 2.0)].mean()
+    assert mid > 0.3
+    assert 0.1 * mid < end < 0.8 * mid
+    assert 0.0 <= beyond < 0.25 * end
+
+
 def test_bad_veins_are_refused():
     with pytest.raises(InputError, match="depth_mm"):
         make_scene("skin", (16, 16), veins=[dict(depth_mm=9.0, diameter_mm=2.0, points_mm=[[0, 0], [1, 1]])])

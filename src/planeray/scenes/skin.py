@@ -77,7 +77,9 @@ Assumptions
   tones interpolate the log ratio linearly in the melanosome fraction (clamped below fair)
   and get their own background kernel ``K0``.
 * Veins are locally straight (the nearest segment of the centreline gives ``rho`` and the
-  angle); where a branch meets its parent both perturb the kernel (multiplied).
+  angle); beyond a vein's ends its shadow fades as from a round cap (``|rho|`` is the
+  distance to the end, the angle the cap's tangent: :func:`_nearest_segment`); where a
+  branch meets its parent both perturb the kernel (multiplied).
 * The camera pixel's own extent across a vein is not integrated (the ratio is taken at
   the pixel centre).
 
@@ -291,10 +293,19 @@ def _check_veins(veins) -> list[dict]:
 
 
 def _nearest_segment(points, X, Y):
-    """Distance, signed ``rho`` (mm) and angle to the rows (deg, in [0, 180)) of the nearest segment.
+    """Distance, signed distance ``rho`` (mm) and local angle to the rows (deg, in [0, 180)) of
+    each point ``(X, Y)`` from a vein's centreline.
 
     The centreline is sampled every <= 0.25 mm (a k-d tree finds the nearest sample);
-    the pixel is then projected exactly onto that sample's segment and its two neighbours.
+    the point is then projected exactly onto that sample's segment and its two neighbours.
+    Where the projection falls inside the nearest segment, ``rho`` is the signed distance
+    from that segment's line and the angle the segment's.  Where it falls on a segment's end
+    (beyond the vein's ends, or outside a bend), the nearest centreline point is that end:
+    ``|rho|`` is the distance to it and the angle is the tangent of the round cap there
+    (perpendicular to the point's offset from it), so a vein's shadow ends in a round cap
+    (as its ground-truth mask, ``distance <= radius``) instead of continuing along the last
+    segment's line, and it is continuous everywhere (at the cap's edge the tangent is the
+    segment's direction).
     """
     points = np.asarray(points, dtype=float)
     d = np.diff(points, axis=0)
@@ -310,6 +321,7 @@ def _nearest_segment(points, X, Y):
     k0 = seg_of[idx]
     best = np.full(len(P), np.inf)
     kbest = k0.copy()
+    tbest = np.zeros(len(P))
     for dk in (-1, 0, 1):
         k = np.clip(k0 + dk, 0, len(p0) - 1)
         t = np.clip(np.einsum("ij,ij->i", P - p0[k], d[k]) / seg_len[k] ** 2, 0.0, 1.0)
@@ -317,9 +329,18 @@ def _nearest_segment(points, X, Y):
         better = dist < best
         best = np.where(better, dist, best)
         kbest = np.where(better, k, kbest)
+        tbest = np.where(better, t, tbest)
     ang = np.degrees(np.arctan2(d[kbest, 0], d[kbest, 1])) % 180.0  # direction (sin a, cos a) in (x, y)
+    # On an end of the segment: the tangent of the round cap, perpendicular to the offset.
+    off = P - p0[kbest] - tbest[:, None] * d[kbest]
+    cap = ((tbest <= 0.0) | (tbest >= 1.0)) & (best > 0.0)
+    ang = np.where(cap, np.degrees(np.arctan2(-off[:, 1], off[:, 0])) % 180.0, ang)
     a = np.radians(ang)
-    rho = (P[:, 0] - p0[kbest, 0]) * np.cos(a) - (P[:, 1] - p0[kbest, 1]) * np.sin(a)
+    rho = np.where(
+        cap,
+        off[:, 0] * np.cos(a) - off[:, 1] * np.sin(a),  # +-distance: the cap's tangent is normal to the offset
+        (P[:, 0] - p0[kbest, 0]) * np.cos(a) - (P[:, 1] - p0[kbest, 1]) * np.sin(a),
+    )
     return best.reshape(X.shape), rho.reshape(X.shape), ang.reshape(X.shape)
 
 
