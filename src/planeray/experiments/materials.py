@@ -532,12 +532,13 @@ def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FI
     """``mu_s'`` and ``mu_a`` (1/mm) of each medium of a ``materials`` scene, fitted, beside the published ones.
 
     Each container's pixels at least ``near_wall_mm`` from its walls are fitted as one region
-    (:func:`planeray.materials.fit.fit_transport`, ``regions_only``, its noise from the spread of
-    :data:`MEDIA_FIT_BLOCK_PX` blocks; shape only -- the scene has no white target --,
-    the containers' walls modelled from the scene's material map), once per transport of
-    ``transports`` (``{source: Transport}``, e.g. the scene's ground truth and the demultiplexed
-    capture).  Extends Fig. 10 (Sec. 8: "to use delay profiles to better model or inverse render
-    subsurface scattering").
+    (shape only -- the scene has no white target --, the containers' walls modelled from the
+    scene's material map), once per entry of ``transports`` (``{source: Transport or Stack}``,
+    e.g. the scene's ground truth and the capture): a transport by
+    :func:`planeray.materials.fit.fit_transport` (``regions_only``, its noise from the spread of
+    :data:`MEDIA_FIT_BLOCK_PX` blocks), a stack by :func:`planeray.materials.stackfit.fit_stack`
+    (its images fitted directly: no demultiplexing noise in the tail).  Extends Fig. 10 (Sec. 8:
+    "to use delay profiles to better model or inverse render subsurface scattering").
 
     Returns
     -------
@@ -547,7 +548,9 @@ def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FI
         "mu_s_prime_rel_err", "mu_a_rel_err", "pixels"}}}}`` (None where a parameter is not identified).
     """
     from ..materials.fit import fit_transport
+    from ..materials.stackfit import fit_stack
     from ..optical_data import material_medium
+    from ..stack import Stack
     from ..scenes.base import DEFAULT_MM_PER_ROW
 
     mm = float(scene.params.get("mm_per_row", DEFAULT_MM_PER_ROW))
@@ -564,14 +567,17 @@ def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FI
         for cid, name in MATERIAL_CLASSES.items()
     }
     for source, transport in transports.items():
-        res = fit_transport(
-            transport,
-            mm_per_row=mm,
-            labels=regions,
-            block_px=MEDIA_FIT_BLOCK_PX,
-            containers=containers,
-            regions_only=True,
-        )
+        if isinstance(transport, Stack):
+            res = fit_stack(transport, mm_per_row=mm, labels=regions, containers=containers)
+        else:
+            res = fit_transport(
+                transport,
+                mm_per_row=mm,
+                labels=regions,
+                block_px=MEDIA_FIT_BLOCK_PX,
+                containers=containers,
+                regions_only=True,
+            )
         for cid, name in MATERIAL_CLASSES.items():
             reg = res.regions.get(cid) or {}
             row = {"pixels": int((regions == cid).sum())}
@@ -813,7 +819,7 @@ def run_materials_report(
             truth_scene = _capture_scene(test)
             numbers["media_fit"] = tick(
                 media_fit_numbers(
-                    truth_scene, {"ground-truth transport": truth_scene.transport, "demultiplexed capture": T_test}
+                    truth_scene, {"ground-truth transport": truth_scene.transport, "capture (stack fit)": test.stack}
                 )
             )
 
