@@ -553,7 +553,7 @@ def fit_cmd(
         if white_reference is not None:
             white = _load_stack(white_reference)
             if white.shape != stack.shape or not (
-                np.array_equal(white.delays, stack.delays) and np.array_equal(white.exposures, stack.exposures)
+                np.array_equal(white.delay_us, stack.delay_us) and np.array_equal(white.exposure_us, stack.exposure_us)
             ):
                 raise ValueError(
                     f"--white-reference {white_reference} is {white.shape[0]}x{white.shape[1]} over "

@@ -550,8 +550,8 @@ def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FI
     from ..materials.fit import fit_transport
     from ..materials.stackfit import fit_stack
     from ..optical_data import material_medium
-    from ..stack import Stack
     from ..scenes.base import DEFAULT_MM_PER_ROW
+    from ..stack import Stack
 
     mm = float(scene.params.get("mm_per_row", DEFAULT_MM_PER_ROW))
     material = np.asarray(scene.maps["material"], np.int64)

@@ -452,7 +452,7 @@ def fit_stack(
     if calibrated:
         if isinstance(white, Stack):
             if white.shape != stack.shape or not (
-                np.array_equal(white.delays, stack.delays) and np.array_equal(white.exposures, stack.exposures)
+                np.array_equal(white.delay_us, stack.delay_us) and np.array_equal(white.exposure_us, stack.exposure_us)
             ):
                 raise InputError("the white reference must be captured with the same sweep and image size")
             scale = white_stack_scale(white, albedo=white_albedo)
