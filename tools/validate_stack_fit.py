@@ -146,17 +146,41 @@ def summarize(rows):
     return out
 
 
-def scene_capture(size):
-    """(b): the materials scene's test capture, the stack fit beside the demultiplexed transport's."""
-    from planeray.experiments.materials import TEST_SETTINGS, media_fit_numbers, simulate_capture
-    from planeray.scenes import make_scene
+def scene_capture(size, demux):
+    """(b): the materials scene's test capture: the stack fit (shape only; a white card's capture), the
+    demultiplex-then-fit path and the ground-truth transport, each container >= 3 mm from its walls, walls modelled."""
+    from planeray.experiments.materials import (
+        TEST_SETTINGS,
+        _capture_scene,
+        media_fit_numbers,
+        simulate_capture,
+        simulate_white_reference,
+    )
+    from planeray.materials.model import capture_transport
 
     cap = simulate_capture(size=(size, size), **TEST_SETTINGS)
-    scene = make_scene("materials", (size, size), projector_rows=720, seed=TEST_SETTINGS["seed"],
-                       placement=TEST_SETTINGS["placement"])  # fmt: skip
-    t0 = time.time()
-    out = media_fit_numbers(scene, {"capture": cap.stack})
-    out["seconds"] = time.time() - t0
+    white = simulate_white_reference(
+        size=(size, size), seed=TEST_SETTINGS["seed"] + 1000, noise=TEST_SETTINGS["noise"],
+        ambient_e_per_us=TEST_SETTINGS["ambient_e_per_us"],
+    )  # fmt: skip
+    scene = _capture_scene(cap)
+    sources = {
+        "ground-truth transport": scene.transport,
+        "capture, stack fit, shape only": cap.stack,
+        "capture, stack fit, white reference": cap.stack,
+    }
+    if demux:
+        sources["capture, demultiplexed, transport fit"] = capture_transport(cap.stack)
+    out = {}
+    for name, src in sources.items():
+        t0 = time.time()
+        whites = {name: white} if "white" in name else None
+        r = media_fit_numbers(scene, {name: src}, whites=whites)
+        for medium, row in r["media"].items():
+            out.setdefault(medium, {"published": row["published"]})[name] = row[name]
+        out.setdefault("seconds", {})[name] = round(time.time() - t0, 1)
+        print(name, json.dumps({m: (v[name] if m != "seconds" else None) for m, v in out.items() if m != "seconds"}),
+              flush=True)  # fmt: skip
     return out
 
 
@@ -175,7 +199,7 @@ def main():
         out_path.write_text(json.dumps(out, indent=1))
     if "--media-only" not in sys.argv:
         size = 64 if quick else 128
-        out[f"materials_scene_{size}"] = scene_capture(size)
+        out[f"materials_scene_{size}"] = scene_capture(size, demux)
         print(json.dumps(out[f"materials_scene_{size}"], indent=1), flush=True)
     out["seconds"] = time.time() - t0
     if out_path.exists() and "--scene-only" in sys.argv:
