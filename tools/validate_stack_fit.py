@@ -207,7 +207,23 @@ def main():
         out = {**prev, **out}
     out_path.parent.mkdir(parents=True, exist_ok=True)
     out_path.write_text(json.dumps(out, indent=1))
-    print(json.dumps({k: v for k, v in out.items() if k != "known_media"}, indent=1))
+    for key, block in out.items():  # a compact table of the scene's relative errors
+        if key.startswith("materials_scene"):
+            print(key)
+            for medium, row in block.items():
+                if medium == "seconds":
+                    continue
+                cells = [
+                    f"{src}: {_pct(v['mu_s_prime_rel_err'])} / {_pct(v['mu_a_rel_err'])}"
+                    for src, v in row.items()
+                    if src != "published"
+                ]
+                print(f"  {medium}: " + "; ".join(cells))
+    print(f"written: {out_path} ({out['seconds']:.0f} s)")
+
+
+def _pct(v):
+    return "NaN" if v is None else f"{v:+.1%}"
 
 
 if __name__ == "__main__":

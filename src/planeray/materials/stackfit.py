@@ -241,12 +241,13 @@ def white_stack_scale(white: Stack, *, albedo=0.99, design: StackDesign | None =
         D = np.stack([design.A[g] @ direct, design.exposure_rows], axis=1)  # (N, 2)
         Y = imgs[:, rows, :].reshape(imgs.shape[0], -1)
         M = ok[:, rows, :].reshape(imgs.shape[0], -1)
-        for j in range(Y.shape[1]):
+        full = M.all(axis=0)
+        c = np.full(Y.shape[1], np.nan)
+        c[full] = (np.linalg.pinv(D) @ Y[:, full])[0]  # every image usable: one solve for all such pixels
+        for j in np.flatnonzero(~full & (M.sum(axis=0) >= 3)):
             m = M[:, j]
-            if m.sum() < 3:
-                continue
-            coef, *_ = np.linalg.lstsq(D[m], Y[m, j], rcond=None)
-            out.reshape(H, W)[rows[j // W], j % W] = coef[0]
+            c[j] = np.linalg.lstsq(D[m], Y[m, j], rcond=None)[0][0]
+        out[rows] = c.reshape(rows.size, W)
     out /= float(albedo)
     return np.where(out > 0, out, np.nan)
 
