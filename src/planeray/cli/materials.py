@@ -642,7 +642,7 @@ def fit_cmd(
         "calibration": (
             f"white reference {white_reference} (albedo {white_albedo:g}): absolute reflectance"
             if calibrated
-            else "none: shape only (a free scale per block); mu_a is less identifiable"
+            else f"none: shape only (a free scale per {'region' if method == 'stack' and block is None else 'block'}); mu_a is less identifiable"
         ),
         "block_px": block,
         "walls": (

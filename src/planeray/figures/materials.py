@@ -433,7 +433,8 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
             axp.plot(x, model, "-", color=colour, lw=1.2, label=label)
         else:
             axp.plot([], [], ".", color=colour, label=label)
-    if stack:  # the regions' mean images over the fitted model: image index on x, linear
+    if stack:  # the regions' mean images over the fitted model: image index on x
+        axp.set_yscale("log")
         axp.set_xlabel("stack image (index; the sweep's order, boundary images left out)")
         axp.set_ylabel("mean image value (normalized)")
         axp.set_title("regions' mean stack images (dots) and the fitted model (lines)", fontsize=9)
