@@ -136,6 +136,13 @@ def summarize(rows):
             mu_a_median_rel_err=stat(ea, 50),
             mu_a_p90_rel_err=stat(ea, 90),
         )
+        for p in ("s", "a"):  # are the standard errors honest? |error| / standard error
+            z = np.array(
+                [abs(r[f"err_{p}"]) / r[f"se_{p}"] for r in sel if r.get(f"se_{p}") and r[f"err_{p}"] is not None]
+            )
+            key = "mu_s_prime" if p == "s" else "mu_a"
+            out[tag][f"{key}_within_2se"] = float((z < 2).mean()) if z.size else None
+            out[tag][f"{key}_median_err_over_se"] = float(np.median(z)) if z.size else None
         per = {}
         for r, e_s, e_a in zip([r for r in rows if tag in r], es, ea):
             key = f"{r['mu_s_prime']}/{r['mu_a']}"
