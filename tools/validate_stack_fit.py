@@ -12,7 +12,8 @@
 (b) **The materials scene's noisy capture** (``materials`` report's test settings), pixels >= 3 mm
     from the walls, walls modelled: :func:`planeray.experiments.materials.media_fit_numbers`.
 
-    nice -n 19 python tools/validate_stack_fit.py [--quick] [--no-demux] [--scene-only] [--out FILE]
+    nice -n 19 python tools/validate_stack_fit.py [--quick] [--no-demux] [--scene-only | --media-only]
+        [--scene-seeds 1,2,3] [--out FILE]
 """
 
 from __future__ import annotations
@@ -153,7 +154,7 @@ def summarize(rows):
     return out
 
 
-def scene_capture(size, demux):
+def scene_capture(size, demux, seed=None):
     """(b): the materials scene's test capture: the stack fit (shape only; a white card's capture), the
     demultiplex-then-fit path and the ground-truth transport, each container >= 3 mm from its walls, walls modelled."""
     from planeray.experiments.materials import (
@@ -165,9 +166,10 @@ def scene_capture(size, demux):
     )
     from planeray.materials.model import capture_transport
 
-    cap = simulate_capture(size=(size, size), **TEST_SETTINGS)
+    settings = {**TEST_SETTINGS, **({} if seed is None else {"seed": seed})}
+    cap = simulate_capture(size=(size, size), **settings)
     white = simulate_white_reference(
-        size=(size, size), seed=TEST_SETTINGS["seed"] + 1000, noise=TEST_SETTINGS["noise"],
+        size=(size, size), seed=settings["seed"] + 1000, noise=TEST_SETTINGS["noise"],
         ambient_e_per_us=TEST_SETTINGS["ambient_e_per_us"],
     )  # fmt: skip
     scene = _capture_scene(cap)
@@ -191,6 +193,38 @@ def scene_capture(size, demux):
     return out
 
 
+def scene_summary(blocks):
+    """Median and p90 of |relative error| per source over the captures, milks and toothpaste (the soap is a
+    30 mm layer: not the semi-infinite medium of the model) and all five, and the identified shares."""
+    out = {}
+    for subset, names in (
+        ("milks_and_toothpaste", ("fat-free milk", "2% milk", "whole milk", "toothpaste")),
+        ("all", None),
+    ):
+        for block in blocks:
+            for medium, row in block.items():
+                if medium == "seconds" or (names is not None and medium not in names):
+                    continue
+                for src, v in row.items():
+                    if src == "published":
+                        continue
+                    d = out.setdefault(subset, {}).setdefault(src, {"s": [], "a": []})
+                    d["s"].append(np.nan if v["mu_s_prime_rel_err"] is None else abs(v["mu_s_prime_rel_err"]))
+                    d["a"].append(np.nan if v["mu_a_rel_err"] is None else abs(v["mu_a_rel_err"]))
+        for src, d in out[subset].items():
+            s_, a_ = np.array(d["s"]), np.array(d["a"])
+
+            def q(v, p):
+                return float(np.nanpercentile(v, p)) if np.isfinite(v).any() else None
+
+            out[subset][src] = dict(
+                fits=int(s_.size), mu_s_prime_identified=float(np.isfinite(s_).mean()),
+                mu_s_prime_median=q(s_, 50), mu_s_prime_p90=q(s_, 90), mu_a_identified=float(np.isfinite(a_).mean()),
+                mu_a_median=q(a_, 50), mu_a_p90=q(a_, 90),
+            )  # fmt: skip
+    return out
+
+
 def main():
     quick = "--quick" in sys.argv
     demux = "--no-demux" not in sys.argv
@@ -206,8 +240,17 @@ def main():
         out_path.write_text(json.dumps(out, indent=1))
     if "--media-only" not in sys.argv:
         size = 64 if quick else 128
-        out[f"materials_scene_{size}"] = scene_capture(size, demux)
-        print(json.dumps(out[f"materials_scene_{size}"], indent=1), flush=True)
+        seeds = [None]
+        if "--scene-seeds" in sys.argv:
+            seeds = [int(v) for v in sys.argv[sys.argv.index("--scene-seeds") + 1].split(",")]
+        for seed in seeds:
+            tag = f"materials_scene_{size}" + ("" if seed is None else f"_seed{seed}")
+            out[tag] = scene_capture(size, demux, seed)
+        if len(seeds) > 1:
+            out[f"materials_scene_{size}_summary"] = scene_summary(
+                [out[k] for k in out if k.startswith(f"materials_scene_{size}_seed")]
+            )
+            print(json.dumps(out[f"materials_scene_{size}_summary"], indent=1), flush=True)
     out["seconds"] = time.time() - t0
     if out_path.exists() and "--scene-only" in sys.argv:
         prev = json.loads(out_path.read_text())
