@@ -258,7 +258,7 @@ def main():
     out_path.parent.mkdir(parents=True, exist_ok=True)
     out_path.write_text(json.dumps(out, indent=1))
     for key, block in out.items():  # a compact table of the scene's relative errors
-        if key.startswith("materials_scene"):
+        if key.startswith("materials_scene") and not key.endswith("_summary"):
             print(key)
             for medium, row in block.items():
                 if medium == "seconds":
