@@ -13,7 +13,7 @@
     from the walls, walls modelled: :func:`planeray.experiments.materials.media_fit_numbers`.
 
     nice -n 19 python tools/validate_stack_fit.py [--quick] [--no-demux] [--scene-only | --media-only]
-        [--scene-seeds 1,2,3] [--out FILE]
+        [--scene-seeds 1,2,3] [--near-wall-mm 3] [--out FILE]
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ def summarize(rows):
     return out
 
 
-def scene_capture(size, demux, seed=None):
+def scene_capture(size, demux, seed=None, near_wall_mm=3.0):
     """(b): the materials scene's test capture: the stack fit (shape only; a white card's capture), the
     demultiplex-then-fit path and the ground-truth transport, each container >= 3 mm from its walls, walls modelled."""
     from planeray.experiments.materials import (
@@ -184,7 +184,7 @@ def scene_capture(size, demux, seed=None):
     for name, src in sources.items():
         t0 = time.time()
         whites = {name: white} if "white" in name else None
-        r = media_fit_numbers(scene, {name: src}, whites=whites)
+        r = media_fit_numbers(scene, {name: src}, whites=whites, near_wall_mm=near_wall_mm)
         for medium, row in r["media"].items():
             out.setdefault(medium, {"published": row["published"]})[name] = row[name]
         out.setdefault("seconds", {})[name] = round(time.time() - t0, 1)
@@ -243,9 +243,11 @@ def main():
         seeds = [None]
         if "--scene-seeds" in sys.argv:
             seeds = [int(v) for v in sys.argv[sys.argv.index("--scene-seeds") + 1].split(",")]
+        near = float(sys.argv[sys.argv.index("--near-wall-mm") + 1]) if "--near-wall-mm" in sys.argv else 3.0
         for seed in seeds:
             tag = f"materials_scene_{size}" + ("" if seed is None else f"_seed{seed}")
-            out[tag] = scene_capture(size, demux, seed)
+            tag += "" if near == 3.0 else f"_near{near:g}mm"
+            out[tag] = scene_capture(size, demux, seed, near)
         if len(seeds) > 1:
             out[f"materials_scene_{size}_summary"] = scene_summary(
                 [out[k] for k in out if k.startswith(f"materials_scene_{size}_seed")]
