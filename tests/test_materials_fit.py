@@ -569,10 +569,10 @@ def test_the_stack_fit_says_why_a_parameter_is_not_identified(stacks, table):
     sat[:, :, 2] = True  # region 2: every image saturated, no data
     from dataclasses import replace
 
-    res = fit_stack(replace(st, saturated=sat), mm_per_row=MM, labels=labels, table=table, max_relative_se=0.03)
+    res = fit_stack(replace(st, saturated=sat), mm_per_row=MM, labels=labels, table=table, max_relative_se=0.08)
     r1, r2 = res.regions[1], res.regions[2]
     se_s, se_a = r1["log_se"]
-    assert se_s < 0.03 < se_a  # region 1: mu_s' constrained to 3 %, mu_a not
+    assert se_s < 0.08 < se_a  # region 1: mu_s' constrained to 8 %, mu_a not
     assert r1["mu_s_prime_per_mm"] is not None and r1["mu_a_per_mm"] is None and r1["mask"] == 16
     assert any("mu_a not constrained" in t for t in r1["not_identifiable"])
     assert r2["mu_s_prime_per_mm"] is None and r2["mask"] & 1 and np.isnan(res.maps["mu_a_per_mm"][:, 2]).all()

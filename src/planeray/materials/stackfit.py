@@ -80,6 +80,11 @@ __all__ = ["StackDesign", "stack_design", "stack_model_images", "white_stack_sca
 
 #: Fewer used images with data than this: no fit (reason bit 1).
 MIN_IMAGES = 6
+#: The forward model's relative error per image, independent (of the modelled laser light).
+STACK_MODEL_RELATIVE_SD = MODEL_RELATIVE_SD
+#: The forward model's correlated relative error: the kernel off by this much in each of a few smooth bumps
+#: over the offsets (table interpolation: 2-6 % against direct Monte Carlo, tests and tools/validate_stack_fit.py).
+STACK_MODEL_CORRELATED_SD = 0.03
 
 
 @dataclass(frozen=True)
@@ -288,6 +293,14 @@ def _region_data(imgs, ok, rows, cols):
     return y, np.sqrt(var), m
 
 
+def _model_error_basis(offsets):
+    """Smooth bumps over ``log(1 + |u|)`` (``(U, J)``): the shapes of the forward model's correlated error."""
+    x = np.log1p(np.abs(np.asarray(offsets, np.float64)))
+    centres = np.log1p(np.array([0.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0]))
+    width = 0.5 * float(np.mean(np.diff(centres)))
+    return np.exp(-0.5 * ((x[:, None] - centres[None, :]) / width) ** 2)
+
+
 def _fit_region(
     y,
     se,
@@ -302,53 +315,73 @@ def _fit_region(
     h,
     max_relative_se,
     model_relative_sd,
+    model_correlated_sd,
     lo,
     hi,
     starts,
     Kg,
+    basis,
 ):
-    """One region's fit: ``dict`` of per-row estimates (log), standard errors, mask bits, scale, ambient, model."""
+    """One region's fit: ``dict`` of per-row estimates (log), standard errors, mask bits, scale, ambient, model.
+
+    The data's covariance is the images' standard errors (diagonal) plus the forward model's error:
+    ``model_relative_sd`` of the modelled laser light per image (independent) and a correlated part --
+    the kernel off by ``model_correlated_sd`` (relative) in each smooth bump of ``basis`` over the
+    offsets, independently, seen through the illumination matrix.  Residuals are whitened by it (held
+    at the current estimate during a least-squares pass; three passes).
+    """
     out = dict(mask=0, x=None, se_log=np.full(2, np.nan), c=np.nan, b=np.nan, chi2=np.nan, model=None, kernel=None)
     ok = np.isfinite(y) & np.isfinite(se)
     if ok.sum() < MIN_IMAGES:
         out["mask"] |= 1
         return out
-    floor = 1e-6 * max(float(np.nanmax(np.abs(y[ok]))), 1e-30)
-    se0 = np.where(ok, np.maximum(se, floor), 1.0)
-    yk = np.where(ok, y, 0.0)
+    Y, A, I = y[ok], Abar[ok], Iw[ok]
+    se0 = np.maximum(se[ok], 1e-6 * max(float(np.abs(Y).max()), 1e-30))
 
     def kernel(x):
         return _model_kernel(table, x[0], x[1], offsets, foot, walls)
 
-    def linear(m, sd):
-        """Best ``(c, b)`` for the modelled laser images ``m`` (``c = 1`` calibrated) and the residual."""
+    def whitener(m, c, k):
+        """Inverse Cholesky factor of the covariance at modelled laser images ``c m`` and kernel ``c k``."""
+        cov = np.diag(se0**2 + (model_relative_sd * c * m) ** 2)
+        if model_correlated_sd > 0 and k is not None:
+            B = A @ (c * k[:, None] * basis)  # (N, J): the images' change per bump of relative kernel error
+            cov = cov + model_correlated_sd**2 * (B @ B.T)
+        return np.linalg.inv(np.linalg.cholesky(cov))
+
+    def linear(m, L):
+        """Best ``(c, b)`` for the modelled laser images ``m`` (``c = 1`` calibrated) and the whitened residual."""
+        t = L @ Y
         if calibrated:
-            w = np.where(ok, Iw / sd, 0.0)
-            t = np.where(ok, (yk - m) / sd, 0.0)
+            w = L @ I
+            t = t - L @ m
             b = float(w @ t) / max(float(w @ w), 1e-300)
             return 1.0, b, t - b * w
-        D = np.stack([np.where(ok, m / sd, 0.0), np.where(ok, Iw / sd, 0.0)], axis=1)
-        t = np.where(ok, yk / sd, 0.0)
+        D = L @ np.stack([m, I], axis=1)
         coef, *_ = np.linalg.lstsq(D, t, rcond=None)
         return float(coef[0]), float(coef[1]), t - D @ coef
 
-    sd = np.hypot(se0, model_relative_sd * np.abs(yk))
-    # start: the table's grid point of least misfit (walls left out: a start only)
-    Mg = Kg @ Abar.T  # (G, N)
-    costs = [float(np.sum(linear(Mg[i], sd)[2] ** 2)) for i in range(len(Mg))]
-    x0 = np.clip(starts[int(np.argmin(costs))], lo + 1e-9, hi - 1e-9)
+    # start: the table's grid point of least misfit (walls left out: a start only), independent errors
+    L = np.diag(1.0 / np.hypot(se0, model_relative_sd * np.abs(Y)))
+    Mg = Kg @ A.T  # (G, N)
+    costs = [float(np.sum(linear(Mg[i], L)[2] ** 2)) for i in range(len(Mg))]
+    g0 = int(np.argmin(costs))
+    x0 = np.clip(starts[g0], lo + 1e-9, hi - 1e-9)
+    c0 = linear(Mg[g0], L)[0]
+    L = whitener(Mg[g0], c0, Kg[g0])
 
-    def resid(x, sd_=None):
-        return linear(Abar @ kernel(x), sd if sd_ is None else sd_)[2]
+    def resid(x):
+        return linear(A @ kernel(x), L)[2]
 
     try:
-        for _ in range(2):  # the model's own error: of the data's magnitude, then of the fitted laser light
-            res = least_squares(lambda x: resid(x), x0, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
+        for _ in range(3):  # the model's error at the start, then at each estimate
+            res = least_squares(resid, x0, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
             x0 = np.clip(res.x, lo + 1e-9, hi - 1e-9)
-            m = Abar @ kernel(x0)
-            c, b, _ = linear(m, sd)
-            sd = np.hypot(se0, model_relative_sd * np.abs(c * m))
-        res = least_squares(lambda x: resid(x), x0, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
+            k = kernel(x0)
+            m = A @ k
+            c, _, _ = linear(m, L)
+            L = whitener(m, abs(c), k)
+        res = least_squares(resid, x0, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
     except (ValueError, np.linalg.LinAlgError):
         out["mask"] |= 64
         return out
@@ -356,24 +389,24 @@ def _fit_region(
         out["mask"] |= 64
     x = res.x
     k = kernel(x)
-    m = Abar @ k
-    c, b, r = linear(m, sd)
-    # standard errors: Jacobian of all unknowns (log s, log a, c[, b]) of the full residual
+    m = A @ k
+    c, b, r = linear(m, L)
+    # standard errors: Jacobian of all unknowns (log s, log a, c[, b]) of the whitened residual
     step = 1e-4
     cols = []
     for i in range(2):
         xi = np.array(x, float)
         xi[i] += step
-        cols.append(np.where(ok, c * (Abar @ kernel(xi) - m) / step / sd, 0.0))
+        cols.append(L @ (c * (A @ kernel(xi) - m)) / step)
     if not calibrated:
-        cols.append(np.where(ok, m / sd, 0.0))
-    cols.append(np.where(ok, Iw / sd, 0.0))
+        cols.append(L @ m)
+    cols.append(L @ I)
     J = np.stack(cols, axis=1)
     n_dof = max(int(ok.sum()) - J.shape[1], 1)
     chi2 = float(r @ r) / n_dof
     cov = np.linalg.pinv(J.T @ J) * max(chi2, 1.0)
     se_log = np.sqrt(np.maximum(np.diag(cov)[:2], 0.0))
-    out.update(x=x, se_log=se_log, c=c, b=b, chi2=chi2, model=c * m + b * Iw, kernel=c * k)
+    out.update(x=x, se_log=se_log, c=c, b=b, chi2=chi2, model=c * (Abar @ k) + b * Iw, kernel=c * k)
     edge_tol = 0.02
     if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:
         out["mask"] |= 2
@@ -402,7 +435,8 @@ def fit_stack(
     block_px=None,
     table: ForwardTable | None = None,
     max_relative_se=MAX_RELATIVE_SE,
-    model_relative_sd=MODEL_RELATIVE_SD,
+    model_relative_sd=STACK_MODEL_RELATIVE_SD,
+    model_correlated_sd=STACK_MODEL_CORRELATED_SD,
     progress=None,
 ) -> TransportFit:
     """Fit ``mu_s'`` and ``mu_a`` (1/mm) of each region from a stack's images directly (see the module).
@@ -428,8 +462,12 @@ def fit_stack(
         Also fit blocks of ``block_px x block_px`` pixels (within each region) for the maps;
         None: the maps hold each region's estimate on its pixels.
     table : ForwardTable, optional
-    max_relative_se, model_relative_sd : float
-        As in :func:`planeray.materials.fit.fit_profiles`.
+    max_relative_se : float
+        A parameter with a larger relative standard error is NaN (reason in the mask).
+    model_relative_sd, model_correlated_sd : float
+        The forward model's relative error: independent per image (of its modelled laser light), and
+        correlated -- the kernel off by this much in each of a few smooth bumps over the offsets
+        (:data:`STACK_MODEL_CORRELATED_SD`; 0: none).
     progress : callable, optional
         Called with the number of fits just done.
 
@@ -486,7 +524,8 @@ def fit_stack(
     Kg = _kernel_per_row(table, starts[:, 0], starts[:, 1], offsets, foot)
     kw = dict(
         table=table, calibrated=calibrated, h=h, max_relative_se=max_relative_se,
-        model_relative_sd=model_relative_sd, lo=lo, hi=hi, starts=starts, Kg=Kg,
+        model_relative_sd=model_relative_sd, model_correlated_sd=model_correlated_sd, lo=lo, hi=hi,
+        starts=starts, Kg=Kg, basis=_model_error_basis(offsets),
     )  # fmt: skip
 
     def fit_pixels(rows, cols):
