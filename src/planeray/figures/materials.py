@@ -499,7 +499,7 @@ def measured_media_figure(media, *, out=None):
     ]
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
     fig.suptitle(
-        "the Fig. 10 media measured: fitted vs published (walls modelled, shape only; grey: within 25 %)", fontsize=9
+        "the Fig. 10 media measured: fitted vs published (walls modelled; grey: within 25 %)", fontsize=9
     )
     fig.tight_layout(rect=(0, 0.12, 1, 0.95))
     return finish(fig, out)
