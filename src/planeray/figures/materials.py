@@ -498,8 +498,6 @@ def measured_media_figure(media, *, out=None):
         axes[0].plot([], [], m, color="0.4", mec="k", mew=0.5, label=src)[0] for src, m in zip(sources, markers)
     ]
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
-    fig.suptitle(
-        "the Fig. 10 media measured: fitted vs published (walls modelled; grey: within 25 %)", fontsize=9
-    )
+    fig.suptitle("the Fig. 10 media measured: fitted vs published (walls modelled; grey: within 25 %)", fontsize=9)
     fig.tight_layout(rect=(0, 0.12, 1, 0.95))
     return finish(fig, out)
