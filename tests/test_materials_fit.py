@@ -476,14 +476,25 @@ def test_the_report_measures_each_container_away_from_its_walls_with_its_walls_m
             }
         return SimpleNamespace(regions=regions)
 
+    def fake_stack_fit(stack, *, mm_per_row, labels, containers):  # a capture's stack: its images fitted
+        seen.append((stack, mm_per_row, labels, "stack", containers))
+        return SimpleNamespace(regions={})
+
+    from planeray.materials import stackfit
+    from planeray.stack import Stack
+
     monkeypatch.setattr(fit, "fit_transport", fake_fit)
-    out = media_fit_numbers(scene, {"truth": scene.transport, "other": "T"}, near_wall_mm=3.0)
+    monkeypatch.setattr(stackfit, "fit_stack", fake_stack_fit)
+    stack = Stack(np.zeros((2, 24, 24), np.float32), [0.0, 900.0], [600.0, 600.0], 54_000.0)
+    out = media_fit_numbers(scene, {"truth": scene.transport, "other": "T", "cap": stack}, near_wall_mm=3.0)
     material = scene.maps["material"]
     trays = np.where((material >= 1) & (material <= 5), material, 0)
     away = np.where(scene.maps["wall_distance_mm"] >= 3.0, trays, 0)
-    assert [s[0] for s in seen] == [scene.transport, "T"]
-    for _, mm, labels, block_px, containers in seen:
-        assert mm == 0.3 and block_px == 8  # the blocks give each region's noise, as in tools/validate_fit.py
+    assert [s[0] for s in seen] == [scene.transport, "T", stack]
+    assert [s[3] for s in seen] == [8, 8, "stack"]  # transports: 8-px blocks give each region's noise
+    assert all(out["media"][name]["cap"]["mu_a_per_mm"] is None for name in MATERIAL_CLASSES.values())
+    for _, mm, labels, _, containers in seen:
+        assert mm == 0.3
         np.testing.assert_array_equal(labels, away)
         np.testing.assert_array_equal(containers, trays)
     assert 0 < (away > 0).sum() < (trays > 0).sum()
@@ -498,3 +509,158 @@ def test_the_report_measures_each_container_away_from_its_walls_with_its_walls_m
         assert out["media"][name]["published"]["mu_a_per_mm"] == material_medium(cid).sigma_a
     fig = measured_media_figure(out["media"], out=tmp_path / "m.png")
     assert len(fig.axes) == 2 and (tmp_path / "m.png").stat().st_size > 10_000
+
+
+# ---------------------------------------------------------------- the stack's images fitted directly
+STACK_SHAPE, STACK_PROJECTOR_ROWS = (16, 3), 90  # 5.625 projector rows per camera row (the materials scene's)
+STACK_MEDIUM = (1.0, 0.01)  # mu_s', mu_a (1/mm)
+
+
+def _homogeneous_scene(kernel, ambient_albedo):
+    """Every pixel sees ``kernel`` (each bin's part on the projector holds its light: the edge rule)."""
+    from planeray.scenes.base import Scene, scene_offsets
+    from planeray.timing import RowGeometry
+    from planeray.transport import Transport
+
+    H, W = STACK_SHAPE
+    geo = RowGeometry(H, STACK_PROJECTOR_ROWS)
+    off = scene_offsets()
+    cov = geo.coverage(np.arange(H)[:, None], off[None, :])
+    dense = np.repeat((kernel[None, :] * cov)[:, None, :], W, axis=1).astype(np.float32)
+    return Scene(
+        "homogeneous", Transport(dense, off, geo), np.zeros((H, W), np.float32),
+        np.full((H, W), ambient_albedo, np.float32), np.full((H, W), 2, np.uint8), params={"mm_per_row": MM},
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def stacks(table):
+    """Captures of one medium (its kernel from the table: exact for the model) and of a white card, by the
+    simulated camera: noiseless and noisy (the paper's sweep, default camera and ambient light)."""
+    from planeray.acquire import simulate_stack
+    from planeray.scenes.base import footprint_kernel, scene_offsets
+    from planeray.timing import paper_sweep
+
+    off = scene_offsets()
+    rpc = STACK_PROJECTOR_ROWS / STACK_SHAPE[0]
+    k = fit.line_kernel(*STACK_MEDIUM, offsets_rows=off, mm_per_row=MM, rows_per_camera_row=rpc, table=table)
+    medium = _homogeneous_scene(k, float(k.sum()))
+    white = _homogeneous_scene(0.99 * footprint_kernel(off, rpc), 0.99)
+    sweep = paper_sweep()
+    return dict(
+        kernel_sum=float(k.sum()),
+        clean=simulate_stack(medium, sweep, noise=False),
+        noisy=simulate_stack(medium, sweep, seed=3),
+        white_clean=simulate_stack(white, sweep, noise=False),
+        white_noisy=simulate_stack(white, sweep, seed=4),
+    )
+
+
+def test_the_stack_model_is_what_the_simulated_camera_records(stacks, table):
+    """The model's images against the simulator's (Transport.render through the bands, the camera's ambient)."""
+    from planeray.camera import CameraModel
+    from planeray.materials.stackfit import stack_design, stack_model_images
+
+    st = stacks["clean"]
+    cam = CameraModel()
+    ambient = cam.ambient_e_per_us * stacks["kernel_sum"] * 1e6 / (st.lines_per_second * cam.full_well_e)
+    design = stack_design(st)
+    model = stack_model_images(
+        st, *STACK_MEDIUM, mm_per_row=MM, scale=cam.signal_scale, ambient=ambient, table=table, design=design
+    )
+    images = np.asarray(st.images)[design.image_index]
+    assert images.max() > 0.1
+    for col in range(STACK_SHAPE[1]):
+        np.testing.assert_allclose(model, images[:, :, col], rtol=1e-5, atol=1e-7)
+    # the rows near the projector's ends differ (their bands are cut): the model follows them
+    assert np.ptp(model, axis=1).max() > 0.05 * model.max()
+
+
+def test_a_white_card_gives_the_cameras_scale(stacks):
+    from planeray.camera import CameraModel
+    from planeray.materials.stackfit import white_stack_scale
+
+    scale = white_stack_scale(stacks["white_clean"], albedo=0.99)
+    np.testing.assert_allclose(scale, CameraModel().signal_scale, rtol=1e-4)
+    noisy = white_stack_scale(stacks["white_noisy"], albedo=0.99)
+    assert np.median(noisy) == pytest.approx(CameraModel().signal_scale, rel=0.02)
+
+
+@pytest.mark.parametrize("white", [False, True])
+def test_the_stack_fit_recovers_a_noiseless_capture(stacks, table, white):
+    from planeray.materials.stackfit import fit_stack
+
+    w = stacks["white_clean"] if white else None
+    res = fit_stack(stacks["clean"], mm_per_row=MM, white=w, table=table)
+    r = res.regions[1]
+    assert res.source == "stack" and res.calibrated == white
+    assert r["mu_s_prime_per_mm"] == pytest.approx(STACK_MEDIUM[0], rel=0.005)
+    assert r["mu_a_per_mm"] == pytest.approx(STACK_MEDIUM[1], rel=0.01)
+    assert r["mask"] == 0 and r["ambient_per_row_exposure"] > 0
+    assert np.all(res.maps["mu_s_prime_per_mm"] == np.float32(r["mu_s_prime_per_mm"]))
+
+
+def test_the_stack_fit_of_a_noisy_capture_lies_within_its_standard_errors(stacks, table):
+    from planeray.materials.stackfit import fit_stack
+
+    for white in (stacks["white_noisy"], None):
+        r = fit_stack(stacks["noisy"], mm_per_row=MM, white=white, table=table).regions[1]
+        for key, truth in zip(("mu_s_prime", "mu_a"), STACK_MEDIUM):
+            v, se = r[f"{key}_per_mm"], r[f"{key}_se_per_mm"]
+            assert 0 < se < 0.3 * truth and abs(v - truth) < 3 * se, (white is None, key, v, se)
+
+
+def test_the_stack_fit_says_why_a_parameter_is_not_identified(stacks, table):
+    from planeray.materials.stackfit import fit_stack
+
+    st = stacks["noisy"]
+    labels = np.ones(STACK_SHAPE, int)
+    labels[:, 2] = 2
+    sat = np.zeros(np.shape(st.images), bool)
+    sat[:, :, 2] = True  # region 2: every image saturated, no data
+    from dataclasses import replace
+
+    res = fit_stack(replace(st, saturated=sat), mm_per_row=MM, labels=labels, table=table, max_relative_se=0.08)
+    r1, r2 = res.regions[1], res.regions[2]
+    se_s, se_a = r1["log_se"]
+    assert se_s < 0.08 < se_a  # region 1: mu_s' constrained to 8 %, mu_a not
+    assert r1["mu_s_prime_per_mm"] is not None and r1["mu_a_per_mm"] is None and r1["mask"] == 16
+    assert any("mu_a not constrained" in t for t in r1["not_identifiable"])
+    assert r2["mu_s_prime_per_mm"] is None and r2["mask"] & 1 and np.isnan(res.maps["mu_a_per_mm"][:, 2]).all()
+
+
+def test_the_command_fits_a_stack_through_its_images(stacks, tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from _new_user import run_bad, user_files
+    from planeray.cli import app
+    from planeray.io import write_stack, write_transport
+    from planeray.transport import Transport
+
+    write_stack(stacks["noisy"], tmp_path / "cap.zarr")
+    write_stack(stacks["white_noisy"], tmp_path / "white.zarr")
+    out = tmp_path / "fit"
+    res = CliRunner().invoke(
+        app, ["materials", "fit", str(tmp_path / "cap.zarr"), "--out", str(out), "--white-reference",
+              str(tmp_path / "white.zarr")],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "stack fit" in res.output
+    meta = json.loads((out / "planeray.json").read_text())
+    assert meta["method"].startswith("stack") and "white reference" in meta["calibration"]
+    r = meta["regions"]["1"]
+    assert r["mu_s_prime_per_mm"] == pytest.approx(STACK_MEDIUM[0], rel=0.1)
+    assert r["mu_a_per_mm"] == pytest.approx(STACK_MEDIUM[1], rel=0.25)
+    assert (out / "fit.png").stat().st_size > 10_000
+    write_transport(Transport(np.zeros((4, 4, 3), np.float32), np.arange(-1, 2)), tmp_path / "t.zarr")
+    user_files(tmp_path / "u")
+    for extra, option in (
+        (["--method", "stacks"], "--method"),
+        (["--white-reference", str(tmp_path / "t.zarr")], "--white-reference"),
+    ):
+        run_bad(["materials", "fit", tmp_path / "cap.zarr", "--out", "{d}/fit", *extra], folder=tmp_path / "u",
+                option=option)  # fmt: skip
+    run_bad(["materials", "fit", tmp_path / "t.zarr", "--out", "{d}/fit", "--method", "stack"],
+            folder=tmp_path / "u", option="--method")  # fmt: skip

@@ -159,8 +159,9 @@ def fig10_materials(size=(96, 96), variants=("none", "walls", "exclude"), near_m
 
 
 def stack_fit(size=48, seed=0):
-    """A noisy simulated capture (``materials simulate``) through ``planeray materials fit`` (the STACK path:
-    demultiplexed by the command), with and without the walls' model: every pixel of each tray."""
+    """A noisy simulated capture (``materials simulate``) through ``planeray materials fit --method transport``
+    (demultiplexed by the command, then the transport fitted; the stack's images themselves: validate_stack_fit.py),
+    with and without the walls' model: every pixel of each tray."""
     import tempfile
     from pathlib import Path
 
@@ -176,7 +177,16 @@ def stack_fit(size=48, seed=0):
         simulate_capture(d / "cap", size=(size, size), seed=seed)
         for walls in ("--walls", "--no-walls"):
             t0 = time.time()
-            args = ["materials", "fit", str(d / "cap" / "stack.zarr"), "--out", str(d / walls), walls]
+            args = [
+                "materials",
+                "fit",
+                str(d / "cap" / "stack.zarr"),
+                "--out",
+                str(d / walls),
+                walls,
+                "--method",
+                "transport",
+            ]
             res = CliRunner().invoke(app, [*args, "--labels", str(d / "cap" / "labels.png")])
             assert res.exit_code == 0, res.output
             regions = json.loads((d / walls / "planeray.json").read_text())["regions"]

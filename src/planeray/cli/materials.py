@@ -482,7 +482,20 @@ def fit_cmd(
         float | None,
         typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
     ] = None,
-    block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels (1: every pixel), 1-64.")] = 4,
+    block: Annotated[
+        int | None,
+        typer.Option(
+            help="Fit blocks of BLOCK x BLOCK pixels (1: every pixel), 1-64, for the maps. Default: 4 for a "
+            "transport; for a stack's images none (the maps hold each region's estimate).",
+        ),
+    ] = None,
+    method: Annotated[
+        str | None,
+        typer.Option(
+            help="stack: fit the stack's images directly (band weights x kernel + ambient; default for a stack); "
+            "transport: demultiplex first and fit the transport (the only one for a transport store).",
+        ),
+    ] = None,
     walls: Annotated[
         bool,
         typer.Option(
@@ -503,8 +516,10 @@ def fit_cmd(
     from ..io import atomic_directory
     from ..materials import fit as mfit
 
-    if not 1 <= block <= 64:
+    if block is not None and not 1 <= block <= 64:
         raise ValueError(f"--block must be an integer in 1-64, got {block}")
+    if method is not None and method not in ("stack", "transport"):
+        raise ValueError(f"--method must be stack or transport, got {method!r}")
     if not 0.0 < white_albedo <= 1.0:
         raise ValueError(f"--white-albedo must be in (0, 1], got {white_albedo:g}")
     if not 1.0 <= n <= 1.6:
@@ -513,10 +528,45 @@ def fit_cmd(
         raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
     _not_an_input(out_dir, [("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)])
     _outputs((out_dir, "materials fit"), overwrite=overwrite)
-    transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
-    lab = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
+    from ..io.atomic import planeray_output_kind
+
+    if not Path(input_path).exists():
+        raise ValueError(f"the capture {input_path}: no such file or folder")
+    is_transport = planeray_output_kind(input_path) == "transport"
+    if method == "stack" and is_transport:
+        raise ValueError(f"--method stack needs a stack: {input_path} is a transport store")
+    method = method or ("transport" if is_transport else "stack")
+    if method == "stack":
+        if white_reference is not None and not Path(white_reference).exists():
+            raise ValueError(f"--white-reference {white_reference}: no such file or folder")
+        if white_reference is not None and planeray_output_kind(white_reference) == "transport":
+            raise ValueError(
+                f"--white-reference {white_reference} is a transport store: the stack fit needs the white "
+                "target's stack (or --method transport)"
+            )
+        stack = _load_stack(input_path)
+        mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(dict(stack.metadata or {}))
+        if mm is None:
+            raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+        lab = _read_labels(labels, "--labels", stack.shape) if labels is not None else None
+        white = None
+        if white_reference is not None:
+            white = _load_stack(white_reference)
+            if white.shape != stack.shape or not (
+                np.array_equal(white.delay_us, stack.delay_us) and np.array_equal(white.exposure_us, stack.exposure_us)
+            ):
+                raise ValueError(
+                    f"--white-reference {white_reference} is {white.shape[0]}x{white.shape[1]} over "
+                    f"{len(white)} images, the capture {stack.shape[0]}x{stack.shape[1]} over {len(stack)}: "
+                    "capture it with the same sweep and camera"
+                )
+        transport = None
+    else:
+        transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
+        lab = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
+        block = 4 if block is None else block
     scale = None
-    if white_reference is not None:
+    if white_reference is not None and method == "transport":
         white, _ = _read_fit_input(white_reference, "--white-reference")
         if white.shape != transport.shape or not np.array_equal(white.offsets_rows, transport.offsets_rows):
             raise ValueError(
@@ -533,39 +583,66 @@ def fit_cmd(
             markup=False,
         )
     table = mfit.forward_table(n=n)
-    H, W = transport.shape
+    H, W = transport.shape if transport is not None else stack.shape
     regions = lab if lab is not None else np.ones((H, W), np.int64)
-    n_blocks = sum(
-        1
-        for r in np.unique(regions)
-        if r != 0
-        for r0 in range(0, H, block)
-        for c0 in range(0, W, block)
-        if (regions[r0 : r0 + block, c0 : c0 + block] == r).any()
+    n_regions = sum(1 for r in np.unique(regions) if r != 0)
+    n_blocks = (
+        0
+        if block is None
+        else sum(
+            1
+            for r in np.unique(regions)
+            if r != 0
+            for r0 in range(0, H, block)
+            for c0 in range(0, W, block)
+            if (regions[r0 : r0 + block, c0 : c0 + block] == r).any()
+        )
     )
     with progress_bar() as bar:
-        task = bar.add_task("fitting pixel blocks", total=n_blocks)
-        result = mfit.fit_transport(
-            transport,
-            mm_per_row=mm,
-            labels=lab,
-            white_scale=scale,
-            block_px=block,
-            containers=lab if walls else None,
-            table=table,
-            progress=lambda k: bar.advance(task, k),
-        )
+        if method == "stack":
+            from ..materials.stackfit import fit_stack
+
+            task = bar.add_task("fitting the stack's images (regions, blocks)", total=n_regions + n_blocks)
+            result = fit_stack(
+                stack,
+                mm_per_row=mm,
+                labels=lab,
+                containers=lab if walls else None,
+                white=white,
+                white_albedo=white_albedo,
+                block_px=block,
+                table=table,
+                progress=lambda k: bar.advance(task, k),
+            )
+        else:
+            task = bar.add_task("fitting pixel blocks", total=n_blocks)
+            result = mfit.fit_transport(
+                transport,
+                mm_per_row=mm,
+                labels=lab,
+                white_scale=scale,
+                block_px=block,
+                containers=lab if walls else None,
+                table=table,
+                progress=lambda k: bar.advance(task, k),
+            )
+    calibrated = white_reference is not None
     summary = {
         "format": "planeray-materials-fit",
         "format_version": 1,
         "capture": str(input_path),
+        "method": (
+            "stack: the stack's images fitted directly (illumination matrix x line kernel + ambient per region)"
+            if method == "stack"
+            else "transport: the demultiplexed (or given) transport's profiles fitted"
+        ),
         "mm_per_row": mm,
         "refractive_index": n,
         "anisotropy_g": mfit.DEFAULT_G,
         "calibration": (
             f"white reference {white_reference} (albedo {white_albedo:g}): absolute reflectance"
-            if scale is not None
-            else "none: shape only (a free scale per block); mu_a is less identifiable"
+            if calibrated
+            else f"none: shape only (a free scale per {'region' if method == 'stack' and block is None else 'block'}); mu_a is less identifiable"
         ),
         "block_px": block,
         "walls": (
@@ -591,7 +668,7 @@ def fit_cmd(
     if json_out:
         print_json(jsonable(summary))
         return
-    out.print(f"fit: {out_dir}  ({summary['calibration']})")
+    out.print(f"fit: {out_dir}  ({summary['method'].split(':')[0]} fit; {summary['calibration']})")
     for region, r in result.regions.items():
         f = lambda v: "n/a" if v is None else f"{v:.4g}"  # noqa: E731
         why = f"  [{'; '.join(r['not_identifiable'])}]" if r["not_identifiable"] else ""

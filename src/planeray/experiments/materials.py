@@ -39,6 +39,7 @@ from ..materials import (
     write_label_image,
 )
 from ..scenes import make_scene
+from ..stack import Stack
 from ..timing import PAPER_PROJECTOR_ROWS, make_sweep
 from ._report import jsonable
 
@@ -52,6 +53,8 @@ __all__ = [
     "check_report_options",
     "max_projector_rows",
     "simulate_capture",
+    "simulate_white_reference",
+    "WHITE_ALBEDO",
     "score",
     "run_materials_report",
     "TRAIN_SETTINGS",
@@ -354,6 +357,56 @@ def simulate_capture(
     return cap
 
 
+#: Albedo of the simulated white reference card (:func:`simulate_white_reference`).
+WHITE_ALBEDO = 0.99
+
+
+def simulate_white_reference(
+    *,
+    size=(128, 128),
+    projector_rows: int = PAPER_PROJECTOR_ROWS,
+    seed: int = 0,
+    noise: float = 1.0,
+    ambient_e_per_us: float = 0.5,
+    sweep: str = "paper",
+    albedo: float = WHITE_ALBEDO,
+) -> Stack:
+    """A white Lambertian card of uniform ``albedo`` captured as :func:`simulate_capture` captures the scene.
+
+    The calibration target of ``planeray materials fit --white-reference`` (the same sweep, camera
+    and image size; its own noise ``seed``): direct light only, the camera row's footprint
+    (:func:`planeray.scenes.base.footprint_kernel`), ambient light of the card's albedo.
+
+    Returns
+    -------
+    Stack
+    """
+    from ..scenes.base import DEFAULT_MM_PER_ROW, Scene, footprint_kernel, scene_offsets
+    from ..timing import RowGeometry
+    from ..transport import Transport
+
+    check_capture_options(
+        size=size, projector_rows=projector_rows, seed=seed, placement=0, container="tray", wall="fresnel",
+        source="narasimhan", channel="red", noise=noise, ambient_e_per_us=ambient_e_per_us, sweep=sweep,
+    )  # fmt: skip
+    H, W = (int(v) for v in size)
+    geometry = RowGeometry(H, int(projector_rows))
+    offsets = scene_offsets(int(np.ceil(geometry.rows_per_camera_row)) + 1)
+    kernel = float(albedo) * footprint_kernel(offsets, geometry.rows_per_camera_row)
+    dense = np.broadcast_to(kernel.astype(np.float32), (H, W, offsets.size))
+    card = np.full((H, W), float(albedo), np.float32)
+    scene = Scene(
+        "white_reference",
+        Transport(np.array(dense), offsets, geometry),
+        card,
+        card.copy(),
+        np.ones((H, W), np.uint8),
+        params={"name": "white_reference", "albedo": float(albedo), "mm_per_row": DEFAULT_MM_PER_ROW},
+    )
+    camera = camera_for(noise=noise, ambient_e_per_us=ambient_e_per_us)
+    return simulate_stack(scene, make_sweep(sweep), camera=camera, seed=seed)
+
+
 def _write_png8(path, image):
     """An 8-bit grayscale PNG of an image in [0, 1] (with planeray's mark)."""
     from PIL import Image
@@ -532,16 +585,21 @@ MEDIA_FIT_NEAR_WALL_MM = 3.0
 MEDIA_FIT_BLOCK_PX = 8
 
 
-def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FIT_NEAR_WALL_MM) -> dict:
+def media_fit_numbers(
+    scene, transports: dict, *, near_wall_mm: float = MEDIA_FIT_NEAR_WALL_MM, whites: dict | None = None
+) -> dict:
     """``mu_s'`` and ``mu_a`` (1/mm) of each medium of a ``materials`` scene, fitted, beside the published ones.
 
     Each container's pixels at least ``near_wall_mm`` from its walls are fitted as one region
-    (:func:`planeray.materials.fit.fit_transport`, ``regions_only``, its noise from the spread of
-    :data:`MEDIA_FIT_BLOCK_PX` blocks; shape only -- the scene has no white target --,
-    the containers' walls modelled from the scene's material map), once per transport of
-    ``transports`` (``{source: Transport}``, e.g. the scene's ground truth and the demultiplexed
-    capture).  Extends Fig. 10 (Sec. 8: "to use delay profiles to better model or inverse render
-    subsurface scattering").
+    (shape only -- the scene has no white target --, the containers' walls modelled from the
+    scene's material map), once per entry of ``transports`` (``{source: Transport or Stack}``,
+    e.g. the scene's ground truth and the capture): a transport by
+    :func:`planeray.materials.fit.fit_transport` (``regions_only``, its noise from the spread of
+    :data:`MEDIA_FIT_BLOCK_PX` blocks), a stack by :func:`planeray.materials.stackfit.fit_stack`
+    (its images fitted directly: no demultiplexing noise in the tail), calibrated by the white
+    reference ``whites[source]`` where given (:func:`simulate_white_reference`, albedo
+    :data:`WHITE_ALBEDO`).  Extends Fig. 10 (Sec. 8: "to use delay profiles to better model or
+    inverse render subsurface scattering").
 
     Returns
     -------
@@ -551,8 +609,10 @@ def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FI
         "mu_s_prime_rel_err", "mu_a_rel_err", "pixels"}}}}`` (None where a parameter is not identified).
     """
     from ..materials.fit import fit_transport
+    from ..materials.stackfit import fit_stack
     from ..optical_data import material_medium
     from ..scenes.base import DEFAULT_MM_PER_ROW
+    from ..stack import Stack
 
     mm = float(scene.params.get("mm_per_row", DEFAULT_MM_PER_ROW))
     material = np.asarray(scene.maps["material"], np.int64)
@@ -568,14 +628,21 @@ def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FI
         for cid, name in MATERIAL_CLASSES.items()
     }
     for source, transport in transports.items():
-        res = fit_transport(
-            transport,
-            mm_per_row=mm,
-            labels=regions,
-            block_px=MEDIA_FIT_BLOCK_PX,
-            containers=containers,
-            regions_only=True,
-        )
+        white = (whites or {}).get(source)
+        if white is not None and not isinstance(transport, Stack):
+            raise ValueError(f"a white reference is for a stack source; {source!r} is a transport")
+        if isinstance(transport, Stack):
+            kw = {} if white is None else {"white": white, "white_albedo": WHITE_ALBEDO}
+            res = fit_stack(transport, mm_per_row=mm, labels=regions, containers=containers, **kw)
+        else:
+            res = fit_transport(
+                transport,
+                mm_per_row=mm,
+                labels=regions,
+                block_px=MEDIA_FIT_BLOCK_PX,
+                containers=containers,
+                regions_only=True,
+            )
         for cid, name in MATERIAL_CLASSES.items():
             reg = res.regions.get(cid) or {}
             row = {"pixels": int((regions == cid).sum())}
@@ -587,7 +654,11 @@ def media_fit_numbers(scene, transports: dict, *, near_wall_mm: float = MEDIA_FI
                 truth = media[name]["published"][key]
                 row[key.replace("_per_mm", "_rel_err")] = float(value / truth - 1.0) if ok else None
             media[name][source] = row
-    return {"near_wall_mm": float(near_wall_mm), "mm_per_row": mm, "calibration": "shape only", "media": media}
+    calibration = {
+        source: f"white reference (albedo {WHITE_ALBEDO:g})" if (whites or {}).get(source) is not None else "shape only"
+        for source in transports
+    }
+    return {"near_wall_mm": float(near_wall_mm), "mm_per_row": mm, "calibration": calibration, "media": media}
 
 
 def report_tasks(*, quick: bool = False) -> int:
@@ -817,9 +888,19 @@ def run_materials_report(
             # --- beyond Fig. 10: the media measured (mu_s', mu_a), not only named ----------------
             start("measuring the media (mu_s', mu_a)")
             truth_scene = _capture_scene(test)
+            white = simulate_white_reference(
+                size=shape, seed=TEST_SETTINGS["seed"] + 1000, noise=TEST_SETTINGS["noise"],
+                ambient_e_per_us=TEST_SETTINGS["ambient_e_per_us"],
+            )  # fmt: skip
             numbers["media_fit"] = tick(
                 media_fit_numbers(
-                    truth_scene, {"ground-truth transport": truth_scene.transport, "demultiplexed capture": T_test}
+                    truth_scene,
+                    {
+                        "ground-truth transport": truth_scene.transport,
+                        "capture, shape only": test.stack,
+                        "capture, white reference": test.stack,
+                    },
+                    whites={"capture, white reference": white},
                 )
             )
 

@@ -291,10 +291,10 @@ def _media_fit_row(quote: str, fit: dict | None) -> dict:
     return _row(
         quote,
         f"beyond the paper: mu_s' / mu_a fitted per container (>= {fit['near_wall_mm']:g} mm from its walls, the walls "
-        "modelled, shape only) against the published constants; " + "; ".join(parts),
+        "modelled; a capture's stack images fitted directly) against the published constants; " + "; ".join(parts),
         "qualitative",
-        "the paper proposes it as future work; the fit's validation (known media, Mitsuba 3, the walls) is in the "
-        "user guide, Measuring the medium. A demultiplexed capture's mu_a is biased by the camera's noise",
+        "the paper proposes it as future work; the fit's validation (known media, Mitsuba 3, the walls, stack fits "
+        "with and without a white reference) is in the user guide, Measuring the medium",
     )
 
 

@@ -414,7 +414,8 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
     )
     axp = fig.add_subplot(gs[1, :])
     order = sorted(result.profiles, key=lambda r: -result.regions[r]["pixels"])[:max_profiles]
-    x = np.asarray(result.offsets_rows) * float(mm_per_row)
+    stack = getattr(result, "source", "transport") == "stack"
+    x = np.asarray(result.offsets_rows) * (1.0 if stack else float(mm_per_row))
     top = 0.0
     for k, region in enumerate(order):
         y, s, model = result.profiles[region]
@@ -432,6 +433,14 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
             axp.plot(x, model, "-", color=colour, lw=1.2, label=label)
         else:
             axp.plot([], [], ".", color=colour, label=label)
+    if stack:  # the regions' mean images over the fitted model: image index on x
+        axp.set_yscale("log")
+        axp.set_xlabel("stack image (index; the sweep's order, boundary images left out)")
+        axp.set_ylabel("mean image value (normalized)")
+        axp.set_title("regions' mean stack images (dots) and the fitted model (lines)", fontsize=9)
+        axp.legend(fontsize=7, frameon=True, framealpha=0.85, loc="upper right")
+        fig.tight_layout()
+        return finish(fig, out)
     axp.set_yscale("log")
     if top > 0:
         axp.set_ylim(top * 1e-6, top * 2.0)  # six decades: what a camera's dynamic range sees
@@ -489,8 +498,6 @@ def measured_media_figure(media, *, out=None):
         axes[0].plot([], [], m, color="0.4", mec="k", mew=0.5, label=src)[0] for src, m in zip(sources, markers)
     ]
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
-    fig.suptitle(
-        "the Fig. 10 media measured: fitted vs published (walls modelled, shape only; grey: within 25 %)", fontsize=9
-    )
+    fig.suptitle("the Fig. 10 media measured: fitted vs published (walls modelled; grey: within 25 %)", fontsize=9)
     fig.tight_layout(rect=(0, 0.12, 1, 0.95))
     return finish(fig, out)

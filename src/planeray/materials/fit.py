@@ -965,7 +965,11 @@ class TransportFit:
     profiles : dict of int -> (data, sigma, model)
         The regions' mean profiles, their standard errors and the fitted kernels (for figures).
     offsets_rows : ndarray
+        The profiles' offsets (projector rows); for a stack fit the used images' indices.
     calibrated : bool
+    source : str
+        ``"transport"`` (:func:`fit_transport`: ``profiles`` are transport profiles over offsets) or
+        ``"stack"`` (:func:`planeray.materials.stackfit.fit_stack`: the regions' mean stack images).
     """
 
     maps: dict
@@ -973,6 +977,7 @@ class TransportFit:
     profiles: dict
     offsets_rows: np.ndarray
     calibrated: bool
+    source: str = "transport"
 
 
 def white_reference_scale(white_dense, *, albedo=1.0):
