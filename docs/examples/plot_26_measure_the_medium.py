@@ -32,5 +32,6 @@ fig = measured_media_figure(numbers["media"])
 # %%
 # The liquid soap misses: its transport mean free path (5 mm) is as long as the distances to its
 # walls, where the walls' diffusion model overstates the light they take (see the user guide,
-# "Measuring the medium"). On a noisy capture, demultiplexed first, ``mu_a`` is biased high by the
-# camera's noise: calibrate with a white target and prefer regions to pixels.
+# "Measuring the medium"). From a noisy capture, ``materials fit`` fits the stack's images themselves
+# (``planeray.materials.stackfit.fit_stack``: no demultiplexing noise in the kernel's tail); a white
+# target captured with the same sweep fixes the magnitude and tightens ``mu_a``.
