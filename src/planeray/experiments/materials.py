@@ -234,20 +234,11 @@ class Capture:
     settings: dict
 
 
-def _capture_scene(cap: Capture):
-    """The ``materials`` scene a capture was simulated from (its ground truth), rebuilt from its settings."""
-    s = cap.settings
-    return make_scene(
-        "materials",
-        tuple(s["size"]),
-        projector_rows=s["projector_rows"],
-        seed=s["seed"],
-        placement=s["placement"],
-        container=s["container"],
-        wall=s["wall"],
-        source=s["source"],
-        channel=s["channel"],
-    )
+def _capture_scene(settings: dict):
+    """The ``materials`` scene of a capture's ``settings`` (:attr:`Capture.settings`): the one
+    :func:`simulate_capture` images, and its ground truth when rebuilt later."""
+    keys = ("projector_rows", "seed", "placement", "container", "wall", "source", "channel")
+    return make_scene("materials", tuple(settings["size"]), **{k: settings[k] for k in keys})
 
 
 def simulate_capture(
@@ -318,19 +309,6 @@ def simulate_capture(
     if table_progress is not None:  # trace (and cache) the tables first, so their runs can be counted
         material_tables(source=source, channel=channel, wall=wall, progress=table_progress)
     H, W = (int(v) for v in size)
-    scene = make_scene(
-        "materials",
-        (H, W),
-        projector_rows=projector_rows,
-        seed=seed,
-        placement=placement,
-        container=container,
-        wall=wall,
-        source=source,
-        channel=channel,
-    )
-    camera = camera_for(noise=noise, ambient_e_per_us=ambient_e_per_us)
-    stack = simulate_stack(scene, make_sweep(sweep), camera=camera, seed=seed, progress=progress)
     settings = dict(
         size=[H, W],
         projector_rows=int(projector_rows),
@@ -344,6 +322,9 @@ def simulate_capture(
         ambient_e_per_us=float(ambient_e_per_us),
         sweep=sweep,
     )
+    scene = _capture_scene(settings)
+    camera = camera_for(noise=noise, ambient_e_per_us=ambient_e_per_us)
+    stack = simulate_stack(scene, make_sweep(sweep), camera=camera, seed=seed, progress=progress)
     cap = Capture(
         stack,
         scene.maps["material"].astype(np.uint8),
@@ -887,7 +868,7 @@ def run_materials_report(
             numbers["cups"] = {"training": model_c.training, "test": evaluate(model_c, te_c)[1]}
             # --- beyond Fig. 10: the media measured (mu_s', mu_a), not only named ----------------
             start("measuring the media (mu_s', mu_a)")
-            truth_scene = _capture_scene(test)
+            truth_scene = _capture_scene(test.settings)
             white = simulate_white_reference(
                 size=shape, seed=TEST_SETTINGS["seed"] + 1000, noise=TEST_SETTINGS["noise"],
                 ambient_e_per_us=TEST_SETTINGS["ambient_e_per_us"],

@@ -420,21 +420,28 @@ def _dipole_per_row(s, a, n):
     )
 
 
+def _source_line(x, z, st):
+    """One diffusion source's term of a line kernel: ``z sigma_tr K1(sigma_tr rho) / rho``, ``rho = sqrt(x^2 + z^2)``.
+
+    Half the line integral of ``z (sigma_tr r + 1) exp(-sigma_tr r) / r^3`` (the source's reflectance at
+    depth ``z``, signed), ``x`` the lateral distance to the line (rows).
+    """
+    rho = np.sqrt(x * x + z * z)
+    if st > 0:
+        return z * st * k1e(st * rho) * np.exp(-st * rho) / rho
+    return z / (rho * rho)
+
+
 def _dipole_line(x, d):
     """Line integral of the dipole's reflectance at lateral distance ``x`` (rows): closed form.
 
     ``int R(sqrt(x^2 + y^2)) dy`` with ``z (sigma_tr r + 1) exp(-sigma_tr r) / r^3`` per source,
-    whose line integral is ``2 z sigma_tr K1(sigma_tr rho) / rho``, ``rho = sqrt(x^2 + z^2)``.
+    whose line integral is ``2 z sigma_tr K1(sigma_tr rho) / rho`` (:func:`_source_line`).
     """
     x = np.asarray(x, np.float64)
     out = np.zeros_like(x)
-    st = d["sigma_tr"]
     for z in d["z"]:
-        rho = np.sqrt(x * x + z * z)
-        if st > 0:
-            out += z * st * k1e(st * rho) * np.exp(-st * rho) / rho
-        else:
-            out += z / (rho * rho)
+        out += _source_line(x, z, d["sigma_tr"])
     return d["albedo"] / (2.0 * np.pi) * out
 
 
@@ -445,22 +452,17 @@ def _layer_line(x, d, depth_rows, images=4):
     top's extrapolated boundary ``z_b`` above the surface (its Fresnel mismatch), the bottom's
     ``2 / (3 sigma_t')`` below the bottom (index-matched: nothing returns); sources ``z_r + m P``
     and images ``-2 z_b - z_r + m P``, period ``P = 2 (t + z_b + z_b')``, ``|m| <= images``.
-    Each source's line integral is :func:`_dipole_line`'s ``2 z sigma_tr K1(sigma_tr rho) / rho``
-    with its signed depth ``z``; ``images = 0`` of a deep layer is the semi-infinite dipole.
+    Each source's line integral is :func:`_source_line` with its signed depth ``z``; ``images = 0``
+    of a deep layer is the semi-infinite dipole.
     """
     x = np.asarray(x, np.float64)
-    st = d["sigma_tr"]
     z_r, z_b = d["z"][0], d["z_b"]
     z_b2 = 2.0 * z_r / 3.0  # 2 / (3 sigma_t'), A = 1
     period = 2.0 * (float(depth_rows) + z_b + z_b2)
     out = np.zeros_like(x)
     for m in range(-images, images + 1):
         for z, sign in ((z_r + m * period, 1.0), (-2.0 * z_b - z_r + m * period, -1.0)):
-            rho = np.sqrt(x * x + z * z)
-            if st > 0:
-                out += sign * z * st * k1e(st * rho) * np.exp(-st * rho) / rho
-            else:
-                out += sign * z / (rho * rho)
+            out += sign * _source_line(x, z, d["sigma_tr"])
     return d["albedo"] / (2.0 * np.pi) * out
 
 
@@ -735,6 +737,37 @@ def describe_reasons(bits: int) -> list[str]:
     return [text for bit, text in REASONS.items() if int(bits) & bit]
 
 
+#: Mask bits that leave ``mu_s'`` / ``mu_a`` without an estimate (a ``mu_a`` beside a ``mu_s'`` stuck at the edge is none).
+_MU_S_BAD = 1 | 2 | 8 | 32 | 64
+_MU_A_BAD = 1 | 2 | 4 | 16 | 64
+
+
+def _log_bounds(table: ForwardTable):
+    """``(lo, hi)``: the fit's bounds in per-row ``(log mu_s', log mu_a)``, the dipole beyond the table's ``mu_s'``."""
+    (s0, s1), (a0, a1) = table.bounds_per_row
+    s1 = max(s1, DIPOLE_MU_S_PRIME_MAX_PER_ROW)
+    return np.array([math.log(s0), math.log(a0)]), np.array([math.log(s1), math.log(a1)])
+
+
+def _grid_starts(table: ForwardTable, offsets, foot):
+    """The table's grid points ``(G, 2)`` in per-row log-coefficients and their kernels ``(G, U)``: the coarse start."""
+    GS, GA = np.meshgrid(np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row), indexing="ij")
+    starts = np.stack([GS.ravel(), GA.ravel()], axis=1)
+    return starts, _kernel_per_row(table, starts[:, 0], starts[:, 1], offsets, foot)
+
+
+def _regions_and_walls(labels, containers, shape, rows_per_camera_row, what):
+    """The region labels (default one region) and each pixel's wall distances (None without ``containers``)."""
+    lab = np.ones(shape, np.int64) if labels is None else np.asarray(labels, np.int64)
+    if lab.shape != tuple(shape):
+        raise InputError(f"labels have shape {lab.shape}, the {what} {tuple(shape)}")
+    if containers is None:
+        return lab, None
+    if np.shape(containers) != tuple(shape):
+        raise InputError(f"containers have shape {np.shape(containers)}, the {what} {tuple(shape)}")
+    return lab, container_wall_distances(containers, rows_per_camera_row=rows_per_camera_row)
+
+
 def fit_profiles(
     profiles,
     *,
@@ -809,10 +842,7 @@ def fit_profiles(
     u_tab = np.minimum(np.abs(offsets).astype(np.int64), table.offsets_rows[-1])
     h = float(mm_per_row)
     foot = _footprint(rows_per_camera_row)
-    (s0, s1), (a0, a1) = table.bounds_per_row
-    s1 = max(s1, DIPOLE_MU_S_PRIME_MAX_PER_ROW)  # the dipole beyond the table
-    lo = [math.log(s0), math.log(a0)]
-    hi = [math.log(s1), math.log(a1)]
+    lo, hi = _log_bounds(table)
     P = Y.shape[0]
     out = {k: np.full(P, np.nan) for k in ("s", "a", "se_s", "se_a", "chi2")}
     scale = np.ones(P)
@@ -821,9 +851,7 @@ def fit_profiles(
     raw, raw_se = np.full((P, 2), np.nan), np.full((P, 2), np.nan)
     # A coarse start: the grid point of least misfit (shape only, scale solved in closed form).
     gs, ga = np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row)
-    GS, GA = np.meshgrid(gs, ga, indexing="ij")
-    starts = np.stack([GS.ravel(), GA.ravel()], axis=1)
-    Kg = _kernel_per_row(table, starts[:, 0], starts[:, 1], offsets, foot)  # (G, U)
+    starts, Kg = _grid_starts(table, offsets, foot)
     edge_tol = 0.02
     for p in range(P):
         y, sd = Y[p], S[p]
@@ -928,8 +956,8 @@ def fit_profiles(
         k0 = _kernel_per_row(table, x[0], x[1], np.array([0, 1]), _footprint(1.0))
         if k0[1] < 0.05 * k0[0] and float(rows_per_camera_row) <= 1.0 + 1e-12:
             mask[p] |= 32
-    bad_s = (mask & (1 | 2 | 8 | 32 | 64)) > 0
-    bad_a = (mask & (1 | 2 | 4 | 16 | 64)) > 0  # mu_a given a mu_s' stuck at the edge is no estimate
+    bad_s = (mask & _MU_S_BAD) > 0
+    bad_a = (mask & _MU_A_BAD) > 0
     for k in ("s", "se_s"):
         out[k][bad_s] = np.nan
     for k in ("a", "se_a"):
@@ -1071,14 +1099,7 @@ def fit_transport(
     calibrated = white_scale is not None
     if calibrated:
         dense = dense / np.asarray(white_scale, np.float64)[..., None]
-    lab = np.ones((H, W), np.int64) if labels is None else np.asarray(labels, np.int64)
-    if lab.shape != (H, W):
-        raise InputError(f"labels have shape {lab.shape}, the transport {(H, W)}")
-    dist = None
-    if containers is not None:
-        if np.shape(containers) != (H, W):
-            raise InputError(f"containers have shape {np.shape(containers)}, the transport {(H, W)}")
-        dist = container_wall_distances(containers, rows_per_camera_row=rpc)
+    lab, dist = _regions_and_walls(labels, containers, (H, W), rpc, "transport")
     b = int(block_px)
     if b < 1:
         raise InputError(f"block_px must be >= 1, got {block_px!r}")

@@ -66,17 +66,20 @@ from ..errors import InputError
 from ..stack import Stack
 from .fit import (
     _MAP_NAMES,
-    DIPOLE_MU_S_PRIME_MAX_PER_ROW,
+    _MU_A_BAD,
+    _MU_S_BAD,
     MAX_RELATIVE_SE,
     MODEL_RELATIVE_SD,
     ForwardTable,
     TransportFit,
     _footprint,
+    _grid_starts,
     _group_walls,
     _kernel_per_row,
+    _log_bounds,
     _model_kernel,
     _num,
-    container_wall_distances,
+    _regions_and_walls,
     describe_reasons,
     forward_table,
 )
@@ -507,26 +510,14 @@ def fit_stack(
         good = np.isfinite(scale) & (scale > 0)
         imgs = imgs / np.where(good, scale, 1.0)[None]
         ok &= good[None]
-    lab = np.ones((H, W), np.int64) if labels is None else np.asarray(labels, np.int64)
-    if lab.shape != (H, W):
-        raise InputError(f"labels have shape {lab.shape}, the stack {(H, W)}")
-    dist = None
-    if containers is not None:
-        if np.shape(containers) != (H, W):
-            raise InputError(f"containers have shape {np.shape(containers)}, the stack {(H, W)}")
-        dist = container_wall_distances(containers, rows_per_camera_row=design.rows_per_camera_row)
+    lab, dist = _regions_and_walls(labels, containers, (H, W), design.rows_per_camera_row, "stack")
     b = None if block_px is None else int(block_px)
     if b is not None and b < 1:
         raise InputError(f"block_px must be >= 1, got {block_px!r}")
     offsets = design.offsets_rows
     foot = _footprint(design.rows_per_camera_row)
-    (s0, s1), (a0, a1) = table.bounds_per_row
-    s1 = max(s1, DIPOLE_MU_S_PRIME_MAX_PER_ROW)
-    lo, hi = np.array([math.log(s0), math.log(a0)]), np.array([math.log(s1), math.log(a1)])
-    gs, ga = np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row)
-    GS, GA = np.meshgrid(gs, ga, indexing="ij")
-    starts = np.stack([GS.ravel(), GA.ravel()], axis=1)
-    Kg = _kernel_per_row(table, starts[:, 0], starts[:, 1], offsets, foot)
+    lo, hi = _log_bounds(table)
+    starts, Kg = _grid_starts(table, offsets, foot)
     kw = dict(
         table=table, calibrated=calibrated, h=h, max_relative_se=max_relative_se,
         model_relative_sd=model_relative_sd, model_correlated_sd=model_correlated_sd, lo=lo, hi=hi,
@@ -545,8 +536,8 @@ def fit_stack(
 
     def estimates(r):
         x, se_log, mask = r["x"], r["se_log"], r["mask"]
-        bad_s = (mask & (1 | 2 | 8 | 32 | 64)) > 0 or x is None
-        bad_a = (mask & (1 | 2 | 4 | 16 | 64)) > 0 or x is None
+        bad_s = (mask & _MU_S_BAD) > 0 or x is None
+        bad_a = (mask & _MU_A_BAD) > 0 or x is None
         s = np.nan if bad_s else math.exp(x[0]) / h
         a = np.nan if bad_a else math.exp(x[1]) / h
         return s, a, s * se_log[0], a * se_log[1]
