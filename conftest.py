@@ -97,10 +97,10 @@ def _blank_figures(monkeypatch) -> None:
     savefig = Figure.savefig
 
     def blank(self, *args, **kwargs):
-        self.clear()
+        # a new empty figure of the same size is saved in its place (clearing this one's axes costs more)
         kwargs["dpi"] = 10
         kwargs.pop("bbox_inches", None)
-        return savefig(self, *args, **kwargs)
+        return savefig(Figure(figsize=self.get_size_inches()), *args, **kwargs)
 
     monkeypatch.setattr(Figure, "savefig", blank)
     monkeypatch.setattr(Figure, "tight_layout", lambda self, *args, **kwargs: None)

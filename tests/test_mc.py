@@ -199,8 +199,9 @@ def _profile_bytes(p):
 
 @pytest.mark.parametrize("point", [False, True])
 def test_progress_adds_up_to_the_photons_and_changes_no_byte(point):
-    # With a callback the 32 batches are traced in groups of one per thread: the same
-    # streams and per-batch tallies, so the same bytes, whatever the thread count.
+    # With a callback the 32 batches are traced on the threads and reported one by one, in
+    # batch order: the same streams and per-batch tallies, so the same bytes, whatever the
+    # thread count.
     numba = pytest.importorskip("numba")
     from planeray.mc import mc_point_profile
 
@@ -216,7 +217,7 @@ def test_progress_adds_up_to_the_photons_and_changes_no_byte(point):
             p = run(medium, **kw, progress=calls.append)
         finally:
             numba.set_num_threads(before)
-        assert sum(calls) == 20_001 and len(calls) == -(-32 // threads)
+        assert sum(calls) == 20_001 and len(calls) == 32  # one call per batch (trace_batches)
         assert _profile_bytes(p) == _profile_bytes(plain)
 
 

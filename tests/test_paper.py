@@ -81,6 +81,7 @@ def run(tmp_path_factory, blank_figures):
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("figures_not_drawn")  # the reruns of the figures' commands: their numbers
 def test_a_quick_run_killed_and_resumed_writes_what_the_figures_own_commands_compute(run, tmp_path):
     """One test over the one run (under pytest-xdist a module fixture would run once per worker)."""
     _check_resumed(run)

@@ -68,6 +68,7 @@ def test_figure_work_names_every_figure():
         figure_work("fig13")
 
 
+@pytest.mark.usefixtures("figures_not_drawn")  # the runs in this process; the fresh process draws its figure
 def test_fig12_prints_one_json_line_and_is_the_same_bytes_in_every_run_and_process(tmp_path, bars):
     # Twice in this process (no state carried from one run to the next) ...
     res = runner.invoke(app, ["figure", "fig12", "--out", str(tmp_path / "a"), "--size", "24", "--seed", "1"])
