@@ -22,8 +22,6 @@ from planeray.errors import InputError
 from planeray.io import read_transport, read_transport_maps
 from planeray.stack import Stack
 
-cp = pytest.importorskip("cvxpy")
-
 LPS = 54_000.0  # lines per second: one projector row is 1e6 / LPS us
 WIDTHS = (3, 4, 5, 7)  # band widths I_w in projector rows
 CENTRES = np.arange(-12, 13)  # band centres I_d in projector rows
@@ -31,6 +29,7 @@ CENTRES = np.arange(-12, 13)  # band centres I_d in projector rows
 
 def cvxpy_optimum(A, e, b, alpha, beta):
     """Eq. 6a for one pixel, written out with CVXPY + Clarabel (tight tolerances): ``x, a, f*``."""
+    cp = pytest.importorskip("cvxpy")  # imported by the worker that runs these tests, not at every collection
     x = cp.Variable(A.shape[1], nonneg=True)
     a = cp.Variable(nonneg=True)
     f = cp.sum_squares(A @ x + a * e - b) + alpha * cp.sum_squares(cp.diff(x)) + beta * cp.sum(x)

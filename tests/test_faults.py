@@ -288,11 +288,13 @@ def test_a_failing_disk_gives_one_line_and_leaves_nothing(command, code, inputs,
     assert sorted(p.name for p in target.iterdir()) == []
 
 
-def test_an_unreachable_scheduler_fails_within_seconds(inputs, tmp_path):
+def test_an_unreachable_scheduler_fails_within_seconds(inputs, tmp_path, monkeypatch):
+    # the command waits SCHEDULER_TIMEOUT_S (5 s) for a scheduler; 1 s here, and the message says so
+    monkeypatch.setattr("planeray.demux.driver.SCHEDULER_TIMEOUT_S", 1.0)
     t0 = time.perf_counter()
     res = invoke("demux", inputs, "--out", tmp_path / "T.zarr", "--scheduler", "tcp://127.0.0.1:9")
-    one_line_error(res, "cannot reach the Dask scheduler", "127.0.0.1:9")
-    assert time.perf_counter() - t0 < 20
+    one_line_error(res, "cannot reach the Dask scheduler", "127.0.0.1:9", "within 1 s")
+    assert time.perf_counter() - t0 < 16
     assert leftovers(tmp_path) == []
 
 

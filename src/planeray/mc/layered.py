@@ -57,10 +57,11 @@ References
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numba
@@ -822,6 +823,24 @@ class VeinTable:
             )
 
 
+@functools.lru_cache(maxsize=8)
+def _read_vein_table(path: str, mtime_ns: int, size: int) -> VeinTable:
+    table = VeinTable.load(path)
+    for name in (*VeinTable._ARRAYS, "ratio"):
+        getattr(table, name).flags.writeable = False  # shared by every later hit: never changed in place
+    return table
+
+
+def _load_vein_table(path: str, mtime_ns: int, size: int) -> VeinTable:
+    """:meth:`VeinTable.load`, read once per file version (path, modification time, size) in a process.
+
+    A skin scene reads its tables at every build (a pulse video builds several); the arrays
+    of a cached table are read-only and its ``params`` a fresh copy at every hit.
+    """
+    table = _read_vein_table(path, mtime_ns, size)
+    return replace(table, params=json.loads(json.dumps(table.params)))
+
+
 #: Default grid of the vein tables: angles (deg), depth of the vein's top (mm), diameter (mm).
 TABLE_ANGLES_DEG = (0.0, 45.0, 90.0)
 TABLE_DEPTHS_MM = (1.0, 2.0, 3.0, 4.0, 5.0)
@@ -894,7 +913,8 @@ def mc_vein_table(
         for hit in (TABLES_DIR / name, path):
             if hit.exists():
                 try:
-                    table = VeinTable.load(hit)
+                    stat = hit.stat()
+                    table = _load_vein_table(str(hit), stat.st_mtime_ns, stat.st_size)
                 except (OSError, ValueError, KeyError):
                     continue
                 if progress is not None:

@@ -186,6 +186,10 @@ def tables_to_trace(*, source="narasimhan", channel="red", wall="fresnel", mm_pe
     ]
 
 
+#: Kernel values computed per table lookup in :func:`_pixel_kernels` (bounds its memory: 32 MB of float64).
+_KERNELS_PER_CALL = 4_000_000
+
+
 def _pixel_kernels(table, distances_rows, angles_deg, signs, foot_offsets, foot, cos_phi):
     """Kernels ``(P, U_table)`` of pixels: the footprint average of the pencil beams of its projector rows.
 
@@ -196,13 +200,16 @@ def _pixel_kernels(table, distances_rows, angles_deg, signs, foot_offsets, foot,
     P = distances_rows.size
     U = table.offsets_rows.size
     out = np.zeros((P, U))
-    for f, w in zip(foot_offsets, foot):
-        if w <= 0:
-            continue
-        d = np.maximum(distances_rows - signs * f * cos_phi, 0.0)
-        k = table.kernels(d, angles_deg) - table.slab  # the wall's effect, (P, U) in the wall's frame
-        k = np.where((signs < 0)[:, None], k[:, ::-1], k)  # back to the image's offsets
-        out += w * np.roll(k, int(f), axis=1)  # a pencil f rows down: offsets shift by f
+    pencils = [(f, w) for f, w in zip(foot_offsets, foot) if w > 0]
+    per_call = max(1, _KERNELS_PER_CALL // max(1, P * U))  # many pencils per table lookup (a small image has
+    for start in range(0, len(pencils), per_call):  # 45 per camera row), in bounded memory
+        chunk = pencils[start : start + per_call]
+        f = np.array([f for f, _ in chunk])[:, None]
+        d = np.maximum(distances_rows - signs * f * cos_phi, 0.0)  # (pencils, P)
+        k = table.kernels(d, angles_deg) - table.slab  # the wall's effect, (pencils, P, U) in the wall's frame
+        k = np.where((signs < 0)[:, None], k[:, :, ::-1], k)  # back to the image's offsets
+        for (f, w), k_f in zip(chunk, k):
+            out += w * np.roll(k_f, int(f), axis=1)  # a pencil f rows down: offsets shift by f
     return out
 
 

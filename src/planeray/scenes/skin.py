@@ -614,19 +614,28 @@ def build(
     best = np.full(shape, np.inf)
     reach_mm = (table.rho_rows[-1] + 1) * mm
     for v in veins:
-        dist, rho_mm, ang = _nearest_segment(v["points_mm"], X, Y)
+        # Only pixels within reach of the centreline's bounding box can be near it (|rho| is the
+        # distance to the centreline, never below the distance to its box): the same numbers.
+        pts = np.asarray(v["points_mm"], dtype=float)
+        margin = max(reach_mm, 0.5 * v["diameter_mm"])
+        (x0, y0), (x1, y1) = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+        bi, bj = np.nonzero((X >= x0) & (X <= x1) & (Y >= y0) & (Y <= y1))
+        if bi.size == 0:
+            continue
+        dist, rho_mm, ang = _nearest_segment(pts, X[bi, bj], Y[bi, bj])
         sl = _table_slice(table, v["depth_mm"], v["diameter_mm"])
-        near = (np.abs(rho_mm) <= reach_mm) & on
+        near = (np.abs(rho_mm) <= reach_mm) & on[bi, bj]
         if near.any():
-            ti, si = np.nonzero(near)
+            ti, si = bi[near], bj[near]
             r = _vein_ratio(sl, table, rho_mm[near] / mm, ang[near], u_t[ti])
             ratio[ti, si] *= r if blood_scale == 1.0 else np.power(np.maximum(r, 1e-12), float(blood_scale))
         rel = dist / (0.5 * v["diameter_mm"])
-        over = (rel <= 1.0) & on & (rel < best)
-        best = np.where(over, rel, best)
-        vid[over] = v["id"]
-        vdepth[over] = v["depth_mm"]
-        vdiam[over] = v["diameter_mm"]
+        over = (rel <= 1.0) & on[bi, bj] & (rel < best[bi, bj])
+        oi, oj = bi[over], bj[over]
+        best[oi, oj] = rel[over]
+        vid[oi, oj] = v["id"]
+        vdepth[oi, oj] = v["depth_mm"]
+        vdiam[oi, oj] = v["diameter_mm"]
 
     tint = 1.0 + smooth_noise(shape, rng, max(H, W) / 8.0, 0.05)
     texture = 1.0 + smooth_noise(shape, rng, 0.7, 0.15)
