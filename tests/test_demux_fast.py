@@ -185,3 +185,36 @@ def test_maps_from_the_certificate_equal_the_float64_diagnostics(saturated_stack
     for name in ("objective", "residual_rms"):
         np.testing.assert_allclose(res.maps[name].ravel(), ref[name], rtol=1e-5)
     np.testing.assert_allclose(res.maps["kkt_residual"].ravel(), ref["kkt_residual"], atol=1e-5)
+
+
+def test_stacks_of_one_geometry_share_the_factorizations_and_give_the_same_bytes(monkeypatch):
+    """A second stack of the same sweep and geometry reuses the first one's solvers (each a function of its
+    illumination matrix and weights alone): no solver is built again, and the result is the one a process
+    that keeps nothing computes, byte for byte.  Other weights, or a budget of 0 bytes, build anew."""
+    first, second = (
+        simulate_stack(make_scene(name, (24, 8), projector_rows=90, seed=0), paper_sweep(), seed=1)
+        for name in ("wax", "corner")
+    )
+    built = []
+    real_init = AdmmRowSolver.__init__
+
+    def counting(self, *args, **kwargs):
+        built.append(1)
+        real_init(self, *args, **kwargs)
+
+    monkeypatch.setattr(AdmmRowSolver, "__init__", counting)
+    monkeypatch.setattr(fast, "_SOLVERS", type(fast._SOLVERS)())
+    demultiplex(first)
+    n_groups = len(built)
+    assert n_groups > 1
+    shared = demultiplex(second)
+    assert len(built) == n_groups  # every row group of the second stack found its solver
+    demultiplex(second, alpha=0.02)
+    assert len(built) == 2 * n_groups  # other weights: other solvers
+    monkeypatch.setattr(fast, "SOLVER_CACHE_BYTES", 0)  # keep (at most) the last one
+    monkeypatch.setattr(fast, "_SOLVERS", type(fast._SOLVERS)())
+    alone = demultiplex(second)
+    assert len(built) == 3 * n_groups and len(fast._SOLVERS) == 1
+    np.testing.assert_array_equal(alone.transport.dense, shared.transport.dense)
+    for key in alone.maps:
+        np.testing.assert_array_equal(alone.maps[key], shared.maps[key])

@@ -62,9 +62,11 @@ References
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import sys
 import threading
+from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -476,16 +478,44 @@ def blas_one_thread(threads: int):
 
 
 _CACHE_LOCK = threading.Lock()
+#: Memory (bytes) of the factorizations a process keeps for later row groups and calls with the same
+#: illumination matrix and weights; the least recently used go first.  A solver of ``U`` unknowns holds
+#: about ``6 * 8 * U**2`` bytes once factored at the rho it needs (2.3 MB at the paper's 229 offsets).
+SOLVER_CACHE_BYTES = 128 * 2**20
+_SOLVERS: OrderedDict = OrderedDict()  # key -> (solver, its estimated bytes)
+
+
+def _solver_key(A, alpha, beta, ambient) -> tuple:
+    """What an :class:`AdmmRowSolver` is a function of: ``A``'s bytes, the weights, the ambient column."""
+    digest = hashlib.blake2b(np.ascontiguousarray(A, np.float64).tobytes(), digest_size=16)
+    if ambient is not None:
+        digest.update(b"ambient")
+        digest.update(np.ascontiguousarray(ambient, np.float64).tobytes())
+    return (np.shape(A), float(alpha), float(beta), digest.hexdigest())
 
 
 def row_solver(group: RowGroup, alpha: float, beta: float, ambient=None) -> AdmmRowSolver:
-    """The factorization of a row group, cached on the group (chunks and threads reuse it)."""
+    """The factorization of a row group, cached on the group (chunks and threads reuse it).
+
+    Row groups with the same illumination matrix and weights -- the interior rows of every
+    stack of one sweep and geometry, in this and later calls of the process (the stacks of
+    one experiment, one figure) -- share one solver: it is a function of those alone.
+    """
     key = (alpha, beta) if ambient is None else (alpha, beta, np.asarray(ambient, np.float64).tobytes())
     with _CACHE_LOCK:
         cache = group.__dict__.setdefault("_admm_cache", {})
         if key not in cache:
             cache.clear()
-            cache[key] = AdmmRowSolver(group.A, alpha, beta, ambient=ambient)
+            shared = _solver_key(group.A, alpha, beta, ambient)
+            entry = _SOLVERS.get(shared)
+            if entry is None:
+                entry = (AdmmRowSolver(group.A, alpha, beta, ambient=ambient), 48 * group.A.shape[1] ** 2)
+                _SOLVERS[shared] = entry
+                while sum(size for _, size in _SOLVERS.values()) > SOLVER_CACHE_BYTES and len(_SOLVERS) > 1:
+                    _SOLVERS.popitem(last=False)
+            else:
+                _SOLVERS.move_to_end(shared)
+            cache[key] = entry[0]
         return cache[key]
 
 
