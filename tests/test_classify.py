@@ -377,8 +377,9 @@ def test_every_scene_says_its_effects():
     assert set(SCENE_EFFECTS) == set(list_scenes())
 
 
-@pytest.mark.parametrize("size", SIZES)
+# every scene at one size, then the next size: the scenes of a size share their demultiplexing factorizations
 @pytest.mark.parametrize("name", sorted(SCENE_EFFECTS))
+@pytest.mark.parametrize("size", SIZES)
 def test_labels_agree_with_ground_truth_in_every_scene_at_every_size(name, size):
     scene, result = _demuxed(name, size)
     _, plane = _demuxed("diffuse_plane", size)  # the white target: width of a direct peak

@@ -479,10 +479,19 @@ def blas_one_thread(threads: int):
 
 _CACHE_LOCK = threading.Lock()
 #: Memory (bytes) of the factorizations a process keeps for later row groups and calls with the same
-#: illumination matrix and weights; the least recently used go first.  A solver of ``U`` unknowns holds
-#: about ``6 * 8 * U**2`` bytes once factored at the rho it needs (2.3 MB at the paper's 229 offsets).
-SOLVER_CACHE_BYTES = 128 * 2**20
-_SOLVERS: OrderedDict = OrderedDict()  # key -> (solver, its estimated bytes)
+#: illumination matrix and weights; the least recently used go first.  A solver of a 128-row paper
+#: sweep holds about 2.3 MB once factored at the rhos it needed (41 of them for 128 rows of a
+#: 720-row projector, 83 for 256).
+SOLVER_CACHE_BYTES = 256 * 2**20
+_SOLVERS: OrderedDict = OrderedDict()
+
+
+def _solver_bytes(solver: AdmmRowSolver) -> int:
+    """Bytes of the arrays a solver holds now (it grows as it is factored at more rhos)."""
+    parts = [vars(solver), *(vars(f) for f in list(solver._factors.values()))]
+    arrays = [v for part in parts for v in part.values() if isinstance(v, np.ndarray)]
+    arrays += list(solver._AQ or ())
+    return sum(a.nbytes for a in arrays)
 
 
 def _solver_key(A, alpha, beta, ambient) -> tuple:
@@ -507,15 +516,15 @@ def row_solver(group: RowGroup, alpha: float, beta: float, ambient=None) -> Admm
         if key not in cache:
             cache.clear()
             shared = _solver_key(group.A, alpha, beta, ambient)
-            entry = _SOLVERS.get(shared)
-            if entry is None:
-                entry = (AdmmRowSolver(group.A, alpha, beta, ambient=ambient), 48 * group.A.shape[1] ** 2)
-                _SOLVERS[shared] = entry
-                while sum(size for _, size in _SOLVERS.values()) > SOLVER_CACHE_BYTES and len(_SOLVERS) > 1:
+            solver = _SOLVERS.get(shared)
+            if solver is None:
+                solver = AdmmRowSolver(group.A, alpha, beta, ambient=ambient)
+                _SOLVERS[shared] = solver
+                while len(_SOLVERS) > 1 and sum(map(_solver_bytes, _SOLVERS.values())) > SOLVER_CACHE_BYTES:
                     _SOLVERS.popitem(last=False)
             else:
                 _SOLVERS.move_to_end(shared)
-            cache[key] = entry[0]
+            cache[key] = solver
         return cache[key]
 
 
