@@ -205,7 +205,8 @@ def test_contrast_model_against_brute_force_monte_carlo_of_a_vein():
     """The fit's contrast model (perturbation tables) against brute force: blood in the medium with its own
     scattering (mc_vein_kernel_brute), a pixel over a vein 1 mm deep, 2 mm wide, across the rows, the
     500 us / 200 us band through the camera row's footprint; tolerance 10 % (the documented model error in
-    this regime) + 3 standard errors of the brute-force contrast."""
+    this regime) + 3 standard errors of the brute-force contrast (20,000 photons: contrast 0.79 +- 0.025
+    against the model's 0.81, a tolerance of 0.15; 0.83 +- 0.015 at 40,000)."""
     from planeray.mc.layered import mc_layered_profile, mc_vein_kernel_brute
     from planeray.optical_data_skin import skin_layers
     from planeray.scenes.base import footprint_kernel
@@ -217,7 +218,7 @@ def test_contrast_model_against_brute_force_monte_carlo_of_a_vein():
     fast = 1.0 - vein_signals(model, [64], [0.0], [90.0], 1.0, 2.0)[0][0, 0]
 
     skin = skin_layers(638, "fair")
-    n = 40_000
+    n = 20_000
     brute = mc_vein_kernel_brute(skin.layers, skin.blood, depth_mm=1.0, diameter_mm=2.0, angle_deg=90.0, n_photons=n)
     plain = mc_layered_profile(skin.layers, n_photons=n, offsets_rows=brute.offsets_rows, mm_per_row=0.3)
     u = brute.offsets_rows
