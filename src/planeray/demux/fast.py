@@ -496,10 +496,10 @@ def _solver_bytes(solver: AdmmRowSolver) -> int:
 
 def _solver_key(A, alpha, beta, ambient) -> tuple:
     """What an :class:`AdmmRowSolver` is a function of: ``A``'s bytes, the weights, the ambient column."""
-    digest = hashlib.blake2b(np.ascontiguousarray(A, np.float64).tobytes(), digest_size=16)
+    digest = hashlib.blake2b(np.ascontiguousarray(A, np.float64), digest_size=16)
     if ambient is not None:
         digest.update(b"ambient")
-        digest.update(np.ascontiguousarray(ambient, np.float64).tobytes())
+        digest.update(np.ascontiguousarray(ambient, np.float64))
     return (np.shape(A), float(alpha), float(beta), digest.hexdigest())
 
 
@@ -520,8 +520,9 @@ def row_solver(group: RowGroup, alpha: float, beta: float, ambient=None) -> Admm
             if solver is None:
                 solver = AdmmRowSolver(group.A, alpha, beta, ambient=ambient)
                 _SOLVERS[shared] = solver
-                while len(_SOLVERS) > 1 and sum(map(_solver_bytes, _SOLVERS.values())) > SOLVER_CACHE_BYTES:
-                    _SOLVERS.popitem(last=False)
+                held = sum(map(_solver_bytes, _SOLVERS.values()))
+                while len(_SOLVERS) > 1 and held > SOLVER_CACHE_BYTES:
+                    held -= _solver_bytes(_SOLVERS.popitem(last=False)[1])
             else:
                 _SOLVERS.move_to_end(shared)
             cache[key] = solver

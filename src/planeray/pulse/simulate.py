@@ -390,13 +390,11 @@ def simulate_live(
     frame_us = PAPER_PROJECTOR_ROWS / s.lines_per_second * 1e6  # one frame of the whole projector
     albedo = np.asarray(scene.ambient_albedo, np.float64)
     rng = np.random.default_rng([seed, 1])
-    ambient = []  # the room light's albedo moved with the arm: the same in every method's video
+    # the room light's albedo moved with the arm: the same in every method's video
+    amb = _shift_frames(np.broadcast_to(albedo, (n, *albedo.shape)), shifts)
 
     def capture(method, exposure_us):
         laser = _shift_frames(model.at(method, scale), shifts) * gain[:, None, None]
-        if not ambient:
-            ambient.append(_shift_frames(np.broadcast_to(albedo, laser.shape), shifts))
-        amb = ambient[0]
         expected = camera.mean_electrons(laser.max(axis=0), exposure_us, ambient_albedo=amb.max(axis=0))
         k = min(1.0, s.fill * camera.full_well_e / max(float(expected.max()), 1e-12))
         image, _ = camera.expose(k * laser, exposure_us, rng, ambient_albedo=k * amb, noise=s.noise)

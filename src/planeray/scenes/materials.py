@@ -201,8 +201,9 @@ def _pixel_kernels(table, distances_rows, angles_deg, signs, foot_offsets, foot,
     U = table.offsets_rows.size
     out = np.zeros((P, U))
     pencils = [(f, w) for f, w in zip(foot_offsets, foot) if w > 0]
-    per_call = max(1, _KERNELS_PER_CALL // max(1, P * U))  # many pencils per table lookup (a small image has
-    for start in range(0, len(pencils), per_call):  # 45 per camera row), in bounded memory
+    # many pencils per table lookup (a camera row of a small image spans 45), in bounded memory
+    per_call = max(1, _KERNELS_PER_CALL // max(1, P * U))
+    for start in range(0, len(pencils), per_call):
         chunk = pencils[start : start + per_call]
         f = np.array([f for f, _ in chunk])[:, None]
         d = np.maximum(distances_rows - signs * f * cos_phi, 0.0)  # (pencils, P)
