@@ -48,6 +48,7 @@ def _free_bytes(path: str) -> int:
 if "PYTEST_DEBUG_TEMPROOT" not in os.environ and _free_bytes(_RAM_DISK) >= _RAM_DISK_FREE_BYTES:
     os.environ["PYTEST_DEBUG_TEMPROOT"] = _RAM_DISK  # read by pytest when it makes the first tmp_path
 
+
 def _cores() -> int:
     """The cores this process may run on (its CPU affinity where the platform tells it)."""
     try:
