@@ -98,6 +98,7 @@ def test_contact_sheet_and_profiles_write_pngs(stack_path, tmp_path):
     assert lines[0].startswith("row,col") and len(lines) == 1 + 2 * 27
 
 
+@pytest.mark.usefixtures("figures_not_drawn")  # the words parsed; the profile figure: its own tests
 def test_pixel_accepts_two_words(stack_path, tmp_path):
     assert _join_pixel_args(["profiles", "s", "--pixel", "5", "6", "--out", "x"]) == [
         "profiles",

@@ -286,6 +286,7 @@ def test_a_user_folder_is_never_the_output(capture, tmp_path):
     run_bad(["materials", "fit", cap, "--out", "{d}", "--overwrite"], folder=tmp_path)
 
 
+@pytest.mark.usefixtures("figures_not_drawn")  # the numbers; the fit's figure: the tests that draw it above
 def test_the_white_reference_calibrates_the_magnitude(capture):
     import json
 

@@ -275,8 +275,10 @@ def test_hybrid_diffusion_continuation_matches_full_tracing(medium):
     # traced photons land (bin by bin within the combined Monte Carlo error), for a
     # fraction of the collisions.
     off = np.arange(-30, 31)
-    # 40,000 photons: every tolerance below is in units of the runs' own standard errors.
-    kw = dict(offsets_rows=off, mm_per_row=1.0, n_photons=40_000)
+    # 20,000 photons: every tolerance below is in units of the runs' own standard errors (measured with
+    # these seeds: mean z^2 0.87-1.10, max |z| 2.2-2.4 of 61 bins; four other seed pairs: mean z^2 0.58-1.54,
+    # max |z| 1.8-4.3; the region sums within 0.6 of their tolerance, the total reflectance within 0.2).
+    kw = dict(offsets_rows=off, mm_per_row=1.0, n_photons=20_000)
     hyb = mc_line_profile(Medium(**medium), **kw, seed=1)
     full = mc_line_profile(Medium(**medium), **kw, seed=2, diffusion_depth_mfp=None, cutoff_mm=600.0)  # 20x the window
     assert hyb.n_interactions < 0.5 * full.n_interactions

@@ -143,6 +143,7 @@ def test_figure_all_reports_all_its_work(tmp_path, bars, monkeypatch, figures_no
         assert saved.pop("planeray_mark").startswith("planeray:record:") and x["numbers"] == saved
 
 
+@pytest.mark.usefixtures("figures_not_drawn")  # what it prints; the study's figures: tests/test_study.py
 def test_study_prints_its_findings_and_whole_paths(tmp_path, bars):
     out_dir = tmp_path / ("study_" + "x" * 80)
     res = runner.invoke(

@@ -330,6 +330,7 @@ def test_cli_pulse_writes_its_folder_and_reports_the_rate(tmp_path):
     assert len(res.output.strip().splitlines()) == 1
 
 
+@pytest.mark.usefixtures("figures_not_drawn")  # what it says; the pulse figure: the test above
 def test_cli_pulse_says_when_there_is_no_pulse(tmp_path):
     write_video(tmp_path / "v.tif", pulse_video(amplitude=0.0, seed=4))
     res = runner.invoke(app, ["skin", "pulse", str(tmp_path / "v.tif"), "--out", str(tmp_path / "r")])
