@@ -215,6 +215,51 @@ def test_row_jitter_weights_equal_every_frames_integral_over_every_bin(
     np.testing.assert_array_equal(band.weights(geometry, rows, offsets), expected)
 
 
+def test_jittered_weights_are_computed_once_per_band_and_geometry(monkeypatch):
+    """The same band with the same realized shifts on the same geometry (another scene of one sweep and
+    seed) is integrated once: later calls give the same bytes, as a new array of the caller's own; any
+    other shift, rows, offsets, geometry or band setting is integrated anew."""
+    import planeray.timing as timing
+
+    monkeypatch.setattr(timing, "_JITTERED", timing.OrderedDict())
+    monkeypatch.setattr(timing, "_jittered_bytes", 0)
+    computed = []
+    integrate = Band._jittered_weights
+    monkeypatch.setattr(Band, "_jittered_weights", lambda self, *a: computed.append(1) or integrate(self, *a))
+    rng = np.random.default_rng(0)
+    shifts = rng.normal(0.0, 0.5, size=(4, 16))
+    g = RowGeometry(16, 90)
+    rows, u = np.arange(16)[:, None], np.arange(-30, 31)[None, :]
+    band = Band(150.0, 600.0, 54_000.0, 5.0, row_shifts_rows=shifts)
+    first = band.weights(g, rows, u)
+    again = Band(150.0, 600.0, 54_000.0, 5.0, row_shifts_rows=shifts.copy()).weights(g, rows, u)
+    assert len(computed) == 1
+    np.testing.assert_array_equal(again, first)
+    assert again.flags.writeable and not np.shares_memory(again, first)
+    again[:] = -1.0  # the caller's own array: what is kept is not touched
+    np.testing.assert_array_equal(band.weights(g, rows, u), first)
+    assert len(computed) == 1
+    other_shifts = shifts.copy()
+    other_shifts[3, 7] += 1e-9
+    others = [
+        (Band(150.0, 600.0, 54_000.0, 5.0, row_shifts_rows=other_shifts), g, rows, u),
+        (Band(150.0, 600.0, 54_000.0, 5.5, row_shifts_rows=shifts), g, rows, u),
+        (Band(151.0, 600.0, 54_000.0, 5.0, row_shifts_rows=shifts), g, rows, u),
+        (band, RowGeometry(16, 91), rows, u),
+        (band, g, rows, u[:, :-1]),
+        (band, g, rows[::-1], u),
+    ]
+    for i, (b, geometry, r, o) in enumerate(others, start=2):
+        w = b.weights(geometry, r, o)
+        assert len(computed) == i
+        np.testing.assert_array_equal(w, integrate(b, geometry, r, o))  # its own weights, not the kept ones
+    # bounded: the least recently used are dropped beyond the budget
+    monkeypatch.setattr(timing, "WEIGHTS_CACHE_BYTES", 2 * first.nbytes)
+    for k in range(4):
+        Band(100.0 + k, 600.0, 54_000.0, 5.0, row_shifts_rows=shifts).weights(g, rows, u)
+    assert len(timing._JITTERED) == 2 and timing._jittered_bytes == 2 * first.nbytes
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     camera_rows=st.integers(8, 300),

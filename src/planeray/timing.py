@@ -30,6 +30,9 @@ References
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -434,38 +437,92 @@ class Band:
         exact integral of the band over it (:func:`band_bin_weights`).
         """
         rows = np.asarray(rows)
-        lo, hi = geometry.bin_parts(rows, offsets_rows)
-        sigma = self.jitter_us * 1e-6 * self.lines_per_second
-        line = self.line_width_us * 1e-6 * self.lines_per_second
-
-        def lit(shift, a, b):
-            c = self.centre_rows + shift
-            return band_interval_weights(a, b, c, self.width_rows, blur_sigma_rows=sigma, line_width_rows=line)
-
         if self.row_shifts_rows is not None:
-            shifts = np.asarray(self.row_shifts_rows, dtype=float)
-            # Only bins within reach of the band (half its width, the blurs' reach in
-            # _second_antiderivative, the largest shift, one bin) can be lit: the integral
-            # is exactly 0 beyond it (below the 1e-10 floor), so it is evaluated there only.
-            reach = 0.5 * self.width_rows + 10.0 * sigma + line + 1.0
-            rows_b = np.broadcast_to(rows, lo.shape)
-            near = (hi > self.centre_rows + shifts.min(initial=0.0) - reach) & (
-                lo < self.centre_rows + shifts.max(initial=0.0) + reach
-            )
-            a, b, r = lo[near], hi[near], rows_b[near]
-            acc = 0.0
-            for frame in lit(shifts[:, r], a, b):  # every frame at once, summed in frame order
-                acc = acc + frame
-            w = np.zeros(lo.shape)
-            w[near] = _fraction_of_part(acc / len(shifts), a, b)
-            return w
+            # Exact repeats are common (the same sweep and seed on another scene of the same
+            # geometry: the shifts are drawn per delay and exposure, not per scene): computed once.
+            key = self._jittered_key(geometry, rows, offsets_rows)
+            kept = _kept_jittered(key)
+            if kept is None:
+                kept = _keep_jittered(key, self._jittered_weights(geometry, rows, offsets_rows))
+            return kept.copy()
         # the same profile for every row, recomputed only on the bins that straddle the projector's edge
+        lo, hi = geometry.bin_parts(rows, offsets_rows)
         w = np.array(np.broadcast_to(self.profile(offsets_rows), lo.shape), dtype=np.float64)
         edge = hi - lo < 1.0 - 1e-12
         if edge.any():
             a, b = lo[edge], hi[edge]
-            w[edge] = _fraction_of_part(lit(0.0, a, b), a, b)
+            w[edge] = _fraction_of_part(self._lit(0.0, a, b), a, b)
         return w
+
+    def _lit(self, shift, a, b):
+        """The band, its centre moved by ``shift`` (rows), integrated over the intervals ``[a, b)``."""
+        sigma = self.jitter_us * 1e-6 * self.lines_per_second
+        line = self.line_width_us * 1e-6 * self.lines_per_second
+        c = self.centre_rows + shift
+        return band_interval_weights(a, b, c, self.width_rows, blur_sigma_rows=sigma, line_width_rows=line)
+
+    def _jittered_key(self, geometry: RowGeometry, rows, offsets_rows) -> tuple:
+        """What the weights with realized row shifts are a function of (the shifts, rows and offsets by their bytes)."""
+        digest = hashlib.blake2b(digest_size=16)
+        for a in (self.row_shifts_rows, rows, offsets_rows):
+            a = np.ascontiguousarray(a)
+            digest.update(f"{a.dtype.str}{a.shape};".encode())
+            digest.update(a)
+        fields = (self.delay_us, self.exposure_us, self.lines_per_second, self.jitter_us, self.line_width_us)
+        return (*map(float, fields), geometry.camera_rows, geometry.projector_rows, digest.hexdigest())
+
+    def _jittered_weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
+        """:meth:`weights` averaged over the frames of ``row_shifts_rows`` (computed, never kept)."""
+        lo, hi = geometry.bin_parts(rows, offsets_rows)
+        sigma = self.jitter_us * 1e-6 * self.lines_per_second
+        line = self.line_width_us * 1e-6 * self.lines_per_second
+        shifts = np.asarray(self.row_shifts_rows, dtype=float)
+        # Only bins within reach of the band (half its width, the blurs' reach in
+        # _second_antiderivative, the largest shift, one bin) can be lit: the integral
+        # is exactly 0 beyond it (below the 1e-10 floor), so it is evaluated there only.
+        reach = 0.5 * self.width_rows + 10.0 * sigma + line + 1.0
+        rows_b = np.broadcast_to(rows, lo.shape)
+        near = (hi > self.centre_rows + shifts.min(initial=0.0) - reach) & (
+            lo < self.centre_rows + shifts.max(initial=0.0) + reach
+        )
+        a, b, r = lo[near], hi[near], rows_b[near]
+        acc = 0.0
+        for frame in self._lit(shifts[:, r], a, b):  # every frame at once, summed in frame order
+            acc = acc + frame
+        w = np.zeros(lo.shape)
+        w[near] = _fraction_of_part(acc / len(shifts), a, b)
+        return w
+
+
+#: Memory (bytes) of the jittered band weights a process keeps for later renders of the same band (the
+#: same realized row shifts) on the same geometry; the least recently used go first.  A 256-row paper
+#: sweep image's weights are 0.5 MB (256 rows x 229 offsets, float64): a sweep of 85 images 40 MB.
+WEIGHTS_CACHE_BYTES = 128 * 2**20
+_JITTERED: OrderedDict = OrderedDict()
+_JITTERED_LOCK = threading.Lock()
+_jittered_bytes = 0
+
+
+def _kept_jittered(key: tuple) -> np.ndarray | None:
+    """The weights kept under ``key`` (now the most recently used), or None."""
+    with _JITTERED_LOCK:
+        w = _JITTERED.get(key)
+        if w is not None:
+            _JITTERED.move_to_end(key)
+        return w
+
+
+def _keep_jittered(key: tuple, w: np.ndarray) -> np.ndarray:
+    """Keep ``w`` (read-only) under ``key``, dropping the least recently used beyond :data:`WEIGHTS_CACHE_BYTES`."""
+    global _jittered_bytes
+    w.setflags(write=False)
+    with _JITTERED_LOCK:
+        if key not in _JITTERED:
+            _JITTERED[key] = w
+            _jittered_bytes += w.nbytes
+            while len(_JITTERED) > 1 and _jittered_bytes > WEIGHTS_CACHE_BYTES:
+                _jittered_bytes -= _JITTERED.popitem(last=False)[1].nbytes
+        return _JITTERED[key]
 
 
 def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_rows) -> np.ndarray:
