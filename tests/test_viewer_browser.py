@@ -339,10 +339,13 @@ def test_painted_frame_rate_while_dragging(browser):
     if chromium_path() is None:
         _unavailable("no chromium")
     with ViewerServer(open_source("wax", size=128)) as srv:
-        report = measure_painted_fps(srv, seconds=1.5)  # >= 30 frames at the floor below
+        report = measure_painted_fps(srv, seconds=1.5)  # >= 12 frames at the floor below
     print(f"\n128x128: {report['fps']:.1f} frames painted per second (display {report['display_hz']:.0f} Hz)")
     assert report["width"] == 128
-    # CI shares two cores; the benchmark's numbers are in the README.  A floor that catches a broken pipeline:
-    assert report["fps"] >= 20
+    # A floor that catches a broken pipeline (one that paints no frame, or one per request timeout), not a
+    # benchmark: the frame rate is measured by benchmarks/bench_viewer.py (docs: Benchmarks).  On this
+    # 2-core machine the page paints ~59 frames a second alone and beside two busy processes, and went
+    # down to 15 beside the suite's three workers (make test: a worker per core and one more).
+    assert report["fps"] >= 8
     for key in ("render_ms", "encode_ms", "transfer_ms", "paint_ms"):
         assert report[key] is not None and report[key] >= 0
