@@ -57,6 +57,7 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
+@pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: pytest without it runs the suite in one process
 def pytest_xdist_auto_num_workers(config):
     """``-n auto``: a worker per core and one more, to use the time the others wait (see above)."""
     if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
