@@ -434,7 +434,10 @@ class Band:
 
         The fraction of the bin's part inside the projector that the band lights
         (:meth:`RowGeometry.bin_parts`: the edge rule); for a bin wholly inside, the
-        exact integral of the band over it (:func:`band_bin_weights`).
+        exact integral of the band over it (:func:`band_bin_weights`).  With realized
+        ``row_shifts_rows`` the weights are integrated once per process for each band,
+        geometry, rows and offsets and kept (:data:`WEIGHTS_CACHE_BYTES`); every call
+        returns a new array of the caller's own.
         """
         rows = np.asarray(rows)
         if self.row_shifts_rows is not None:
