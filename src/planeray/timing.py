@@ -417,16 +417,24 @@ class Band:
     def width_rows(self) -> float:
         return float(band_width_rows(self.exposure_us, self.lines_per_second))
 
+    @property
+    def blur_sigma_rows(self) -> float:
+        """The Gaussian blur of the band edges (synchronization jitter), in projector rows."""
+        return self.jitter_us * 1e-6 * self.lines_per_second
+
+    @property
+    def line_width_rows(self) -> float:
+        """The box blur of the band edges (the laser line's own width), in projector rows."""
+        return self.line_width_us * 1e-6 * self.lines_per_second
+
     def profile(self, offsets_rows, centre_shift_rows=0.0) -> np.ndarray:
         """Weights over offset bins before clipping to the projector (same for every row)."""
-        sigma = self.jitter_us * 1e-6 * self.lines_per_second
-        line = self.line_width_us * 1e-6 * self.lines_per_second
         return band_bin_weights(
             offsets_rows,
             self.centre_rows + centre_shift_rows,
             self.width_rows,
-            blur_sigma_rows=sigma,
-            line_width_rows=line,
+            blur_sigma_rows=self.blur_sigma_rows,
+            line_width_rows=self.line_width_rows,
         )
 
     def weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
@@ -459,10 +467,10 @@ class Band:
 
     def _lit(self, shift, a, b):
         """The band, its centre moved by ``shift`` (rows), integrated over the intervals ``[a, b)``."""
-        sigma = self.jitter_us * 1e-6 * self.lines_per_second
-        line = self.line_width_us * 1e-6 * self.lines_per_second
         c = self.centre_rows + shift
-        return band_interval_weights(a, b, c, self.width_rows, blur_sigma_rows=sigma, line_width_rows=line)
+        return band_interval_weights(
+            a, b, c, self.width_rows, blur_sigma_rows=self.blur_sigma_rows, line_width_rows=self.line_width_rows
+        )
 
     def _jittered_key(self, geometry: RowGeometry, rows, offsets_rows) -> tuple:
         """What the weights with realized row shifts are a function of (the shifts, rows and offsets by their bytes)."""
@@ -477,13 +485,11 @@ class Band:
     def _jittered_weights(self, geometry: RowGeometry, rows, offsets_rows) -> np.ndarray:
         """:meth:`weights` averaged over the frames of ``row_shifts_rows`` (computed, never kept)."""
         lo, hi = geometry.bin_parts(rows, offsets_rows)
-        sigma = self.jitter_us * 1e-6 * self.lines_per_second
-        line = self.line_width_us * 1e-6 * self.lines_per_second
         shifts = np.asarray(self.row_shifts_rows, dtype=float)
         # Only bins within reach of the band (half its width, the blurs' reach in
         # _second_antiderivative, the largest shift, one bin) can be lit: the integral
         # is exactly 0 beyond it (below the 1e-10 floor), so it is evaluated there only.
-        reach = 0.5 * self.width_rows + 10.0 * sigma + line + 1.0
+        reach = 0.5 * self.width_rows + 10.0 * self.blur_sigma_rows + self.line_width_rows + 1.0
         rows_b = np.broadcast_to(rows, lo.shape)
         near = (hi > self.centre_rows + shifts.min(initial=0.0) - reach) & (
             lo < self.centre_rows + shifts.max(initial=0.0) + reach
@@ -553,7 +559,7 @@ def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_r
     offsets = np.asarray(offsets_rows)
     if not bands:
         return np.zeros((0, offsets.size))
-    blur = {(b.jitter_us * 1e-6 * b.lines_per_second, b.line_width_us * 1e-6 * b.lines_per_second) for b in bands}
+    blur = {(b.blur_sigma_rows, b.line_width_rows) for b in bands}
     if len(blur) > 1 or any(b.row_shifts_rows is not None for b in bands):
         return np.stack([b.weights(geometry, camera_row, offsets) for b in bands])
     ((sigma, line),) = blur
