@@ -117,7 +117,7 @@ def _on_disk(dispatcher) -> bool:
     """Whether the cache holds a compiled version of the kernel's current source (Numba's index)."""
     try:
         return bool(dispatcher._cache._cache_file._load_index())
-    except Exception:  # noqa: BLE001 - Numba's private cache layout: unknown means not cached
+    except Exception:  # Numba's private cache layout: unknown means not cached
         return False
 
 
