@@ -55,6 +55,7 @@ LAYERS = [
     "_console",
     "demo",
     "cli",
+    "_jit",  # compiles the kernels of every engine (make kernels): above them all, imported by none
 ]
 
 
