@@ -24,13 +24,22 @@ option's annotations) at each ``CliRunner.invoke``: 0.13-0.18 s a call, a third 
 suites' time (``test_faults_ops``: 159 calls, 28 of 74 s).  The tests build it once per app and
 reuse it, as the ``planeray`` program does in its one process; a test that registers or replaces a
 command gets a new tree (the key holds every registered callback).
+
+The garbage collector runs less often: a test session allocates tens of millions of short-lived
+objects (matplotlib's artists, Typer's and Rich's), and at Python's default thresholds (700, 10, 10)
+each worker spent ~5 % of its time in collections that found little; at (100,000, 50, 50) the
+suite took 297 s instead of 308 s (520 instead of 541 CPU-s), its largest process 1.79 instead
+of 1.75 GB.
 """
 
 from __future__ import annotations
 
+import gc
 import os
 
 import pytest
+
+gc.set_threshold(100_000, 50, 50)
 
 _RAM_DISK = "/dev/shm"
 #: Free space a RAM disk needs to hold the suite's temporary folders (about 250 MB a session).
