@@ -150,6 +150,27 @@ def test_zero_padding_and_interpolation_beat_the_3_75_bpm_bin_of_480_frames():
     assert max(err_fine) < 0.25 and np.mean(err_fine) < 0.1
 
 
+def test_a_spectrum_computed_once_gives_what_each_estimate_computes():
+    """``spectrum=``: one periodogram per padding serves the estimates with and without interpolation."""
+    from scipy.signal import periodogram
+
+    rng = np.random.default_rng(3)
+    x = cardiac_signal(480, FPS, bpm=77.0, seed=3).volume + 0.3 * rng.standard_normal(480)
+    for pad in (1, 8):
+        spectrum = periodogram(x, FPS, window="hann", nfft=pad * x.size, detrend="linear")  # SciPy's, directly
+        for interpolate in (False, True):
+            shared = estimate_heart_rate(x, FPS, pad=pad, interpolate=interpolate, spectrum=spectrum)
+            own = estimate_heart_rate(x, FPS, pad=pad, interpolate=interpolate)
+            assert (shared.rate_bpm, shared.peak_bpm, shared.snr_db, shared.band_snr_db) == (
+                own.rate_bpm,
+                own.peak_bpm,
+                own.snr_db,
+                own.band_snr_db,
+            )
+    wrong = periodogram(x, FPS, window="hann", nfft=x.size, detrend="linear")  # pad 1, estimate asked at pad 8
+    assert estimate_heart_rate(x, FPS, pad=8, spectrum=wrong).peak_bpm != estimate_heart_rate(x, FPS, pad=8).peak_bpm
+
+
 def test_heart_rate_from_a_noisy_video_and_its_region():
     video = pulse_video(bpm=83.0)
     region = find_pulse_region(magnify(video.frames, FPS, levels=2), FPS)

@@ -184,6 +184,7 @@ def estimate_heart_rate(
     half_width_bpm: float = 6.0,
     min_band_snr_db: float = MIN_BAND_SNR_DB,
     reference_bpm: float | None = None,
+    spectrum: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> PulseEstimate:
     """Heart rate of a pulse signal: the spectral peak in ``band_hz``, and its SNR.
 
@@ -209,6 +210,10 @@ def estimate_heart_rate(
         Report no rate below this peak SNR of the rate band.
     reference_bpm : float, optional
         A known rate: the SNR template is centred on it (the toolboxes' SNR against ground truth).
+    spectrum : (ndarray, ndarray), optional
+        ``(freqs, power)`` of this signal from :func:`pulse_spectrum` with the same ``method``,
+        ``pad`` and ``segment_s``, computed once for several estimates (e.g. with and without
+        ``interpolate``); default: computed here.
 
     Examples
     --------
@@ -221,7 +226,9 @@ def estimate_heart_rate(
     fps = check_positive(fps, "fps")
     lo, hi = check_band(band_hz, fps, "rate band")
     snr_band = check_band(snr_band_hz, fps, "SNR band", clip=True)
-    freqs, power = pulse_spectrum(signal, fps, method=method, pad=pad, segment_s=segment_s)
+    if spectrum is None:
+        spectrum = pulse_spectrum(signal, fps, method=method, pad=pad, segment_s=segment_s)
+    freqs, power = spectrum
     sel = np.flatnonzero((freqs >= lo) & (freqs <= hi))
     if sel.size == 0:
         raise InputError(f"no spectrum sample in the rate band {lo:g}-{hi:g} Hz")
