@@ -356,3 +356,15 @@ def test_cli_pulse_says_when_there_is_no_pulse(tmp_path):
     write_video(tmp_path / "v.tif", pulse_video(amplitude=0.0, seed=4))
     res = runner.invoke(app, ["skin", "pulse", str(tmp_path / "v.tif"), "--out", str(tmp_path / "r")])
     assert res.exit_code == 0 and "no pulse found" in res.stdout
+
+
+def test_the_skin_builder_builds_each_blood_scale_once():
+    """A report linearizes at several delays: the same blood scale is the same scene, built once."""
+    from planeray.pulse.simulate import skin_builder
+    from planeray.scenes import make_scene
+
+    build = skin_builder((8, 8), projector_rows=32, seed=2)
+    assert build(1.0) is build(1) and build(1.02) is not build(1.0)
+    fresh = make_scene("skin", (8, 8), projector_rows=32, seed=2, blood_scale=1.02)
+    np.testing.assert_array_equal(build(1.02).transport.dense, fresh.transport.dense)
+    assert not np.array_equal(build(1.0).transport.dense, fresh.transport.dense)
