@@ -17,9 +17,11 @@ $(VENV)/.installed: pyproject.toml
 # An editable install leaves planeray's own modules uncompiled (pip byte-compiles a regular install), and
 # where PYTHONDONTWRITEBYTECODE is set nothing ever writes them: every test worker, subprocess and Dask
 # worker then compiled every module it imported (measured: make test 363 -> 344 s).  Compiled here once;
-# compileall redoes only the modules changed since.
+# compileall redoes only the modules changed since.  The same holds for pytest's rewrite of the asserts of
+# the test modules (tools/rewrite_tests.py: ~2.5 s of each test worker's start).
 bytecode: venv
 	@$(PY) -m compileall -q src >/dev/null
+	@$(PY) tools/rewrite_tests.py conftest.py tests/test_*.py
 
 # planeray's Numba kernels (demultiplexer, band renderer, Monte Carlo engines) compile on first call, 4-10 s
 # each; from an empty cache every test worker, Dask worker and subprocess that needs one at the same moment
