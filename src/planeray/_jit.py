@@ -113,18 +113,21 @@ def cached_kernels() -> dict:
     return found
 
 
-def _on_disk(dispatcher) -> bool:
-    """Whether the cache holds a compiled version of the kernel's current source (Numba's index)."""
+def _on_disk(dispatcher) -> bool | None:
+    """Whether the cache holds a compiled version of the kernel's current source (Numba's index).
+
+    None where this Numba keeps its cache otherwise (its layout is not public): unknown.
+    """
     try:
         return bool(dispatcher._cache._cache_file._load_index())
-    except Exception:  # Numba's private cache layout: unknown means not cached
-        return False
+    except Exception:
+        return None
 
 
 def _held(dispatcher) -> bool:
     # a helper called only from other kernels is compiled with them; when they are loaded from the
     # cache it is not compiled in this process, but its own cache entry was written when they were
-    return bool(dispatcher.signatures) or _on_disk(dispatcher)
+    return bool(dispatcher.signatures) or _on_disk(dispatcher) is not False
 
 
 def uncompiled(kernels: dict | None = None) -> list[str]:
@@ -165,7 +168,7 @@ def compile_kernels(*, processes: int | None = None) -> dict:
     with ProcessPoolExecutor(n, mp_context=get_context("spawn")) as pool:
         done = dict(zip(GROUPS, pool.map(compile_group, GROUPS)))
     compiled = sorted({k for _, held in done.values() for k in held})
-    missing = sorted(k for k, disp in cached_kernels().items() if k not in compiled and not _on_disk(disp))
+    missing = sorted(k for k, disp in cached_kernels().items() if k not in compiled and _on_disk(disp) is False)
     return {"seconds": {g: s for g, (s, _) in done.items()}, "compiled": compiled, "missing": missing}
 
 
