@@ -218,3 +218,36 @@ def test_stacks_of_one_geometry_share_the_factorizations_and_give_the_same_bytes
     np.testing.assert_array_equal(alone.transport.dense, shared.transport.dense)
     for key in alone.maps:
         np.testing.assert_array_equal(alone.maps[key], shared.maps[key])
+
+
+def test_solver_threads_follow_numbas_count_and_do_not_change_the_bytes(saturated_stack, tmp_path):
+    """One solver thread where Numba may use one (a test worker), two where it may use two: same store.
+
+    BLAS may use two threads outside the solver (as in a user's process): the solver holds it to one,
+    or a product split over BLAS threads would sum in another order than on one solver thread.
+    """
+    import numba
+    import zarr
+    from threadpoolctl import threadpool_limits
+
+    from planeray.demux import demultiplex_to_store
+
+    before = numba.get_num_threads()
+    stores = {}
+    try:
+        for n in (1, 2):
+            if n > numba.config.NUMBA_NUM_THREADS:  # pragma: no cover - a one-core machine
+                continue
+            numba.set_num_threads(n)
+            assert fast._threads() == n
+            with threadpool_limits(2, user_api="blas"):
+                stores[n] = demultiplex_to_store(saturated_stack, tmp_path / f"T{n}.zarr", chunk_rows=8)
+        if numba.config.NUMBA_NUM_THREADS >= 3:  # pragma: no cover - more cores: still two solver threads
+            numba.set_num_threads(3)
+            assert fast._threads() == 2
+    finally:
+        numba.set_num_threads(before)
+    T = {n: zarr.open_group(str(p), mode="r")["T"][...] for n, p in stores.items()}
+    assert T[1].any()
+    if 2 in T:
+        assert T[1].tobytes() == T[2].tobytes()

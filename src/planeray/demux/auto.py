@@ -399,7 +399,7 @@ def cv_score(
         wt = w[part][:, test]
         return (g, part), (wt * R * R).sum(axis=1), (wt > 0).sum(axis=1)
 
-    with blas_one_thread(n_threads):
+    with blas_one_thread():
         if n_threads > 1 and len(tasks) > 1:
             with ThreadPoolExecutor(n_threads) as pool:
                 results = list(pool.map(run, tasks))

