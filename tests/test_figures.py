@@ -80,7 +80,6 @@ def _study_results():
 
 def _cases(scene, stack, mc_profile):
     """``(name, draw(**kw) -> Figure, expected number of Axes, dpi of the PNG)`` for every figure function."""
-    E, D = stack.exposures().size, stack.delays().size
     pixels = [(5, 6), (12, 12), (20, 3)]
     prof = pr.measured_delay_profiles(stack, pixels)
     continuous = pr.transport_delay_profiles(
@@ -90,11 +89,11 @@ def _cases(scene, stack, mc_profile):
     ex, ns, sweeps, rs = _study_results()
     point = pr.mc.mc_point_profile(pr.Medium(sigma_s=1.0, sigma_a=0.1, g=0.5), n_photons=1000, radius_bins=np.arange(6))
     return [
-        ("contact_sheet", lambda **kw: contact_sheet_figure(stack, **kw), E * D, 110),
+        ("contact_sheet", lambda **kw: contact_sheet_figure(stack, **kw), 1, 110),  # one image of all tiles
         (
             "contact_sheet_max_delays",
             lambda **kw: contact_sheet_figure(stack, max_delays=4, gamma=1.0, **kw),
-            E * 4,
+            1,
             110,
         ),
         ("delay_profiles", lambda **kw: delay_profiles_figure(stack, prof, names=["a", "b", "c"], **kw), 2, 110),
@@ -323,6 +322,54 @@ def test_ax_refuses_what_does_not_fit_one_panel(scene, stack):
         label_map_figure(scene.labels, reference=stack.image(0), ax=_fresh_ax())
     with pytest.raises(ValueError, match="one pixel"):
         transport_profiles_figure(scene.transport, [(1, 1), (2, 2)], ax=_fresh_ax())
+
+
+@pytest.mark.parametrize("max_delays", [None, 4])
+def test_contact_sheet_shows_each_image_at_its_delay_and_exposure(stack, max_delays):
+    """The sheet's one image: each tile is the stack's image at its delay (left to right) and exposure
+    (longest on top), all scaled by one factor (gamma 1); frames red exactly where ``|t_d| >= t_e / 2``
+    (images used), dashed grey on the excluded boundary images, black on the others."""
+    from matplotlib.colors import to_rgba
+
+    fig = contact_sheet_figure(stack, gamma=1.0, max_delays=max_delays)
+    (ax,) = fig.axes
+    mosaic = np.asarray(ax.images[0].get_array())
+    H, W = stack.shape
+    delays, exposures = stack.delays(), stack.exposures()[::-1]
+    if max_delays:
+        delays = delays[np.linspace(0, delays.size - 1, max_delays).round().astype(int)]
+    assert [t.get_text() for t in ax.get_xticklabels()] == [f"{d:g}" for d in delays]
+    assert [t.get_text() for t in ax.get_yticklabels()] == [f"{e:g}" for e in exposures]
+    ratios, expected = [], {"red": 0, "dashed": 0, "black": 0}
+    for y_mid, e in zip(ax.get_yticks(), exposures):
+        for x_mid, d in zip(ax.get_xticks(), delays):
+            y0, x0 = round(y_mid - (H - 1) / 2), round(x_mid - (W - 1) / 2)
+            tile = mosaic[y0 : y0 + H, x0 : x0 + W]
+            assert tile.shape[:2] == (H, W)
+            i = stack.index_of(d, e)
+            if i is None:
+                assert np.all(tile == np.float32(0.85))
+                continue
+            np.testing.assert_array_equal(tile[..., 0], tile[..., 2])  # grey
+            image = stack.image(i)
+            shown = (tile[..., 0] < 1) & (image > 0)  # not clipped by the common scaling
+            ratios.append(tile[..., 0][shown] / image[shown])
+            expected["black"] += 1  # every image's frame, under its style's
+            if stack.excluded[i]:
+                expected["dashed"] += 1
+            elif abs(d) >= e / 2:
+                expected["red"] += 1
+    ratios = np.concatenate(ratios)
+    np.testing.assert_allclose(ratios, np.median(ratios), rtol=1e-5)  # one brightening factor for every tile
+    (frames,) = ax.collections
+    colors = [tuple(c) for c in frames.get_edgecolors()]
+    styles = [ls for ls in frames.get_linestyles()]
+    got = {
+        "red": colors.count(to_rgba("red")),
+        "dashed": sum(1 for c, ls in zip(colors, styles) if c == to_rgba("0.6") and ls[1] is not None),
+        "black": colors.count(to_rgba("black")),
+    }
+    assert got == expected and min(expected.values()) > 0, (got, expected)
 
 
 # ------------------------------------------------------------------- the API
