@@ -363,7 +363,7 @@ def test_contact_sheet_shows_each_image_at_its_delay_and_exposure(stack, max_del
     np.testing.assert_allclose(ratios, np.median(ratios), rtol=1e-5)  # one brightening factor for every tile
     (frames,) = ax.collections
     colors = [tuple(c) for c in frames.get_edgecolors()]
-    styles = [ls for ls in frames.get_linestyles()]
+    styles = list(frames.get_linestyles())
     got = {
         "red": colors.count(to_rgba("red")),
         "dashed": sum(1 for c, ls in zip(colors, styles) if c == to_rgba("0.6") and ls[1] is not None),
