@@ -53,7 +53,10 @@ def contact_sheet_figure(
     >>> fig = contact_sheet_figure(stack, gamma=1.0)
     >>> type(fig).__name__, len(fig.axes)
     ('Figure', 1)
-    >>> [len(t) for t in (fig.axes[0].get_xticks(), fig.axes[0].get_yticks())] == [stack.delays().size, stack.exposures().size]
+    >>> [len(t) for t in (fig.axes[0].get_xticks(), fig.axes[0].get_yticks())] == [
+    ...     stack.delays().size,
+    ...     stack.exposures().size,
+    ... ]
     True
     >>> len(contact_sheet_figure(stack, max_delays=3).axes[0].get_xticks())
     3
@@ -92,7 +95,13 @@ def contact_sheet_figure(
     ax.imshow(mosaic, interpolation="nearest")
     ax.add_collection(PatchCollection(frames, match_original=True))
     ax.set_xticks(np.arange(cols) * (W + gap) + (W - 1) / 2, [f"{d:g}" for d in delays], fontsize=7)
-    ax.set_yticks(np.arange(rows) * (H + gap) + (H - 1) / 2, [f"{e:g}" for e in exposures[::-1]], fontsize=7, rotation=90, va="center")
+    ax.set_yticks(
+        np.arange(rows) * (H + gap) + (H - 1) / 2,
+        [f"{e:g}" for e in exposures[::-1]],
+        fontsize=7,
+        rotation=90,
+        va="center",
+    )
     ax.tick_params(length=0, pad=2)
     for spine in ax.spines.values():
         spine.set_visible(False)
