@@ -334,8 +334,11 @@ def test_scene_page_with_camera_noise(browser):
         done(page)
 
 
-def test_painted_frame_rate_while_dragging(browser):
-    """The frame rate the page paints while a slider moves (128x128; benchmarks/bench_viewer.py measures 512)."""
+def test_painted_frame_rate_while_dragging():
+    """The frame rate the page paints while a slider moves (128x128; benchmarks/bench_viewer.py measures 512).
+
+    Measured in a chromium of its own (the benchmark's), not the module's Playwright browser: a
+    worker that runs this test alone does not launch that one too."""
     if chromium_path() is None:
         _unavailable("no chromium")
     with ViewerServer(open_source("wax", size=128)) as srv:
