@@ -60,8 +60,8 @@ llvm:
 		echo "note: no LLVM >= 16, so planeray render falls back to row-by-row scalar rendering; install it (Debian: sudo apt-get install libllvm19)"; \
 	fi
 
-# Independent tests run in parallel, a worker per core and one more (pytest-xdist, conftest.py; worksteal
-# balances the slow ones).
+# Independent tests run in parallel, a worker per core (pytest-xdist, conftest.py; worksteal balances the
+# slow ones).
 test: venv bytecode kernels browser llvm
 	$(PY) -m pytest -q -n auto --dist worksteal
 

@@ -13,10 +13,12 @@ create than on this machine's disk, and nothing to delete from a disk later); py
 the latest session's folders (``tmp_path_retention_count = 1`` in pyproject.toml).  A user's own
 ``PYTEST_DEBUG_TEMPROOT`` or ``--basetemp`` is kept.
 
-``-n auto`` starts one worker more than the machine has cores: some 8-10 % of a worker's time
-is spent waiting (on chromium, a Dask cluster, a subprocess, a server's socket), and the extra
-worker runs a test meanwhile (measured on the 2-core machine: ``make test`` 359-369 s with two
-workers, 318-334 s with three, 365 s with four).  A user's ``-n N`` or
+``-n auto`` starts one worker per core.  One more worker once ran tests while the others waited
+(on chromium, a Dask cluster, a subprocess: 359-369 s with two workers, 318-334 s with three,
+when each worker also compiled kernels and ran two demultiplexing threads); with the kernels
+compiled before the suite and one solver thread a worker, the third worker only shared the cores:
+four back-to-back pairs on the 2-core machine, two workers against three, 311/326, 270/338,
+277/287 and 284/310 s (user CPU 521/556, 448/578, 462/489, 472/529 s).  A user's ``-n N`` or
 ``PYTEST_XDIST_AUTO_NUM_WORKERS`` is kept.
 
 Typer builds the whole click command tree of ``planeray`` (some forty commands, evaluating every
@@ -68,14 +70,14 @@ def _cores() -> int:
 
 @pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: pytest without it runs the suite in one process
 def pytest_xdist_auto_num_workers(config):
-    """``-n auto``: a worker per core and one more, to use the time the others wait (see above)."""
+    """``-n auto``: a worker per core (see above)."""
     if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
         return None  # the user's own count: pytest-xdist reads it
-    return _cores() + 1
+    return _cores()
 
 
 _WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
-#: Threads each worker may use (1 on the 2-core CI machine running three workers).
+#: Threads each worker may use (1 on the 2-core CI machine running two workers).
 THREADS_PER_WORKER = max(1, _cores() // max(1, _WORKERS))
 
 if _WORKERS > 1:

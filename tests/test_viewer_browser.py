@@ -348,7 +348,7 @@ def test_painted_frame_rate_while_dragging():
     # A floor that catches a broken pipeline (one that paints no frame, or one per request timeout), not a
     # benchmark: the frame rate is measured by benchmarks/bench_viewer.py (docs: Benchmarks).  On this
     # 2-core machine the page paints ~59 frames a second alone and beside two busy processes, and went
-    # down to 15 beside the suite's three workers (make test: a worker per core and one more).
+    # down to 15 beside three busy test workers (make test now runs a worker per core).
     assert report["fps"] >= 8
     for key in ("render_ms", "encode_ms", "transfer_ms", "paint_ms"):
         assert report[key] is not None and report[key] >= 0
