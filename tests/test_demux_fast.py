@@ -251,3 +251,41 @@ def test_solver_threads_follow_numbas_count_and_do_not_change_the_bytes(saturate
     assert T[1].any()
     if 2 in T:
         assert T[1].tobytes() == T[2].tobytes()
+
+
+def test_blas_is_limited_once_for_all_holders_and_restored_by_the_last(monkeypatch):
+    """The driver's hold, its tasks' holds inside it and a solver thread's: one threadpoolctl limit
+    (~1.5 ms each, once per task before), kept while any holder solves, restored when the last leaves."""
+    import threading
+
+    import threadpoolctl
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    calls = []
+    real = threadpoolctl.threadpool_limits
+    monkeypatch.setattr(threadpoolctl, "threadpool_limits", lambda *a, **k: calls.append(a) or real(*a, **k))
+    entered, leave = threading.Event(), threading.Event()
+
+    def solver_thread():
+        with fast.blas_one_thread():
+            entered.set()
+            leave.wait(30)
+
+    with threadpool_limits(2, user_api="blas"):  # as in a user's process
+        assert blas_threads() == {2}
+        t = threading.Thread(target=solver_thread)
+        with fast.blas_one_thread():  # the driver's
+            assert blas_threads() == {1}
+            for _ in range(20):  # its tasks'
+                with fast.blas_one_thread():
+                    assert blas_threads() == {1}
+            t.start()
+            assert entered.wait(30)
+            leave.set()
+            t.join()
+            assert blas_threads() == {1}  # the solver thread left first: still held for the driver
+        assert blas_threads() == {2}  # the last holder restored it
+    assert calls == [(1,)]

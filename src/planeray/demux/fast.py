@@ -474,17 +474,38 @@ def _threads() -> int:
     return max(1, min(2, numba.get_num_threads()))
 
 
+_BLAS_LOCK = threading.Lock()
+#: The one BLAS limit held while any solver runs in this process, and how many hold it.
+_BLAS = {"held": 0, "limits": None}
+
+
+@contextlib.contextmanager
 def blas_one_thread():
     """Hold BLAS to one thread while the solver runs, on one Python thread or several.
 
     The batches' products then sum in one order whatever the threads: the same bytes with one
     solver thread or two (a multi-threaded BLAS splits a product, and its sums, by its threads).
+    Held once for all holders (a driver's and each of its tasks', or calls from several
+    threads): only the first sets the limit (threadpoolctl: ~1.5 ms, too much for every task)
+    and only the last to leave restores it, so no caller restores it under another still solving.
     """
+    with _BLAS_LOCK:
+        if _BLAS["held"] == 0:
+            try:
+                from threadpoolctl import threadpool_limits
+            except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+                pass
+            else:
+                _BLAS["limits"] = threadpool_limits(1, user_api="blas")
+        _BLAS["held"] += 1
     try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
-        return contextlib.nullcontext()
-    return threadpool_limits(1, user_api="blas")
+        yield
+    finally:
+        with _BLAS_LOCK:
+            _BLAS["held"] -= 1
+            if _BLAS["held"] == 0 and _BLAS["limits"] is not None:
+                _BLAS["limits"].restore_original_limits()
+                _BLAS["limits"] = None
 
 
 _CACHE_LOCK = threading.Lock()
