@@ -388,6 +388,16 @@ def test_scalar_fallback_renders_row_by_row(tmp_path):
         with pytest.warns(RenderWarning, match="rendered without it"):
             r = render_transport(path, shape=(8, 8), projector_rows=16, spp=1, variant="scalar")
         assert r.attrs["caustics"] is False
+        # the command says so once, as a warning line after the bar (counting the work loads the file too)
+        from typer.testing import CliRunner
+
+        from planeray.cli import app
+
+        args = ["render", str(path), "--size", "8", "8", "--rows", "16", "--spp", "1", "--variant", "scalar"]
+        res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "s.zarr")])
+        assert res.exit_code == 0, res.output
+        assert res.output.count("rendered without it") == 1 and "warning: " in res.output, res.output
+        assert "RenderWarning" not in res.output
     finally:
         choose_variant()
     u = r.transport.offsets_rows

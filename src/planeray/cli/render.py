@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from pathlib import Path
 from typing import Annotated
@@ -191,22 +192,20 @@ def render(
         camera=None if look_from is None else (look_from, look_at, up),
         vfov_deg=None if look_from is None else vfov,
     )
-    with console.status(f"loading {path.name}"):
-        total = render_work(path, **kwargs)
-    with warnings.catch_warnings(record=True) as caught, progress_bar() as bar:
-        warnings.simplefilter("always")
-        task = bar.add_task(f"rendering {path.name} {size[0]}x{size[1]}, {rows} rows", total=total)
-        _, result = render_to_store(
-            path,
-            out_path,
-            overwrite=overwrite,
-            restart=restart,
-            progress=lambda n: bar.advance(task, n),
-            on_resume=_say_resuming(out_path),
-            **kwargs,
-        )
-    for w in caught:
-        console.print(Text("warning: ", style="bold yellow") + Text(str(w.message)), highlight=False, soft_wrap=True)
+    with _render_warnings():
+        with console.status(f"loading {path.name}"):
+            total = render_work(path, **kwargs)
+        with progress_bar() as bar:
+            task = bar.add_task(f"rendering {path.name} {size[0]}x{size[1]}, {rows} rows", total=total)
+            _, result = render_to_store(
+                path,
+                out_path,
+                overwrite=overwrite,
+                restart=restart,
+                progress=lambda n: bar.advance(task, n),
+                on_resume=_say_resuming(out_path),
+                **kwargs,
+            )
     a = result.attrs
     r = a["rig"]
     out.print(
@@ -216,6 +215,20 @@ def render(
         markup=False,
         highlight=False,
     )
+
+
+@contextlib.contextmanager
+def _render_warnings():
+    """Collect the renderer's warnings and print each distinct one once, as a ``warning:`` line, after the bar.
+
+    Left to Python they would print as ``file:line: RenderWarning: ...`` in the middle of the progress
+    bar, once per scene load (counting the work loads the scene too).
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    for message in dict.fromkeys(str(w.message) for w in caught):
+        console.print(Text("warning: ", style="bold yellow") + Text(message), highlight=False, soft_wrap=True)
 
 
 def _check_camera(look_from, look_at, up, vfov) -> None:
@@ -276,17 +289,18 @@ def render_examples(
     check_render_options(size=(size, size), rows=rows, spp=spp, seed=seed)
     _check_outputs(*render_examples_outputs(out_dir, names=scene or None), overwrite=overwrite)
     kw = dict(size=size, projector_rows=rows, spp=spp, seed=seed, names=scene or None)
-    with console.status("loading the example scenes"):
-        total = render_examples_work(**kw)
-    with progress_bar() as bar:
-        task = bar.add_task(f"rendering examples {size}x{size}, {rows} rows, {spp} spp", total=total)
-        summary = run_render_examples(
-            out_dir,
-            overwrite=overwrite,
-            progress=lambda n: bar.advance(task, n),
-            on_resume=lambda name, done, total: _say_resuming(out_dir / f"{name}.zarr")(done, total),
-            **kw,
-        )
+    with _render_warnings():
+        with console.status("loading the example scenes"):
+            total = render_examples_work(**kw)
+        with progress_bar() as bar:
+            task = bar.add_task(f"rendering examples {size}x{size}, {rows} rows, {spp} spp", total=total)
+            summary = run_render_examples(
+                out_dir,
+                overwrite=overwrite,
+                progress=lambda n: bar.advance(task, n),
+                on_resume=lambda name, done, total: _say_resuming(out_dir / f"{name}.zarr")(done, total),
+                **kw,
+            )
     for name, s in summary.items():
         out.print(
             f"{name}: {out_dir / (name + '.zarr')}, {out_dir / (name + '.png')}  ({s['seconds']} s)",
