@@ -328,8 +328,11 @@ def test_existing_dask_cluster_by_address(wax_stack, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     _, stack = wax_stack
     local = demultiplex_to_store(stack, tmp_path / "local.zarr", chunk_rows=8)
-    # one worker: the address is what this checks (chunks shared among workers: the test above)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=":0") as cluster:
+    # one worker, a thread of this process: the address is what this checks (the scheduler is reached over
+    # TCP all the same); chunks shared among worker processes: the test above
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
         remote = demultiplex_to_store(
             stack, tmp_path / "remote.zarr", chunk_rows=8, scheduler=cluster.scheduler_address
         )

@@ -101,7 +101,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import convolve1d
-from scipy.signal import lfilter
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
@@ -195,6 +194,8 @@ def _polyline(rng, start, heading_deg, length_mm, wiggle_deg=2.0, max_turn_deg=2
     The heading deviates from ``heading_deg`` by an AR(1) random walk (``0.9`` memory,
     ``wiggle_deg`` per step), clipped to ``+-max_turn_deg``.
     """
+    from scipy.signal import lfilter  # here: scipy.signal costs ~0.6 s to import, every process that builds a scene
+
     n = max(2, int(length_mm / step_mm) + 1)
     dev = np.clip(lfilter([1.0], [1.0, -0.9], rng.normal(0.0, wiggle_deg, n - 1)), -max_turn_deg, max_turn_deg)
     h = np.radians(heading_deg + dev)
@@ -489,6 +490,8 @@ def _hair(rng, X, Y, col_mm, row_mm_img, *, density_per_cm2):
     m = int(15.0 / step)
     if n == 0:
         return np.zeros((H, W))
+    from scipy.signal import lfilter
+
     length = rng.uniform(3.0, 15.0, n)
     heading = rng.uniform(0, 180) + rng.normal(0, 20, n)
     dev = np.clip(lfilter([1.0], [1.0, -0.97], rng.normal(0.0, 1.5, (n, m)), axis=1), -40.0, 40.0)
