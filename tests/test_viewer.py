@@ -700,6 +700,7 @@ def test_a_freshly_started_server_reuses_its_memory_frame_after_frame(tmp_path):
     store = write_transport(T, tmp_path / "tall.zarr", attrs={"lines_per_second": LPS})
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")}
     env.pop("DISPLAY", None)
+    env.pop("GLIBC_TUNABLES", None)  # glibc's defaults: the server's own setting is what this checks (conftest.py)
     proc = subprocess.Popen(
         [sys.executable, "-m", "planeray.cli", "view", str(store), "--port", "0", "--no-browser"],
         stdout=subprocess.PIPE,
