@@ -34,9 +34,7 @@ so the numpy temporaries of the physics checks were faulted in again page by pag
 test.  With blocks up to 32 MiB served from the heap and up to 256 MiB of free heap kept (the
 settings of :func:`planeray.viewer.server.keep_freed_memory`), two of the heaviest modules
 (``test_classify``, ``test_skin_depth``) faulted in 0.29 M instead of 1.1 M pages and took 82
-instead of 91 CPU-s; its heap in transparent huge pages as well (``hugetlb=1``, glibc 2.35+; the
-kernel's ``madvise`` mode): 0.18 M page faults and ~4.5 % less CPU again in two back-to-back pairs
-(80.8 -> 75.3 and 80.9 -> 77.3 CPU-s).  A user's own ``GLIBC_TUNABLES`` is kept.
+instead of 91 CPU-s.  A user's own ``GLIBC_TUNABLES`` is kept.
 
 The garbage collector runs less often: a test session allocates tens of millions of short-lived
 objects (matplotlib's artists, Typer's and Rich's), and at Python's default thresholds (700, 10, 10)
@@ -68,7 +66,7 @@ def _free_bytes(path: str) -> int:
 
 
 #: glibc's allocator settings for the test workers and their subprocesses (see above).
-_MALLOC_TUNABLES = "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=268435456:glibc.malloc.hugetlb=1"
+_MALLOC_TUNABLES = "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=268435456"
 os.environ.setdefault("GLIBC_TUNABLES", _MALLOC_TUNABLES)
 
 if "PYTEST_DEBUG_TEMPROOT" not in os.environ and _free_bytes(_RAM_DISK) >= _RAM_DISK_FREE_BYTES:
