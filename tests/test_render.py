@@ -12,12 +12,14 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
 pytest.importorskip("mitsuba")
 
-from planeray.render import example_scenes, labels_from_classes, render_to_store, render_transport
+from planeray.render import example_scenes, labels_from_classes, render_to_store, render_transport, render_work
 from planeray.render._mitsuba import choose_variant, find_libllvm
 from planeray.render.rig import Rig
 
@@ -388,6 +390,9 @@ def test_scalar_fallback_renders_row_by_row(tmp_path):
         with pytest.warns(RenderWarning, match="rendered without it"):
             r = render_transport(path, shape=(8, 8), projector_rows=16, spp=1, variant="scalar")
         assert r.attrs["caustics"] is False
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # counting the work renders nothing: nothing to warn of
+            assert render_work(path, shape=(8, 8), projector_rows=16, spp=1, variant="scalar") >= 1
         # the command says so once, as a warning line after the bar (counting the work loads the file too)
         from typer.testing import CliRunner
 

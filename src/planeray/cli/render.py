@@ -219,16 +219,13 @@ def render(
 
 @contextlib.contextmanager
 def _render_warnings():
-    """Collect the renderer's warnings and print each distinct one once, as a ``warning:`` line, after the bar.
-
-    Left to Python they would print as ``file:line: RenderWarning: ...`` in the middle of the progress
-    bar, once per scene load (counting the work loads the scene too).
-    """
+    """Collect the renderer's warnings and print each as a ``warning:`` line after the bar (left to
+    Python they would print as ``file:line: RenderWarning: ...`` in the middle of the bar)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         yield
-    for message in dict.fromkeys(str(w.message) for w in caught):
-        console.print(Text("warning: ", style="bold yellow") + Text(message), highlight=False, soft_wrap=True)
+    for w in caught:
+        console.print(Text("warning: ", style="bold yellow") + Text(str(w.message)), highlight=False, soft_wrap=True)
 
 
 def _check_camera(look_from, look_at, up, vfov) -> None:

@@ -545,8 +545,13 @@ def render_transport(
 
 
 def render_work(scene_file, **kwargs) -> int:
-    """Number of ``progress`` units of a render with these parameters (without rendering)."""
-    return len(_units(_setup(scene_file, **_common_kwargs(kwargs))))
+    """Number of ``progress`` units of a render with these parameters (without rendering).
+
+    Silent about what the render itself will warn of (a caustic pass skipped): it renders nothing.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RenderWarning)
+        return len(_units(_setup(scene_file, **_common_kwargs(kwargs))))
 
 
 def _store_arrays(result: RenderResult) -> dict:
