@@ -686,6 +686,21 @@ def test_server_renders_in_one_thread_and_is_warm_before_serving(truth_store):
     not Path("/proc/self/stat").exists() or __import__("platform").libc_ver()[0] != "glibc",
     reason="page faults read from /proc; the allocator setting is glibc's",
 )
+def test_the_test_workers_allocator_settings_are_the_servers():
+    """conftest.py cannot import the server (1 s) to read them: its GLIBC_TUNABLES copy them, checked here."""
+    import inspect
+    import sys
+
+    from planeray.viewer.server import keep_freed_memory
+
+    defaults = {k: p.default for k, p in inspect.signature(keep_freed_memory).parameters.items()}
+    expected = (
+        f"glibc.malloc.mmap_threshold={defaults['mmap_threshold_bytes']}"
+        f":glibc.malloc.trim_threshold={defaults['trim_threshold_bytes']}"
+    )
+    assert sys.modules["conftest"]._MALLOC_TUNABLES == expected
+
+
 def test_a_freshly_started_server_reuses_its_memory_frame_after_frame(tmp_path):
     """`planeray view` as a user starts it, asked for a drag of frames: after the first few, the server
     process faults in (almost) no new memory per frame.  Each frame computes megabytes of temporaries
