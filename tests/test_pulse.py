@@ -171,6 +171,29 @@ def test_a_spectrum_computed_once_gives_what_each_estimate_computes():
     assert estimate_heart_rate(x, FPS, pad=8, spectrum=wrong).peak_bpm != estimate_heart_rate(x, FPS, pad=8).peak_bpm
 
 
+def test_many_signals_spectra_in_one_call_are_each_signal_s_own():
+    """``pulse_spectrum`` of (..., T) signals: each row's spectrum is SciPy's of that row alone."""
+    from scipy.signal import periodogram, welch
+
+    from planeray.pulse.rate import pulse_spectrum
+
+    rng = np.random.default_rng(5)
+    signals = rng.standard_normal((2, 3, 150)) + np.linspace(0.0, 4.0, 150)  # a trend for the detrending
+    freqs, power = pulse_spectrum(signals, FPS, pad=4)
+    assert power.shape == (2, 3, freqs.size)
+    f_w, p_w = pulse_spectrum(signals, FPS, method="welch", segment_s=2.0, pad=2)
+    for i, j in np.ndindex(2, 3):
+        x = signals[i, j]
+        f, p = periodogram(x, FPS, window="hann", nfft=4 * x.size, detrend="linear")
+        np.testing.assert_array_equal(freqs, f)
+        np.testing.assert_allclose(power[i, j], p, rtol=1e-12, atol=1e-15 * p.max())
+        f, p = welch(x, FPS, window="hann", nperseg=60, noverlap=30, nfft=120, detrend="linear")
+        np.testing.assert_array_equal(f_w, f)
+        np.testing.assert_allclose(p_w[i, j], p, rtol=1e-12, atol=1e-15 * p.max())
+    with pytest.raises(InputError, match="at least 4 samples"):
+        pulse_spectrum(np.zeros((5, 3)), FPS)
+
+
 def test_heart_rate_from_a_noisy_video_and_its_region():
     video = pulse_video(bpm=83.0)
     region = find_pulse_region(magnify(video.frames, FPS, levels=2), FPS)
@@ -308,6 +331,26 @@ def test_linearization_is_exact_for_a_linear_scene_and_the_capture_is_reproducib
     c = simulate_live(quiet, model=model, seed=3, methods=("indirect",))
     sig = region_signal(c.videos["indirect"].frames, model.scene.maps["vein_mask"])
     assert np.corrcoef(sig, c.truth["volume"])[0, 1] < -0.999
+
+
+def test_the_arm_motion_moves_each_frame_as_scipy_s_bilinear_shift_does():
+    """The video's motion, in one pass, against ``scipy.ndimage.shift`` frame by frame (the reference)."""
+    from scipy.ndimage import shift
+
+    from planeray.pulse.simulate import _shift_frames
+
+    rng = np.random.default_rng(7)
+    shifts = rng.normal(0.0, 3.0, (40, 2))
+    shifts[:4] = [[0.0, 0.0], [2.0, -3.0], [-0.5, 0.25], [31.0, -45.5]]  # still, whole pixels, beyond the frame
+    for dtype in (np.float64, np.float32):
+        frames = rng.random((40, 17, 29)).astype(dtype)
+        moved = _shift_frames(frames, shifts)
+        assert moved.dtype == dtype and moved.shape == frames.shape
+        for t in range(40):
+            expected = shift(frames[t].astype(np.float64), shifts[t], order=1, mode="nearest")
+            np.testing.assert_allclose(moved[t], expected, rtol=0, atol=1e-6 if dtype == np.float32 else 1e-13)
+    still = rng.random((3, 5, 5))
+    assert _shift_frames(still, np.zeros((3, 2))) is still
 
 
 # --------------------------------------------------------------------------- CLI

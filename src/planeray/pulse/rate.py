@@ -125,23 +125,44 @@ def pulse_spectrum(
     """One-sided power spectrum of a detrended, Hann-windowed signal, zero-padded ``pad`` times.
 
     ``method="welch"`` averages segments of ``segment_s`` seconds (default: half the record) overlapping by half.
+
+    Parameters
+    ----------
+    signal : array_like (T,) or (..., T)
+        One signal, or many of the same length along the last axis (one call for all: each row's
+        spectrum is the one it would have alone).
+    fps : float
+        Samples per second (Hz).
+    method : {"periodogram", "welch"}
+    pad : int
+        Zero-padding factor (1: none).
+    segment_s : float, optional
+        Welch segment length, seconds.
+
+    Returns
+    -------
+    freqs_hz : ndarray (F,)
+    power : ndarray (F,) or (..., F)
+        Power spectral density (signal units squared per Hz).
     """
     from scipy import signal as sps
 
     x = np.asarray(signal, np.float64)
-    if x.ndim != 1 or x.size < 4:
+    if x.ndim < 1 or x.shape[-1] < 4 or x.size == 0:
         raise InputError(f"a pulse signal needs at least 4 samples, got shape {x.shape}")
     if not np.all(np.isfinite(x)):
         raise InputError("the pulse signal contains NaN or infinite values")
     fps = check_positive(fps, "fps")
     pad = check_integer(pad, "pad", minimum=1)
+    n = x.shape[-1]
     if method == "periodogram":
-        nfft = pad * x.size
-        return sps.periodogram(x, fps, window="hann", nfft=nfft, detrend="linear")
+        return sps.periodogram(x, fps, window="hann", nfft=pad * n, detrend="linear", axis=-1)
     if method == "welch":
-        nper = x.size // 2 if segment_s is None else int(round(check_positive(segment_s, "segment_s") * fps))
-        nper = int(min(max(nper, 4), x.size))
-        return sps.welch(x, fps, window="hann", nperseg=nper, noverlap=nper // 2, nfft=pad * nper, detrend="linear")
+        nper = n // 2 if segment_s is None else int(round(check_positive(segment_s, "segment_s") * fps))
+        nper = int(min(max(nper, 4), n))
+        return sps.welch(
+            x, fps, window="hann", nperseg=nper, noverlap=nper // 2, nfft=pad * nper, detrend="linear", axis=-1
+        )
     raise InputError(f"method must be periodogram or welch, got {method!r}")
 
 

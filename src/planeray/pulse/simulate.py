@@ -331,14 +331,32 @@ def binned_camera(camera: CameraModel, pixels: float) -> CameraModel:
 
 
 def _shift_frames(images: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-    from scipy.ndimage import shift
+    """Frame ``t`` of ``images`` (T, H, W) moved by ``shifts[t]`` = (rows, columns) pixels.
 
+    Bilinear, with the edge pixels repeated outside: what ``scipy.ndimage.shift(frame, shifts[t],
+    order=1, mode="nearest")`` gives frame by frame (to rounding), in a few array passes over the
+    whole video, one axis at a time (the bilinear weights are separable and the same over a frame).
+    """
+    shifts = np.asarray(shifts, np.float64)
     if not np.any(shifts):
         return images
-    out = np.empty_like(images)
-    for t in range(images.shape[0]):
-        out[t] = shift(images[t], shifts[t], order=1, mode="nearest")
-    return out
+    moved = _shift_axis(np.asarray(images, np.float64), shifts[:, 0], axis=1)
+    moved = _shift_axis(moved, shifts[:, 1], axis=2)
+    return moved.astype(images.dtype, copy=False)
+
+
+def _shift_axis(frames: np.ndarray, shift: np.ndarray, axis: int) -> np.ndarray:
+    """``frames`` (T, H, W) with frame ``t`` moved by ``shift[t]`` pixels along ``axis`` (1 or 2):
+    ``out[i] = frame(i - shift)``, linear between pixels, coordinates clamped to the frame."""
+    n = frames.shape[axis]
+    whole = np.floor(-shift)
+    frac = (-shift - whole).reshape(-1, 1, 1)  # in [0, 1): the weight of the next pixel
+    first = np.arange(n)[None, :] + whole.astype(np.int64)[:, None]
+    shape = [frames.shape[0], 1, 1]
+    shape[axis] = n
+    lo = np.clip(first, 0, n - 1).reshape(shape)
+    hi = np.clip(first + 1, 0, n - 1).reshape(shape)
+    return (1.0 - frac) * np.take_along_axis(frames, lo, axis=axis) + frac * np.take_along_axis(frames, hi, axis=axis)
 
 
 def simulate_live(
