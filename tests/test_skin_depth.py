@@ -265,3 +265,72 @@ def test_neighbouring_veins_are_fitted_with_each_others_shadows():
     for f, v in zip(fits, veins):
         assert f.resolved, f.reason
         assert abs(f.depth_mm - v["depth_mm"]) < 0.1, (f.id, f.depth_mm)
+
+
+# ---------------------------------------------------------------- the fit's two small linear solves
+def _arrow(d, e, s):
+    K = d.size
+    M = np.zeros((K + 1, K + 1))
+    M[np.arange(K), np.arange(K)] = d
+    M[:K, K] = M[K, :K] = e
+    M[K, K] = s
+    return M
+
+
+def _normal_equations(rng, K, n, *, ambient, zero_image=None, ambient_like_image=None):
+    """The weighted normal equations of backgrounds B_k (one column per image) and one ambient column."""
+    cols = rng.uniform(0.5, 1.5, (K, n))
+    amb = rng.uniform(0.0, 2.0, (K, n)) * ambient
+    if zero_image is not None:
+        cols[zero_image] = 0.0
+    if ambient_like_image is not None:  # an ambient column the backgrounds can imitate exactly
+        amb[:] = 0.0
+        amb[ambient_like_image] = 3.0 * cols[ambient_like_image]
+    w = rng.uniform(0.2, 1.0, (K, n))
+    data = rng.normal(size=(K, n))
+    d, e = np.sum(w * cols * cols, axis=1), np.sum(w * cols * amb, axis=1)
+    s, b, c = float(np.sum(w * amb * amb)), np.sum(w * cols * data, axis=1), float(np.sum(w * amb * data))
+    return d, e, s, b, c
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        dict(ambient=1.0),
+        dict(ambient=0.0),  # no ambient light fitted: lstsq's minimum-norm A = 0
+        dict(ambient=1e-9),  # an ambient column far below the backgrounds'
+        dict(ambient=1.0, zero_image=2),  # an image without light: its B_k = 0
+        dict(ambient=1.0, ambient_like_image=1),  # the ambient column is one image's own: singular
+    ],
+    ids=["ambient", "none", "faint", "dark-image", "imitated"],
+)
+def test_the_arrow_solve_is_lstsqs_minimum_norm_solution(case):
+    """The background-and-ambient solve (O(K) by the Schur complement) against LAPACK's least squares."""
+    from planeray.skin.depth import _arrow_solve
+
+    rng = np.random.default_rng(7)
+    for K in (1, 5, 40):
+        if K <= 2 and ("zero_image" in case or "ambient_like_image" in case):
+            continue
+        d, e, s, b, c = _normal_equations(rng, K, 300, **case)
+        B, A = _arrow_solve(d, e, s, b, c)
+        ref = np.linalg.lstsq(_arrow(d, e, s), np.concatenate([b, [c]]), rcond=None)[0]
+        # (an ambient column below lstsq's cutoff: lstsq keeps an A of ~e / d times the backgrounds, ~1e-9)
+        np.testing.assert_allclose(np.append(B, A), ref, rtol=0, atol=1e-8 * np.abs(ref).max())
+
+
+def test_the_tint_solve_is_lstsqs_solution_and_its_minimum_norm_one_when_singular():
+    from planeray.skin.depth import _spd_solve
+
+    rng = np.random.default_rng(3)
+    phi = rng.normal(size=(300, 24))
+    q = rng.uniform(0.1, 1.0, 300)
+    N, rhs = phi.T @ (q[:, None] * phi), phi.T @ rng.normal(size=300)
+    np.testing.assert_allclose(_spd_solve(N, rhs), np.linalg.solve(N, rhs), rtol=1e-10)
+    # a column repeated (a knot whose pixels lie on one line across the vein): singular, the minimum-norm answer
+    phi[:, 5] = phi[:, 4]
+    N, rhs = phi.T @ (q[:, None] * phi), phi.T @ rng.normal(size=300)
+    x = _spd_solve(N, rhs)
+    ref = np.linalg.lstsq(N, rhs, rcond=None)[0]
+    np.testing.assert_allclose(x, ref, rtol=0, atol=1e-8 * np.abs(ref).max())
+    assert abs(x[4] - x[5]) < 1e-8 * np.abs(ref).max()

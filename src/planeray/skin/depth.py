@@ -56,6 +56,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 from scipy.ndimage import binary_dilation, convolve1d, distance_transform_edt, label
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
@@ -214,8 +215,7 @@ def vein_signals(model: VeinModel, rows, rho_mm, angle_deg, depth_mm, diameter_m
         cache["base"] = base
         cache["S0"] = np.einsum("rku,u->rk", cache["W"], base)  # (n_rows, K)
     sl = _table_slice(model.table, float(depth_mm), float(diameter_mm))
-    u_t = np.broadcast_to(wide.astype(float)[None, :], (rho.size, wide.size))
-    r = _vein_ratio(sl, model.table, rho, ang, u_t)
+    r = _vein_ratio(sl, model.table, rho, ang, wide.astype(float))  # the same offsets for every pixel
     sub = convolve1d(cache["k_row"][None, :] * r, foot[::-1], axis=1, mode="constant")[:, half:-half]
     W = cache["W"][cache["inv"]]  # (n, K, U)
     S = np.einsum("nku,nu->kn", W, sub)
@@ -512,23 +512,58 @@ class VeinFit:
 
 def _linear_solve(cols_k, amb, data, wts, te):
     """Weighted least squares of ``data[k, n] = B_k cols_k[k, n] + A te_k amb[n]``; returns residuals, B, A."""
-    K, n = data.shape
     amb2 = te[:, None] * (amb if np.ndim(amb) == 2 else amb[None, :])
     # normal equations: block structure (K diagonal entries + one shared column)
     a_kk = np.sum(wts * cols_k * cols_k, axis=1)
     a_kA = np.sum(wts * cols_k * amb2, axis=1)
-    a_AA = np.sum(wts * amb2**2)
+    a_AA = float(np.sum(wts * amb2**2))
     b_k = np.sum(wts * cols_k * data, axis=1)
-    b_A = np.sum(wts * amb2 * data)
-    M = np.zeros((K + 1, K + 1))
-    M[np.arange(K), np.arange(K)] = a_kk
-    M[:K, K] = M[K, :K] = a_kA
-    M[K, K] = a_AA
-    rhs = np.concatenate([b_k, [b_A]])
-    sol = np.linalg.lstsq(M, rhs, rcond=None)[0]
-    B, A = sol[:K], sol[K]
+    b_A = float(np.sum(wts * amb2 * data))
+    B, A = _arrow_solve(a_kk, a_kA, a_AA, b_k, b_A)
     pred = B[:, None] * cols_k + A * amb2
     return (data - pred) * np.sqrt(wts), B, A
+
+
+def _arrow_solve(d, e, s, b, c):
+    """``[[diag(d), e], [e^T, s]] [B; A] = [b; c]``: the minimum-norm least-squares solution (``lstsq``'s).
+
+    The matrix (the normal equations of :func:`_linear_solve`, positive semi-definite) is an arrow: where
+    every ``d_k`` and the Schur complement ``s - e^T diag(d)^-1 e`` are well above rounding it is solved
+    in O(K) by that complement; an ambient column below ``lstsq``'s cutoff (none fitted, ``s = 0``) gives
+    ``A = 0`` as ``lstsq`` does (to ~1e-9 of the solution where ``s`` is not exactly 0); anything else (a
+    zero background column, an ambient column the backgrounds can imitate) goes to ``lstsq``.
+    """
+    K = d.size
+    cutoff = np.finfo(float).eps * (K + 1) * max(float(d.max(initial=0.0)), s)  # lstsq's rcond=None
+    if d.min(initial=np.inf) > cutoff:
+        inv = 1.0 / d
+        if s <= cutoff:  # no ambient column (then e = 0 and c = 0: Cauchy-Schwarz): A = 0
+            return b * inv, 0.0
+        schur = s - float(np.dot(e * inv, e))
+        if schur > 1e-8 * s:
+            A = (c - float(np.dot(e * inv, b))) / schur
+            return (b - e * A) * inv, A
+    M = np.zeros((K + 1, K + 1))
+    M[np.arange(K), np.arange(K)] = d
+    M[:K, K] = M[K, :K] = e
+    M[K, K] = s
+    sol = np.linalg.lstsq(M, np.concatenate([b, [c]]), rcond=None)[0]
+    return sol[:K], float(sol[K])
+
+
+def _spd_solve(N, rhs):
+    """``N x = rhs`` for a symmetric positive semi-definite ``N``: by Cholesky where ``N`` is well
+    conditioned (its factor's diagonal within 1e6, so a condition number below ~1e12), else ``lstsq``'s
+    minimum-norm solution."""
+    try:
+        factor = cho_factor(N, lower=True, check_finite=False)
+    except np.linalg.LinAlgError:
+        factor = None
+    if factor is not None:
+        diag = np.abs(np.diagonal(factor[0]))
+        if diag.min() > 1e-6 * diag.max():
+            return cho_solve(factor, rhs, check_finite=False)
+    return np.linalg.lstsq(N, rhs, rcond=None)[0]
 
 
 def fit_vein(
@@ -693,7 +728,7 @@ def _fit_vein(
             G = (B[:, None] * R + A * te[:, None] * F[None, :]) * m
             q = np.sum(wts * G * G, axis=0)
             r = np.sum(wts * G * data, axis=0)
-            c = np.linalg.lstsq(phi.T @ (q[:, None] * phi), phi.T @ r, rcond=None)[0]
+            c = _spd_solve(phi.T @ (q[:, None] * phi), phi.T @ r)
             c /= max(float(np.mean(phi @ c)), 1e-12)
             if rsig is not None:
                 P = (B[:, None] * R + A * te[:, None] * F[None, :]) * (phi @ c)[None, :]
