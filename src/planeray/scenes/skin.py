@@ -450,7 +450,7 @@ def _table_slice(table: VeinTable, depth_mm, diameter_mm):
 
 def _vein_ratio(sl, table: VeinTable, rho_rows, angle_deg, u_table):
     """Kernel ratio ``(n, U)`` of pixels at ``rho_rows`` from a vein at ``angle_deg``; ``u_table`` (n, U) offsets,
-    or (U,): the same offsets for every pixel (one gather per table row instead of one per pixel and offset)."""
+    or (U,): the same offsets for every pixel (one gather of the table's columns instead of one per pixel)."""
     # Angles in (90, 180) mirror (y -> -y) onto 180 - a with rho -> -rho.
     flip = angle_deg > 90.0
     a = np.where(flip, 180.0 - angle_deg, angle_deg)
@@ -465,15 +465,16 @@ def _vein_ratio(sl, table: VeinTable, rho_rows, angle_deg, u_table):
     fk = u_table - table.offsets_rows[0]
     ik = np.clip(np.floor(fk).astype(np.int64), 0, table.offsets_rows.size - 2)
     wk = np.clip(fk - ik, 0.0, 1.0)
-    out = np.zeros((rho.size, u_table.shape[-1]))
+    # bilinear in (angle, rho): each pixel's own table row (n, K), then linear along the offsets
+    rows = np.zeros((rho.size, sl.shape[-1]))
     for da, wa_ in ((0, 1 - wa), (1, wa)):
         for dr, wr_ in ((0, 1 - wr), (1, wr)):
-            rows = sl[ia + da, ir + dr]  # (n, K)
-            if ik.ndim == 1:
-                lo, hi = rows[:, ik], rows[:, ik + 1]
-            else:
-                lo, hi = np.take_along_axis(rows, ik, axis=1), np.take_along_axis(rows, ik + 1, axis=1)
-            out += (wa_ * wr_)[:, None] * ((1 - wk) * lo + wk * hi)
+            rows += (wa_ * wr_)[:, None] * sl[ia + da, ir + dr]
+    if ik.ndim == 1:
+        lo, hi = rows[:, ik], rows[:, ik + 1]
+    else:
+        lo, hi = np.take_along_axis(rows, ik, axis=1), np.take_along_axis(rows, ik + 1, axis=1)
+    out = (1 - wk) * lo + wk * hi
     far = (np.abs(u_table) > table.offsets_rows[-1]) | (np.abs(rho) > gr[-1])[:, None]
     return np.where(far, 1.0, out)
 
