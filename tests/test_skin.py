@@ -130,6 +130,18 @@ def test_a_vein_ends_where_its_centreline_ends():
     assert 0.0 <= beyond < 0.25 * end
 
 
+@pytest.mark.parametrize("shape", [(1,), (2,), (399,), (1, 150), (30, 150)])
+def test_the_veins_and_hairs_wander_as_scipys_first_order_filter(shape):
+    """The random headings of veins and hairs (an AR(1) walk) are exactly ``scipy.signal.lfilter``'s."""
+    from scipy.signal import lfilter
+
+    from planeray.scenes.skin import _ar1
+
+    x = np.random.default_rng(len(shape) * 1000 + shape[-1]).normal(0.0, 2.0, shape)
+    for memory in (0.9, 0.97):
+        np.testing.assert_array_equal(_ar1(x, memory), lfilter([1.0], [1.0, -memory], x, axis=-1))
+
+
 def test_bad_veins_are_refused():
     with pytest.raises(InputError, match="depth_mm"):
         make_scene("skin", (16, 16), veins=[dict(depth_mm=9.0, diameter_mm=2.0, points_mm=[[0, 0], [1, 1]])])
