@@ -278,10 +278,16 @@ def test_cli_skin_validate_writes_report_and_figure(tmp_path):
     from planeray.cli import app
 
     out = tmp_path / "validation"
-    res = CliRunner().invoke(app, ["skin", "validate", "--out", str(out), "--n-photons", "3200"])
+    # 800 photons (seed 0): the dark-skin runs trace no background light into the short-range band
+    res = CliRunner().invoke(app, ["skin", "validate", "--out", str(out), "--n-photons", "800"])
     assert res.exit_code == 0, res.output
-    rep = json.loads((out / "skin_validation.json").read_text())
+    assert "Warning" not in res.output and "nan" not in res.output
+    # strict JSON: a contrast without background light in its band is null, never NaN or Infinity
+    rep = json.loads((out / "skin_validation.json").read_text(), parse_constant=pytest.fail)
     assert len(rep["cases"]) == 10 and len(rep["dark_skin_cases"]) == 2
+    undefined = [r for r in rep["cases"] + rep["dark_skin_cases"] if r["short_brute"] is None]
+    assert undefined and all(r["short_brute_stderr"] is None for r in undefined)
+    assert res.output.count("none (no traced light in the band") == len(undefined)
     assert rep["adding_doubling"]["ad"] == pytest.approx(0.4116, abs=2e-3)
     assert (out / "skin_validation.png").stat().st_size > 10_000
     assert json.loads((out / "planeray.json").read_text())["format"] == "planeray-skin-validation"

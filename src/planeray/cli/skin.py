@@ -12,6 +12,7 @@ simulated skin scene: methods, ambient light, best delay against depth, Eq. 7).
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -203,15 +204,19 @@ def validate(
             overwrite=overwrite,
             progress=lambda k: bar.advance(task, k),
         )
+
+    def contrast(x):  # NaN: no traced background light reached the band
+        return f"{x:.3f}" if math.isfinite(x) else "none (no traced light in the band: more --n-photons)"
+
     for r in rep["cases"]:
         out.print(
             f"{r['angle_deg']:>4.0f} deg top {r['depth_mm']:g} mm D {r['diameter_mm']:g} mm rho {r['rho_rows']:+.0f}: "
-            f"short-range contrast {r['short_brute']:.3f} (brute) {r['short_fast']:.3f} (fast)"
+            f"short-range contrast {contrast(r['short_brute'])} (brute) {contrast(r['short_fast'])} (fast)"
         )
     for r in rep["dark_skin_cases"]:
         out.print(
             f"dark skin, {r['angle_deg']:.0f} deg top {r['depth_mm']:g} mm: short-range contrast "
-            f"{r['short_brute']:.3f} (brute) {r['short_fast']:.3f} (fast)"
+            f"{contrast(r['short_brute'])} (brute) {contrast(r['short_fast'])} (fast)"
         )
     ad = rep["adding_doubling"]
     out.print(

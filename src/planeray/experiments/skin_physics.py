@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -70,7 +71,20 @@ def short_range_weights(offsets_rows, *, delay_us=SHORT_RANGE_DELAY_US, exposure
 
 
 def _contrast(w, vein, bg):
-    return float(1.0 - (w * vein).sum() / (w * bg).sum())
+    """``1 - vein / background`` in the band ``w``; NaN where no background light reached the band (too few photons)."""
+    total = float((w * bg).sum())
+    return float(1.0 - (w * vein).sum() / total) if total > 0 else math.nan
+
+
+def _nulls(value):
+    """``value`` with every NaN or infinite float as None: strict JSON (``null``)."""
+    if isinstance(value, dict):
+        return {k: _nulls(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_nulls(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def vein_validation(*, wavelength_nm=638, tone="fair", cases=VALIDATION_CASES, n_photons=200_000, progress=None):
@@ -84,7 +98,8 @@ def vein_validation(*, wavelength_nm=638, tone="fair", cases=VALIDATION_CASES, n
     -------
     list of dict
         Per case: the contrasts ``short_brute``, ``short_fast``, ``epipolar_brute``,
-        ``epipolar_fast`` (1 - vein / background), the brute-force standard error of the
+        ``epipolar_fast`` (1 - vein / background; NaN where no traced background light reached
+        the band: too few photons), the brute-force standard error of the
         short-range contrast ``short_brute_stderr`` (from the batch spread), and the
         kernels ``offsets_rows``, ``ratio_brute``, ``ratio_fast``.
     """
@@ -117,7 +132,8 @@ def vein_validation(*, wavelength_nm=638, tone="fair", cases=VALIDATION_CASES, n
             ratio_brute = np.where(bg.values > 0, vein.values / bg.values, np.nan)
         # Standard error of the brute-force short-range contrast: its kernel's error (the
         # background run is the same for all cases and correlated with it).
-        se = float(np.sqrt(((w_short * vein.stderr) ** 2).sum()) / (w_short * bg.values).sum())
+        in_band = float((w_short * bg.values).sum())
+        se = float(np.sqrt(((w_short * vein.stderr) ** 2).sum()) / in_band) if in_band > 0 else math.nan
         rows.append(
             dict(
                 angle_deg=angle,
@@ -222,7 +238,8 @@ def run_skin_validation(
     )
     if out is not None:
         with atomic_directory(Path(out), overwrite=overwrite, kind="skin validation") as tmp:
-            (tmp / "skin_validation.json").write_text(json.dumps(report, indent=1))
+            # a contrast without background light in its band (too few photons) is null
+            (tmp / "skin_validation.json").write_text(json.dumps(_nulls(report), indent=1, allow_nan=False))
             vein_validation_figure(rows, out=tmp / "skin_validation.png")
             (tmp / MARKER).write_text(json.dumps({"format": VALIDATION_FORMAT, "format_version": 1}, indent=1))
     return report
