@@ -28,6 +28,7 @@ from ..mc.layered import mc_layered_profile, mc_vein_kernel_brute
 from ..optical_data_skin import skin_layers
 from ..scenes.skin import _table_slice, _vein_ratio, skin_tables
 from ..timing import PAPER_LINES_PER_SECOND, band_bin_weights, band_centre_rows, band_width_rows
+from ._report import jsonable
 
 __all__ = [
     "VALIDATION_CASES",
@@ -74,17 +75,6 @@ def _contrast(w, vein, bg):
     """``1 - vein / background`` in the band ``w``; NaN where no background light reached the band (too few photons)."""
     total = float((w * bg).sum())
     return float(1.0 - (w * vein).sum() / total) if total > 0 else math.nan
-
-
-def _nulls(value):
-    """``value`` with every NaN or infinite float as None: strict JSON (``null``)."""
-    if isinstance(value, dict):
-        return {k: _nulls(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_nulls(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def vein_validation(*, wavelength_nm=638, tone="fair", cases=VALIDATION_CASES, n_photons=200_000, progress=None):
@@ -239,7 +229,7 @@ def run_skin_validation(
     if out is not None:
         with atomic_directory(Path(out), overwrite=overwrite, kind="skin validation") as tmp:
             # a contrast without background light in its band (too few photons) is null
-            (tmp / "skin_validation.json").write_text(json.dumps(_nulls(report), indent=1, allow_nan=False))
+            (tmp / "skin_validation.json").write_text(json.dumps(jsonable(report), indent=1, allow_nan=False))
             vein_validation_figure(rows, out=tmp / "skin_validation.png")
             (tmp / MARKER).write_text(json.dumps({"format": VALIDATION_FORMAT, "format_version": 1}, indent=1))
     return report
