@@ -1,9 +1,12 @@
-"""``alpha``/``beta`` chosen by cross-validation over the images (issue 26).
+"""``alpha``/``beta`` chosen by the data (issues 26 and 42).
 
-The criterion is checked against an independent computation (SciPy's NNLS on the
-augmented system, folds as documented) by exhaustive search over a grid; pure noise
-must choose strong regularization; explicit weights stay exactly what was asked; the
-store records the choice; an interrupted automatic run resumes only on identical inputs.
+The criteria -- generalized cross-validation (the default), Stein's risk estimate and K-fold
+cross-validation over the images -- are checked against independent computations (SciPy's NNLS
+on the augmented system; folds as documented) by exhaustive search over a grid; pure noise
+must choose strong regularization; a best weight beyond the searched range is searched for and
+otherwise reported (store and console); explicit weights stay exactly what was asked; the store
+records the choice; an interrupted automatic run resumes only on identical inputs.  What each
+criterion estimates is tested in ``test_demux_risk.py``.
 """
 
 from __future__ import annotations
@@ -30,9 +33,13 @@ SMALL_BETAS = (1e-3, 1e-1)
 
 @pytest.fixture(autouse=True)
 def small_grids(monkeypatch):
-    """Coarse grids keep each automatic run to a few pairs (the search itself is the same)."""
+    """Coarse grids keep each automatic run to a few pairs (the search itself is the same; it goes
+    past the grid's ends only as far as the limits, here the grids' own ranges, except where a test
+    widens them)."""
     monkeypatch.setattr(auto_mod, "DEFAULT_ALPHAS", SMALL_ALPHAS)
     monkeypatch.setattr(auto_mod, "DEFAULT_BETAS", SMALL_BETAS)
+    monkeypatch.setattr(auto_mod, "ALPHA_LIMITS", (min(SMALL_ALPHAS), max(SMALL_ALPHAS)))
+    monkeypatch.setattr(auto_mod, "BETA_LIMITS", (min(SMALL_BETAS), max(SMALL_BETAS)))
     monkeypatch.setattr(auto_mod, "MIN_PIXELS", 48)
 
 
@@ -94,13 +101,37 @@ def independent_cv(stack, pixels, alpha, *, folds=5, seed=0):
     return float(np.mean(scores))
 
 
-def test_criterion_matches_exhaustive_search_with_an_independent_solver():
+def independent_gcv(stack, pixels, alpha):
+    """GCV written out with SciPy: beta = 0, each fit an NNLS of ``[A; sqrt(alpha) D]``, its influence on the free set."""
+    problem = DemuxProblem.from_stack(stack)
+    imgs = np.asarray(stack.images, np.float64)[problem.image_index]
+    scores = []
+    for r, c in pixels:
+        A = problem.groups[problem.row_group[r]].A
+        N, V = A.shape
+        D = np.diff(np.eye(V), axis=0)
+        b = imgs[:, r, c]
+        x, _ = nnls(np.vstack([A, np.sqrt(alpha) * D]), np.concatenate([b, np.zeros(V - 1)]), maxiter=20 * V)
+        F = x > 0
+        AF = A[:, F]
+        S = AF @ np.linalg.pinv(AF.T @ AF + alpha * (D.T @ D)[np.ix_(F, F)]) @ AF.T  # the influence matrix
+        res = b - A @ x
+        scores.append(N * float(res @ res) / (N - np.trace(S)) ** 2)
+    return float(np.mean(scores))
+
+
+@pytest.mark.parametrize("criterion", ["gcv", "cv-images"])
+def test_criterion_matches_exhaustive_search_with_an_independent_solver(criterion):
     stack, _ = synthetic("smooth", shape=(H, 8))
     grid = (1e-2, 1.0, 30.0, 1e3, 1e5)
-    choice = choose_weights(stack, alpha="auto", beta=0.0, alphas=grid, n_pixels=6, tol=1e-6)
-    assert choice.beta == 0.0 and set(choice.betas) == {0.0}
+    choice = choose_weights(
+        stack, alpha="auto", beta=0.0, alphas=grid, n_pixels=6, tol=1e-6, criterion=criterion
+    )
+    assert choice.beta == 0.0 and set(choice.betas) == {0.0} and choice.criterion == criterion
+    assert choice.worst_gap <= 1e-6  # every solve behind the curve certified to the tolerance asked
     ours = dict(zip(choice.alphas, choice.scores))
-    theirs = {a: independent_cv(stack, choice.pixels, a) for a in grid if a in ours}
+    independent = independent_gcv if criterion == "gcv" else independent_cv
+    theirs = {a: independent(stack, choice.pixels, a) for a in grid if a in ours}
     for a in theirs:
         assert ours[a] == pytest.approx(theirs[a], rel=0.02), a
     best = min(theirs, key=theirs.get)
@@ -133,6 +164,29 @@ def test_pure_noise_chooses_strong_regularization():
     auto = demultiplex(stack, alpha=choice.alpha, beta=choice.beta, ambient=choice.ambient).transport.dense
     paper = demultiplex(stack).transport.dense
     assert np.linalg.norm(auto) < 0.2 * np.linalg.norm(paper)
+
+
+def test_search_goes_past_the_grids_ends_and_says_when_it_stops_at_a_limit(monkeypatch):
+    """A best weight beyond the grid is searched for in half-decade steps; beyond the limits it is reported."""
+    monkeypatch.setattr(auto_mod, "ALPHA_LIMITS", (1e-5, 1e6))
+    monkeypatch.setattr(auto_mod, "BETA_LIMITS", (1e-6, 100.0))
+    alphas, betas = (1e-3, 1e-2, 1e-1, 1.0), (1e-3, 1e-2, 1e-1)
+    auto = {"alpha": "auto", "beta": "auto"}
+
+    def bowl(a0, b0):  # per-pixel scores with their minimum at (a0, b0)
+        return lambda a, b: np.array([1.0, 1.1]) + (np.log10(a / a0) ** 2 + np.log10(b / b0) ** 2)
+
+    curve = auto_mod.search(bowl(1e-4, 3.16e-1), auto, alphas, betas)  # both beyond the grid, within the limits
+    best = auto_mod._best(curve)
+    assert best[0] == pytest.approx(1e-4) and best[1] == pytest.approx(10**-0.5)
+    assert auto_mod.edges(curve, auto) == {}  # a worse point was scored beyond each
+    curve = auto_mod.search(bowl(1e-8, 1e3), auto, alphas, betas)  # beyond the limits
+    best = auto_mod._best(curve)
+    assert best[0] == pytest.approx(1e-5) and best[1] == pytest.approx(100.0)
+    assert auto_mod.edges(curve, auto) == {"alpha": "low", "beta": "high"}
+    held = {"alpha": "auto", "beta": 0.01}  # a weight that is not automatic is never moved nor reported
+    curve = auto_mod.search(bowl(1e-8, 1e3), held, alphas, betas)
+    assert {k[1] for k in curve} == {0.01} and auto_mod.edges(curve, held) == {"alpha": "low"}
 
 
 def test_explicit_weights_are_exactly_what_was_asked(tmp_path):
@@ -171,7 +225,12 @@ def test_store_records_the_choice_and_the_command_prints_and_draws_it(tmp_path):
     attrs = zarr.open_group(str(out), mode="r").attrs.asdict()
     rec = attrs["weights_choice"]
     assert attrs["ambient"] == rec["ambient"] == "estimate"
-    assert rec["requested"] == {"alpha": "auto", "beta": "auto"} and rec["criterion"] == "cv-images"
+    assert rec["requested"] == {"alpha": "auto", "beta": "auto"} and rec["criterion"] == "gcv"
+    assert 0 < rec["worst_gap"] <= 1e-4  # every solve behind the curve certified as the final one
+    # the search may not pass the (pinned) ends of the small grids: a best on one is said, not silent
+    assert rec["edge"] == {"beta": "low"} and rec["beta"] == min(SMALL_BETAS)
+    warn = [line for line in r.output.splitlines() if line.startswith("warning: beta = ")]
+    assert len(warn) == 1 and "is the smallest value the search tried" in warn[0] and "may lie below" in warn[0]
     assert attrs["alpha"] == rec["alpha"] and attrs["beta"] == rec["beta"]
     curve = rec["curve"]
     n = len(curve["score"])

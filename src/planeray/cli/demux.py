@@ -41,10 +41,15 @@ def demux(
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Transport store to write (Zarr).")],
     alpha: Annotated[
         str,
-        typer.Option(help="Smoothness weight (paper: 0.01), or 'auto': chosen by cross-validation over the images."),
+        typer.Option(
+            help="Smoothness weight (paper: 0.01), or 'auto': chosen from the images (generalized cross-validation)."
+        ),
     ] = "0.01",
     beta: Annotated[
-        str, typer.Option(help="Sparsity weight (paper: 0.01), or 'auto': chosen by cross-validation over the images.")
+        str,
+        typer.Option(
+            help="Sparsity weight (paper: 0.01), or 'auto': chosen from the images (generalized cross-validation)."
+        ),
     ] = "0.01",
     ambient: Annotated[
         str | None,
@@ -65,7 +70,7 @@ def demux(
     restart: Annotated[bool, typer.Option(help="Discard an unfinished run instead of resuming it.")] = False,
     report: Annotated[
         Path | None,
-        typer.Option(help="With 'auto' weights: write the cross-validation curve to DIR/weights_cv.png."),
+        typer.Option(help="With 'auto' weights: write the criterion's curve to DIR/weights_cv.png."),
     ] = None,
 ):
     """Demultiplex a delay-exposure stack into 3D light transport (Sec. 4); resumable."""
@@ -113,9 +118,12 @@ def demux(
         chosen["choice"] = choice
         note = " (taken from the unfinished run)" if resumed else f" ({time.perf_counter() - t0:.1f} s)"
         out.print(choice.summary() + note, markup=False, highlight=False)
+        warning = choice.edge_warning()
+        if warning:  # the best lies on an end of what was searched: said, not silent
+            console.print(warning, style="yellow", markup=False, highlight=False)
 
     if auto:
-        console.print("choosing the weights by cross-validation over the images ...", markup=False, highlight=False)
+        console.print("choosing the weights from the images ...", markup=False, highlight=False)
     with progress_bar() as bar:
         task = bar.add_task(f"demultiplexing ({method})", total=st.shape[0])
         path = demultiplex_to_store(
@@ -156,7 +164,7 @@ def demux(
 
         Path(report).mkdir(parents=True, exist_ok=True)
         weights_cv_figure(chosen["choice"], out=figure)
-        out.print(f"cross-validation curve: {figure}", markup=False, highlight=False)
+        out.print(f"criterion curve: {figure}", markup=False, highlight=False)
     empty = int((maps["n_observations"] == 0).sum())
     if empty:
         console.print(

@@ -18,7 +18,9 @@ one pass, and two Python threads run two pixel batches at once (``nogil``):
 * :func:`split_dual`, :func:`finish_residual`, :func:`finish_gradient`, :func:`half_norms`:
   the certificate's per-pixel parts (objective, gradient, KKT residual, gap bound);
   :func:`null_adjust` the multiplier's move that keeps the bound finite when ``Q`` is
-  singular (the ambient term of Eq. 6a).
+  singular (the ambient term of Eq. 6a);
+* :func:`path_solves`: the smoothness term's tridiagonal solves of the automatic weights'
+  criterion (:mod:`planeray.demux.risk`).
 
 Compiled by Numba on first use and cached on disk.
 
@@ -44,6 +46,7 @@ __all__ = [
     "finish_gradient",
     "null_adjust",
     "half_norms",
+    "path_solves",
     "warm_up",
 ]
 
@@ -424,6 +427,49 @@ def half_norms(W, lamz, out):  # pragma: no cover - compiled
             w = W[p, u]
             s += w * w
         out[p] = 0.5 * s + lamz[p]
+
+
+@numba.njit(**_JIT)
+def path_solves(A, free, n_free, n_x, S, Y):  # pragma: no cover - compiled
+    """For each pixel: its free transport columns ``S = A[:, F]`` and ``Y = R_FF^{-1} S^T`` (padded).
+
+    ``free`` (P, m_max) holds each pixel's sorted free transport unknowns (``< n_x``), ``n_free``
+    (P,) how many; ``R = D^T D`` is the path Laplacian (2 inside, 1 at the two ends, -1 between
+    neighbours), so ``R_FF`` is tridiagonal (-1 only where consecutive free unknowns are
+    neighbours) and positive definite unless every unknown is free: one Thomas sweep per pixel
+    over all ``N`` right-hand sides.  ``S`` (P, N, m_max) and ``Y`` (P, m_max, N) are written on
+    their first ``n_free`` columns / rows (the rest must be zero).  The observation-space
+    degrees of freedom of :mod:`planeray.demux.risk`.
+    """
+    P = free.shape[0]
+    N = A.shape[0]
+    for p in range(P):
+        m = n_free[p]
+        if m == 0:
+            continue
+        cp = np.empty(m)
+        for i in range(m):
+            u = free[p, i]
+            d = 1.0 if (u == 0 or u == n_x - 1) else 2.0
+            if n_x == 1:
+                d = 0.0
+            e_prev = 0.0
+            if i > 0 and free[p, i - 1] == u - 1:
+                e_prev = -1.0
+            e_next = 0.0
+            if i < m - 1 and free[p, i + 1] == u + 1:
+                e_next = -1.0
+            denom = d - (e_prev * cp[i - 1] if i > 0 else 0.0)
+            cp[i] = e_next / denom
+            for j in range(N):
+                s = A[j, u]
+                S[p, j, i] = s
+                Y[p, i, j] = (s - (e_prev * Y[p, i - 1, j] if i > 0 else 0.0)) / denom
+        for i in range(m - 2, -1, -1):
+            c = cp[i]
+            if c != 0.0:
+                for j in range(N):
+                    Y[p, i, j] -= c * Y[p, i + 1, j]
 
 
 def warm_up() -> None:

@@ -92,6 +92,8 @@ _RELAX = 1.8
 #: Pixels per batch (one task of a worker thread).
 _CHUNK = 512
 _FIRST_CHECK = 30
+#: The first certificate of a warm-started solve (it often holds at once).
+_FIRST_CHECK_WARM = 10
 _CHECK_EVERY = 10
 _MAX_ITER = 2000
 
@@ -253,7 +255,7 @@ class AdmmRowSolver:
         return self._AQ
 
     # ------------------------------------------------------------------ solve
-    def solve(self, B, tol=DEFAULT_TOL, max_iter=_MAX_ITER, *, mask=None):
+    def solve(self, B, tol=DEFAULT_TOL, max_iter=None, *, mask=None, start=None):
         """ADMM for a batch of pixels ``B`` (P, N).
 
         Parameters
@@ -261,10 +263,15 @@ class AdmmRowSolver:
         B : ndarray (P, N)
         tol : float
             Certified relative objective gap at which a pixel stops.
-        max_iter : int
+        max_iter : int, optional
+            Iteration cap (default ``_MAX_ITER``, 2000); pixels left there are finished exactly.
         mask : ndarray (P, N) bool, optional
             Observations to use (False: dropped, e.g. saturated).  A pixel without any
             is returned as 0, not converged, with 0 iterations.
+        start : ndarray (P, U), optional
+            A warm start in the solver's variables (e.g. each pixel's solution at nearby
+            weights): ADMM starts there, with the multipliers this problem's gradient gives
+            on its zero entries.  The result is certified all the same.
 
         Returns
         -------
@@ -274,6 +281,7 @@ class AdmmRowSolver:
         (``(P, U + 1)`` with the ambient: its last column is ``a' = sqrt(U) a``, the solver's
         scaled ambient; :func:`solve_fast` returns ``a``).
         """
+        max_iter = _MAX_ITER if max_iter is None else int(max_iter)
         B = np.ascontiguousarray(B, np.float64)
         P, N = B.shape
         U = self.A.shape[1]
@@ -295,7 +303,7 @@ class AdmmRowSolver:
                 KQ = self.certificate_woodbury()[1]
                 ok = np.ones(wb.n, bool)
                 K.woodbury_factors(KQ, wb.sel, wb.k, np.arange(wb.n), wb.L0, ok)
-                if not ok.all():  # numerically singular: those pixels on their own rows
+                if not ok.all():  # numerically singular: those pixels on their own rows (cold)
                     self._solve_apart(B, mask, wb.pix[~ok], tol, max_iter, X, iters, gap, fval, kkt, rss)
                     run[wb.pix[~ok]] = False
             else:
@@ -304,7 +312,11 @@ class AdmmRowSolver:
             done = run if U == 0 else np.zeros(P, bool)
             gap[done] = 0.0
             return X, iters, done, np.where(done, 0.0, np.inf), fval, kkt, rss
-        self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss)
+        if start is not None:
+            start = np.maximum(np.asarray(start, np.float64), 0.0)
+            if start.shape != (P, U):
+                raise ValueError(f"start must be {(P, U)}, got {start.shape}")
+        self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss, start)
         capped = np.flatnonzero(run & (iters >= max_iter) & ~(gap <= tol * np.maximum(fval - gap, 0.0)))
         if capped.size:  # the few pixels left at the cap: finished exactly in float64 (certified or kept)
             finish_pixels(self, B, mask, capped, tol, X, gap, fval, kkt, rss)
@@ -332,7 +344,20 @@ class AdmmRowSolver:
         C[np.abs(C) < 1e-30] = 0.0
         return C.astype(np.float32)
 
-    def _admm(self, Ball, tol, max_iter, idx, wb, mask, X, iters, gap, fval, kkt, rss):
+    def _warm(self, X0, Bb, keep, rho) -> np.ndarray:
+        """ADMM's ``v = z + w`` at a warm start ``X0``: ``w = -lambda / rho``, ``lambda`` this problem's gradient on zeros."""
+        R = X0 @ self.AT - Bb
+        if keep.size:
+            R = np.where(keep, R, 0.0)
+        G = 2.0 * (R @ self.A) + self.beta_u
+        if self.n_x > 1:
+            d = 2.0 * self.alpha * np.diff(X0[:, : self.n_x], axis=1)
+            G[:, : self.n_x - 1] -= d
+            G[:, 1 : self.n_x] += d
+        lam = np.where(X0 > 0, 0.0, np.maximum(G, 0.0))
+        return (X0 - lam / rho).astype(np.float32)
+
+    def _admm(self, Ball, tol, max_iter, idx, wb, mask, X, iters, gap, fval, kkt, rss, start=None):
         ladder = np.asarray(_RHO_LADDER)
         U = self.A.shape[1]
         P = idx.size
@@ -344,16 +369,18 @@ class AdmmRowSolver:
             idx, Bb, masked = idx[first], Bb[first], masked[first]
             if keep.size:
                 keep = keep[first]
-        start = _ambient_start(self.beta) if self.ambient else _RHO_START
-        level = np.full(P, start)
+        start_level = _ambient_start(self.beta) if self.ambient else _RHO_START
+        level = np.full(P, start_level)
         moves = np.zeros(P, np.int32)
         if wb is not None:
-            wb.refactor(self.factor(start).K, np.arange(wb.n))
+            wb.refactor(self.factor(start_level).K, np.arange(wb.n))
         V = np.zeros((P, U), np.float32)
-        if self.ambient:
+        if start is not None:
+            V[:] = self._warm(start[idx], Bb, keep, _RHO_LADDER[start_level])
+        elif self.ambient:
             # start: every offset's multiplier at beta (the sparsity term's pull balanced) and the
             # ambient at its upper bound min_i b_i / I_w,i over the observations used (T >= 0), scaled
-            V[:, : self.n_x] = -self.beta / _RHO_LADDER[start]
+            V[:, : self.n_x] = -self.beta / _RHO_LADDER[start_level]
             e = self.ambient_column
             if e.min(initial=0.0) > 0:
                 ratio = Bb / e
@@ -363,10 +390,10 @@ class AdmmRowSolver:
                 V[:, -1] = np.where(np.isfinite(a0), np.maximum(a0, 0.0), 0.0) * self.ambient_scale
         absV = np.abs(V)
         T = np.empty_like(V)
-        C = self._constants(Bb, start, masked, wb)
+        C = self._constants(Bb, start_level, masked, wb)
         dz2 = np.zeros(P)
         dw2 = np.zeros(P)
-        k, n = 0, _FIRST_CHECK
+        k, n = 0, (_FIRST_CHECK_WARM if start is not None else _FIRST_CHECK)
         AQ = None if wb is None else self.certificate_woodbury()[0]
         while P:
             # rows are sorted by level: one product per level, on views
@@ -599,7 +626,8 @@ def solve_fast(
     Returns
     -------
     SolveResult
-        ``converged`` is True where the certificate proved the gap ``<= tol``.
+        ``converged`` is True where the certificate proved the gap ``<= tol``; ``gap`` is
+        each pixel's certified relative gap.
     """
     tol = DEFAULT_TOL if tol is None else float(tol)
     B = np.asarray(B, np.float64)
@@ -620,17 +648,18 @@ def solve_fast(
             np.zeros(0, np.int32),
             np.zeros(0, bool),
             ambient=None if ambient is None else np.zeros(0),
+            gap=np.zeros(0),
         )
-    X, iters, conv, _, f, kkt, rss = (np.concatenate([p[i] for p in parts]) for i in range(7))
+    X, iters, conv, gap, f, kkt, rss = (np.concatenate([p[i] for p in parts]) for i in range(7))
     # the driver's maps, from the last certificate (float64 residual; gradient in float32)
     Bm = B if mask is None else np.where(mask, B, 0.0)
     if ambient is None:
         c = 2.0 * (Bm.astype(np.float32) @ solver.A32) - np.float32(beta)
         scaled = kkt / (1.0 + np.abs(c).max(axis=1, initial=0.0))
-        return SolveResult(X, iters, conv, objective=f, residual_ss=rss, kkt_residual=scaled)
+        return SolveResult(X, iters, conv, objective=f, residual_ss=rss, kkt_residual=scaled, gap=gap)
     # with the ambient the maps are those of Eq. 6a itself (the solver's a' is scaled), in float64
     n = solver.n_x
     a = X[:, n] / solver.ambient_scale
     e = np.asarray(ambient, np.float64)
     d = pixel_terms(group.A, X[:, :n], B, alpha, beta, mask=mask, exposure_rows=e, ambient=a)
-    return SolveResult(X[:, :n], iters, conv, ambient=a, **d)
+    return SolveResult(X[:, :n], iters, conv, ambient=a, gap=gap, **d)

@@ -28,6 +28,9 @@ class SolveResult:
     ambient : ndarray (P,), optional
         Each pixel's ambient ``a`` (normalized value per projector row of exposure) when
         the problem has the ambient term (Eq. 6a); None otherwise.
+    gap : ndarray (P,), optional
+        The certified relative objective gap of each pixel (``(f - f*) / f*`` is at most
+        this), when the solver certifies one (``fast``); inf where nothing was usable.
     """
 
     X: np.ndarray
@@ -37,3 +40,4 @@ class SolveResult:
     residual_ss: np.ndarray | None = None
     kkt_residual: np.ndarray | None = None
     ambient: np.ndarray | None = None
+    gap: np.ndarray | None = None

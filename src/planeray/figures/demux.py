@@ -1,4 +1,4 @@
-"""The cross-validation curve of an automatic choice of the demultiplexing weights (issue 26)."""
+"""The criterion's curve of an automatic choice of the demultiplexing weights (issues 26, 42)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,20 @@ from ._common import figure_for, finish, new_figure
 
 __all__ = ["weights_cv_figure"]
 
+#: The score's axis label, per criterion.
+_YLABEL = {
+    "gcv": "GCV score (noise-weighted; 1 = the camera model's noise)",
+    "sure": "risk estimate C_p (1 = the noise level)",
+    "cv-images": "CV score (left-out images, noise-weighted)",
+}
+
 
 def weights_cv_figure(choice, *, ax=None, out=None):
-    """Cross-validation score against the weights tried, with the chosen pair marked.
+    """The criterion's score against the weights tried, with the chosen pair marked.
+
+    The score is generalized cross-validation (the default), Stein's risk estimate or K-fold
+    cross-validation over the images (``choice.criterion``); a best weight on an end of what
+    was searched (``choice.edge``) is said in the panel.
 
     Parameters
     ----------
@@ -87,13 +98,25 @@ def weights_cv_figure(choice, *, ax=None, out=None):
         lo, hi = getattr(choice, f"{name}_range")
         ax_.axvspan(lo / 1.15, hi * 1.15, color="tab:green", alpha=0.12, label="within 1 SE of the best")
         ax_.plot([xb], [yb], marker="*", ms=16, color="tab:red", zorder=5, label=f"chosen {name} = {xb:.3g}")
+        side = choice.edge.get(name)
+        if side:
+            ax_.annotate(
+                f"best on the {'lower' if side == 'low' else 'upper'} end searched:\nit may lie {'below' if side == 'low' else 'above'}",
+                (xb, yb),
+                xytext=(0.5, 0.85),
+                textcoords="axes fraction",
+                ha="center",
+                fontsize=8,
+                color="tab:red",
+                arrowprops={"arrowstyle": "->", "color": "tab:red"},
+            )
         ax_.set_xscale("log")
         ax_.set_yscale("log")
         ax_.set_xlabel(f"{name} ({'smoothness' if name == 'alpha' else 'sparsity'} weight)")
-        ax_.set_ylabel("CV score (left-out images, noise-weighted)")
+        ax_.set_ylabel(_YLABEL.get(choice.criterion, "score"))
         ax_.grid(alpha=0.3, which="both")
         ax_.legend(fontsize=7)
-        ax_.set_title(f"{choice.folds}-fold CV over images, {choice.n_pixels} pixels ({choice.weighting})", fontsize=9)
+        ax_.set_title(f"{choice.criterion_label()}, {choice.n_pixels} pixels ({choice.weighting})", fontsize=9)
     if ax is None:
         fig.tight_layout()
     return finish(fig, out)
