@@ -44,6 +44,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from demux_auto_table import columns, truth_on  # issue 26's tool, beside this one
 
 from planeray.acquire import simulate_stack
 from planeray.camera import CameraModel
@@ -66,42 +67,6 @@ BLOCK_FOLDS = False
 
 
 # ------------------------------------------------------------------ the condition
-def columns(stack: Stack, cols) -> Stack:
-    """The stack restricted to some columns (the problem depends on rows only)."""
-    sat = None if stack.saturated is None else np.asarray(stack.saturated)[:, :, cols]
-    return Stack(
-        np.asarray(stack.images)[:, :, cols],
-        stack.delay_us,
-        stack.exposure_us,
-        stack.lines_per_second,
-        excluded=stack.excluded,
-        saturated=sat,
-        projector_rows=stack.projector_rows,
-        metadata=stack.metadata,
-    )
-
-
-def truth_on(scene, problem: DemuxProblem, scale: float, cols) -> np.ndarray:
-    """``scale`` times the scene's transport (dense and sparse) on the problem's offsets, ``(H, C, U)``."""
-    tr = scene.transport
-    H = tr.dense.shape[0]
-    out = np.zeros((H, len(cols), problem.n_offsets))
-    u0 = int(problem.offsets_rows[0])
-    for k, u in enumerate(tr.offsets_rows):
-        j = int(u) - u0
-        if 0 <= j < problem.n_offsets:
-            out[:, :, j] = tr.dense[:, cols, k]
-    sp = tr.sparse
-    if len(sp):
-        keep = np.isin(sp.col, cols)
-        colpos = {int(c): i for i, c in enumerate(cols)}
-        for r, c, o, v in zip(sp.row[keep], sp.col[keep], sp.offset[keep], sp.value[keep]):
-            j = int(o) - u0
-            if 0 <= j < problem.n_offsets:
-                out[r, colpos[int(c)], j] += v
-    return scale * out
-
-
 def band_images(T, problem: DemuxProblem) -> np.ndarray:
     """The images of :data:`UNCAPTURED` predicted from ``T`` ``(H, C, U)``: ``(len(UNCAPTURED), H, C)``."""
     H = T.shape[0]
@@ -347,6 +312,130 @@ def summary_row(rec: dict, choice: tuple) -> dict:
     }
 
 
+def _label(rec: dict) -> tuple[str, str]:
+    """Scene name and ``projector / camera rows`` of a condition."""
+    name = rec["scene"]
+    parts = name.split("_")
+    geo = f"{rec['projector_rows']}/{rec['shape'][0]}"
+    base = "_".join(parts[:-2]) if len(parts) > 2 and parts[-1].isdigit() and parts[-2].isdigit() else name
+    return base, geo
+
+
+def _fmt(pair) -> str:
+    return f"{pair[0]:.3g} / {pair[1]:.3g}"
+
+
+def report(cache: Path, *, product: str = "gcv", figure: Path | None = None) -> None:
+    """The docs' tables (markdown, stdout) and the curves' figure, from the cache."""
+    keys = sorted(p.stem for p in cache.glob("*.json") if "__product_" not in p.stem)
+    recs = [json.loads((cache / f"{k}.json").read_text()) for k in keys]
+    order = sorted(
+        range(len(recs)), key=lambda i: (_label(recs[i])[1] != "720/32", _label(recs[i]), recs[i]["ambient_e_per_us"])
+    )
+    print(f"\n### The automatic weights ({product}) against the truth\n")
+    print(
+        "| scene | P / H rows | ambient | chosen alpha / beta | error at chosen | best alpha / beta (truth) | error at best | "
+        "error at 0.01 / 0.01 | chosen / best | chosen / 0.01-0.01 | uncaptured images, chosen / 0.01-0.01 | worst gap |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    worst = {"best": 0.0, "default": 0.0}
+    for i in order:
+        rec = recs[i]
+        path = cache / f"{rec['condition']}__product_{product}.json"
+        if not path.exists():
+            continue
+        pr_ = json.loads(path.read_text())
+        s = summary_row(rec, DEFAULT)
+        base, geo = _label(rec)
+        img = dict(zip(map(tuple, rec["grid"]), rec["image_error"]))
+        rb, rd = pr_["error"] / s["error_best"], pr_["error"] / s["error_default"]
+        worst["best"], worst["default"] = max(worst["best"], rb), max(worst["default"], rd)
+        edge = "" if not pr_["edge"] else " (edge: " + ", ".join(f"{k} {v}" for k, v in pr_["edge"].items()) + ")"
+        gap = max(max(rec["worst_gap"]), pr_["worst_gap"])
+        print(
+            f"| {base} | {geo} | {'on' if rec['ambient_e_per_us'] else 'off'} | {_fmt(pr_['choice'])}{edge} | "
+            f"{pr_['error']:.3f} | {_fmt(s['best'])} | {s['error_best']:.3f} | {s['error_default']:.3f} | "
+            f"**{rb:.2f}** | **{rd:.3f}** | {pr_['image_error'] / img[DEFAULT]:.2f} | {gap:.1e} |"
+        )
+    print(f"\nworst chosen / best {worst['best']:.3f}, worst chosen / 0.01-0.01 {worst['default']:.3f}")
+    print("\n### Every criterion's grid choice (chosen / best, chosen / 0.01-0.01)\n")
+    crits = [c for c in CRITERIA if c != "null"]
+    print("| scene | P / H | ambient | " + " | ".join(crits) + " |")
+    print("|---|---|---|" + "---|" * len(crits))
+    summary = {c: [] for c in crits}
+    for i in order:
+        rec = recs[i]
+        _, pp = load(cache, rec["condition"])
+        grid = [tuple(p) for p in rec["grid"]]
+        cells = []
+        for c in crits:
+            s = summary_row(rec, grid[int(np.argmin(pp[c].mean(axis=1)))])
+            summary[c].append((s["ratio_best"], s["ratio_default"]))
+            miss = "" if s["ratio_best"] <= 1.3 and s["ratio_default"] <= 1.05 else " ✗"
+            cells.append(f"{s['ratio_best']:.2f} / {s['ratio_default']:.2f}{miss}")
+        base, geo = _label(rec)
+        print(f"| {base} | {geo} | {'on' if rec['ambient_e_per_us'] else 'off'} | " + " | ".join(cells) + " |")
+    for c in crits:
+        w = np.array(summary[c])
+        fails = int(((w[:, 0] > 1.3) | (w[:, 1] > 1.05)).sum())
+        print(f"{c}: worst {w[:, 0].max():.3f} / {w[:, 1].max():.3f}, misses {fails} of {len(w)}")
+    if figure is not None:
+        _figure(cache, recs, order, product, figure)
+
+
+def _figure(cache, recs, order, product, path) -> None:
+    """Per condition with ambient light: the criterion and the truth error along alpha at the chosen beta."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sel = [
+        i
+        for i in order
+        if recs[i]["ambient_e_per_us"] > 0 and (cache / f"{recs[i]['condition']}__product_{product}.json").exists()
+    ]
+    cols = 5
+    rows = -(-len(sel) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.5 * rows), squeeze=False)
+    for ax, i in zip(axes.ravel(), sel):
+        rec = recs[i]
+        pr_ = json.loads((cache / f"{rec['condition']}__product_{product}.json").read_text())
+        _, pp = load(cache, rec["condition"])
+        grid = np.array(rec["grid"])
+        b = min(BETAS, key=lambda v: abs(np.log(v / pr_["choice"][1])))
+        on = np.isclose(grid[:, 1], b)
+        a = grid[on, 0]
+        crit = pp[product if product in pp else "gcv"][on].mean(axis=1)
+        err = np.array(rec["error"])[on]
+        ax.plot(a, crit / crit.min(), "o-", ms=3, color="tab:blue", label=f"{product} / min")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax2 = ax.twinx()
+        ax2.plot(a, err / np.min(rec["error"]), "s--", ms=3, color="tab:red", label="T error / grid best")
+        ax2.axhline(1.3, color="tab:red", lw=0.6, alpha=0.5)
+        ax.axvline(pr_["choice"][0], color="tab:blue", lw=1.2, alpha=0.6)
+        ax.axvline(0.01, color="0.5", lw=0.8, ls=":")
+        base, geo = _label(rec)
+        ax.set_title(f"{base} {geo}, beta {b:.2g}", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax2.tick_params(labelsize=7, colors="tab:red")
+    for ax in axes.ravel()[len(sel) :]:
+        ax.axis("off")
+    handles = [
+        plt.Line2D([], [], color="tab:blue", marker="o", label=f"criterion ({product}) / its minimum"),
+        plt.Line2D([], [], color="tab:red", marker="s", ls="--", label="T error / the grid's best (right axis)"),
+        plt.Line2D([], [], color="tab:blue", lw=1.2, alpha=0.6, label="chosen alpha"),
+        plt.Line2D([], [], color="0.5", ls=":", label="alpha = 0.01"),
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=8)
+    fig.suptitle("The criterion along alpha (at the chosen beta) and the truth's error; ambient light on", fontsize=10)
+    fig.tight_layout(rect=(0, 0.04, 1, 0.97))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+    print(f"figure: {path}")
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cache", type=Path, required=True)
@@ -357,6 +446,10 @@ def main(argv=None) -> None:
     ap.add_argument("--cols", type=int, default=8)
     ap.add_argument("--problem", default="estimate", choices=["estimate", "none"])
     ap.add_argument("--product", nargs="*", default=[], help="also run choose_weights with these criteria")
+    ap.add_argument("--no-grid", action="store_true", help="only the conditions whose grid is cached (with --product)")
+    ap.add_argument("--report", action="store_true", help="print the tables of everything in the cache")
+    ap.add_argument("--report-criterion", default="gcv", help="the product's criterion in the main table")
+    ap.add_argument("--figure", type=Path, default=None, help="with --report: write the curves' figure here")
     args = ap.parse_args(argv)
     args.cache.mkdir(parents=True, exist_ok=True)
     from planeray.scenes import make_scene
@@ -372,8 +465,21 @@ def main(argv=None) -> None:
         scene = None
         for amb in args.ambient:
             key = f"{name}__amb{amb:g}__{args.problem}"
+            if not (args.cache / f"{key}.json").exists():
+                if args.no_grid:
+                    continue
+                scene = build() if scene is None else scene
+                rec = run_condition(
+                    name, scene, ambient_e_per_us=amb, cols_n=args.cols, problem_mode=args.problem, cache=args.cache
+                )
+                s = summary_row(rec, DEFAULT)
+                print(
+                    f"{key}: best {s['best']} err {s['error_best']:.4f}, 0.01/0.01 {s['error_default']:.4f}, worst gap "
+                    f"{s['worst_gap']:.1e}, {rec['seconds_total']:.0f} s",
+                    flush=True,
+                )
             for crit in args.product:
-                if (args.cache / f"{key}.json").exists() and not (args.cache / f"{key}__product_{crit}.json").exists():
+                if not (args.cache / f"{key}__product_{crit}.json").exists():
                     scene = build() if scene is None else scene
                     r = run_product(
                         name,
@@ -385,20 +491,11 @@ def main(argv=None) -> None:
                         criterion=crit,
                     )
                     print(
-                        f"{key} [{crit}]: chose {r['choice']} err {r['error']:.4f} edge {r['edge']} {r['seconds']:.0f} s"
+                        f"{key} [{crit}]: chose {r['choice']} err {r['error']:.4f} edge {r['edge']} {r['seconds']:.0f} s",
+                        flush=True,
                     )
-            if (args.cache / f"{key}.json").exists():
-                continue
-            scene = build() if scene is None else scene
-            rec = run_condition(
-                name, scene, ambient_e_per_us=amb, cols_n=args.cols, problem_mode=args.problem, cache=args.cache
-            )
-            s = summary_row(rec, DEFAULT)
-            print(
-                f"{key}: best {s['best']} err {s['error_best']:.4f}, 0.01/0.01 {s['error_default']:.4f}, worst gap "
-                f"{s['worst_gap']:.1e}, {rec['seconds_total']:.0f} s",
-                flush=True,
-            )
+    if args.report:
+        report(args.cache, product=args.report_criterion, figure=args.figure)
 
 
 if __name__ == "__main__":

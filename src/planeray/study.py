@@ -267,24 +267,40 @@ FIXED_ALPHAS = tuple(float(10.0**e) for e in range(-3, 5))
 FIXED_BETAS = tuple(float(10.0**e) for e in range(-4, 2))
 
 
-def auto_weights(setup: StudySetup, B, *, folds: int = 5, seed: int = 0) -> tuple[float, float]:
+def auto_weights(setup: StudySetup, B, *, criterion: str | None = None) -> tuple[float, float]:
     """``alpha, beta`` chosen from observations ``B`` (P, N) alone, as ``planeray demux --alpha auto --beta auto``.
 
-    K-fold cross-validation over the images (:mod:`planeray.demux.auto`), the
-    observations of the ``P`` noise realizations pooled like the pixels of a stack,
-    weighted alike (the study's noise is the same for every image).
+    The criterion of :mod:`planeray.demux.auto` (generalized cross-validation by default;
+    ``criterion="cv-images"``: 5-fold cross-validation over the images, seed 0), the
+    observations of the ``P`` noise realizations pooled like the pixels of a stack, weighted
+    alike (the study's noise is the same for every image).
     """
-    from .demux.auto import DEFAULT_ALPHAS, DEFAULT_BETAS, _folds, cv_score, search, summarize
-
-    B = np.atleast_2d(np.asarray(B, np.float64))
-    split = _folds(B.shape[1], folds, seed)
-    ones = np.ones_like(B)
-    curve = search(
-        lambda a, b: cv_score([setup.group], [B], [None], [ones], split, a, b, threads=1),
-        {"alpha": "auto", "beta": "auto"},
+    from .demux.auto import (
+        CV_CRITERION,
         DEFAULT_ALPHAS,
         DEFAULT_BETAS,
+        DEFAULT_CRITERION,
+        _folds,
+        cv_score,
+        risk_score,
+        search,
+        summarize,
     )
+
+    criterion = DEFAULT_CRITERION if criterion is None else criterion
+    if criterion not in ("gcv", CV_CRITERION):  # SURE needs the noise level, which these weights do not carry
+        raise ValueError(f"criterion must be 'gcv' or {CV_CRITERION!r} here, got {criterion!r}")
+    B = np.atleast_2d(np.asarray(B, np.float64))
+    ones = np.ones_like(B)
+    if criterion == CV_CRITERION:
+        split = _folds(B.shape[1], 5, 0)
+        score = lambda a, b: cv_score([setup.group], [B], [None], [ones], split, a, b, threads=1)  # noqa: E731
+    else:
+        warm: dict = {}
+        score = lambda a, b: risk_score(  # noqa: E731
+            [setup.group], [B], [None], [ones], a, b, threads=1, gcv=criterion == "gcv", warm=warm
+        )
+    curve = search(score, {"alpha": "auto", "beta": "auto"}, DEFAULT_ALPHAS, DEFAULT_BETAS)
     return summarize(curve)[3]
 
 

@@ -140,8 +140,8 @@ def run_study(
         Replace files a previous run wrote; a file planeray did not write is never
         replaced.  Every output is checked before any work.
     auto : bool
-        Also the full method at weights chosen from each profile's observations by
-        cross-validation over the images (:func:`planeray.study.auto_weights`, what
+        Also the full method at weights chosen from each profile's observations by the
+        automatic criterion (:func:`planeray.study.auto_weights`, what
         ``planeray demux --alpha auto --beta auto`` does), against the best fixed weights
         of a decade grid per profile (the parameter sweeps' ``auto`` and ``best_fixed``).
 
