@@ -433,60 +433,33 @@ def cv_score(
         Per pixel: sum of ``w (b - A x^{(-F)})^2`` over its left-out observations
         divided by their number (1 at the noise level).
     """
-    n_threads = _threads() if threads is None else threads
     # each fold's pixels in as many parts as threads (5 folds on 2 threads would leave one idle
     # for a third of the time); a fold's factorization is made once and shared by its parts
-    n_parts = n_threads if min(B.shape[0] for B in Bs) >= 64 * n_threads else 1
-    tasks = [(g, f, k) for k in range(n_parts) for g in range(len(groups)) for f in range(len(folds))]
-    solvers: dict = {}
-    lock = threading.Lock()
-
-    def solver_for(g, f, train):
-        with lock:
-            entry = solvers.setdefault((g, f), [threading.Lock(), None])
-        with entry[0]:
-            if entry[1] is None:
-                e = None if ambient is None else np.asarray(ambient, np.float64)[train]
-                entry[1] = AdmmRowSolver(groups[g].A[train], alpha, beta, ambient=e)
-        return entry[1]
+    pool = _Tasks(Bs, threads)
+    tasks = [(g, f, k) for k in range(pool.n_parts) for g in range(len(groups)) for f in range(len(folds))]
 
     def run(task):
         g, f, k = task
         group, B, mask, w = groups[g], Bs[g], masks[g], weights[g]
         test = folds[f]
         train = np.setdiff1d(np.arange(B.shape[1]), test)
-        solver = solver_for(g, f, train)
-        P = B.shape[0]
-        part = slice(k * P // n_parts, (k + 1) * P // n_parts)
+        e = None if ambient is None else np.asarray(ambient, np.float64)[train]
+        solver = pool.solver((g, f), lambda: AdmmRowSolver(group.A[train], alpha, beta, ambient=e))
+        part = pool.part(B.shape[0], k)
         Bp = B[part]
-        X = np.zeros((Bp.shape[0], solver.A.shape[1]))
-        worst = 0.0
-        for s in range(0, Bp.shape[0], 512):
-            sl = slice(s, min(s + 512, Bp.shape[0]))
-            m = None if mask is None else mask[part][sl][:, train]
-            if m is not None and m.all():
-                m = None
-            X[sl], _, _, gap, *_ = solver.solve(Bp[sl][:, train], tol, mask=m)
-            worst = max(worst, float(gap.max(initial=0.0)))
+        X, worst = _solve_part(solver, Bp[:, train], None if mask is None else mask[part][:, train], tol)
         # the prediction of the left-out images (with the ambient: its scaled column, the solver's a')
         A_test = group.A[test] if ambient is None else _test_columns(solver, group.A[test], np.asarray(ambient)[test])
         R = Bp[:, test] - X @ A_test.T
         wt = w[part][:, test]
         return (g, part), (wt * R * R).sum(axis=1), (wt > 0).sum(axis=1), worst
 
-    with blas_one_thread():
-        if n_threads > 1 and len(tasks) > 1:
-            with ThreadPoolExecutor(n_threads) as pool:
-                results = list(pool.map(run, tasks))
-        else:
-            results = [run(t) for t in tasks]
     ss = [np.zeros(B.shape[0]) for B in Bs]
     n = [np.zeros(B.shape[0]) for B in Bs]
-    for (g, part), s_, n_, worst in results:
+    for (g, part), s_, n_, worst in pool.map(run, tasks):
         ss[g][part] += s_
         n[g][part] += n_
-        if record is not None:
-            record["worst_gap"] = max(record.get("worst_gap", 0.0), worst)
+        _record(record, worst)
     out = [a / np.maximum(b, 1) for a, b in zip(ss, n)]
     return np.concatenate(out)
 
@@ -534,55 +507,74 @@ def risk_score(
         Per pixel: the expected noise-weighted squared error of a new image at the same settings
         (1 at the noise level); with ``gcv`` the squared error (units of the images squared).
     """
-    n_threads = _threads() if threads is None else threads
-    n_parts = n_threads if min(B.shape[0] for B in Bs) >= 64 * n_threads else 1
-    tasks = [(g, k) for k in range(n_parts) for g in range(len(groups))]
-    solvers: dict = {}
-    lock = threading.Lock()
-
-    def solver_for(g):
-        with lock:
-            entry = solvers.setdefault(g, [threading.Lock(), None])
-        with entry[0]:
-            if entry[1] is None:
-                entry[1] = AdmmRowSolver(groups[g].A, alpha, beta, ambient=ambient)
-        return entry[1]
+    pool = _Tasks(Bs, threads)
+    tasks = [(g, k) for k in range(pool.n_parts) for g in range(len(groups))]
 
     def run(task):
         g, k = task
         B, mask, w = Bs[g], masks[g], weights[g]
-        solver = solver_for(g)
-        P = B.shape[0]
-        part = slice(k * P // n_parts, (k + 1) * P // n_parts)
-        Bp = B[part]
+        solver = pool.solver(g, lambda: AdmmRowSolver(groups[g].A, alpha, beta, ambient=ambient))
+        part = pool.part(B.shape[0], k)
         mp = None if mask is None else mask[part]
-        X = np.zeros((Bp.shape[0], solver.A.shape[1]))
         X0 = None if warm is None else warm.get((g, k))
-        worst = 0.0
-        for s in range(0, Bp.shape[0], 512):
-            sl = slice(s, min(s + 512, Bp.shape[0]))
-            m = None if mp is None else mp[sl]
-            if m is not None and m.all():
-                m = None
-            X[sl], _, _, gap, *_ = solver.solve(Bp[sl], tol, mask=m, start=None if X0 is None else X0[sl])
-            worst = max(worst, float(gap.max(initial=0.0)))
+        X, worst = _solve_part(solver, B[part], mp, tol, start=X0)
         if warm is not None:
             warm[(g, k)] = X
-        scores = pixel_scores(solver.A, X, Bp, w[part], alpha, solver.n_x, mask=mp, gcv=gcv)
-        return (g, part), scores, worst
+        return (g, part), pixel_scores(solver.A, X, B[part], w[part], alpha, solver.n_x, mask=mp, gcv=gcv), worst
 
-    with blas_one_thread():
-        if n_threads > 1 and len(tasks) > 1:
-            with ThreadPoolExecutor(n_threads) as pool:
-                results = list(pool.map(run, tasks))
-        else:
-            results = [run(t) for t in tasks]
     out = [np.zeros(B.shape[0]) for B in Bs]
-    for (g, part), s_, worst in results:
+    for (g, part), s_, worst in pool.map(run, tasks):
         out[g][part] = s_
-        if record is not None:
-            record["worst_gap"] = max(record.get("worst_gap", 0.0), worst)
+        _record(record, worst)
     return np.concatenate(out)
+
+
+class _Tasks:
+    """The criterion's solves on the solver threads: each row group's pixels in as many parts as
+    threads, one factorization per key shared by the parts (made by the first that needs it)."""
+
+    def __init__(self, Bs, threads):
+        self.n_threads = _threads() if threads is None else threads
+        self.n_parts = self.n_threads if min(B.shape[0] for B in Bs) >= 64 * self.n_threads else 1
+        self._solvers: dict = {}
+        self._lock = threading.Lock()
+
+    def solver(self, key, make):
+        with self._lock:
+            entry = self._solvers.setdefault(key, [threading.Lock(), None])
+        with entry[0]:
+            if entry[1] is None:
+                entry[1] = make()
+        return entry[1]
+
+    def part(self, P: int, k: int) -> slice:
+        return slice(k * P // self.n_parts, (k + 1) * P // self.n_parts)
+
+    def map(self, run, tasks) -> list:
+        with blas_one_thread():
+            if self.n_threads > 1 and len(tasks) > 1:
+                with ThreadPoolExecutor(self.n_threads) as pool:
+                    return list(pool.map(run, tasks))
+            return [run(t) for t in tasks]
+
+
+def _solve_part(solver: AdmmRowSolver, B, mask, tol, *, start=None):
+    """``X`` of pixels ``B`` (P, N) in batches of 512 and the worst certified relative gap."""
+    X = np.zeros((B.shape[0], solver.A.shape[1]))
+    worst = 0.0
+    for s in range(0, B.shape[0], 512):
+        sl = slice(s, min(s + 512, B.shape[0]))
+        m = None if mask is None else mask[sl]
+        if m is not None and m.all():
+            m = None
+        X[sl], _, _, gap, *_ = solver.solve(B[sl], tol, mask=m, start=None if start is None else start[sl])
+        worst = max(worst, float(gap.max(initial=0.0)))
+    return X, worst
+
+
+def _record(record: dict | None, worst: float) -> None:
+    if record is not None:
+        record["worst_gap"] = max(record.get("worst_gap", 0.0), worst)
 
 
 def _test_columns(solver: AdmmRowSolver, A_test, e_test) -> np.ndarray:
@@ -856,18 +848,9 @@ def choose_weights(
         warm: dict = {}
 
         def score(a, b):
+            S = sample
             return risk_score(
-                sample.groups,
-                sample.B,
-                sample.mask,
-                sample.weight,
-                a,
-                b,
-                tol=tol,
-                ambient=column,
-                gcv=gcv,
-                record=record,
-                warm=warm,
+                S.groups, S.B, S.mask, S.weight, a, b, tol=tol, ambient=column, gcv=gcv, record=record, warm=warm
             )
 
         name = criterion
