@@ -10,8 +10,8 @@ __all__ = ["weights_cv_figure"]
 
 #: The score's axis label, per criterion.
 _YLABEL = {
-    "gcv": "GCV score (noise-weighted; 1 = the camera model's noise)",
-    "sure": "risk estimate C_p (1 = the noise level)",
+    "gcv": "GCV score (noise-weighted)",
+    "sure": "risk estimate C_p (1 = noise level)",
     "cv-images": "CV score (left-out images, noise-weighted)",
 }
 
