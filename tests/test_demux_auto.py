@@ -125,9 +125,7 @@ def independent_gcv(stack, pixels, alpha):
 def test_criterion_matches_exhaustive_search_with_an_independent_solver(criterion):
     stack, _ = synthetic("smooth", shape=(H, 8))
     grid = (1e-2, 1.0, 30.0, 1e3, 1e5)
-    choice = choose_weights(
-        stack, alpha="auto", beta=0.0, alphas=grid, n_pixels=6, tol=1e-6, criterion=criterion
-    )
+    choice = choose_weights(stack, alpha="auto", beta=0.0, alphas=grid, n_pixels=6, tol=1e-6, criterion=criterion)
     assert choice.beta == 0.0 and set(choice.betas) == {0.0} and choice.criterion == criterion
     assert choice.worst_gap <= 1e-6  # every solve behind the curve certified to the tolerance asked
     ours = dict(zip(choice.alphas, choice.scores))
