@@ -19,8 +19,8 @@ one pass, and two Python threads run two pixel batches at once (``nogil``):
   the certificate's per-pixel parts (objective, gradient, KKT residual, gap bound);
   :func:`null_adjust` the multiplier's move that keeps the bound finite when ``Q`` is
   singular (the ambient term of Eq. 6a);
-* :func:`path_solves`: the smoothness term's tridiagonal solves of the automatic weights'
-  criterion (:mod:`planeray.demux.risk`).
+* :func:`path_solves`, :func:`ridge_traces`: the smoothness term's tridiagonal solves and the
+  ``n x n`` traces of the automatic weights' criterion (:mod:`planeray.demux.risk`).
 
 Compiled by Numba on first use and cached on disk.
 
@@ -47,6 +47,7 @@ __all__ = [
     "null_adjust",
     "half_norms",
     "path_solves",
+    "ridge_traces",
     "warm_up",
 ]
 
@@ -470,6 +471,72 @@ def path_solves(A, free, n_free, n_x, S, Y):  # pragma: no cover - compiled
             if c != 0.0:
                 for j in range(N):
                     Y[p, i, j] -= c * Y[p, i + 1, j]
+
+
+@numba.njit(**_JIT)
+def ridge_traces(M, su, use, out):  # pragma: no cover - compiled
+    """``tr((I + C)^{-1})`` per pixel, and the unpenalized column's term, from ``M = I + C`` (P, n, n).
+
+    ``M`` is overwritten by its Cholesky factor ``L``; ``W = M^{-1} = L^{-T} L^{-1}``, so
+    ``tr W = ||L^{-1}||_F^2`` (one forward substitution per unit vector).  With ``use[p]`` the
+    pixel's unpenalized column ``su`` (n,) (the ambient) is free too, and ``out[p, 1]`` gets
+    ``s^T W^2 s / s^T W s`` (``v = L^{-1} s``: ``s^T W s = |v|^2``, ``W s = L^{-T} v``).
+    ``out[p, 0]`` is ``tr W``; a matrix that is not positive definite gets NaN.  The
+    observation-space degrees of freedom of :mod:`planeray.demux.risk`.
+    """
+    P, n, _ = M.shape
+    z = np.empty(n)
+    for p in range(P):
+        L = M[p]
+        ok = True
+        for j in range(n):  # Cholesky, lower, in place
+            s = L[j, j]
+            for k in range(j):
+                s -= L[j, k] * L[j, k]
+            if s <= 0.0:
+                ok = False
+                break
+            d = np.sqrt(s)
+            L[j, j] = d
+            for i in range(j + 1, n):
+                s = L[i, j]
+                for k in range(j):
+                    s -= L[i, k] * L[j, k]
+                L[i, j] = s / d
+        if not ok:
+            out[p, 0] = np.nan
+            out[p, 1] = np.nan
+            continue
+        tr = 0.0
+        for j in range(n):  # column j of L^{-1}: L z = e_j, z_i = 0 for i < j
+            z[j] = 1.0 / L[j, j]
+            tr += z[j] * z[j]
+            for i in range(j + 1, n):
+                s = 0.0
+                for k in range(j, i):
+                    s -= L[i, k] * z[k]
+                z[i] = s / L[i, i]
+                tr += z[i] * z[i]
+        out[p, 0] = tr
+        out[p, 1] = 0.0
+        if use[p]:
+            for i in range(n):  # v = L^{-1} s
+                s = su[i]
+                for k in range(i):
+                    s -= L[i, k] * z[k]
+                z[i] = s / L[i, i]
+            vv = 0.0
+            for i in range(n):
+                vv += z[i] * z[i]
+            for i in range(n - 1, -1, -1):  # w = L^{-T} v
+                s = z[i]
+                for k in range(i + 1, n):
+                    s -= L[k, i] * z[k]
+                z[i] = s / L[i, i]
+            ww = 0.0
+            for i in range(n):
+                ww += z[i] * z[i]
+            out[p, 1] = ww / vv if vv > 0.0 else 0.0
 
 
 def warm_up() -> None:
