@@ -13,7 +13,7 @@ from .._console import out
 from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND
 from . import _limits as lim
-from ._common import _check_outputs, _friendly_errors, _load_stack
+from ._common import _check_outputs, _claim, _friendly_errors, _load_stack
 from ._devices import CalibrationArg, DeviceOptionArg, close_device, open_device_from_cli
 
 calibrate_app = typer.Typer(help="Calibration (Sec. 6): line velocity v_p and delay zero.", no_args_is_help=True)
@@ -31,9 +31,10 @@ def _check_write_target(write: Path | None) -> None:
         from ..calibration.files import calibration_target
 
         try:
-            calibration_target(write)
+            target, _ = calibration_target(write)
         except InputError as exc:
             raise InputError(f"--write: {exc}") from None
+        _claim(target)  # writable, and no other calibration writing it
 
 
 def _report_calibration(result, write: Path | None, as_json: bool, key: str):

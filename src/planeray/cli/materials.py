@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from .._console import console, out, print_json, progress_bar
-from ._common import _check_outputs, _friendly_errors, _load_stack
+from ._common import _check_outputs, _claim, _friendly_errors, _load_stack, _not_an_input, _same_place
 
 materials_app = typer.Typer(
     help="Material recognition from delay profiles (Sec. 8, Fig. 10): simulate, train, predict, report.",
@@ -19,39 +19,6 @@ materials_app = typer.Typer(
 def _choice(value: str, option: str, choices) -> None:
     if value not in choices:
         raise ValueError(f"{option} must be one of {', '.join(choices)}, got {value!r}")
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.resolve() == b.resolve()
-    except OSError:
-        return False
-
-
-def _not_an_input(out_path: Path, inputs) -> None:
-    """Refuse an output that is also one of the command's inputs (compared as resolved paths)."""
-    for option, path in inputs:
-        if path is not None and _same_file(out_path, Path(path)):
-            raise ValueError(
-                f"--out {out_path} is also an input ({option}): planeray never writes over its inputs; "
-                "choose another output"
-            )
-
-
-def _check_parent(path: Path) -> None:
-    """Refuse an output whose folder cannot be made: a file on its way."""
-    for parent in Path(path).absolute().parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise ValueError(f"--out {path} cannot be created: {parent} is a file, not a folder")
-            return
-
-
-def _outputs(*outputs, overwrite: bool) -> None:
-    """:func:`_check_outputs` (before any work), and outputs whose folder cannot be made refused too."""
-    for path, _ in outputs:
-        _check_parent(path)
-    _check_outputs(*outputs, overwrite=overwrite)
 
 
 def _read_labels(path: Path, option: str, shape):
@@ -146,7 +113,7 @@ def simulate(
         sweep=sweep,
     )
     check_capture_options(**options)
-    _outputs((out_dir, "materials capture"), overwrite=overwrite)
+    _check_outputs((out_dir, "materials capture"), overwrite=overwrite)
     trace = tables_to_trace(source=source, channel=channel, wall=wall)
     n = len(make_sweep(sweep))
     with progress_bar() as bar:
@@ -234,9 +201,9 @@ def train(
         raise ValueError(f"--labels: {len(stacks)} stacks but {len(labels)} label images; give one per stack, in order")
     if out_path.suffix.lower() != ".zip":
         raise ValueError(f"--out must end in .zip (a model file: a JSON record and a skops estimator), got {out_path}")
-    _not_an_input(out_path, [("a stack", p) for p in stacks] + [("--labels", p) for p in labels])
-    _check_parent(out_path)
+    _not_an_input(out_path, [("STACKS", p) for p in stacks] + [("--labels", p) for p in labels])
     check_model_output(out_path, overwrite=overwrite)
+    _claim(out_path)
     loaded = [_load_stack(p) for p in stacks]
     labs = [_read_labels(lp, "--labels", st.shape) for lp, st in zip(labels, loaded)]
     with progress_bar() as bar:
@@ -308,11 +275,11 @@ def predict(
         raise ValueError(f"--out must end in .png, .tif or .tiff (a label image of class ids), got {out_png}")
     if near_wall is not None and labels is None:
         raise ValueError("--near-wall needs --labels: it splits the accuracies into near walls and away from them")
-    _not_an_input(
-        out_png,
-        [("the model", model_path), ("the stack", stack_path), ("--labels", labels), ("--near-wall", near_wall)],
+    _check_outputs(
+        (out_png, "segmentation"),
+        overwrite=overwrite,
+        inputs=[("MODEL", model_path), ("STACK", stack_path), ("--labels", labels), ("--near-wall", near_wall)],
     )
-    _outputs((out_png, "segmentation"), overwrite=overwrite)
     model = load_model(model_path)
     st = _load_stack(stack_path)
     model.check_stack(st, source=str(stack_path))
@@ -526,8 +493,11 @@ def fit_cmd(
         raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
     if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
         raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
-    _not_an_input(out_dir, [("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)])
-    _outputs((out_dir, "materials fit"), overwrite=overwrite)
+    _check_outputs(
+        (out_dir, "materials fit"),
+        overwrite=overwrite,
+        inputs=[("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)],
+    )
     from ..io.atomic import planeray_output_kind
 
     if not Path(input_path).exists():
@@ -723,7 +693,7 @@ def report(
     from ..experiments.materials import check_report_options, report_tasks, run_materials_report
 
     check_report_options(size=size, quick=quick)
-    _outputs((out_dir, "materials report"), overwrite=overwrite)
+    _check_outputs((out_dir, "materials report"), overwrite=overwrite)
     with progress_bar() as bar:
         task = bar.add_task("materials report", total=report_tasks(quick=quick))
 
@@ -834,10 +804,11 @@ def recognize_cmd(
         raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
     if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
         raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
-    _not_an_input(
-        out_dir, [("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)]
+    _check_outputs(
+        (out_dir, "materials recognition"),
+        overwrite=overwrite,
+        inputs=[("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)],
     )
-    _outputs((out_dir, "materials recognition"), overwrite=overwrite)
     lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
     reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
     truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
@@ -942,8 +913,17 @@ def library_add(
     names = _parse_class_names(class_name)
     if not names:
         raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
-    _not_an_input(out_json, [("the capture", input_path), ("--labels", labels), ("--library", library)])
-    _outputs((out_json, "media library"), overwrite=overwrite)
+    in_place = library is not None and _same_place(Path(out_json), Path(library))
+    if in_place and not overwrite:  # updating the library itself: a planeray library, replaced atomically
+        raise ValueError(
+            f"--out {out_json} is the --library to add to: pass --overwrite to update it in place (planeray replaces "
+            "only a library it wrote), or name a new --out"
+        )
+    _check_outputs(
+        (out_json, "media library"),
+        overwrite=overwrite,
+        inputs=[("the capture", input_path), ("--labels", labels)] + ([] if in_place else [("--library", library)]),
+    )
     lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
     lab = _read_labels(labels, "--labels", transport.shape)
     missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]

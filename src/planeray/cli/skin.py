@@ -473,7 +473,11 @@ def veins(
     _exposure_option(exposure_us)
     if mm_per_row is not None:
         _mm_per_row_option(mm_per_row)
-    _check_outputs((out_dir, "skin veins"), overwrite=overwrite)
+    _check_outputs(
+        (out_dir, "skin veins"),
+        overwrite=overwrite,
+        inputs=[("SOURCE", source), ("--transport", transport_path), ("--mask", mask)],
+    )
     from_transport = _source_kind(source, "SOURCE") == "transport"
     if from_transport and transport_path is not None:
         raise ValueError(f"--transport: {source} is already a transport store; give a stack with --transport")
@@ -594,7 +598,7 @@ def enhance(
     _delay_option(min_delay_us, "--min-delay-us")
     if mm_per_row is not None:
         _mm_per_row_option(mm_per_row)
-    _check_outputs((out_dir, "skin enhance"), overwrite=overwrite)
+    _check_outputs((out_dir, "skin enhance"), overwrite=overwrite, inputs=[("STACK", stack_path), ("--mask", mask)])
     _source_kind(stack_path, "STACK")
     stack = _load_stack(stack_path)
     if patch_px is not None:  # bounded by the image: a patch larger than the image is the image
@@ -779,7 +783,7 @@ def depth(
         _wavelength(wavelength)
     if mm_per_row is not None:
         _mm_per_row_option(mm_per_row)
-    _check_outputs((out_dir, "skin depth"), overwrite=overwrite)
+    _check_outputs((out_dir, "skin depth"), overwrite=overwrite, inputs=[("STACK", stack_path), ("--mask", mask)])
     if _source_kind(stack_path, "STACK") != "stack":
         raise InputError("a transport store has no delay sweep: give the stack (STACK)", stack_path)
     stack = _load_stack(stack_path)
