@@ -408,3 +408,24 @@ def test_a_killed_runs_lock_is_taken_over_with_a_note_and_the_run_resumes(stores
     assert f"took over the lock of a planeray run that is no longer running (pid {pid}" in " ".join(res.output.split())
     assert not lock_path(out).exists()
     assert read_transport(out)[0].shape == (16, 12)
+
+
+# ---------------------------------------------------------------------------- a disk that fills while a run writes
+def test_a_disk_that_fills_during_demux_is_named_in_one_line(stores, tmp_path, monkeypatch):
+    """The checks pass, then the disk fills under Zarr's chunk writes: the message names the output, not a chunk."""
+    import zarr.storage
+
+    real = zarr.storage.LocalStore.set
+
+    async def full(self, key, value):
+        if "/c/" in key or key.startswith("c/"):  # a chunk: the disk is full now
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), f"{self}/{key}")
+        return await real(self, key, value)
+
+    monkeypatch.setattr(zarr.storage.LocalStore, "set", full)
+    out = tmp_path / "T.zarr"
+    line = one_line_error(
+        invoke("demux", stores / "S.zarr", "--out", out), f"{out}: cannot write: No space left on device [ENOSPC]"
+    )
+    assert "unexpected" not in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing finished: nothing left

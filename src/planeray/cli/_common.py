@@ -144,6 +144,7 @@ def _check_outputs(*outputs, overwrite: bool, inputs=()) -> None:
         option = output[2] if len(output) > 2 else "--out"
         if path is None:
             continue
+        _not_a_home(path, option)
         key = Path(path).resolve()
         if key in seen:
             raise ValueError(f"{path}: named twice as an output")
@@ -166,6 +167,17 @@ def _claim(*paths) -> None:
         check_writable(path)
         if _HELD:
             _HELD[-1].enter_context(output_lock(path, on_stale=_note))
+
+
+def _not_a_home(path, option: str = "--out") -> None:
+    """Refuse, with or without ``--overwrite``, the current folder, one of its parents, the home folder or a root."""
+    from ..io.atomic import _is_protected
+
+    if _is_protected(Path(path)):
+        raise InputError(
+            f"{option} {path}: is the current folder, one of its parents or the home folder; name a new output "
+            "inside it (e.g. {option} out/)".replace("{option}", option)
+        )
 
 
 def _note(text: str) -> None:

@@ -21,15 +21,23 @@ def _choice(value: str, option: str, choices) -> None:
         raise ValueError(f"{option} must be one of {', '.join(choices)}, got {value!r}")
 
 
-def _read_labels(path: Path, option: str, shape):
-    """A label image of the stack's size, errors naming the option."""
+def _read_labels(path: Path, option: str, shape, *, labelled: bool = True):
+    """A label image of the stack's size, errors naming the option; ``labelled``: refuse one with no labelled pixel."""
+    import numpy as np
+
     from ..errors import InputError
     from ..materials import read_label_image
 
     try:
-        return read_label_image(path, shape=shape)
+        lab = read_label_image(path, shape=shape)
     except InputError as exc:
         raise ValueError(f"{option} {exc}") from None
+    if labelled and not np.any(lab > 0):
+        raise ValueError(
+            f"{option} {path}: no labelled pixel (every pixel is 0, 'unlabelled'); mark the regions with class ids "
+            "1-255"
+        )
+    return lab
 
 
 @materials_app.command("classes")
@@ -153,6 +161,12 @@ def _parse_class_names(items) -> dict:
             raise ValueError(f"--class-name expects ID=NAME (e.g. 7=mayonnaise), got {item!r}")
         if not 1 <= int(key) <= 255:
             raise ValueError(f"--class-name ids must be 1 to 255 (0 is unlabelled), got {item!r}")
+        if int(key) in names:
+            raise ValueError(
+                f"--class-name {int(key)} is named twice ({names[int(key)]!r} and {name.strip()!r}); give each id once"
+            )
+        if name.strip() in names.values():
+            raise ValueError(f"--class-name {name.strip()!r} is given to two ids; give each name once")
         names[int(key)] = name.strip()
     return names
 
@@ -284,7 +298,7 @@ def predict(
     st = _load_stack(stack_path)
     model.check_stack(st, source=str(stack_path))
     truth = _read_labels(labels, "--labels", st.shape) if labels is not None else None
-    near = _read_labels(near_wall, "--near-wall", st.shape) > 0 if near_wall is not None else None
+    near = _read_labels(near_wall, "--near-wall", st.shape, labelled=False) > 0 if near_wall is not None else None
     blind = {c: p for c, p in model.smallest_typicality().items() if 0 < threshold <= p}
     if blind:
         console.print(
@@ -378,6 +392,23 @@ def _capture_and_row_size(input_path: Path, mm_per_row: float | None):
     return transport, meta, mm
 
 
+def _capture_shape(input_path: Path) -> tuple[int, int]:
+    """The image size of a capture (stack or transport store), read without demultiplexing it."""
+    from ..io import read_transport
+    from ..io.atomic import planeray_output_kind
+
+    if not Path(input_path).exists():
+        raise ValueError(f"the capture {input_path}: no such file or folder")
+    if planeray_output_kind(input_path) == "transport":
+        import zarr
+
+        try:
+            return tuple(int(n) for n in zarr.open_group(str(input_path), mode="r")["T"].shape[:2])
+        except Exception:  # a damaged store: read it properly, for the reader's one-line message
+            return read_transport(input_path)[0].shape
+    return tuple(_load_stack(input_path).shape)
+
+
 def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None):
     """``--library`` (else the shipped one), read before the capture, then checked against its row size."""
     from ..errors import InputError
@@ -414,6 +445,21 @@ def _read_fit_input(path: Path, option: str, *, with_progress: bool = True):
     else:
         transport = capture_transport(st)
     return transport, dict(st.metadata or {})
+
+
+#: A capture given as its own white reference would "calibrate" it to an albedo of one.
+_WHITE_IS_CAPTURE = (
+    "--white-reference {white} is the capture itself: a white reference is a separate capture of a white "
+    "Lambertian target, with the same sweep and camera"
+)
+
+
+def _mm_per_row_option(value: float | None) -> None:
+    """``--mm-per-row``: a finite size in (0, 100] mm, or not given."""
+    from .._validate import check_number
+
+    if value is not None:
+        check_number(value, "--mm-per-row", minimum=0.0, maximum=100.0, min_inclusive=False)
 
 
 def _recorded_mm_per_row(meta: dict):
@@ -491,8 +537,7 @@ def fit_cmd(
         raise ValueError(f"--white-albedo must be in (0, 1], got {white_albedo:g}")
     if not 1.0 <= n <= 1.6:
         raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
-    if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
-        raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
+    _mm_per_row_option(mm_per_row)
     _check_outputs(
         (out_dir, "materials fit"),
         overwrite=overwrite,
@@ -502,6 +547,8 @@ def fit_cmd(
 
     if not Path(input_path).exists():
         raise ValueError(f"the capture {input_path}: no such file or folder")
+    if white_reference is not None and _same_place(Path(white_reference), Path(input_path)):
+        raise ValueError(_WHITE_IS_CAPTURE.format(white=white_reference))
     is_transport = planeray_output_kind(input_path) == "transport"
     if method == "stack" and is_transport:
         raise ValueError(f"--method stack needs a stack: {input_path} is a transport store")
@@ -530,6 +577,8 @@ def fit_cmd(
                     f"{len(white)} images, the capture {stack.shape[0]}x{stack.shape[1]} over {len(stack)}: "
                     "capture it with the same sweep and camera"
                 )
+            if white.content_digest() == stack.content_digest():
+                raise ValueError(_WHITE_IS_CAPTURE.format(white=white_reference) + " (the same images)")
         transport = None
     else:
         transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
@@ -544,6 +593,8 @@ def fit_cmd(
                 f"{white.offsets_rows.size} offsets, the capture {transport.shape[0]}x{transport.shape[1]} over "
                 f"{transport.offsets_rows.size}: capture it with the same sweep and camera"
             )
+        if np.array_equal(white.dense, transport.dense):
+            raise ValueError(_WHITE_IS_CAPTURE.format(white=white_reference) + " (the same transport)")
         scale = mfit.white_reference_scale(white.dense, albedo=white_albedo)
     if n != mfit.DEFAULT_N:
         console.print(
@@ -802,16 +853,19 @@ def recognize_cmd(
         raise ValueError(f"--pool-mm must be in 0-100 mm, got {pool_mm:g}")
     if not 0.0 <= p_unknown < 1.0:
         raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
-    if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
-        raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
+    _mm_per_row_option(mm_per_row)
     _check_outputs(
         (out_dir, "materials recognition"),
         overwrite=overwrite,
         inputs=[("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)],
     )
+    if regions is not None or labels is not None:  # the label images before the capture is demultiplexed
+        shape = _capture_shape(input_path)
+        reg = _read_labels(regions, "--regions", shape) if regions is not None else None
+        truth = _read_labels(labels, "--labels", shape) if labels is not None else None
+    else:
+        reg = truth = None
     lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
-    truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
     H, W = transport.shape
     rpc = float(transport.geometry.rows_per_camera_row)
     mm_per_pixel = mm * rpc
@@ -910,6 +964,7 @@ def library_add(
 
     if out_json.suffix.lower() != ".json":
         raise ValueError(f"--out must end in .json (a media library), got {out_json}")
+    _mm_per_row_option(mm_per_row)
     names = _parse_class_names(class_name)
     if not names:
         raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
@@ -924,11 +979,20 @@ def library_add(
         overwrite=overwrite,
         inputs=[("the capture", input_path), ("--labels", labels)] + ([] if in_place else [("--library", library)]),
     )
-    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    lab = _read_labels(labels, "--labels", transport.shape)
+    lab = _read_labels(labels, "--labels", _capture_shape(input_path))  # before the capture is demultiplexed
     missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
     if missing:
         raise ValueError(f"--class-name {', '.join(missing)}: --labels {labels} has no pixel of that id")
+    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
+    rpc = float(transport.geometry.rows_per_camera_row)
+    lib_rpc = lib.conditions.get("rows_per_camera_row")
+    if lib.entries and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+        raise ValueError(
+            f"--library {library or '(the shipped one)'}: its media were fitted at {lib_rpc:g} projector rows per "
+            f"camera row, {input_path} has {rpc:g}: the fit's biases differ with the resolution, so an entry from "
+            "this capture would not be comparable with the others; start a new library from captures at this "
+            "resolution (--library of a library made from them)"
+        )
     block = int(lib.conditions.get("block_px", 2))
     regions = np.where(np.isin(lab, list(names)), lab, 0)
     with console.status("fitting the labelled regions"):

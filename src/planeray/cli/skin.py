@@ -21,7 +21,7 @@ import typer
 
 from .._console import console, out, progress_bar
 from . import _bounds
-from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack
+from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack, _not_a_home
 
 skin_app = typer.Typer(
     help="Skin and veins (Sec. 10): simulate captures, check the physics, vein images and metrics, Eq. 7.",
@@ -128,6 +128,7 @@ def simulate(
         raise ValueError(f"--sweep must be one of {', '.join(sorted(SWEEPS))}, got {sweep!r}")
     n = len(make_sweep(sweep))
     _bounds.scene_memory(shape, extra_bytes=3 * n * shape[0] * shape[1] * 4)
+    _not_a_home(out_path)  # before its name makes the ground truth's file names
     truth = truth_paths(out_path)
     _check_outputs(
         (out_path, "stack"),

@@ -32,7 +32,7 @@ from pathlib import Path
 
 from .._validate import check_integer
 from ..errors import InputError
-from ..io.lock import locks_output
+from ..io.lock import writes_output
 from ..io import atomic_directory, atomic_file
 from ..io.atomic import MARKER, check_replaceable, planeray_output_kind, storage_error
 from ._report import jsonable
@@ -691,7 +691,7 @@ def run_step(out: Path, name: str, settings: dict, *, advance=None) -> dict:
     return jsonable(record)
 
 
-@locks_output("out_dir")
+@writes_output("out_dir")
 def run_paper(
     out_dir,
     *,

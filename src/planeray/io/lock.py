@@ -37,7 +37,7 @@ from pathlib import Path
 
 from ..errors import InputError, StorageError
 
-__all__ = ["OutputBusyError", "StaleLockWarning", "lock_holder", "lock_path", "locks_output", "output_lock"]
+__all__ = ["OutputBusyError", "StaleLockWarning", "lock_holder", "lock_path", "output_lock", "writes_output"]
 
 
 class OutputBusyError(InputError):
@@ -324,11 +324,18 @@ def _remove_folders(folders: list[Path]) -> None:
             return
 
 
-def locks_output(parameter: str = "out"):
-    """Decorate a writer so that it holds the lock of its output argument ``parameter`` while it runs.
+#: File-system failures that can only come from writing: a full disk or quota, a read-only file system, a file too big.
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG}
 
-    The lock is taken before the writer's first check, so a second run into the same
-    output is refused before any work (see :func:`output_lock`).
+
+def writes_output(parameter: str = "out"):
+    """Decorate a writer of the output named by its argument ``parameter``: locked, and its disk failures named.
+
+    The writer holds the output's lock while it runs (:func:`output_lock`), taken before
+    its first check, so a second run into the same output is refused before any work.
+    A full disk, a read-only file system or a file too big met while it writes (deep in
+    Zarr's threads, where the file named is an internal chunk) becomes one
+    :class:`~planeray.errors.StorageError` naming the output.
     """
     import functools
     import inspect
@@ -342,7 +349,14 @@ def locks_output(parameter: str = "out"):
             if out is None:
                 return fn(*args, **kwargs)
             with output_lock(out):
-                return fn(*args, **kwargs)
+                try:
+                    return fn(*args, **kwargs)
+                except OSError as exc:
+                    if isinstance(exc, StorageError) or exc.errno not in _WRITE_ERRNOS:
+                        raise
+                    from .atomic import storage_error
+
+                    raise storage_error(exc, out) from None
 
         return locked
 
