@@ -394,6 +394,11 @@ def _capture_and_row_size(input_path: Path, mm_per_row: float | None):
 
 def _capture_shape(input_path: Path) -> tuple[int, int]:
     """The image size of a capture (stack or transport store), read without demultiplexing it."""
+    return _capture_geometry(input_path)[:2]
+
+
+def _capture_geometry(input_path: Path) -> tuple[int, int, float]:
+    """``(H, W, rows_per_camera_row)`` of a capture (stack or transport store), read without demultiplexing it."""
     from ..io import read_transport
     from ..io.atomic import planeray_output_kind
 
@@ -403,21 +408,32 @@ def _capture_shape(input_path: Path) -> tuple[int, int]:
         import zarr
 
         try:
-            return tuple(int(n) for n in zarr.open_group(str(input_path), mode="r")["T"].shape[:2])
+            group = zarr.open_group(str(input_path), mode="r")
+            H, W = (int(n) for n in group["T"].shape[:2])
+            return H, W, float(group.attrs["projector_rows"]) / H
         except Exception:  # a damaged store: read it properly, for the reader's one-line message
-            return read_transport(input_path)[0].shape
-    return tuple(_load_stack(input_path).shape)
+            transport = read_transport(input_path)[0]
+            return (*transport.shape, float(transport.geometry.rows_per_camera_row))
+    st = _load_stack(input_path)
+    return (*st.shape, float(st.geometry.rows_per_camera_row))
+
+
+def _library(library: Path | None):
+    """``--library`` (else the shipped one), errors naming the option."""
+    from ..errors import InputError
+    from ..materials.library import default_library, load_library
+
+    try:
+        return load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
 
 
 def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None):
     """``--library`` (else the shipped one), read before the capture, then checked against its row size."""
     from ..errors import InputError
-    from ..materials.library import default_library, load_library
 
-    try:
-        lib = load_library(library) if library is not None else default_library()
-    except InputError as exc:
-        raise ValueError(f"--library {exc}") from None
+    lib = _library(library)
     transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
     try:
         lib.check_conditions(mm_per_row=mm, calibrated=False)
@@ -979,12 +995,12 @@ def library_add(
         overwrite=overwrite,
         inputs=[("the capture", input_path), ("--labels", labels)] + ([] if in_place else [("--library", library)]),
     )
-    lab = _read_labels(labels, "--labels", _capture_shape(input_path))  # before the capture is demultiplexed
+    H, W, rpc = _capture_geometry(input_path)  # the labels and the resolution before any demultiplexing
+    lab = _read_labels(labels, "--labels", (H, W))
     missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
     if missing:
         raise ValueError(f"--class-name {', '.join(missing)}: --labels {labels} has no pixel of that id")
-    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    rpc = float(transport.geometry.rows_per_camera_row)
+    lib = _library(library)
     lib_rpc = lib.conditions.get("rows_per_camera_row")
     if lib.entries and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
         raise ValueError(
@@ -993,6 +1009,7 @@ def library_add(
             "this capture would not be comparable with the others; start a new library from captures at this "
             "resolution (--library of a library made from them)"
         )
+    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
     block = int(lib.conditions.get("block_px", 2))
     regions = np.where(np.isin(lab, list(names)), lab, 0)
     with console.status("fitting the labelled regions"):

@@ -207,7 +207,9 @@ class MediaLibrary:
         clash = [e for e in self.entries if e.name == entry.name or e.class_id == entry.class_id]
         if clash and not replace:
             c = clash[0]
-            raise InputError(f"the library already has {c.name!r} (class {c.class_id}); replace it with --replace (replace=True)")
+            raise InputError(
+                f"the library already has {c.name!r} (class {c.class_id}); replace it with --replace (replace=True)"
+            )
         keep = tuple(e for e in self.entries if e not in clash)
         return MediaLibrary(keep + (entry,), dict(self.conditions))
 
