@@ -130,10 +130,8 @@ def _child(args: list[str], timeout_s: float) -> dict:
 
 def _child_env() -> dict:
     """The child's environment: this process's, with planeray's sources first on the path."""
-    import planeray
-
     env = dict(os.environ)
-    src = os.path.dirname(os.path.dirname(os.path.abspath(planeray.__file__)))
+    src = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # the folder of planeray/
     env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     return env
 
