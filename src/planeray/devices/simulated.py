@@ -288,14 +288,18 @@ class SimulatedEpiscan(DeviceBase):
         start_row = opens_us * 1e-6 * v_p - 0.5
         n_v = v_p * float(exposure_us) * 1e-6
         rng = np.random.default_rng(
-            [self.seed, 2**44, int(round(exposure_us * 1000)), int(round(trigger_delay_us * 1000)), self._next_pattern()]
+            [
+                self.seed,
+                2**44,
+                int(round(exposure_us * 1000)),
+                int(round(trigger_delay_us * 1000)),
+                self._next_pattern(),
+            ]
         )
         rows = self.projected_rows()
         pattern = self._exposed(rng, start_row, n_v) * (np.ones(P) if rows is None else rows)
         signal = self.scene.transport.render(RowPattern(pattern))
-        return self.camera.expose(
-            signal, exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise
-        )
+        return self.camera.expose(signal, exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise)
 
     def _exposed(self, rng, start, length):
         """Exposed fraction of each projector row's scanline in ``[start, start + length)`` rows, over the frames."""
