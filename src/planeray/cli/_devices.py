@@ -233,6 +233,27 @@ def _as_json(value) -> str:
         return repr(value)
 
 
+def screen_options(name: str, screen, display, option_texts) -> dict:
+    """The device options that plug a simulated projector into ``--screen`` (and ``--display``).
+
+    A device that takes a ``screen`` option (the simulated Episcan: the X screen its
+    projector shows) is given the command's ``--screen`` unless ``-O screen=...``
+    says otherwise (``-O screen=0 --screen 1``: the projector cable on another
+    screen than the window's).
+    """
+    from ..devices import device_options
+
+    if screen is None or "screen" not in device_options(name):
+        return {}
+    given = parse_device_options(option_texts)
+    found = {}
+    if "screen" not in given:
+        found["screen"] = screen
+    if display is not None and "display" not in given and "display" in device_options(name):
+        found["display"] = display
+    return found
+
+
 def close_device(device) -> None:
     """Release a device (devices written without ``close`` have nothing to release)."""
     close = getattr(device, "close", None)
