@@ -52,8 +52,11 @@ def parse_device_options(texts) -> dict:
     return options
 
 
-def read_calibration(path) -> dict:
-    """The calibration fields of an ``acquisition.json`` (or of ``path/acquisition.json``)."""
+def read_calibration(path, *, fields=None) -> dict:
+    """The calibration fields of an ``acquisition.json`` (or of ``path/acquisition.json``).
+
+    ``fields``: the numeric fields to read (default :data:`CALIBRATION_FIELDS`).
+    """
     path = Path(path)
     if path.is_dir():
         path = path / "acquisition.json"
@@ -66,7 +69,7 @@ def read_calibration(path) -> dict:
     if not isinstance(acq, dict):
         raise InputError("expected a JSON object", path)
     found = {}
-    for key in CALIBRATION_FIELDS:
+    for key in CALIBRATION_FIELDS if fields is None else fields:
         value = acq.get(key)
         if value is None:
             continue

@@ -28,15 +28,16 @@ DEFAULT_FRAME_RATE_HZ = 60.0
 
 
 def _check_light(dark, flat, screen_index, trigger_delay_us) -> None:
-    """Refuse a capture in which the projector's white is no brighter than its black."""
+    """Refuse a capture in which the projector's white adds no light to its black (the flat's exposure is 2 t_e)."""
     from ..errors import DeviceError
 
-    gain = float(np.median(flat - dark))
-    noise = 1.4826 * float(np.median(np.abs(dark - np.median(dark)))) + 1e-6
-    if gain < 5 * noise / np.sqrt(dark.size) and gain < 1e-3:
+    light = flat - 2.0 * dark  # the dark frame's ambient, scaled to the flat's exposure
+    gain = float(np.mean(light))
+    noise = float(np.std(light)) / np.sqrt(light.size)
+    if gain < max(5.0 * noise, 0.01 * float(np.mean(flat))):
         raise DeviceError(
             f"the camera sees no projector light: white on screen {screen_index} is no brighter than black "
-            f"(median difference {gain:.2g}): is the projector on, showing screen {screen_index}, and the exposure "
+            f"(mean difference {gain:.2g}): is the projector on, showing screen {screen_index}, and the exposure "
             f"opened inside its raster (trigger delay {trigger_delay_us:g} us; --trigger-delay-us)?"
         )
 
