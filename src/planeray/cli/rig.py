@@ -132,9 +132,7 @@ def check(
 
     def report(c):
         if not as_json:
-            style = {"pass": "green", "fail": "bold red", "skip": "yellow"}[c.status]
-            out.print(f"[{style}]{c.status.upper():4}[/]  {c.name:15} ", end="", highlight=False)
-            out.print(c.message, markup=False, highlight=False)
+            out.print(c.line(), markup=False, highlight=False, soft_wrap=True)
 
     results = check_rig(
         opener,

@@ -122,7 +122,15 @@ def serve(name: str, x_screen: int, head: int) -> str:
         caption="planeray projector",
     )
     window.set_mouse_visible(False)
-    state = {"texture": None, "closed": None}
+    state = {"texture": None, "closed": None, "exposed": False}
+
+    @window.event
+    def on_expose():  # uncovered (a window above closed): the X server does not keep what was under it
+        state["exposed"] = True
+
+    @window.event
+    def on_draw():
+        state["exposed"] = True
 
     @window.event
     def on_key_press(symbol, modifiers):
@@ -174,6 +182,10 @@ def serve(name: str, x_screen: int, head: int) -> str:
             window.dispatch_events()
             if state["closed"] is not None:
                 break
+            if state["exposed"]:
+                state["exposed"] = False
+                draw()
+                window.flip()
             ready, _, _ = select.select([fd], [], [], 0.01)
             if not ready:
                 continue
