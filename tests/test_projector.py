@@ -14,10 +14,10 @@ import time
 import numpy as np
 import pytest
 from typer.testing import CliRunner
-from xvfb import send_key, start_xvfb, stop_xvfb
 
 from planeray.cli import app
 from planeray.errors import InputError
+from xvfb import send_key, start_xvfb, stop_xvfb
 
 
 @pytest.fixture(scope="module")

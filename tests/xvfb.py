@@ -40,7 +40,9 @@ def start_xvfb():
                 raise RuntimeError(f"Xvfb did not say its display number within {START_TIMEOUT_S:g} s")
             chunk = os.read(read, 16)
             if not chunk:
-                raise RuntimeError(f"Xvfb ended before it started: {proc.stderr.read().decode(errors='replace')[-300:]}")
+                raise RuntimeError(
+                    f"Xvfb ended before it started: {proc.stderr.read().decode(errors='replace')[-300:]}"
+                )
             number += chunk
     except BaseException:
         proc.kill()

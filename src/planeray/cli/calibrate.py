@@ -75,6 +75,13 @@ def calibrate_lines(
         float | None,
         typer.Option(help="--device: when the global exposure opens after VSYNC (us).", show_default="mid-frame"),
     ] = None,
+    timing_jitter_us: Annotated[
+        float | None,
+        typer.Option(
+            help="--device: RMS jitter (us) of the exposure window per averaged image, for the uncertainty.",
+            show_default="the device's, else 0",
+        ),
+    ] = None,
     save: Annotated[
         Path | None, typer.Option(help="--device: also save the captured line sweep (.npz) to count again later.")
     ] = None,
@@ -101,14 +108,25 @@ def calibrate_lines(
     if (path is None) == (device is None):
         raise InputError("give a line-sweep capture PATH, or --device NAME --screen N to capture one")
     live_only = {"--screen": screen, "--display": display, "--trigger-delay-us": trigger_delay_us, "--save": save}
+    live_only["--timing-jitter-us"] = timing_jitter_us
     live_only.update({"--device-option": device_option or None, "--calibration": calibration})
     for option, value in live_only.items():
         if value is not None and device is None:
             raise InputError(f"{option} applies to --device only")
     _check_write_target(write)
     if device is not None:
+        lim.optional(lim.nonnegative, timing_jitter_us, "--timing-jitter-us", maximum=10_000.0)
         sweep = _capture_lines_live(
-            device, device_option, calibration, screen, display, exposure_us, rows_per_line, trigger_delay_us, save
+            device,
+            device_option,
+            calibration,
+            screen,
+            display,
+            exposure_us,
+            rows_per_line,
+            trigger_delay_us,
+            save,
+            timing_jitter_us,
         )
     else:
         sweep = read_line_sweep(path, exposure_us=exposure_us, rows_per_line=rows_per_line)
@@ -131,7 +149,16 @@ def calibrate_lines(
 
 
 def _capture_lines_live(
-    device, device_option, calibration, screen, display, exposure_us, rows_per_line, trigger_delay_us, save
+    device,
+    device_option,
+    calibration,
+    screen,
+    display,
+    exposure_us,
+    rows_per_line,
+    trigger_delay_us,
+    save,
+    timing_jitter_us=None,
 ):
     """The comb shown on the screen and captured by the device (``calibrate lines --device``)."""
     from ..calibration import write_line_sweep
@@ -160,6 +187,7 @@ def _capture_lines_live(
                 exposure_us=PAPER_CALIBRATION_EXPOSURE_US if exposure_us is None else exposure_us,
                 line_step_rows=DEFAULT_COMB_STEP_ROWS if rows_per_line is None else rows_per_line,
                 trigger_delay_us=trigger_delay_us,
+                timing_jitter_us=timing_jitter_us,
             )
     finally:
         close_device(dev)

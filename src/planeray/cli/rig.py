@@ -112,9 +112,9 @@ def check(
     response peaks at the calibrated delay zero (--calibration). Exit status 1 if a
     check fails. Put a white diffuse target in front of the rig.
     """
-    from . import _limits as lim
     from ..projector import get_screen
     from ..rig import check_rig
+    from . import _limits as lim
 
     sweep_ = lim.sweep(sweep)
     lim.optional(lim.positive, frame_rate_hz, "--frame-rate-hz", maximum=1000.0)

@@ -260,7 +260,11 @@ def _run(device, window, screen, display, delay_zero_us, sweep, exposure_us, fra
     _check_linearity(rig, rate, add)
     row_ok, scan = _check_row_time(rig, centre, add)
     if expected is None:
-        add(Check("delay zero", "skip", "no calibrated delay zero: run calibrate delay-zero --write, then --calibration"))
+        add(
+            Check(
+                "delay zero", "skip", "no calibrated delay zero: run calibrate delay-zero --write, then --calibration"
+            )
+        )
     elif not row_ok:
         add(Check("delay zero", "skip", "the row time is off (fix that first)"))
     else:
@@ -291,9 +295,7 @@ def _check_ranges(device, sweep, base, add) -> bool:
         return False
     text = f"exposures {lo:g}..{hi:g} us cover the sweep's {e_lo:g}..{e_hi:g} us"
     if base is not None:
-        d_lo, d_hi = (
-            device.get_trigger_delay_range_us() if has(device, "ranges") else device.trigger_delay_range_us
-        )
+        d_lo, d_hi = device.get_trigger_delay_range_us() if has(device, "ranges") else device.trigger_delay_range_us
         lps = device.lines_per_second
         t_o = np.array(
             [sync_offset_from_delay(d, e, lines_per_second=lps) for d, e in zip(sweep.delay_us, sweep.exposure_us)]
@@ -318,7 +320,11 @@ def _check_ranges(device, sweep, base, add) -> bool:
 def _check_trigger(device, rate, add) -> None:
     period = 1.0 / rate
     if not has(device, "frame_times"):
-        add(Check("trigger", "pass", "frames arrive on the trigger (the camera gives no time stamps: rate not measured)"))
+        add(
+            Check(
+                "trigger", "pass", "frames arrive on the trigger (the camera gives no time stamps: rate not measured)"
+            )
+        )
         return
     times = np.asarray(device.frame_times_s(), float)
     if times.size < 2:
@@ -437,7 +443,14 @@ def _check_linearity(rig, rate, add) -> None:
             )
         )
         return
-    add(Check("linearity", "pass", f"twice the light gave {ratio:.3f} times the value{gamma_text}", details={"ratio": ratio}))
+    add(
+        Check(
+            "linearity",
+            "pass",
+            f"twice the light gave {ratio:.3f} times the value{gamma_text}",
+            details={"ratio": ratio},
+        )
+    )
 
 
 def _scan(rig, centre, half_width_us, step_us):
@@ -491,7 +504,11 @@ def _check_row_time(rig, centre, add):
             )
         )
         return False, scan
-    add(Check("row time", "pass", f"matches the projector's line velocity to {abs(error):.2%}{reported}", details=details))
+    add(
+        Check(
+            "row time", "pass", f"matches the projector's line velocity to {abs(error):.2%}{reported}", details=details
+        )
+    )
     return True, scan
 
 
