@@ -17,22 +17,12 @@ from typer.testing import CliRunner
 
 from planeray.cli import app
 from planeray.errors import InputError
-from xvfb import send_key, start_xvfb, stop_xvfb
+from xvfb import display_for_tests, send_key
 
 
 @pytest.fixture(scope="module")
 def xdisplay():
-    proc, name = start_xvfb()
-    old = os.environ.get("DISPLAY")
-    os.environ["DISPLAY"] = name  # nothing may open on the developer's own display
-    try:
-        yield name
-    finally:
-        if old is None:
-            os.environ.pop("DISPLAY", None)
-        else:
-            os.environ["DISPLAY"] = old
-        stop_xvfb(proc)
+    yield from display_for_tests()
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,6 @@ stand-in SDK (``fake_pyueye``) whose camera renders through such a projector.
 """
 
 import json
-import os
 
 import numpy as np
 import pytest
@@ -14,7 +13,7 @@ from typer.testing import CliRunner
 
 from fake_pyueye import FakeCamera, install
 from planeray.cli import app
-from xvfb import start_xvfb, stop_xvfb
+from xvfb import display_for_tests
 
 SIM = ["-O", "scene=diffuse_plane"]
 LINES = ["--rows-per-line", "4", "--json"]
@@ -22,17 +21,7 @@ LINES = ["--rows-per-line", "4", "--json"]
 
 @pytest.fixture(scope="module")
 def xdisplay():
-    proc, name = start_xvfb()
-    old = os.environ.get("DISPLAY")
-    os.environ["DISPLAY"] = name
-    try:
-        yield name
-    finally:
-        if old is None:
-            os.environ.pop("DISPLAY", None)
-        else:
-            os.environ["DISPLAY"] = old
-        stop_xvfb(proc)
+    yield from display_for_tests()
 
 
 def test_calibrate_lines_on_the_simulated_rig_recovers_its_line_velocity(xdisplay, tmp_path):

@@ -63,6 +63,21 @@ def stop_xvfb(proc) -> None:
     proc.stderr.close()
 
 
+def display_for_tests():
+    """A module fixture's body: Xvfb started, DISPLAY pointing at it while the tests run, then stopped."""
+    proc, name = start_xvfb()
+    old = os.environ.get("DISPLAY")
+    os.environ["DISPLAY"] = name  # nothing may open on the developer's own display
+    try:
+        yield name
+    finally:
+        if old is None:
+            os.environ.pop("DISPLAY", None)
+        else:
+            os.environ["DISPLAY"] = old
+        stop_xvfb(proc)
+
+
 def send_key(display: str, x_screen: int, keysym_name: str) -> None:
     """Press and release a key on ``display`` with the pointer on ``x_screen`` (XTest, as a user's keyboard)."""
     import ctypes

@@ -15,7 +15,7 @@ import numpy as np
 from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from xvfb import start_xvfb, stop_xvfb  # noqa: E402
+from xvfb import start_xvfb, stop_xvfb
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "_static" / "rig"
 PATTERNS = {"comb_8_3": "comb:8:3", "rows_300_340": "rows:300:340", "card": "card"}
