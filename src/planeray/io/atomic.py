@@ -14,14 +14,14 @@ disk full) become one :class:`~planeray.errors.StorageError` naming the output.
 from __future__ import annotations
 
 import contextlib
-import errno
 import json
 import os
 import shutil
 import uuid
 from pathlib import Path
 
-from ..errors import InputError, StorageError
+from ..errors import InputError
+from ._storage import storage_error
 
 __all__ = [
     "ALREADY_EXISTS",
@@ -146,18 +146,6 @@ def check_replaceable(path, *, overwrite: bool, kind: str | None = None, error=I
         raise error(
             f"is a planeray {found}, not a {kind}; planeray will not replace one kind of result with another", path
         )
-
-
-def storage_error(exc: BaseException, path) -> StorageError:
-    """A one-line :class:`~planeray.errors.StorageError` for a file-system failure while writing ``path``."""
-    if isinstance(exc, OSError) and exc.errno is not None:
-        name = errno.errorcode.get(exc.errno, str(exc.errno))
-        cause = f"{exc.strerror or os.strerror(exc.errno)} [{name}]"
-        where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(path) else ""
-        return StorageError(f"cannot write: {cause}{where}", path)
-    # an encoder's own message (ffmpeg's: the error, then its whole command line): its first line only
-    first = next((line.strip() for line in str(exc).splitlines() if line.strip()), "")
-    return StorageError(f"cannot write: {type(exc).__name__}: {first}", path)
 
 
 #: Bytes the write probe of :func:`check_writable` writes (a full disk refuses its first block).

@@ -169,7 +169,7 @@ def _acquire(path: Path, lock: Path, on_stale, error) -> int:
         except FileNotFoundError:
             raise error("cannot be created: its folder does not exist", path) from None
         except OSError as exc:
-            from .atomic import storage_error
+            from ._storage import storage_error
 
             raise storage_error(exc, path) from None
         try:
@@ -198,7 +198,7 @@ def _acquire(path: Path, lock: Path, on_stale, error) -> int:
             with contextlib.suppress(OSError):
                 os.close(fd)
             if isinstance(exc, OSError) and not isinstance(exc, StorageError):
-                from .atomic import storage_error
+                from ._storage import storage_error
 
                 raise storage_error(exc, path) from None
             raise
@@ -290,7 +290,7 @@ def output_lock(path, *, on_stale=None, error=OutputBusyError, make_folders: boo
 
 def _make_folders(path: Path) -> list[Path]:
     """Create the missing folders above ``path``; the ones created, innermost first."""
-    from .atomic import storage_error
+    from ._storage import storage_error
 
     missing = []
     folder = path.absolute().parent
@@ -354,7 +354,7 @@ def writes_output(parameter: str = "out"):
                 except OSError as exc:
                     if isinstance(exc, StorageError) or exc.errno not in _WRITE_ERRNOS:
                         raise
-                    from .atomic import storage_error
+                    from ._storage import storage_error
 
                     raise storage_error(exc, out) from None
 
