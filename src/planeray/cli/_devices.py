@@ -158,6 +158,8 @@ def check_device_options(options: dict, spellings: dict, defaults: dict | None =
         if problem is not None:
             raise InputError(f"{spellings.get(key, key)} must be {problem}, got {value!r}")
         check = _COMMON_CHECKS.get(key)
+        if key == "camera_id" and not isinstance((defaults or {}).get(key), int):
+            check = None  # a uEye camera's number; a GenICam camera's id or serial number is text
         if check is not None and value is not None:
             if key == "size" and isinstance(value, list):
                 value = tuple(value)
