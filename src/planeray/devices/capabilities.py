@@ -13,6 +13,7 @@ uEye driver implement):
 ``gamma``         the camera's gamma, read back (1.0: linear)
 ``row_time``      the rolling shutter's row time, read back (us per camera row)
 ``ranges``        the exposure and trigger-delay ranges the camera can realize (us)
+``timing``        the delay and exposure the device realizes now, read back from the camera (us)
 ================  ===============================================================================
 
 Use :func:`capabilities` to list what a device has and :func:`require` to refuse,
@@ -40,6 +41,7 @@ __all__ = [
     "Gamma",
     "RowTime",
     "Ranges",
+    "TimingReadback",
     "CAPABILITIES",
     "capabilities",
     "has",
@@ -120,6 +122,14 @@ class Ranges(Protocol):
         """Shortest and longest trigger delay (us)."""
 
 
+@runtime_checkable
+class TimingReadback(Protocol):
+    """A device that says which delay and exposure it realizes now (the conformance suite reads it back)."""
+
+    def get_timing_us(self) -> tuple[float, float]:
+        """``(t_d, t_e)`` in us as realized: a camera's from its trigger delay and exposure read back (Eq. 1)."""
+
+
 #: Capability names and their protocols.
 CAPABILITIES = {
     "global_shutter": GlobalShutter,
@@ -128,6 +138,7 @@ CAPABILITIES = {
     "gamma": Gamma,
     "row_time": RowTime,
     "ranges": Ranges,
+    "timing": TimingReadback,
 }
 
 

@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DeviceError, InputError
-from ..timing import PAPER_LINES_PER_SECOND, sync_offset_from_delay
+from ..timing import PAPER_LINES_PER_SECOND, delay_from_sync_offset, sync_offset_from_delay
 from .base import DeviceBase, register_device
 from .capabilities import SHUTTER_MODES, TRIGGER_EDGES
 
@@ -598,6 +598,16 @@ class GenICamEpiscan(DeviceBase):
     def frame_ids(self) -> list[int]:
         """The camera's frame ids (GenICam block ids) of the frames averaged by the last grab."""
         return list(self._frame_ids)
+
+    def get_timing_us(self) -> tuple[float, float]:
+        """``(t_d, t_e)`` realized now: ``ExposureTime`` and ``TriggerDelay`` read back from the camera, Eq. 1."""
+        self._require_open()
+        exposure = float(self._get("float", self._exposure))
+        trigger = float(self._get("float", self._trigger_delay))
+        if self._base is None or self._shutter == "global":
+            return self.delay_us, exposure
+        t_o = self._base - trigger
+        return float(delay_from_sync_offset(t_o, exposure, lines_per_second=self.lines_per_second)), exposure
 
     @property
     def aravis_device(self):

@@ -21,16 +21,26 @@ rising edge, every ``1 / frame_rate_hz``; a global-shutter exposure opens
 (``trigger_wired=False``, ``trigger_edge="falling"``, ``gamma=2.2``,
 ``shutter="global"``, ``row_time_error=0.1``, ``exposure_range_us=[20, 1000]``,
 ``screen`` another than the window's) for ``rig check`` to find.
+
+The pulsing skin
+----------------
+With ``pulse_bpm`` (the ``skin`` scene only) the veins' blood volume pulses: each grab renders the
+transport at the blood scale ``s = 1 + pulse_amplitude * (1 - cos(2 pi f t)) / 2`` averaged over the
+grab's frame times ``t`` on the rig's clock (``frame_rate_hz``), ``f = pulse_bpm / 60``, linearized
+as the live pulse simulation is (:mod:`planeray.pulse.simulate`): ``T(s) = T(1) + (s - 1) dT/ds``, the
+derivative a central difference of two scene builds at ``1 +- 0.02``.  A sinusoid, so that the rate
+is exactly ``pulse_bpm`` (the heart's waveform and its variability are the pulse simulation's).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..camera import CameraModel, row_shifts_rows
+from ..camera import CameraModel, binned_camera, row_shifts_rows
 from ..errors import DeviceError, InputError
 from ..scenes import Scene
-from ..timing import PAPER_LINES_PER_SECOND, Band, RowPattern
+from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, Band, RowPattern
+from ..transport import Transport
 from .base import DeviceBase, register_device
 from .capabilities import SHUTTER_MODES, TRIGGER_EDGES
 
@@ -87,8 +97,10 @@ class SimulatedEpiscan(DeviceBase):
         seed=0,
         noise=True,
         rig: dict | None = None,
+        pulse: dict | None = None,
     ):
         self.scene = scene
+        self._pulse = None if pulse is None else dict(pulse)
         self.camera = camera or CameraModel()
         self.lines_per_second = float(lines_per_second)
         self.seed = int(seed)
@@ -167,6 +179,10 @@ class SimulatedEpiscan(DeviceBase):
     def get_exposure_range_us(self) -> tuple[float, float]:
         return self.rig["exposure_range_us"]
 
+    def get_timing_us(self) -> tuple[float, float]:
+        """The delay and exposure the next grab renders (us)."""
+        return self.delay_us, self.exposure_us
+
     def get_trigger_delay_range_us(self) -> tuple[float, float]:
         return self.rig["trigger_delay_range_us"]
 
@@ -181,6 +197,23 @@ class SimulatedEpiscan(DeviceBase):
         lo, hi = self.rig["exposure_range_us"]
         if not lo <= exposure_us <= hi:
             raise DeviceError(f"exposure {exposure_us:g} us is outside the camera's range {lo:g}..{hi:g} us")
+
+    # ------------------------------------------------------------------ the pulsing skin
+    def blood_scale(self) -> float:
+        """The veins' blood scale of the last grab (1 without a pulse): the mean over its frames' times."""
+        if self._pulse is None or self._frame_times.size == 0:
+            return 1.0
+        phase = 2.0 * np.pi * self._pulse["bpm"] / 60.0 * self._frame_times
+        return float(np.mean(1.0 + self._pulse["amplitude"] * 0.5 * (1.0 - np.cos(phase))))
+
+    def _render(self, illumination) -> np.ndarray:
+        """The scene's transport rendered under ``illumination`` (at the grab's blood scale, with a pulse)."""
+        signal = self.scene.transport.render(illumination)
+        if self._pulse is not None:
+            s = self.blood_scale()
+            if s != 1.0:
+                signal = signal + np.float32(s - 1.0) * self._pulse["derivative"].render(illumination)
+        return signal
 
     # ------------------------------------------------------------------ the projector and the trigger
     def projected_rows(self) -> np.ndarray | None:
@@ -265,10 +298,10 @@ class SimulatedEpiscan(DeviceBase):
         rows = self.projected_rows()
         if self.exposure_us >= self.frame_period_us:
             pattern = np.ones(self.scene.geometry.projector_rows) if rows is None else rows
-            signal = (self.exposure_us / self.frame_period_us) * self.scene.transport.render(RowPattern(pattern))
+            signal = (self.exposure_us / self.frame_period_us) * self._render(RowPattern(pattern))
         else:
             band = self.band(rng)
-            signal = self.scene.transport.render(band if rows is None else _Lit(band, RowPattern(rows)))
+            signal = self._render(band if rows is None else _Lit(band, RowPattern(rows)))
         return self._output(
             *self.camera.expose(
                 signal, self.exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise
@@ -298,7 +331,7 @@ class SimulatedEpiscan(DeviceBase):
         )
         rows = self.projected_rows()
         pattern = self._exposed(rng, start_row, n_v) * (np.ones(P) if rows is None else rows)
-        signal = self.scene.transport.render(RowPattern(pattern))
+        signal = self._render(RowPattern(pattern))
         return self.camera.expose(signal, exposure_us, rng, ambient_albedo=self.scene.ambient_albedo, noise=self.noise)
 
     def _exposed(self, rng, start, length):
@@ -506,6 +539,11 @@ class SimulatedEpiscan(DeviceBase):
             "scene": self.scene.params,
             "seed": self.seed,
             "noise": self.noise,
+            **(
+                {"pulse": {"bpm": self._pulse["bpm"], "amplitude": self._pulse["amplitude"]}}
+                if self._pulse is not None
+                else {}
+            ),
         }
 
 
@@ -539,6 +577,10 @@ def open_simulated(
     exposure_range_us=(1.0, 1_000_000.0),
     trigger_delay_range_us=(0.0, 2_000_000.0),
     frame_rate_hz: float = 60.0,
+    frames_averaged: int = 8,
+    sensor_rows: int | None = None,
+    pulse_bpm: float | None = None,
+    pulse_amplitude: float = 0.02,
 ) -> SimulatedEpiscan:
     """A :class:`SimulatedEpiscan` of a built-in scene (``planeray acquire --device sim``).
 
@@ -570,14 +612,51 @@ def open_simulated(
         What the camera can realize (us).
     frame_rate_hz : float
         The projector's frame rate.
+    frames_averaged : int
+        Frames averaged per image (the paper: 8; a live view: 1).
+    sensor_rows : int, optional
+        The real sensor's rows over the projector's whole field (the paper's camera: 1200): a simulated
+        pixel then sums the sensor pixels that see its patch (:func:`planeray.camera.binned_camera`), so
+        that its noise is the real camera's; default: one sensor pixel per simulated pixel.
+    pulse_bpm : float, optional
+        The ``skin`` scene only: the veins' blood volume pulses at this rate (30-240 per minute; see
+        the module's docstring), on the rig's clock.
+    pulse_amplitude : float
+        Relative blood-volume change of the veins from diastole to systole (0-0.1).
     """
+    from dataclasses import replace
+
     from ..scenes import make_scene
+
+    if isinstance(frames_averaged, bool) or int(frames_averaged) != frames_averaged or frames_averaged < 1:
+        raise InputError(f"frames_averaged must be a positive integer, got {frames_averaged!r}")
+    if sensor_rows is not None and (isinstance(sensor_rows, bool) or int(sensor_rows) != sensor_rows or sensor_rows < 1):
+        raise InputError(f"sensor_rows must be a positive integer, got {sensor_rows!r}")
+    if pulse_bpm is not None:
+        if scene != "skin":
+            raise InputError(f"pulse_bpm needs scene='skin' (the pulsing veins), got scene={scene!r}")
+        if isinstance(pulse_bpm, bool) or not 30.0 <= float(pulse_bpm) <= 240.0:
+            raise InputError(f"pulse_bpm must be between 30 and 240 beats per minute, got {pulse_bpm!r}")
+        if isinstance(pulse_amplitude, bool) or not 0.0 <= float(pulse_amplitude) <= 0.1:
+            raise InputError(f"pulse_amplitude must be between 0 and 0.1, got {pulse_amplitude!r}")
 
     if screen is not None and projector_rows is None:
         from ..projector import get_screen
 
         projector_rows = get_screen(screen, display).height
-    built = make_scene(scene, tuple(int(n) for n in size), projector_rows=projector_rows, seed=seed)
+    shape = tuple(int(n) for n in size)
+    built = make_scene(scene, shape, projector_rows=projector_rows, seed=seed)
+    pulse = None
+    if pulse_bpm is not None:
+        step = 0.02  # the central difference of the live pulse simulation (planeray.pulse.simulate.linearize)
+        up, down = (
+            make_scene(scene, shape, projector_rows=projector_rows, seed=seed, blood_scale=1.0 + k * step).transport
+            for k in (1, -1)
+        )
+        if len(up.sparse) or len(down.sparse):
+            raise InputError("the pulsing skin needs a scene without sparse entries")
+        derivative = Transport((up.dense - down.dense) / np.float32(2 * step), up.offsets_rows, up.geometry)
+        pulse = {"bpm": float(pulse_bpm), "amplitude": float(pulse_amplitude), "derivative": derivative}
     rig = dict(
         screen=screen,
         display=display,
@@ -591,4 +670,10 @@ def open_simulated(
         trigger_delay_range_us=tuple(trigger_delay_range_us),
         frame_rate_hz=frame_rate_hz,
     )
-    return SimulatedEpiscan(built, lines_per_second=lines_per_second, seed=seed, noise=noise, rig=rig)
+    camera = replace(CameraModel(), frames_averaged=int(frames_averaged))
+    if sensor_rows is not None:  # the sensor spans the projector's whole field; the scene may show a part of it
+        rows = float(sensor_rows) * built.geometry.projector_rows / PAPER_PROJECTOR_ROWS
+        camera = binned_camera(camera, (rows / shape[0]) ** 2)
+    return SimulatedEpiscan(
+        built, camera, lines_per_second=lines_per_second, seed=seed, noise=noise, rig=rig, pulse=pulse
+    )

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DeviceError, InputError
-from ..timing import PAPER_LINES_PER_SECOND, sync_offset_from_delay
+from ..timing import PAPER_LINES_PER_SECOND, delay_from_sync_offset, sync_offset_from_delay
 from .base import DeviceBase, register_device
 from .capabilities import SHUTTER_MODES, TRIGGER_EDGES
 
@@ -415,6 +415,19 @@ class UEyeEpiscan(DeviceBase):
     def get_trigger_delay_range_us(self) -> tuple[float, float]:
         """Shortest and longest trigger delay (us)."""
         return tuple(self.trigger_delay_range_us)
+
+    def get_timing_us(self) -> tuple[float, float]:
+        """``(t_d, t_e)`` realized now: the exposure and trigger delay read back from the camera, Eq. 1."""
+        self._require_open()
+        u = self._ueye
+        got = u.c_double(0.0)
+        self._check(u.is_Exposure(self._h, u.IS_EXPOSURE_CMD_GET_EXPOSURE, got, u.sizeof(got)), "is_Exposure (get)")
+        exposure = float(_num(got)) * 1000.0
+        trigger = float(int(_num(u.is_SetTriggerDelay(self._h, u.IS_GET_TRIGGER_DELAY))))
+        if self._base is None:
+            return self.delay_us, exposure
+        t_o = self._base - trigger
+        return float(delay_from_sync_offset(t_o, exposure, lines_per_second=self.lines_per_second)), exposure
 
     # -------------------------------------------------------------- timing
     @property
