@@ -140,9 +140,8 @@ class GenICamEpiscan(DeviceBase):
     exposure_tolerance_us : float, optional
         Largest accepted difference between requested and realized exposure (default: half the
         camera's exposure increment, plus 0.5 us).
-    fake_genicam_xml : path or "aravis", optional
-        Aravis's fake camera only: its GenICam file (default :data:`FAKE_GENICAM_XML`; ``"aravis"``:
-        Aravis's own, which has no trigger delay).
+    fake_genicam_xml : path, optional
+        Aravis's fake camera only: its GenICam file (default :data:`FAKE_GENICAM_XML`).
     fake_trigger_hz : float
         Aravis's fake camera only: the rate of its trigger clock (the projector's VSYNC).
     """
@@ -198,7 +197,7 @@ class GenICamEpiscan(DeviceBase):
             raise InputError(f"fake_trigger_hz must be positive, got {fake_trigger_hz!r}")
         self.camera_id = None if camera_id is None else str(camera_id)
         fake = self.camera_id is not None and self.camera_id.startswith("Fake")
-        if fake_genicam_xml not in (None, "aravis"):
+        if fake_genicam_xml is not None:
             fake_genicam_xml = Path(fake_genicam_xml)
             if not fake_genicam_xml.is_file():
                 raise InputError("GenICam file of the fake camera not found", fake_genicam_xml)
@@ -229,8 +228,7 @@ class GenICamEpiscan(DeviceBase):
         self._Aravis, self._GLib = _load_aravis()
         Aravis = self._Aravis
         if fake:
-            xml = None if fake_genicam_xml == "aravis" else str(fake_genicam_xml or FAKE_GENICAM_XML)
-            Aravis.set_fake_camera_genicam_filename(xml)
+            Aravis.set_fake_camera_genicam_filename(str(fake_genicam_xml or FAKE_GENICAM_XML))
             Aravis.enable_interface("Fake")
         self.fake = fake
         device_id = self._find(camera_id)
@@ -435,7 +433,9 @@ class GenICamEpiscan(DeviceBase):
         self.pixel_format = pixel_format
         self.bit_depth = BIT_DEPTHS[pixel_format]
         if not self.black_level < 2**self.bit_depth - 1:
-            raise InputError(f"black_level must be below {2**self.bit_depth - 1} for {pixel_format}, got {self.black_level}")
+            raise InputError(
+                f"black_level must be below {2**self.bit_depth - 1} for {pixel_format}, got {self.black_level}"
+            )
         # 3. image area
         if region is not None:
             try:

@@ -630,7 +630,9 @@ def open_simulated(
 
     if isinstance(frames_averaged, bool) or int(frames_averaged) != frames_averaged or frames_averaged < 1:
         raise InputError(f"frames_averaged must be a positive integer, got {frames_averaged!r}")
-    if sensor_rows is not None and (isinstance(sensor_rows, bool) or int(sensor_rows) != sensor_rows or sensor_rows < 1):
+    if sensor_rows is not None and (
+        isinstance(sensor_rows, bool) or int(sensor_rows) != sensor_rows or sensor_rows < 1
+    ):
         raise InputError(f"sensor_rows must be a positive integer, got {sensor_rows!r}")
     if pulse_bpm is not None:
         if scene != "skin":
