@@ -9,7 +9,12 @@ capture can be checked pixel for pixel against what the camera made -- never aga
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import gc
 import os
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -73,3 +78,20 @@ def expected_image(frame_ids, shape, exposure_us: float, gain: int, *, black_lev
     for i in frame_ids:
         total += fake_frame(i, shape, exposure_us, gain)
     return ((total / len(frame_ids) - black_level) / (65535 - black_level)).astype(np.float32)
+
+
+@contextlib.contextmanager
+def gv_fake_camera(serial: str):
+    """Aravis's GigE Vision fake camera on 127.0.0.1 with planeray's GenICam file (one at a time: it owns GVCP's port)."""
+    from gi.repository import Aravis
+
+    from planeray.devices.genicam import FAKE_GENICAM_XML
+
+    with open(Path(tempfile.gettempdir()) / "planeray-aravis-gv-fake.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        camera = Aravis.GvFakeCamera.new_full("127.0.0.1", serial, str(FAKE_GENICAM_XML))
+        try:
+            yield f"Aravis-Fake-{serial}"
+        finally:
+            del camera
+            gc.collect()

@@ -10,15 +10,12 @@ never comes.  ``make test`` installs Aravis as root; without it these tests skip
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import gc
 import json
 import os
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -26,7 +23,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from _genicam import as_cli, expected_image, fake_frame, fake_options, require_aravis
+from _genicam import as_cli, expected_image, fake_frame, fake_options, gv_fake_camera, require_aravis
 from planeray import resumable
 from planeray.acquire import acquire_to_store
 from planeray.cli import app
@@ -50,23 +47,6 @@ def finalized(device) -> list:
     done: list = []
     device._camera.weak_ref(lambda *a: done.append(1))
     return done
-
-
-@contextlib.contextmanager
-def gv_fake_camera(serial: str):
-    """Aravis's GigE Vision fake camera on 127.0.0.1 with planeray's GenICam file (one at a time: it owns GVCP's port)."""
-    from gi.repository import Aravis
-
-    from planeray.devices.genicam import FAKE_GENICAM_XML
-
-    with open(Path(tempfile.gettempdir()) / "planeray-aravis-gv-fake.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        camera = Aravis.GvFakeCamera.new_full("127.0.0.1", serial, str(FAKE_GENICAM_XML))
-        try:
-            yield f"Aravis-Fake-{serial}"
-        finally:
-            del camera
-            gc.collect()
 
 
 # ----------------------------------------------------------------------------- set-up
