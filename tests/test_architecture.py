@@ -50,6 +50,7 @@ LAYERS = [
     "baselines",
     "skin",
     "pulse",
+    "live",
     "study",
     "figures",
     "experiments",
