@@ -10,8 +10,8 @@ from typing import Annotated
 import typer
 
 from .._console import console, print_verbatim, progress_bar
-from ..timing import PAPER_LINES_PER_SECOND
 from ..errors import InputError
+from ..timing import PAPER_LINES_PER_SECOND
 from ._common import _check_outputs, _friendly_errors
 from ._devices import CalibrationArg, DeviceOptionArg
 

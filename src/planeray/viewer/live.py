@@ -154,7 +154,9 @@ class DeviceSource(ViewSource):
             frame = self.capture.wait_frame(self._last, timing=timing, timeout_s=self.frame_timeout_s)
             frames = [frame]
             image = vein_view(frame.image) if s.mode == "vein" else frame.image
-            info = {"label": f"{'vein view' if s.mode == 'vein' else 'live'}  t_d {timing[0]:g} us  t_e {timing[1]:g} us"}
+            info = {
+                "label": f"{'vein view' if s.mode == 'vein' else 'live'}  t_d {timing[0]:g} us  t_e {timing[1]:g} us"
+            }
             if s.mode == "pulse":
                 result = self.pulse.update(self.capture.window(PULSE_WINDOW_S, timing=timing), self._analysis)
                 info["pulse"] = result
