@@ -46,18 +46,23 @@ PULSE_WINDOW_S = 10.0
 
 
 def cycle_delays(exposure_us: float, delays_us=DEFAULT_CYCLE_DELAYS_US) -> tuple[float, ...]:
-    """The delays of Eq. 7's cycle at ``exposure_us``: those whose band is off the epipolar plane (``|t_d| > t_e/2``).
+    """The delays of Eq. 7's cycle at ``exposure_us``: those whose band is off the epipolar plane
+    (``|t_d| > t_e/2``) and whose edge is not on it (the boundary images a stack leaves out, Sec. 4).
 
     >>> cycle_delays(600.0)
-    (375.0, 562.5, 750.0, 937.5, 1125.0)
+    (562.5, 750.0, 937.5, 1125.0)
     >>> cycle_delays(1200.0)
     (750.0, 937.5, 1125.0)
     """
-    keep = tuple(float(d) for d in delays_us if abs(d) > 0.5 * float(exposure_us))
+    from ..timing import boundary_images
+
+    d = np.asarray(delays_us, np.float64)
+    edge = boundary_images(d, np.full_like(d, float(exposure_us)))
+    keep = tuple(float(x) for x, b in zip(d, edge) if abs(x) > 0.5 * float(exposure_us) and not b)
     if len(keep) < 2:
         raise InputError(
             f"exposure_us = {exposure_us:g}: Eq. 7's composite needs at least 2 delays off the epipolar band "
-            f"(|t_d| > t_e / 2) among {', '.join(f'{d:g}' for d in delays_us)} us"
+            f"(|t_d| > t_e / 2, its edge not on it) among {', '.join(f'{d:g}' for d in delays_us)} us"
         )
     return keep
 
