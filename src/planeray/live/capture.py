@@ -144,6 +144,11 @@ class LiveCapture:
         """``(delays_us, exposure_us)`` being captured."""
         return self._target
 
+    @property
+    def generation(self) -> int:
+        """The number of the current target (each new :meth:`set_timing` or :meth:`set_cycle` adds one)."""
+        return self._generation
+
     # ------------------------------------------------------------------ the thread
     def start(self) -> LiveCapture:
         """Start capturing (idempotent)."""
@@ -233,9 +238,15 @@ class LiveCapture:
             raise DeviceError("the capture was stopped")
 
     def wait_frame(
-        self, after: int = -1, *, timing: tuple[float, float] | None = None, timeout_s: float = 5.0
+        self,
+        after: int = -1,
+        *,
+        timing: tuple[float, float] | None = None,
+        generation: int | None = None,
+        timeout_s: float = 5.0,
     ) -> Frame:
-        """The newest frame with an index above ``after`` (captured at ``timing``, when given).
+        """The newest frame with an index above ``after``: captured at ``timing``, or in ``generation`` or a later
+        one (what a live view wants: its own timing, or a newer one it was already asked for), when given.
 
         Raises DeviceError saying what it waited for when none comes within ``timeout_s``, or the
         device's own error when the capture stopped on one.
@@ -247,7 +258,9 @@ class LiveCapture:
             for frame in reversed(self._frames):
                 if frame.index <= after:
                     return None
-                if timing is None or (frame.delay_us, frame.exposure_us) == timing:
+                if generation is not None and frame.generation >= generation:
+                    return frame
+                if (timing is None and generation is None) or (frame.delay_us, frame.exposure_us) == timing:
                     return frame
             return None
 

@@ -83,6 +83,8 @@ class DeviceSource(ViewSource):
         self.snapshot_dir = Path(snapshot_dir) if snapshot_dir is not None else Path.cwd()
         self.frame_timeout_s = float(frame_timeout_s)
         self._last = -1  # the newest frame shown
+        self._hinted: dict = {}  # settings -> the capture's generation when it was pointed at them
+        self._generation = None
         self._shown: list = []
         lo, hi = 10.0, 3000.0
         if has(device, "ranges"):
@@ -125,11 +127,18 @@ class DeviceSource(ViewSource):
 
     # ------------------------------------------------------------------ capture
     def hint(self, settings: ViewSettings) -> None:
-        """Point the capture at ``settings`` now (before the render that waits for its frame)."""
+        """Point the capture at ``settings`` now (the server calls it as a request arrives, before its render)."""
         if settings.mode == "composite":
             self.capture.set_cycle(cycle_delays(settings.exposure_us), settings.exposure_us)
         else:
             self.capture.set_timing(settings.delay_us, settings.exposure_us)
+        self._hinted[self._key(settings)] = self.capture.generation
+        if len(self._hinted) > 256:
+            self._hinted.pop(next(iter(self._hinted)))
+
+    @staticmethod
+    def _key(settings: ViewSettings):
+        return (settings.mode == "composite", float(settings.delay_us), float(settings.exposure_us))
 
     def warm(self) -> None:
         """Start the capture and wait for its first frame."""
@@ -137,9 +146,16 @@ class DeviceSource(ViewSource):
         self.capture.wait_frame(timeout_s=max(self.frame_timeout_s, 30.0))
 
     def _render(self, s: ViewSettings, buffers: FrameBuffers | None) -> tuple[np.ndarray, dict]:
-        self.hint(s)
+        # the capture was pointed at these settings when the request came (hint), in some generation; a frame of
+        # that generation or a later one is at them or at newer settings.  Never point it back to older ones.
+        self._generation = self._hinted.get(self._key(s))
+        if self._generation is None:
+            self.hint(s)
+            self._generation = self._hinted[self._key(s)]
         if s.mode == "composite":
             delays = cycle_delays(s.exposure_us)
+            if self.capture.target != (tuple(float(d) for d in delays), float(s.exposure_us)):
+                self.hint(s)  # a cycle is captured only while asked for: ask again
             frames = self.capture.wait_cycle(  # a whole cycle newer than anything shown
                 delays, s.exposure_us, after=self._last, timeout_s=self.frame_timeout_s * len(delays)
             )
@@ -150,9 +166,16 @@ class DeviceSource(ViewSource):
                 "composite": used,
             }
         else:
-            timing = (float(s.delay_us), float(s.exposure_us))
-            frame = self.capture.wait_frame(self._last, timing=timing, timeout_s=self.frame_timeout_s)
+            # the first new frame at these settings -- or at newer ones a later request already asked for
+            # (a slider being dragged: never wait for a timing the capture has left)
+            frame = self.capture.wait_frame(
+                self._last,
+                timing=(float(s.delay_us), float(s.exposure_us)),
+                generation=self._generation,
+                timeout_s=self.frame_timeout_s,
+            )
             frames = [frame]
+            timing = (frame.delay_us, frame.exposure_us)
             image = vein_view(frame.image) if s.mode == "vein" else frame.image
             info = {
                 "label": f"{'vein view' if s.mode == 'vein' else 'live'}  t_d {timing[0]:g} us  t_e {timing[1]:g} us"

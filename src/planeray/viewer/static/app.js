@@ -173,8 +173,9 @@ function paint(p, fresh) {
   record("transfer", h.received_ms - h.sent_at_ms);
   const sent = app.sentAt.get(h.id);
   if (sent !== undefined) { record("latency", t1 - sent); }
-  const moved = h.settings ? app.inputAt.get(h.settings.delay_us) : undefined;
-  if (moved !== undefined) { record("slider", t1 - moved); app.inputAt.delete(h.settings.delay_us); }
+  const shownDelay = h.delay_us !== undefined ? h.delay_us : (h.settings ? h.settings.delay_us : undefined);
+  const moved = app.inputAt.get(shownDelay); // the frame shows this delay: since when was it asked for?
+  if (moved !== undefined) { record("slider", t1 - moved); app.inputAt.delete(shownDelay); }
   $(".label", p.el).textContent = h.label + (h.saturated ? `  (${h.saturated} saturated)` : "");
   if (h.camera_fps !== undefined) { $("#camera-fps").textContent = `camera ${h.camera_fps.toFixed(1)} fps`; }
   if (h.pulse !== undefined && p.index === 0) { app.plotState = { panel: p.index, data: { kind: "pulse", pulse: h.pulse } }; drawPlot(); }
