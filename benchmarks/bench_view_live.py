@@ -24,56 +24,16 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
-import subprocess
-import sys
 import time
+
+from bench_viewer import FreshServer
 
 from planeray.viewer.browser import find_chromium, measure_painted_fps
 
 
-class FreshView:
-    """``planeray view ARGS --port 0 --no-browser`` in a new process: its URL and the page's reports."""
-
-    def __init__(self, args: list[str], timeout_s: float = 600.0):
-        cmd = [sys.executable, "-m", "planeray.cli", "view", *args, "--port", "0", "--no-browser"]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.url = None
-        deadline = time.monotonic() + timeout_s
-        for line in self.proc.stdout:
-            found = re.search(r"http://\S+\?token=\S+", line)
-            if found:
-                self.url = found.group(0)
-                break
-            if time.monotonic() > deadline:
-                break
-        if self.url is None:
-            self.close()
-            raise RuntimeError(f"`planeray view {' '.join(args)}` printed no URL")
-        self.base, self.token = self.url.split("/?token=")
-
-    @property
-    def reports(self) -> list:
-        import json
-        import urllib.request
-
-        with urllib.request.urlopen(f"{self.base}/api/reports?token={self.token}", timeout=10) as r:
-            return json.loads(r.read())
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+def FreshView(args: list[str]) -> FreshServer:
+    """``planeray view ARGS --port 0 --no-browser`` in a new process (:class:`bench_viewer.FreshServer`)."""
+    return FreshServer(None, None, timeout_s=600.0, args=args)
 
 
 def _load() -> str:

@@ -45,7 +45,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DeviceError, InputError
-from ..timing import PAPER_LINES_PER_SECOND, delay_from_sync_offset, sync_offset_from_delay
+from ..timing import PAPER_LINES_PER_SECOND
+from ._triggered import TriggeredTiming
 from .base import DeviceBase, register_device
 from .capabilities import SHUTTER_MODES, TRIGGER_EDGES
 
@@ -106,7 +107,7 @@ def _tiny(increment) -> bool:
     "any GenICam camera (GigE Vision, USB3 Vision) through Aravis, rolling shutter triggered by the projector's VSYNC",
     hardware=True,
 )
-class GenICamEpiscan(DeviceBase):
+class GenICamEpiscan(TriggeredTiming, DeviceBase):
     """An Episcan-style rig with any GenICam camera (device protocol of :mod:`planeray.devices`).
 
     Parameters
@@ -310,27 +311,20 @@ class GenICamEpiscan(DeviceBase):
             raise DeviceError(f"camera {self.device_id} has no {names} feature, which the rig needs {needed_for}")
         return None
 
+    #: Aravis's accessors by the kind of feature.
+    _KINDS = {"enum": "string", "float": "float", "int": "integer", "bool": "boolean"}
+
+    def _accessor(self, op: str, kind: str):
+        return getattr(self._device, f"{op}_{self._KINDS[kind]}_feature_value")
+
     def _get(self, kind: str, name: str):
-        d = self._device
-        getter = {
-            "enum": d.get_string_feature_value,
-            "float": d.get_float_feature_value,
-            "int": d.get_integer_feature_value,
-            "bool": d.get_boolean_feature_value,
-        }[kind]
         try:
-            return getter(name)
+            return self._accessor("get", kind)(name)
         except self._GLib.Error as exc:
             raise self._err(f"reading {name}", exc) from None
 
     def _set(self, kind: str, name: str, value) -> None:
-        d = self._device
-        setter = {
-            "enum": d.set_string_feature_value,
-            "float": d.set_float_feature_value,
-            "int": d.set_integer_feature_value,
-            "bool": d.set_boolean_feature_value,
-        }[kind]
+        setter = self._accessor("set", kind)
         try:
             setter(name, value)
         except self._GLib.Error as exc:
@@ -548,15 +542,6 @@ class GenICamEpiscan(DeviceBase):
         self._shutter = mode
         self._applied = None
 
-    def set_global_timing(self, exposure_us: float, trigger_delay_us: float) -> None:
-        """A global exposure of ``exposure_us``, opened ``trigger_delay_us`` after the trigger (applied at grab)."""
-        if not (math.isfinite(exposure_us) and exposure_us > 0):
-            raise DeviceError(f"exposure must be positive, got {exposure_us}")
-        if not math.isfinite(trigger_delay_us):
-            raise InputError(f"trigger delay must be a number, got {trigger_delay_us!r}")
-        self._global_timing = (float(exposure_us), float(trigger_delay_us))
-        self._applied = None
-
     def _get_trigger_edge(self) -> str:
         """The trigger edge read back (``TriggerActivation``)."""
         self._require_open()
@@ -599,15 +584,10 @@ class GenICamEpiscan(DeviceBase):
         """The camera's frame ids (GenICam block ids) of the frames averaged by the last grab."""
         return list(self._frame_ids)
 
-    def get_timing_us(self) -> tuple[float, float]:
-        """``(t_d, t_e)`` realized now: ``ExposureTime`` and ``TriggerDelay`` read back from the camera, Eq. 1."""
+    def _read_timing(self) -> tuple[float, float]:
+        """``ExposureTime`` and ``TriggerDelay`` read back from the camera (us)."""
         self._require_open()
-        exposure = float(self._get("float", self._exposure))
-        trigger = float(self._get("float", self._trigger_delay))
-        if self._base is None or self._shutter == "global":
-            return self.delay_us, exposure
-        t_o = self._base - trigger
-        return float(delay_from_sync_offset(t_o, exposure, lines_per_second=self.lines_per_second)), exposure
+        return float(self._get("float", self._exposure)), float(self._get("float", self._trigger_delay))
 
     @property
     def aravis_device(self):
@@ -615,45 +595,8 @@ class GenICamEpiscan(DeviceBase):
         return self._device if self._open else None
 
     # ------------------------------------------------------------------ timing (Eq. 1)
-    @property
-    def base_trigger_delay_us(self) -> float | None:
-        """Trigger delay (us) at which ``t'_o = 0``; changing it re-applies the timing at the next grab."""
-        return self._base
-
-    @base_trigger_delay_us.setter
-    def base_trigger_delay_us(self, value):
-        if value is not None and not math.isfinite(value):
-            raise InputError(f"base_trigger_delay_us must be a number, got {value!r}")
-        self._base = None if value is None else float(value)
-        self._applied = None
-
-    def trigger_delay_for(self, delay_us: float, exposure_us: float) -> float:
-        """Trigger delay (us) realizing ``(t_d, t_e)`` by Eq. 1: ``base - (t_e/2 - t_p/2 - t_d)``."""
-        if self._base is None:
-            raise DeviceError(
-                "the base trigger delay is not calibrated: run `planeray calibrate delay-zero --device genicam "
-                "--write acquisition.json` and pass --calibration acquisition.json (or --base-trigger-delay-us)"
-            )
-        t_o = float(sync_offset_from_delay(delay_us, exposure_us, lines_per_second=self.lines_per_second))
-        return self._base - t_o
-
-    def set_delay(self, delay_us: float) -> None:
-        if not math.isfinite(delay_us):
-            raise InputError(f"delay must be a number, got {delay_us!r}")
-        self.delay_us = float(delay_us)
-
-    def set_exposure(self, exposure_us: float) -> None:
-        if not (math.isfinite(exposure_us) and exposure_us > 0):
-            raise DeviceError(f"exposure must be positive, got {exposure_us}")
-        self.exposure_us = float(exposure_us)
-
-    def set_timing(self, delay_us: float, exposure_us: float) -> None:
-        """Set one sweep point and apply it now (refusing a pair the camera cannot realize)."""
-        self.set_exposure(exposure_us)
-        self.set_delay(delay_us)
-        self._apply()
-
-    def _write_float(self, name: str, value: float, step: float | None, tolerance: float, what: str) -> float:
+    def _write_float(self, name: str, value: float, tolerance: float, what: str) -> float:
+        """Write a float feature and read it back; refused in one line when the camera set another value."""
         self._set("float", name, float(value))
         back = float(self._get("float", name))
         if abs(back - value) > tolerance:
@@ -679,7 +622,7 @@ class GenICamEpiscan(DeviceBase):
             self.trigger_delay_for(self.delay_us, e)  # the one line asking for the calibration
         step = self.exposure_step_us or 0.0
         tol = 0.5 * step + 0.5 if self.exposure_tolerance_us is None else float(self.exposure_tolerance_us)
-        self.realized_exposure_us = self._write_float(self._exposure, e, self.exposure_step_us, tol, "the exposure")
+        self.realized_exposure_us = self._write_float(self._exposure, e, tol, "the exposure")
         # Eq. 1 with the exposure the camera really uses, so that the band is centred where asked
         ideal = self._global_timing[1] if glob else self.trigger_delay_for(self.delay_us, self.realized_exposure_us)
         dmin, dmax = self.trigger_delay_range_us
@@ -698,7 +641,7 @@ class GenICamEpiscan(DeviceBase):
             )
         dstep = self.trigger_delay_step_us
         tol_d = 0.5 * dstep + 1e-3 if dstep else 1.0  # an integer-us register truncates by up to 1 us
-        self.applied_trigger_delay_us = self._write_float(self._trigger_delay, ideal, dstep, tol_d, "the trigger delay")
+        self.applied_trigger_delay_us = self._write_float(self._trigger_delay, ideal, tol_d, "the trigger delay")
         self._applied = want
         self._settle = 1
 

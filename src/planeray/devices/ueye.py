@@ -41,7 +41,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DeviceError, InputError
-from ..timing import PAPER_LINES_PER_SECOND, delay_from_sync_offset, sync_offset_from_delay
+from ..timing import PAPER_LINES_PER_SECOND
+from ._triggered import TriggeredTiming
 from .base import DeviceBase, register_device
 from .capabilities import SHUTTER_MODES, TRIGGER_EDGES
 
@@ -96,7 +97,7 @@ def _code(ret) -> str:
 
 
 @register_device("ueye", "IDS uEye camera (pyueye), rolling shutter triggered by the projector's VSYNC", hardware=True)
-class UEyeEpiscan(DeviceBase):
+class UEyeEpiscan(TriggeredTiming, DeviceBase):
     """An Episcan-style rig with an IDS uEye camera (device protocol of :mod:`planeray.devices`).
 
     Opening the device initializes the camera and configures it completely; any
@@ -369,15 +370,6 @@ class UEyeEpiscan(DeviceBase):
         self._shutter = mode
         self._applied = None  # the exposure range and trigger timing are the mode's own: set them again
 
-    def set_global_timing(self, exposure_us: float, trigger_delay_us: float) -> None:
-        """A global exposure of ``exposure_us``, opened ``trigger_delay_us`` after VSYNC (applied at grab)."""
-        if not (math.isfinite(exposure_us) and exposure_us > 0):
-            raise DeviceError(f"exposure must be positive, got {exposure_us}")
-        if not math.isfinite(trigger_delay_us):
-            raise InputError(f"trigger delay must be a number, got {trigger_delay_us!r}")
-        self._global_timing = (float(exposure_us), float(trigger_delay_us))
-        self._applied = None
-
     def get_trigger_edge(self) -> str:
         """The VSYNC edge that starts a frame, read back (``is_SetExternalTrigger(IS_GET_EXTERNALTRIGGER)``)."""
         self._require_open()
@@ -416,58 +408,16 @@ class UEyeEpiscan(DeviceBase):
         """Shortest and longest trigger delay (us)."""
         return tuple(self.trigger_delay_range_us)
 
-    def get_timing_us(self) -> tuple[float, float]:
-        """``(t_d, t_e)`` realized now: the exposure and trigger delay read back from the camera, Eq. 1."""
+    def _read_timing(self) -> tuple[float, float]:
+        """The exposure and the trigger delay read back from the camera (us)."""
         self._require_open()
         u = self._ueye
         got = u.c_double(0.0)
         self._check(u.is_Exposure(self._h, u.IS_EXPOSURE_CMD_GET_EXPOSURE, got, u.sizeof(got)), "is_Exposure (get)")
         exposure = float(_num(got)) * 1000.0
-        trigger = float(int(_num(u.is_SetTriggerDelay(self._h, u.IS_GET_TRIGGER_DELAY))))
-        if self._base is None:
-            return self.delay_us, exposure
-        t_o = self._base - trigger
-        return float(delay_from_sync_offset(t_o, exposure, lines_per_second=self.lines_per_second)), exposure
+        return exposure, float(int(_num(u.is_SetTriggerDelay(self._h, u.IS_GET_TRIGGER_DELAY))))
 
     # -------------------------------------------------------------- timing
-    @property
-    def base_trigger_delay_us(self) -> float | None:
-        """Trigger delay (us) at which ``t'_o = 0``; changing it re-applies the timing at the next grab."""
-        return self._base
-
-    @base_trigger_delay_us.setter
-    def base_trigger_delay_us(self, value):
-        if value is not None and not math.isfinite(value):
-            raise InputError(f"base_trigger_delay_us must be a number, got {value!r}")
-        self._base = None if value is None else float(value)
-        self._applied = None
-
-    def trigger_delay_for(self, delay_us: float, exposure_us: float) -> float:
-        """Trigger delay (us) realizing ``(t_d, t_e)`` by Eq. 1: ``base - (t_e/2 - t_p/2 - t_d)``."""
-        if self._base is None:
-            raise DeviceError(
-                "the base trigger delay is not calibrated: run `planeray calibrate delay-zero --device ueye "
-                "--write acquisition.json` and pass --calibration acquisition.json (or --base-trigger-delay-us)"
-            )
-        t_o = float(sync_offset_from_delay(delay_us, exposure_us, lines_per_second=self.lines_per_second))
-        return self._base - t_o
-
-    def set_delay(self, delay_us: float) -> None:
-        if not math.isfinite(delay_us):
-            raise InputError(f"delay must be a number, got {delay_us!r}")
-        self.delay_us = float(delay_us)
-
-    def set_exposure(self, exposure_us: float) -> None:
-        if not (math.isfinite(exposure_us) and exposure_us > 0):
-            raise DeviceError(f"exposure must be positive, got {exposure_us}")
-        self.exposure_us = float(exposure_us)
-
-    def set_timing(self, delay_us: float, exposure_us: float) -> None:
-        """Set one sweep point and apply it now (refusing a pair the camera cannot realize)."""
-        self.set_exposure(exposure_us)
-        self.set_delay(delay_us)
-        self._apply()
-
     def _apply(self):
         self._require_open()
         glob = self._shutter == "global"
