@@ -134,6 +134,7 @@ bench-demux: venv
 
 bench-viewer: venv browser
 	$(PY) benchmarks/bench_viewer.py --sizes 128 512
+	$(PY) benchmarks/bench_view_live.py --size 512
 
 bench-mitsuba: venv llvm
 	$(PY) benchmarks/bench_render_mitsuba.py --size 64 --rows 720 --spp 64

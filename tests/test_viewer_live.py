@@ -60,6 +60,11 @@ def test_the_simulated_skin_live_in_the_page(browser, tmp_path):
         wait_for(page, "window.planeray.panels[0].image.header.settings.mode === 'vein'")
         data, header, _, _ = frame(page)
         np.testing.assert_array_equal(data, vein_view(_captured(source, header["frame_index"]).image))
+        # the pulse view: the frame, and once 3 s of frames are in, the rate and spectrum of skin pulse's analysis
+        page.select_option(".panel[data-panel='0'] select.mode", "pulse")
+        pulse = wait_for(page, "window.planeray.panels[0].image.header.pulse", timeout_s=60)
+        assert pulse["timing"] == [450.0, 1200.0] and pulse["window_s"] >= 3.0 and len(pulse["spectrum"]["bpm"]) > 10
+        assert page.text_content("#plot-title").startswith("Pulse: ")
         # save stack: the frame shown, written where the command line said
         page.select_option(".panel[data-panel='0'] select.mode", "band")
         wait_for(page, "window.planeray.panels[0].image.header.settings.mode === 'band'")
@@ -67,6 +72,7 @@ def test_the_simulated_skin_live_in_the_page(browser, tmp_path):
         saved = wait_for(page, "window.planeray.lastStack")
         st = read_stack(saved["path"], lazy=False)
         assert os.path.dirname(saved["path"]) == str(tmp_path) and len(st) == 1 and st.delay_us[0] == 450.0
+        assert st.exposure_us[0] == 1200.0  # the pulse view's exposure, kept when the band view came back
         assert st.metadata["live"]["view"] == "band" and st.metadata["device"] == "simulated"
         done(page)
     assert not source.capture._thread.is_alive()  # the server stopped, the device released
