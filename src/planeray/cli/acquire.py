@@ -32,7 +32,8 @@ def acquire(
     seed: Annotated[int | None, typer.Option(help="sim: seed.", show_default="0")] = None,
     replay: Annotated[Path | None, typer.Option(help="replay: the recorded stack to serve.")] = None,
     camera_id: Annotated[
-        int | None, typer.Option(help="ueye: camera ID (0: the first free); genicam: -O camera_id=ID.", show_default="0")
+        int | None,
+        typer.Option(help="ueye: camera ID (0: the first free); genicam: -O camera_id=ID.", show_default="0"),
     ] = None,
     lines_per_second: Annotated[
         float | None,
