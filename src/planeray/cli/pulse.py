@@ -60,8 +60,11 @@ def _check_pulse_resources(video, out_dir: Path, opts: dict) -> None:
     from ..pulse.analysis import peak_memory_bytes, scratch_bytes
 
     H, W = video.shape
-    what = f"{video.n_frames:,} frames of {H}x{W}"
-    check_memory(_bounds.BASE_BYTES + peak_memory_bytes((H, W)), what, advice="the frames are too large to magnify")
+    check_memory(
+        _bounds.BASE_BYTES + peak_memory_bytes((H, W)),
+        f"{video.source}: magnifying frames of {H}x{W}",
+        advice="the frames are too large for this machine",
+    )
     need = scratch_bytes(
         video.n_frames,
         (H, W),
@@ -82,12 +85,13 @@ def _check_pulse_resources(video, out_dir: Path, opts: dict) -> None:
     except OSError:
         return
     if need > free:
-        what = "the region search and the laplacian pyramid" if opts["pyramid"] == "laplacian" else "the region search"
-        if "region" in opts:
-            what = "the laplacian pyramid's full-resolution levels"
+        kept = ["the laplacian pyramid's bands" if opts["pyramid"] == "laplacian" else "the pyramid level it filters"]
+        if "region" not in opts:
+            kept.append("the magnified video of the region search")
+        kept = " and ".join(kept)
         raise ValueError(
             f"{video.source}: {video.n_frames:,} frames of {H}x{W} need about {_bytes_text(need)} of temporary disk "
-            f"space beside {out_dir} for {what}, more than the {_bytes_text(free)} free there; "
+            f"space beside {out_dir} for {kept}, more than the {_bytes_text(free)} free there; "
             + ("give --region (no search), " if "region" not in opts else "")
             + "write --out on a disk with more room, or use a shorter video"
         )

@@ -227,14 +227,16 @@ def analyze_pulse(
         # pass 3: the region's signals, the magnified frames to whoever writes them
         signal = np.empty(n, np.float64)
         raw = np.empty(n, np.float64)
+        inside = int(sel.sum())
+        mean = np.add.reduce  # frame[sel].mean(dtype=np.float64), without its Python wrapper: the same sum
         frames_kept = np.empty((n, H, W), np.float32) if keep_video else None
         step = tick("magnifying")
 
         def magnified():
             for t, frame in enumerate(video.iter_frames()):
                 out = mag.magnified(t, frame)
-                signal[t] = out[sel].mean(dtype=np.float64)
-                raw[t] = frame[sel].mean(dtype=np.float64)
+                signal[t] = mean(out[sel], dtype=np.float64) / inside
+                raw[t] = mean(frame[sel], dtype=np.float64) / inside
                 if frames_kept is not None:
                     frames_kept[t] = out
                 yield out

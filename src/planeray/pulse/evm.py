@@ -382,7 +382,7 @@ class Magnifier:
         self._kept = {
             level: self.workspace.frames(n_frames, self.sizes[level], name=f"level{level}") for level in self.gains
         }
-        self._filtered = False
+        self._filtered = None  # the kept levels' arrays, once filtered
 
     def add(self, frame) -> None:
         """Decompose the next frame ``(H, W)`` float32 and keep its amplified levels."""
@@ -401,13 +401,13 @@ class Magnifier:
             bandpass_tiles(
                 kept.data, self.fps, self.band_hz, gain=self.gains[level], tile_bytes=self.workspace.tile_bytes
             )
-        self._filtered = True
+        self._filtered = {level: kept.data for level, kept in self._kept.items()}
 
     def added(self, t: int) -> np.ndarray | None:
         """What is added to frame ``t``: ``alpha * B`` at full size (None where no level is amplified)."""
-        if not self._filtered:
+        if self._filtered is None:
             raise RuntimeError("Magnifier.filter() must run before the magnified frames are read")
-        return _collapse({level: kept.data[t] for level, kept in self._kept.items()}, self.sizes)
+        return _collapse({level: data[t] for level, data in self._filtered.items()}, self.sizes)
 
     def magnified(self, t: int, frame) -> np.ndarray:
         """Frame ``t`` magnified: ``frame + alpha * B`` (a new array)."""
@@ -418,4 +418,4 @@ class Magnifier:
         """Give the kept levels back to the workspace."""
         for kept in self._kept.values():
             self.workspace.release(kept)
-        self._kept = {}
+        self._kept, self._filtered = {}, None

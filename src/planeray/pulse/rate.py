@@ -369,7 +369,8 @@ def find_pulse_region(
         inside = sel[r0:r1, c0:c1]
         if not inside.any():
             continue
-        x = np.asarray(frames[:, r0:r1, c0:c1], np.float32)[:, inside]
+        x = np.asarray(frames[:, r0:r1, c0:c1], np.float32)
+        x = x.reshape(T, -1) if inside.all() else x[:, inside]
         x -= x.mean(axis=0)
         x *= window
         power = np.abs(scipy.fft.rfft(x, axis=0)[inband])
@@ -384,7 +385,7 @@ def find_pulse_region(
     score = np.empty(n_sel, np.float32)
     step = max(int(tile_bytes // (4 * K)), 1) if tile_bytes else n_sel
     for a in range(0, n_sel, step):
-        block = norm[a : a + step, near[0] : near[-1] + 1]
+        block = norm[a : a + step][:, near[0] : near[-1] + 1]  # whole rows read, then the bins near k0
         score[a : a + step] = block[:, 0]
         for j in range(1, block.shape[1]):
             score[a : a + step] += block[:, j]

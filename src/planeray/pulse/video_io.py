@@ -105,8 +105,9 @@ class Video:
         return self.n_frames / self.fps
 
     def iter_frames(self):
-        """The frames ``(H, W)`` float32, one at a time (views of :attr:`frames`)."""
-        return iter(self.frames)
+        """The frames ``(H, W)`` float32, one at a time (views of :attr:`frames` where they are float32)."""
+        for frame in self.frames:
+            yield np.asarray(frame, np.float32)
 
 
 def check_video(frames, fps, where="video") -> Video:
@@ -146,6 +147,66 @@ def _to_unit(array: np.ndarray) -> np.ndarray:
     return array.astype(np.float32, copy=False)
 
 
+#: Weights of red, green and blue in the luma (Rec. 601).
+_LUMA = (0.299, 0.587, 0.114)
+
+
+def _unit_table(dtype) -> np.ndarray:
+    """The float32 value :func:`_to_unit` gives every code of an 8- or 16-bit unsigned type."""
+    key = np.dtype(dtype).str
+    table = _TABLES.get(key)
+    if table is None:
+        table = _TABLES[key] = _to_unit(np.arange(np.iinfo(dtype).max + 1, dtype=dtype))
+    return table
+
+
+def _luma_tables(dtype) -> list[np.ndarray]:
+    key = (np.dtype(dtype).str, "gray")
+    tables = _TABLES.get(key)
+    if tables is None:
+        tables = _TABLES[key] = [_unit_table(dtype) * w for w in _LUMA]
+    return tables
+
+
+_TABLES: dict = {}
+
+
+def _frame_to_float(raw, channel: str, path, *, bgr: bool = False) -> np.ndarray:
+    """One frame ``(H, W[, C])`` of a file (colours in RGB order, or BGR as OpenCV decodes them) ->
+    ``(H, W)`` float32: what :func:`_to_unit` and :func:`_pick_channel` make of it in an RGB stack.
+
+    8- and 16-bit frames are looked up in tables of those values (the same operations on the same
+    codes, so the same float32 values; a 1080p colour frame ~4x faster).
+    """
+    raw = np.asarray(raw)
+    if raw.dtype.kind == "u" and raw.dtype.itemsize <= 2 and raw.ndim == 2:
+        return _lookup(_unit_table(raw.dtype), raw)
+    if raw.dtype.kind == "u" and raw.dtype.itemsize <= 2 and raw.ndim == 3 and raw.shape[-1] in (3, 4):
+        _check_channel(channel)
+        rgb = (2, 1, 0) if bgr else (0, 1, 2)
+        if channel != "gray":
+            return _lookup(_unit_table(raw.dtype), raw, rgb[_CHANNELS.index(channel) - 1])
+        tables = _luma_tables(raw.dtype)
+        out = _lookup(tables[0], raw, rgb[0])  # r w_r + g w_g + b w_b, added in that order
+        out += _lookup(tables[1], raw, rgb[1])
+        out += _lookup(tables[2], raw, rgb[2])
+        return out
+    if bgr and raw.ndim == 3 and raw.shape[-1] in (3, 4):
+        raw = raw[..., [2, 1, 0]]
+    frame = _pick_channel(_to_unit(raw)[None], channel, path)[0]
+    return np.ascontiguousarray(frame, np.float32)
+
+
+def _lookup(table: np.ndarray, raw: np.ndarray, channel: int | None = None) -> np.ndarray:
+    """``table[raw]`` (of one channel of ``raw``): OpenCV's ``LUT`` for 8 bits, ``numpy.take`` beyond."""
+    if raw.dtype == np.uint8:
+        import cv2
+
+        plane = raw if channel is None else cv2.extractChannel(np.ascontiguousarray(raw), channel)
+        return cv2.LUT(plane, table)
+    return np.take(table, raw if channel is None else raw[..., channel])
+
+
 def _check_channel(channel: str) -> None:
     if channel not in _CHANNELS:
         raise InputError(f"channel must be one of {', '.join(_CHANNELS)}, got {channel!r}")
@@ -164,7 +225,7 @@ def _pick_channel(frames: np.ndarray, channel: str, path) -> np.ndarray:
     if frames.ndim != 4 or frames.shape[-1] not in (3, 4):
         raise InputError(f"expected grey or RGB frames, got an array of shape {frames.shape}", path)
     if channel == "gray":
-        return frames[..., 0] * 0.299 + frames[..., 1] * 0.587 + frames[..., 2] * 0.114
+        return frames[..., 0] * _LUMA[0] + frames[..., 1] * _LUMA[1] + frames[..., 2] * _LUMA[2]
     return frames[..., _CHANNELS.index(channel) - 1]
 
 
@@ -326,6 +387,8 @@ class _FolderSource:
 class _OpenCVSource:
     """A video file decoded by OpenCV; its frame count and rate from the container, its size from the first frame."""
 
+    bgr = True  # colour frames come in OpenCV's order
+
     def __init__(self, path: Path):
         self.path = path
         cap = self._open()
@@ -372,7 +435,7 @@ class _OpenCVSource:
                 ok, frame = cap.read()
                 if not ok:
                     break
-                yield frame[..., ::-1] if frame.ndim == 3 else frame  # BGR -> RGB
+                yield frame  # BGR (see bgr)
         finally:
             cap.release()
 
@@ -442,10 +505,10 @@ class VideoFile:
         """
         n = 0
         for raw in self._source:
-            frame = _pick_channel(_to_unit(np.asarray(raw))[None], self.channel, self.path)[0]
+            frame = _frame_to_float(raw, self.channel, self.path, bgr=getattr(self._source, "bgr", False))
             if not self._integer and not np.isfinite(frame).all():
                 raise InputError(f"frame {n} contains NaN or infinite values", self.path)
-            yield np.ascontiguousarray(frame, np.float32)
+            yield frame
             n += 1
         if n != self.n_frames:
             if self._counted:
