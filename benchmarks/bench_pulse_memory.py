@@ -93,7 +93,7 @@ def write_tiff(path: Path, n_frames: int, shape, fps: float) -> None:
 
 
 def measure(args, env=None) -> dict:
-    """Run ``args`` in a fresh process: its wall time, its own peak resident memory (bytes), its stdout."""
+    """Run ``args`` in a fresh process: its wall and CPU time, its own peak resident memory (bytes), its stdout."""
     t0 = time.perf_counter()
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(args, stdout=out, stderr=err, env=env)
@@ -105,7 +105,8 @@ def measure(args, env=None) -> dict:
         stdout, stderr = out.read().decode(), err.read().decode()
     if proc.returncode:
         raise SystemExit(f"{' '.join(map(str, args))} failed ({proc.returncode}):\n{stderr[-3000:]}")
-    return {"wall_s": wall, "peak_bytes": usage.ru_maxrss * 1024, "stdout": stdout}
+    cpu = usage.ru_utime + usage.ru_stime
+    return {"wall_s": wall, "cpu_s": cpu, "peak_bytes": usage.ru_maxrss * 1024, "stdout": stdout}
 
 
 def skin_pulse(video: Path, out: Path, *options, env=None) -> dict:
@@ -134,7 +135,7 @@ def row(name: str, n_frames: int, shape, r: dict) -> str:
     rate = "none" if r["rate_bpm"] is None else f"{r['rate_bpm']:.2f}"
     return (
         f"{name:<46} {n_frames:>6} {shape[1]:>5}x{shape[0]:<5} {r['peak_bytes'] / 2**20:>8.0f} MiB "
-        f"{r['peak_bytes'] / px:>8.2f} {r['wall_s']:>8.1f} s {rate:>8}"
+        f"{r['peak_bytes'] / px:>8.2f} {r['wall_s']:>8.1f} s {r['cpu_s']:>8.1f} s {rate:>8}"
     )
 
 
@@ -153,8 +154,10 @@ def main(argv=None):
     short_n, short_shape = args.short[0], tuple(args.short[1:])
     with tempfile.TemporaryDirectory(dir=args.folder) as d:
         d = Path(d)
-        print(f"true rate {BPM:g} bpm; peak resident memory of each process (os.wait4), fresh processes")
-        print(f"{'what':<46} {'frames':>6} {'size':>11} {'peak':>12} {'B/px-fr':>8} {'wall':>10} {'bpm':>8}")
+        print(f"true rate {BPM:g} bpm; peak resident memory and CPU time of each process (os.wait4), fresh processes")
+        print(
+            f"{'what':<46} {'frames':>6} {'size':>11} {'peak':>12} {'B/px-fr':>8} {'wall':>10} {'CPU':>10} {'bpm':>8}"
+        )
         write_tiff(d / "short.tif", short_n, short_shape, args.fps)
         ref = in_memory(d / "short.tif")
         print(row("in memory: analyze_pulse(read_video(...))", short_n, short_shape, ref))
