@@ -30,7 +30,7 @@ from ..errors import InputError
 from ._workspace import DEFAULT_MEMORY_BYTES, Workspace
 from .evm import DEFAULT_ALPHA, DEFAULT_BAND_HZ, DEFAULT_LEVELS, Magnifier, _pyramid_sizes, level_alphas
 from .rate import RATE_BAND_HZ, PulseEstimate, estimate_heart_rate, find_pulse_region
-from .video_io import MIN_FRAMES
+from .video_io import check_frame_count
 
 __all__ = ["PulseAnalysis", "analyze_pulse", "scratch_bytes", "peak_memory_bytes"]
 
@@ -199,8 +199,7 @@ def analyze_pulse(
                 observe(frame)
             n += 1
             step(n)
-        if n < MIN_FRAMES:
-            raise InputError(f"{n} frames: a pulse needs a video (at least {MIN_FRAMES} frames)", video.source)
+        check_frame_count(n, video.source)
         mean_frame = total / n
         del total
         mag.filter()

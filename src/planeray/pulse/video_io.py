@@ -60,6 +60,7 @@ __all__ = [
     "write_video",
     "encode_video",
     "check_video",
+    "check_frame_count",
     "check_video_path",
     "video_bytes",
 ]
@@ -110,8 +111,14 @@ class Video:
             yield np.asarray(frame, np.float32)
 
 
-def check_video(frames, fps, where="video") -> Video:
-    """A :class:`Video` from ``frames`` and ``fps``, or one-line :class:`InputError` naming ``where``."""
+def check_frame_count(n_frames: int, where="video") -> None:
+    """A one-line :class:`InputError` naming ``where`` for fewer than :data:`MIN_FRAMES` frames."""
+    if n_frames < MIN_FRAMES:
+        s = "s" if n_frames != 1 else ""
+        raise InputError(f"{n_frames} frame{s}: a pulse needs a video (at least {MIN_FRAMES} frames)", where)
+
+
+def _check_rate(fps, where) -> float:
     if fps is None:
         raise InputError("no frame rate: the file does not give one; pass fps (--fps)", where)
     try:
@@ -120,15 +127,16 @@ def check_video(frames, fps, where="video") -> Video:
         raise InputError(f"frame rate must be a number, got {fps!r}", where) from None
     if not np.isfinite(fps) or fps <= 0:
         raise InputError(f"frame rate must be positive, got {fps:g}", where)
+    return fps
+
+
+def check_video(frames, fps, where="video") -> Video:
+    """A :class:`Video` from ``frames`` and ``fps``, or one-line :class:`InputError` naming ``where``."""
+    fps = _check_rate(fps, where)
     frames = np.asarray(frames)
     if frames.ndim != 3:
         raise InputError(f"expected frames (T, H, W), got an array of shape {frames.shape}", where)
-    if frames.shape[0] < MIN_FRAMES:
-        raise InputError(
-            f"{frames.shape[0]} frame{'s' if frames.shape[0] != 1 else ''}: a pulse needs a video "
-            f"(at least {MIN_FRAMES} frames)",
-            where,
-        )
+    check_frame_count(frames.shape[0], where)
     if frames.shape[1] < 1 or frames.shape[2] < 1:
         raise InputError(f"empty frames of shape {frames.shape[1:]}", where)
     frames = frames.astype(np.float32, copy=False)
@@ -516,10 +524,7 @@ class VideoFile:
             self.n_frames = n
             self.meta = {**self.meta, "frames_from": "decoded (the header said otherwise)"}
         self._counted = True
-        if n < MIN_FRAMES:
-            raise InputError(
-                f"{n} frame{'s' if n != 1 else ''}: a pulse needs a video (at least {MIN_FRAMES} frames)", self.path
-            )
+        check_frame_count(n, self.path)
 
     def read(self) -> Video:
         """All frames, in memory (``n_frames * H * W * 4`` bytes)."""
@@ -556,20 +561,8 @@ def open_video(path, *, fps: float | None = None, channel: str = "gray") -> Vide
     if fps is not None:
         fps = check_positive(fps, "--fps")
     _check_channel(channel)
-    rate = fps if fps is not None else source.fps
-    if rate is None:
-        raise InputError("no frame rate: the file does not give one; pass fps (--fps)", path)
-    try:
-        rate = float(rate)
-    except (TypeError, ValueError):
-        raise InputError(f"frame rate must be a number, got {rate!r}", path) from None
-    if not np.isfinite(rate) or rate <= 0:
-        raise InputError(f"frame rate must be positive, got {rate:g}", path)
-    n = int(source.n_frames)
-    if n < MIN_FRAMES:
-        raise InputError(
-            f"{n} frame{'s' if n != 1 else ''}: a pulse needs a video (at least {MIN_FRAMES} frames)", path
-        )
+    rate = _check_rate(fps if fps is not None else source.fps, path)
+    check_frame_count(int(source.n_frames), path)
     shape = tuple(source.frame_shape)
     if len(shape) < 2 or shape[0] < 1 or shape[1] < 1:
         raise InputError(f"empty frames of shape {shape}", path)
@@ -578,16 +571,7 @@ def open_video(path, *, fps: float | None = None, channel: str = "gray") -> Vide
 
 
 def read_video(path, *, fps: float | None = None, channel: str = "gray") -> Video:
-    """Read a recording whole as a :class:`Video` (:func:`open_video`, then every frame).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A multi-page TIFF, a folder of frames, or a video file (see the module's formats).
-    fps : float, optional
-        Frame rate; required when the file does not give one, and overrides it when it does.
-    channel : {"gray", "red", "green", "blue"}
-        What to keep of colour frames (luma by default; rPPG often prefers green).
+    """Read a recording whole as a :class:`Video`: :func:`open_video` (its parameters), then every frame.
 
     Raises
     ------
