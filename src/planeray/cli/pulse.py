@@ -57,15 +57,10 @@ def _check_pulse_resources(video, out_dir: Path, opts: dict) -> None:
     import shutil
 
     from .._validate import _bytes_text, check_memory
-    from ..pulse.analysis import peak_memory_bytes, scratch_bytes
+    from ..pulse.analysis import scratch_bytes
 
     H, W = video.shape
-    check_memory(
-        _bounds.BASE_BYTES + peak_memory_bytes((H, W)),
-        f"{video.source}: magnifying frames of {H}x{W}",
-        advice="the frames are too large for this machine",
-    )
-    need = scratch_bytes(
+    needs = scratch_bytes(
         video.n_frames,
         (H, W),
         levels=opts["levels"],
@@ -74,7 +69,13 @@ def _check_pulse_resources(video, out_dir: Path, opts: dict) -> None:
         search="region" not in opts,
         fps=video.fps,
         rate_band_hz=opts["rate_band_hz"],
-    )["disk"]
+    )
+    check_memory(
+        _bounds.BASE_BYTES + needs["memory"],
+        f"{video.source}: magnifying frames of {H}x{W}",
+        advice="the frames are too large for this machine",
+    )
+    need = needs["disk"]
     if not need:
         return
     folder = Path(out_dir).absolute().parent

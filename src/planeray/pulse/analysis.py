@@ -32,7 +32,7 @@ from .evm import DEFAULT_ALPHA, DEFAULT_BAND_HZ, DEFAULT_LEVELS, Magnifier, _pyr
 from .rate import RATE_BAND_HZ, PulseEstimate, estimate_heart_rate, find_pulse_region
 from .video_io import check_frame_count
 
-__all__ = ["PulseAnalysis", "analyze_pulse", "scratch_bytes", "peak_memory_bytes"]
+__all__ = ["PulseAnalysis", "analyze_pulse", "scratch_bytes"]
 
 
 @dataclass
@@ -276,15 +276,21 @@ def scratch_bytes(
     rate_band_hz=RATE_BAND_HZ,
     memory_bytes: int | None = None,
 ) -> dict:
-    """What :func:`analyze_pulse` keeps between its passes, and how much of it goes to temporary files, bytes.
+    """What :func:`analyze_pulse` keeps between its passes, how much of it goes to temporary files, and
+    the memory it needs, bytes.
 
-    Returns ``{"kept": ..., "disk": ...}``: every array it keeps -- the amplified pyramid levels over time
-    and, for the automatic region ``search``, the magnified video and each pixel's normalized band spectrum
-    -- and the part of them that does not fit the half of ``memory_bytes`` (default
-    :data:`~planeray.pulse._workspace.DEFAULT_MEMORY_BYTES`) arrays may hold, placed in the order
-    the analysis makes them; all are held at once at the search's end, so ``disk`` is the most disk
-    the analysis needs.
+    Returns ``{"kept": ..., "disk": ..., "memory": ...}``: every array it keeps -- the amplified pyramid
+    levels over time and, for the automatic region ``search``, the magnified video and each pixel's
+    normalized band spectrum -- and the part of them that does not fit the half of ``memory_bytes``
+    (default :data:`~planeray.pulse._workspace.DEFAULT_MEMORY_BYTES`) arrays may hold, placed in the order
+    the analysis makes them (all are held at once at the search's end, so ``disk`` is the most disk it
+    needs); and its memory beyond the interpreter: the arrays in memory, one tile of per-pixel work (at most
+    the other half of ``memory_bytes``) and the dozen frames it works on at once (a decoded colour frame,
+    its float copies, the pyramid, the magnified frame).
     """
+    from .evm import _BANDPASS_BYTES
+    from .rate import _REGION_BYTES
+
     memory_bytes = DEFAULT_MEMORY_BYTES if memory_bytes is None else int(memory_bytes)
     T = int(n_frames)
     shape = tuple(int(s) for s in shape)
@@ -294,22 +300,18 @@ def scratch_bytes(
     else:
         kept_levels = [lv for lv, g in enumerate(level_alphas(shape, levels, alpha, lambda_c)) if g]
     arrays = [T * sizes[lv][0] * sizes[lv][1] * 4 for lv in kept_levels]
+    tiles = [T * sizes[lv][0] * sizes[lv][1] * _BANDPASS_BYTES for lv in kept_levels]
     if search:
         f = np.fft.rfftfreq(T, 1.0 / fps)
         k = int(((f >= rate_band_hz[0]) & (f <= rate_band_hz[1])).sum())
         arrays += [T * shape[0] * shape[1] * 4, shape[0] * shape[1] * k * 4]
+        tiles.append(T * shape[0] * shape[1] * _REGION_BYTES)
     left, disk = memory_bytes // 2, 0
     for nbytes in arrays:
         if nbytes <= left:
             left -= nbytes
         else:
             disk += nbytes
-    return {"kept": sum(arrays), "disk": disk}
-
-
-def peak_memory_bytes(shape, *, memory_bytes: int | None = None) -> int:
-    """Memory :func:`analyze_pulse` needs beyond the Python process, bytes: its allowance (``memory_bytes``)
-    and the frames it works on at once (the decoded frame in colour, its float copies, the pyramid, the
-    magnified frame: about 12 float32 frames)."""
-    memory_bytes = DEFAULT_MEMORY_BYTES if memory_bytes is None else memory_bytes
-    return int(memory_bytes) + 12 * 4 * int(shape[0]) * int(shape[1])
+    tile = min(max(tiles, default=0), memory_bytes // 2)
+    frames = 12 * 4 * shape[0] * shape[1]
+    return {"kept": sum(arrays), "disk": disk, "memory": sum(arrays) - disk + tile + frames}
