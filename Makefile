@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test docs lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba bench-pulse-memory browser llvm clean venv
+.PHONY: demo test docs lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba bench-pulse-memory browser llvm xvfb clean venv
 
 venv: $(VENV)/.installed
 
@@ -60,9 +60,20 @@ llvm:
 		echo "note: no LLVM >= 16, so planeray render falls back to row-by-row scalar rendering; install it (Debian: sudo apt-get install libllvm19)"; \
 	fi
 
+# The projector tests (tests/test_projector.py, tests/test_rig.py) start their own two-screen Xvfb and never
+# touch the user's display.  As root (CI) a missing Xvfb is installed with apt (with libXtst, for the key presses).
+xvfb:
+	@if command -v Xvfb >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing Xvfb for the projector tests (apt-get install xvfb libxtst6)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb libxtst6 >/dev/null; \
+	else \
+		echo "note: no Xvfb, so the projector and rig tests will be skipped; install it (Debian: sudo apt-get install xvfb)"; \
+	fi
+
 # Independent tests run in parallel, a worker per core (pytest-xdist, conftest.py; worksteal balances the
 # slow ones).
-test: venv bytecode kernels browser llvm
+test: venv bytecode kernels browser llvm xvfb
 	$(PY) -m pytest -q -n auto --dist worksteal
 
 # The documentation site: docs/ -> docs/_build/html (open docs/_build/html/index.html), offline, warnings as

@@ -57,7 +57,9 @@ def acquire(
     from ..acquire import acquire_to_store
     from ..devices import device_options
 
-    _check_outputs((out_path, "stack"), overwrite=overwrite)  # before the device opens
+    _check_outputs(
+        (out_path, "stack"), overwrite=overwrite, inputs=[("--replay", replay), ("--calibration", calibration)]
+    )  # before the device opens
     sw = lim.sweep(sweep)
     explicit = dict(
         scene=scene,

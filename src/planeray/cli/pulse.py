@@ -178,7 +178,12 @@ def pulse(
         raise ValueError(f"--channel must be one of gray, red, green, blue, got {channel!r}")
     if magnified is not None:
         check_video_path(magnified, "--magnified")
-    _check_outputs((out_dir, "pulse report"), (magnified, VIDEO_KIND), overwrite=overwrite)
+    _check_outputs(
+        (out_dir, "pulse report"),
+        (magnified, VIDEO_KIND, "--magnified"),
+        overwrite=overwrite,
+        inputs=[("VIDEO", video_path), ("--mask", mask)],
+    )
     with console.status(f"opening {video_path}"):
         video = open_video(video_path, fps=fps, channel=channel)  # the header only: no frame decoded yet
     _check_bands_against(video, {"--band": opts["band_hz"], "--rate-band": opts["rate_band_hz"]})

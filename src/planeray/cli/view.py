@@ -11,7 +11,7 @@ import typer
 
 from .._console import console, print_verbatim, progress_bar
 from ..timing import PAPER_LINES_PER_SECOND
-from ._common import _friendly_errors
+from ._common import _check_outputs, _friendly_errors
 
 PathArg = Annotated[
     str, typer.Argument(help="A scene name (a virtual Episcan: see `planeray scenes`), a transport store or a stack.")
@@ -164,7 +164,6 @@ def video(
 ):
     """Write a delay (or exposure) sweep as a video: the paper's "sweeping the band"."""
     from .._validate import check_integer, check_number, check_positive
-    from ..io.atomic import check_replaceable
     from ..viewer.display import check_display
     from ..viewer.session import ViewSettings
     from ..viewer.video import (
@@ -197,7 +196,9 @@ def video(
     if scale is not None:
         check_integer(scale, "--scale", minimum=1, maximum=64)
     _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
-    check_replaceable(out_path, overwrite=overwrite, kind=VIDEO_KIND)
+    _check_outputs(
+        (out_path, VIDEO_KIND), overwrite=overwrite, inputs=[("PATH", path if Path(path).exists() else None)]
+    )
     source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=None, truth_scale=None,
                    pattern=None)  # fmt: skip
     settings = ViewSettings(delay_us=delay_us, exposure_us=exposure_us, noise=noise, ambient=ambient)
