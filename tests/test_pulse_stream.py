@@ -306,6 +306,7 @@ def test_an_interrupted_or_failing_analysis_leaves_nothing(fault, videos, tmp_pa
 
     monkeypatch.setattr(DiskArray, "_write", failing)
     out, mag = tmp_path / "out" / "r", tmp_path / "out" / "m.tif"
+    out.parent.mkdir()
     res = runner.invoke(app, ["skin", "pulse", str(videos["tif"]), "--out", str(out), "--magnified", str(mag)])
     assert len(calls) >= 100 and folders[0].name == ".scratch"  # in the result's own temporary
     if fault == "interrupted":
