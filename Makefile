@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test docs lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba browser llvm xvfb aravis clean venv
+.PHONY: demo test docs lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba bench-pulse-memory browser llvm xvfb aravis clean venv
 
 venv: $(VENV)/.installed
 
@@ -141,6 +141,10 @@ bench-mitsuba: venv llvm
 
 bench-mc: venv
 	$(PY) benchmarks/bench_mc.py --plot $(OUT)/mc_vs_mitsuba.png
+
+# skin pulse on a 30 s 1080p video: peak memory (and ~8 GB of temporary files in the system's temp folder)
+bench-pulse-memory: venv
+	$(PY) benchmarks/bench_pulse_memory.py
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache docs/_build docs/auto_examples docs/reference/api/generated \

@@ -28,6 +28,11 @@ of the solve times (the printed time includes the choice), also for the automati
 the paper's problem (``--ambient none``) and for the ambient term alone at the paper's
 weights (``--ambient estimate``).  ``--auto-only`` runs only this part (no CVXPY).
 
+**Against a baseline** (``--baseline-src DIR``, e.g. main's ``src/`` from ``git archive``): only the
+plain command, on the paper's problem and with the ambient estimated, from this tree and from
+``DIR``, alternated, best of ``--repeat`` each: the ratio of the solve times, the iterations and
+the share of pixels certified.
+
 Run: ``make bench-demux`` or ``.venv/bin/python benchmarks/bench_demux.py [--pixels 384] [--large 512]``.
 """
 
@@ -96,8 +101,16 @@ def import_as_user(stack, tmp: Path, name: str) -> Path:
     return tmp / f"{name}.zarr"
 
 
-def time_command(stack_path: Path, out: Path, repeat: int, *extra) -> dict:
-    """``planeray demux`` in a fresh process, best of ``repeat``: solve time (as printed), wall, peak memory."""
+def time_command(stack_path: Path, out: Path, repeat: int, *extra, src: Path | None = None) -> dict:
+    """``planeray demux`` in a fresh process, best of ``repeat``: solve time (as printed), wall, peak memory, CPU seconds.
+
+    ``src``: run planeray from this source tree instead (``PYTHONPATH``; a baseline version).
+    """
+    env = None
+    if src is not None:
+        import os
+
+        env = dict(os.environ, PYTHONPATH=str(src))
     best = None
     for _ in range(repeat):
         code = (
@@ -107,18 +120,25 @@ def time_command(stack_path: Path, out: Path, repeat: int, *extra) -> dict:
             # VmHWM, not ru_maxrss: that one survives exec and would report this (large) parent
             "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')]\n"
             "peak = int(hwm[0].split()[1]) / 1024 if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024\n"
-            "print('WALL', time.perf_counter() - t0, peak)"
+            "ru = resource.getrusage(resource.RUSAGE_SELF)\n"
+            "print('WALL', time.perf_counter() - t0, peak, ru.ru_utime + ru.ru_stime)"
         )
         run = subprocess.run(
             [sys.executable, "-c", code, "demux", str(stack_path), "--out", str(out), "--overwrite", *map(str, extra)],
             capture_output=True,
             text=True,
+            env=env,
         )
         m = re.search(r"pixels in ([0-9.]+) s", run.stdout)
-        w = re.search(r"WALL ([0-9.]+) ([0-9.]+)", run.stdout)
+        w = re.search(r"WALL ([0-9.]+) ([0-9.]+) ([0-9.]+)", run.stdout)
         if m is None or w is None:
             raise RuntimeError(f"planeray demux failed: {run.stdout[-500:]} {run.stderr[-2000:]}")
-        r = {"solve": float(m.group(1)), "wall": float(w.group(1)), "peak_mib": float(w.group(2))}
+        r = {
+            "solve": float(m.group(1)),
+            "wall": float(w.group(1)),
+            "peak_mib": float(w.group(2)),
+            "cpu": float(w.group(3)),
+        }
         if best is None or r["solve"] < best["solve"]:
             best = r
     return best
@@ -280,6 +300,41 @@ def auto_ratio(name: str, stack_path: Path, tmp: Path, repeat: int) -> float:
     return ratios[AUTO_VARIANTS[0][0]]
 
 
+#: The runs compared against a baseline source tree (``--baseline-src``): the paper's problem and the ambient term.
+BASELINE_VARIANTS = (("plain", ()), ("--ambient estimate", ("--ambient", "estimate")))
+
+
+def against_baseline(name: str, stack_path: Path, tmp: Path, repeat: int, src: Path) -> None:
+    """The plain command (and with the ambient) here and from the baseline tree ``src``, alternated, best of ``repeat``.
+
+    Prints the solve times, their ratio, the iterations and the share of pixels certified.
+    """
+    best: dict = {}
+    for _ in range(repeat):
+        for label, extra in BASELINE_VARIANTS:
+            for which, tree in (("baseline", src), ("this", None)):
+                out = tmp / f"{name}_{which}_{len(extra)}.zarr"
+                t = time_command(stack_path, out, 1, *extra, src=tree)
+                key = (label, which)
+                cpu = best.setdefault(("cpu",) + key, [])
+                cpu.append(t["cpu"])
+                if key not in best or t["solve"] < best[key]["solve"]:
+                    best[key] = t
+    for label, extra in BASELINE_VARIANTS:
+        a, b = best[(label, "baseline")], best[(label, "this")]
+        paths = {w: tmp / f"{name}_{w}_{len(extra)}.zarr" for w in ("baseline", "this")}
+        its = {w: _iters(read_transport_maps(p)) for w, p in paths.items()}
+        same = np.array_equal(read_transport(paths["baseline"])[0].dense, read_transport(paths["this"])[0].dense)
+        print(
+            f"  {label:<22}: {b['solve']:.2f} s vs {a['solve']:.2f} s baseline -> **{b['solve'] / a['solve']:.2f}x** "
+            f"(whole process {b['wall'] / a['wall']:.2f}x; CPU seconds of the process, median "
+            f"{np.median(best[('cpu', label, 'this')]):.2f} vs {np.median(best[('cpu', label, 'baseline')]):.2f} -> "
+            f"{np.median(best[('cpu', label, 'this')]) / np.median(best[('cpu', label, 'baseline')]):.2f}x; "
+            f"T the same bytes: {same})\n"
+            f"      baseline: {its['baseline']}\n      this    : {its['this']}"
+        )
+
+
 def zarr_attrs(path: Path) -> dict:
     import zarr
 
@@ -295,6 +350,12 @@ def main():
     parser.add_argument("--dask", action="store_true", help="also time the large stack with --workers 2")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--auto-only", action="store_true", help="only the automatic weights' cost (no CVXPY)")
+    parser.add_argument(
+        "--baseline-src",
+        type=Path,
+        default=None,
+        help="only the plain command against planeray from this source tree (e.g. main's src/), alternated",
+    )
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     shape = (args.size, args.size)
@@ -309,6 +370,13 @@ def main():
             "random",
         )
         print(f"paper sweep, {PAPER_PROJECTOR_ROWS}-row projector; stacks written in the import format and imported")
+        if args.baseline_src is not None:
+            wax = simulate_stack(make_scene("wax", shape, projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed), sweep)
+            wax_path = write_stack(wax, tmp / "wax.zarr")
+            for name, path in (("random transports, no ambient", random_path), ("wax scene", wax_path)):
+                print(f"\n[{name}: {args.size}x{args.size}; against {args.baseline_src}]")
+                against_baseline(name.split()[0], path, tmp, args.repeat, args.baseline_src.resolve())
+            return
         if args.auto_only:
             wax = simulate_stack(make_scene("wax", shape, projector_rows=PAPER_PROJECTOR_ROWS, seed=args.seed), sweep)
             wax_path = write_stack(wax, tmp / "wax.zarr")

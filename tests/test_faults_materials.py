@@ -257,9 +257,8 @@ def test_a_run_after_a_killed_one_cleans_its_temporaries_and_writes_everything(n
 @pytest.mark.parametrize("name", COMMANDS)
 def test_a_second_run_at_the_same_time_is_refused_in_one_line(name, env, tmp_path):
     """Another planeray process is writing the output (it holds its lock): refused before any work, nothing touched."""
-    from test_faults_concurrency import Holder
-
     from planeray.io.lock import lock_holder, lock_path
+    from test_faults_concurrency import Holder
 
     out = tmp_path / OUTPUT[name]
     other = Holder(lock_path(out))

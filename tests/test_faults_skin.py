@@ -396,9 +396,8 @@ def test_a_second_run_at_the_same_time_is_refused_before_any_work(command, input
     """Another planeray process is writing an output (it holds its lock): refused before any work, nothing touched."""
     import importlib
 
-    from test_faults_concurrency import Holder
-
     from planeray.io.lock import lock_holder, lock_path
+    from test_faults_concurrency import Holder
 
     module, name = WORK[command]
 

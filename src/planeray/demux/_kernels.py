@@ -356,15 +356,26 @@ def finish_gradient(G, Z, Lam, alpha, beta, n_x, rr, f, kkt, lamz):  # pragma: n
 
 
 @numba.njit(**_JIT)
-def null_adjust(H, Z, n, lamz):  # pragma: no cover - compiled
+def null_adjust(H, Z, Lam, n, lamz):  # pragma: no cover - compiled
     """Move each pixel's multiplier along ``Q``'s null direction ``n`` so that ``n^T (g - lam) = 0``.
 
-    ``H`` (P, U) float32 holds ``g - lam`` (in place), ``Z`` (P, U) the iterate, ``n`` (U,)
-    the unit null vector, ``lamz`` (P,) ``lam^T z`` (updated).  Weak duality bounds the gap
-    by ``1/2 h^T Q^+ h + lam^T z`` only when ``h = g - lam`` is orthogonal to ``n``; with
-    ``d = n^T h`` the multiplier of one unknown ``j`` (``n_j d > 0``) grows by ``d / n_j``
-    (it stays >= 0), the one with the smallest ``z_j / |n_j|``, which adds the least to
-    ``lam^T z``.  The dual optimum has ``d = 0``, so near it the move is small.
+    ``H`` (P, U) float32 holds ``g - lam`` (in place), ``Z`` (P, U) the iterate, ``Lam``
+    (P, U) the multiplier, ``n`` (U,) the unit null vector, ``lamz`` (P,) ``lam^T z``
+    (updated).  Weak duality bounds the gap by ``1/2 h^T Q^+ h + lam^T z`` only when
+    ``h = g - lam`` is orthogonal to ``n``; the dual optimum has ``d = n^T h = 0``, so near
+    it the move is small, and it is made where it costs least:
+
+    1. raise the multiplier of an unknown at 0 with ``n_j d > 0`` by ``d / n_j`` (it adds
+       nothing to ``lam^T z``);
+    2. else lower the multipliers with ``n_j d < 0`` in proportion to themselves, if they
+       can absorb ``d`` (they stay >= 0 and ``lam^T z`` does not grow; the change of ``h``
+       is spread, so the quadratic term moves by ``O(d^2)``);
+    3. else raise the multiplier of the unknown with the smallest ``z_j / |n_j|``.
+
+    Without step 2, a ``d < 0`` left by the float32 iterate could only go onto the ambient
+    unknown (``n``'s one negative entry), whose ``z`` is large: ``|d| z_a / |n_a|`` then
+    floored the bound above ``tol f`` for pixels whose objective is small (low noise), and
+    they ran to the iteration cap at a true gap of 1e-8.
     """
     P, U = H.shape
     for p in range(P):
@@ -381,9 +392,24 @@ def null_adjust(H, Z, n, lamz):  # pragma: no cover - compiled
                 if c < best:
                     best = c
                     j = u
+        if j >= 0 and best == 0.0:  # 1. free
+            H[p, j] = H[p, j] - d / n[j]
+            continue
+        cap = 0.0
+        for u in range(U):
+            if n[u] * d < 0.0 and Lam[p, u] > 0.0:
+                cap += abs(n[u]) * Lam[p, u]
+        if cap >= abs(d):  # 2. spread over the multipliers on the other side
+            t = abs(d) / cap
+            for u in range(U):
+                if n[u] * d < 0.0 and Lam[p, u] > 0.0:
+                    step = t * Lam[p, u]
+                    H[p, u] = H[p, u] + step
+                    lamz[p] -= step * Z[p, u]
+            continue
         if j < 0:
             continue
-        delta = d / n[j]
+        delta = d / n[j]  # 3. the cheapest raise
         H[p, j] = H[p, j] - delta
         lamz[p] += delta * Z[p, j]
 
@@ -412,5 +438,5 @@ def warm_up() -> None:
     split_dual(V, np.ones(1, np.float32), np.zeros((1, 4)), V.copy())
     finish_residual(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((0, 0), bool), np.zeros((1, 2), np.float32), z.copy())
     finish_gradient(V.copy(), np.zeros((1, 4)), V.copy(), 0.01, 0.01, 4, z.copy(), z.copy(), z.copy(), z.copy())
-    null_adjust(V.copy(), np.zeros((1, 4)), np.full(4, 0.5), z.copy())
+    null_adjust(V.copy(), np.zeros((1, 4)), V.copy(), np.full(4, 0.5), z.copy())
     half_norms(V, z.copy(), z.copy())

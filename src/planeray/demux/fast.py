@@ -31,6 +31,12 @@ not the maximum.  Each pixel's ``rho`` moves along a ladder by residual balancin
 (Boyd et al. 2011, Sec. 3.4.1): the best ``rho`` depends on the data (~1 with
 ambient light, ~5 without).
 
+**The few pixels left at the iteration cap** without a proof (a float32 iterate at its
+precision floor when the objective is tiny, slow convergence at extreme weights) are finished
+exactly in float64: an active-set solve warm-started from ADMM's split, accepted only where the
+same certificate, in float64, proves the gap (:mod:`planeray.demux._finish`).  Every other pixel
+is untouched (the paper's problem gives the same bytes as before).
+
 **Saturated observations** stay in the batch.  A pixel that drops the rows ``s``
 has the Hessian ``Q - 2 A_s^T A_s``; its operator is the shared ``M`` plus a rank-k
 Woodbury term ``(A_s M)^T S^{-1} (A_s M)``, ``S = I/2 - A_s M A_s^T`` (a k x k
@@ -41,7 +47,8 @@ uses its own ``Q_p^{-1}`` the same way.
 column; where the bands lie inside the projector that column equals ``A 1``, so ``Q``
 is singular along ``(1, ..., 1, -1)`` (a flat transport traded for ambient).  ADMM
 needs only ``Q + rho I``; the certificate uses the pseudo-inverse on that direction's
-complement and first moves the multiplier along it (:class:`AdmmRowSolver`).
+complement and first moves the multiplier along it (:class:`AdmmRowSolver`), where that costs
+least (:func:`planeray.demux._kernels.null_adjust`).
 
 Practicalities measured on a 2-core machine: batches of 512 pixels run on two
 Python threads (the products in BLAS held to one thread, the per-pixel passes
@@ -73,6 +80,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from . import _kernels as K
+from ._finish import finish_pixels
 from .problem import RowGroup, difference_matrix, pixel_terms
 from .result import SolveResult
 
@@ -163,6 +171,7 @@ class AdmmRowSolver:
         A = np.ascontiguousarray(A, np.float64)
         self.n_x = A.shape[1]  # unknowns of T; with the ambient one more column
         self.null = None  # the exact null direction of Q (ambient, bands inside the projector)
+        self.null_basis = None  # an orthonormal basis of its complement (U, U - 1)
         if ambient is not None:
             e = np.asarray(ambient, np.float64).ravel()
             if e.shape != (A.shape[0],):
@@ -210,6 +219,7 @@ class AdmmRowSolver:
             Lr = _lower_inverse(Qr + 1e-12 * np.trace(Qr) / max(U - 1, 1) * np.eye(U - 1))
             Linv = Lr @ Bn.T  # (U - 1, U): h^T Q^+ h = ||Linv h||^2
             self.null = n
+            self.null_basis = Bn
         else:
             Linv = _lower_inverse(self.Q + 1e-12 * np.trace(self.Q) / max(U, 1) * np.eye(U))
         self.LinvT32 = _flush32(Linv.T)
@@ -295,6 +305,9 @@ class AdmmRowSolver:
             gap[done] = 0.0
             return X, iters, done, np.where(done, 0.0, np.inf), fval, kkt, rss
         self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss)
+        capped = np.flatnonzero(run & (iters >= max_iter) & ~(gap <= tol * np.maximum(fval - gap, 0.0)))
+        if capped.size:  # the few pixels left at the cap: finished exactly in float64 (certified or kept)
+            finish_pixels(self, B, mask, capped, tol, X, gap, fval, kkt, rss)
         rel_gap = gap / np.maximum(fval - gap, 1e-300)
         conv = (rel_gap <= tol) & np.isfinite(gap)  # pixels without observations: gap inf
         return X, iters, conv, rel_gap, fval, kkt, rss
@@ -382,7 +395,7 @@ class AdmmRowSolver:
             lamz = np.empty(P)
             K.finish_gradient(G, Z, Lam, self.alpha, self.beta, self.n_x, rr, f, kk, lamz)
             if self.null is not None:  # the multiplier moved along Q's null direction (bound finite)
-                K.null_adjust(G, Z, self.null, lamz)
+                K.null_adjust(G, Z, Lam, self.null, lamz)
             W = G @ self.LinvT32
             g = np.empty(P)
             K.half_norms(W, lamz, g)

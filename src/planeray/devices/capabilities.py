@@ -5,16 +5,16 @@ camera may offer more, each part a small protocol of its own that a driver
 implements when its hardware has it (and that the simulated device and the
 uEye driver implement):
 
-================  ===============================================================================
+==================  =============================================================================
 ``global_shutter``  switch rolling / global shutter (read back), and time a global exposure from
-                  the trigger: the line-velocity calibration (``planeray calibrate lines --device``)
-``trigger_edge``  which edge of the projector's VSYNC starts a frame (read back, settable)
-``frame_times``   the camera's own time stamps of the frames of the last grab (frame rate check)
-``gamma``         the camera's gamma, read back (1.0: linear)
-``row_time``      the rolling shutter's row time, read back (us per camera row)
-``ranges``        the exposure and trigger-delay ranges the camera can realize (us)
-``timing``        the delay and exposure the device realizes now, read back from the camera (us)
-================  ===============================================================================
+                    the trigger: the line-velocity calibration (``planeray calibrate lines --device``)
+``trigger_edge``    which edge of the projector's VSYNC starts a frame (read back, settable)
+``frame_times``     the camera's own time stamps of the frames of the last grab (frame rate check)
+``gamma``           the camera's gamma, read back (1.0: linear)
+``row_time``        the rolling shutter's row time, read back (us per camera row)
+``ranges``          the exposure and trigger-delay ranges the camera can realize (us)
+``timing``          the delay and exposure the device realizes now, read back from the camera (us)
+==================  =============================================================================
 
 Use :func:`capabilities` to list what a device has and :func:`require` to refuse,
 in one line, a device without what a command needs.  A capability is recognized
