@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import gc
 import json
-import re
 import os
+import re
 import signal
 import subprocess
 import sys
