@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test docs lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba browser llvm clean venv
+.PHONY: demo test docs lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba bench-pulse-memory browser llvm xvfb aravis clean venv
 
 venv: $(VENV)/.installed
 
@@ -60,9 +60,41 @@ llvm:
 		echo "note: no LLVM >= 16, so planeray render falls back to row-by-row scalar rendering; install it (Debian: sudo apt-get install libllvm19)"; \
 	fi
 
+# The projector tests (tests/test_projector.py, tests/test_rig.py) start their own two-screen Xvfb and never
+# touch the user's display.  As root (CI) a missing Xvfb is installed with apt (with libXtst, for the key presses).
+xvfb:
+	@if command -v Xvfb >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing Xvfb for the projector tests (apt-get install xvfb libxtst6)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb libxtst6 >/dev/null; \
+	else \
+		echo "note: no Xvfb, so the projector and rig tests will be skipped; install it (Debian: sudo apt-get install xvfb)"; \
+	fi
+
+# The GenICam driver (--device genicam) and its tests use Aravis's fake camera through PyGObject: Debian's
+# gir1.2-aravis-0.8, and PyGObject built into the venv against the system's gobject-introspection (its build
+# needs libgirepository1.0-dev, libcairo2-dev and pkg-config).  As root (CI) they are installed with apt and pip;
+# otherwise a note says what to install and the GenICam tests are skipped.
+ARAVIS_STAMP := $(VENV)/.aravis
+aravis: $(ARAVIS_STAMP)
+$(ARAVIS_STAMP): $(VENV)/.installed
+	@if [ -e /usr/lib/x86_64-linux-gnu/girepository-1.0/Aravis-0.8.typelib ] || ls /usr/lib/*/girepository-1.0/Aravis-0.8.typelib >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing Aravis for the GenICam tests (apt-get install gir1.2-aravis-0.8 libgirepository1.0-dev libcairo2-dev pkg-config)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gir1.2-aravis-0.8 libgirepository1.0-dev \
+			libcairo2-dev pkg-config >/dev/null; \
+	fi
+	@if $(PY) -c "import gi; gi.require_version('Aravis', '0.8')" >/dev/null 2>&1; then touch $@; \
+	elif ls /usr/lib/*/girepository-1.0/Aravis-0.8.typelib >/dev/null 2>&1 && pkg-config --exists gobject-introspection-1.0 cairo 2>/dev/null; then \
+		echo "building PyGObject into $(VENV) (pip install -e '.[genicam]')"; \
+		$(PY) -m pip install --quiet -e ".[genicam]" && touch $@; \
+	else \
+		echo "note: no Aravis, so the GenICam tests will be skipped; install it (Debian: sudo apt-get install gir1.2-aravis-0.8 libgirepository1.0-dev libcairo2-dev pkg-config, then $(PY) -m pip install -e '.[genicam]')"; \
+	fi
+
 # Independent tests run in parallel, a worker per core (pytest-xdist, conftest.py; worksteal balances the
 # slow ones).
-test: venv bytecode kernels browser llvm
+test: venv bytecode kernels browser llvm xvfb aravis
 	$(PY) -m pytest -q -n auto --dist worksteal
 
 # The documentation site: docs/ -> docs/_build/html (open docs/_build/html/index.html), offline, warnings as
@@ -102,12 +134,17 @@ bench-demux: venv
 
 bench-viewer: venv browser
 	$(PY) benchmarks/bench_viewer.py --sizes 128 512
+	$(PY) benchmarks/bench_view_live.py --size 512
 
 bench-mitsuba: venv llvm
 	$(PY) benchmarks/bench_render_mitsuba.py --size 64 --rows 720 --spp 64
 
 bench-mc: venv
 	$(PY) benchmarks/bench_mc.py --plot $(OUT)/mc_vs_mitsuba.png
+
+# skin pulse on a 30 s 1080p video: peak memory (and ~8 GB of temporary files in the system's temp folder)
+bench-pulse-memory: venv
+	$(PY) benchmarks/bench_pulse_memory.py
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache docs/_build docs/auto_examples docs/reference/api/generated \

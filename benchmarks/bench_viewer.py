@@ -93,8 +93,9 @@ class FreshServer:
     """``planeray view SCENE --size N`` started in a new process (as a user starts it): its URL and the
     page's frame-rate reports (``GET /api/reports``)."""
 
-    def __init__(self, scene: str, size: int, timeout_s: float = 300.0):
-        cmd = [sys.executable, "-m", "planeray.cli", "view", scene, "--size", str(size), "--port", "0", "--no-browser"]
+    def __init__(self, scene: str | None, size: int | None, timeout_s: float = 300.0, *, args: list[str] | None = None):
+        view = args if args is not None else [scene, "--size", str(size)]  # args: any `planeray view` arguments
+        cmd = [sys.executable, "-m", "planeray.cli", "view", *view, "--port", "0", "--no-browser"]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.url = None
         deadline = time.monotonic() + timeout_s

@@ -69,6 +69,7 @@ CONSTANTS = dict(
     IS_PARAMETERSET_CMD_LOAD_FILE=2,
     IS_SET_HW_GAMMA_OFF=0x0000,
     IS_GAMMA_CMD_SET=0x0001,
+    IS_GAMMA_CMD_GET=0x0003,
     IS_LUT_CMD_SET_ENABLED=0x0001,
     IS_LUT_DISABLED=0,
     IS_SET_GAINBOOST_OFF=0x0000,
@@ -144,6 +145,10 @@ class FakeCamera:
         What ``is_SetTriggerDelay(IS_GET_MIN/MAX_TRIGGER_DELAY/GRANULARITY)`` returns.
     vsync : bool
         False: no trigger ever arrives (``is_FreezeVideo`` returns IS_TIMED_OUT).
+    render_global : callable, optional
+        ``render_global(trigger_delay_us, exposure_us) -> (H, W)``: the image of a
+        global-shutter exposure opened that long after VSYNC (called at every frame,
+        never cached: what the projector shows may change between frames).
     """
 
     def __init__(
@@ -165,6 +170,7 @@ class FakeCamera:
         unsupported=(),
         vsync=True,
         msb_aligned=False,
+        render_global=None,
     ):
         self.width, self.height, self.pitch = width, height, 2 * width + pitch_pad
         self.render = render or (lambda d, e: np.tile(np.linspace(0.1, 0.9, width), (height, 1)))
@@ -180,6 +186,8 @@ class FakeCamera:
         self.unsupported = set(unsupported)  # function names answering IS_NOT_SUPPORTED
         self.vsync = vsync
         self.msb_aligned = msb_aligned
+        self.render_global = render_global
+        self.gamma = 100
         # state
         self.calls: list[tuple] = []
         self.fail: dict = {}  # "is_Name" or ("is_Name", command) -> return code
@@ -211,6 +219,11 @@ class FakeCamera:
         return e / 2 - 0.5e6 / self.lines_per_second - t_o
 
     def codes(self) -> np.ndarray:
+        if self.shutter_mode == CONSTANTS["IS_DEVICE_FEATURE_CAP_SHUTTER_MODE_GLOBAL"]:
+            if self.render_global is None:
+                raise AssertionError("a global-shutter frame, but the camera has no render_global")
+            img = np.asarray(self.render_global(float(self.trigger_delay_us), self.exposure_ms * 1e3), np.float64)
+            return np.clip(np.rint(img * 4095), 0, 4095).astype("<u2")
         key = (self.trigger_delay_us, round(self.exposure_ms, 9))
         if key not in self._cache:
             img = np.asarray(self.render(self.true_delay_us(), self.exposure_ms * 1e3), np.float64)
@@ -360,8 +373,15 @@ class FakeUEye(types.ModuleType):
 
     def is_Gamma(self, hCam, nCommand, pParam, cbSizeOfParams):
         _expect("is_Gamma pParam", pParam, ctypes.c_int, 4, cbSizeOfParams)
-        ret = self._call("is_Gamma", hCam, _int_arg("is_Gamma nCommand", nCommand, ctypes.c_uint), pParam.value)
-        return 0 if ret is None else ret
+        cmd = _int_arg("is_Gamma nCommand", nCommand, ctypes.c_uint)
+        ret = self._call("is_Gamma", hCam, cmd, pParam.value)
+        if ret is not None:
+            return ret
+        if cmd == CONSTANTS["IS_GAMMA_CMD_SET"]:
+            self.camera.gamma = pParam.value
+        elif cmd == CONSTANTS["IS_GAMMA_CMD_GET"]:
+            pParam.value = self.camera.gamma
+        return 0
 
     def is_LUT(self, hCam, nCommand, pParam, cbSizeOfParams):
         _expect("is_LUT pParam", pParam, ctypes.c_int, 4, cbSizeOfParams)
@@ -397,6 +417,8 @@ class FakeUEye(types.ModuleType):
         ret = self._call("is_SetExternalTrigger", hCam, mode)
         if ret is not None:
             return ret
+        if mode == CONSTANTS["IS_GET_EXTERNALTRIGGER"]:
+            return self.camera.trigger_mode
         self.camera.trigger_mode = mode
         return 0
 

@@ -105,7 +105,7 @@ def test_overwrite_replaces_only_a_result_of_the_same_kind(small_stack, tmp_path
     other = tmp_path / "other.zarr"
     assert invoke("simulate", "diffuse_plane", "--size", 24, 20, "--sweep", "quick", "--out", other).exit_code == 0
     one_line_error(invoke("demux", small_stack, "--out", other, "--overwrite"), other, "not a transport")
-    one_line_error(invoke("demux", small_stack, "--out", small_stack, "--overwrite"), "input stack")
+    one_line_error(invoke("demux", small_stack, "--out", small_stack, "--overwrite"), "is also an input")
     assert read_stack(other).shape == (24, 20)
     with pytest.raises(InputError, match="symbolic link"):
         link = tmp_path / "link.zarr"

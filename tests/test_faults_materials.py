@@ -251,3 +251,20 @@ def test_a_run_after_a_killed_one_cleans_its_temporaries_and_writes_everything(n
     assert res.exit_code == 0, res.output
     assert not stale.exists() and mine.exists() and out.exists()
     assert leftovers(tmp_path) == [mine.name]
+
+
+# ----------------------------------------------------------------------------- a second run at the same time
+@pytest.mark.parametrize("name", COMMANDS)
+def test_a_second_run_at_the_same_time_is_refused_in_one_line(name, env, tmp_path):
+    """Another planeray process is writing the output (it holds its lock): refused before any work, nothing touched."""
+    from planeray.io.lock import lock_holder, lock_path
+    from test_faults_concurrency import Holder
+
+    out = tmp_path / OUTPUT[name]
+    other = Holder(lock_path(out))
+    try:
+        one_line_error(invoke(*command(name, out, env)), f"another planeray run (pid {other.pid}) is writing it")
+        assert not out.exists() and leftovers(tmp_path) == [lock_path(out).name]
+        assert lock_holder(out)["pid"] == other.pid
+    finally:
+        other.release()

@@ -26,6 +26,7 @@ import pytest
 from typer.testing import CliRunner
 
 from planeray.cli import app
+from planeray.io.lock import lock_holder, lock_path
 from planeray.io.marks import file_mark
 from test_faults import failing_folder  # noqa: F401  (the fixture: writes under a folder fail)
 
@@ -347,6 +348,29 @@ def test_a_run_killed_as_its_result_appears_leaves_nothing_half_written(
         assert existing == [], existing
     for path in existing:  # what a long run finished before the kill is whole and planeray's
         assert path.is_dir() or file_mark(path) is not None, path
+
+
+# ---------------------------------------------------------------------------- 7. a second run at the same time
+@pytest.mark.parametrize("command", _params(slow_too=False))
+def test_a_second_run_at_the_same_time_is_refused_in_one_line(command, inputs, tmp_path):
+    """Another planeray process writes the output (it holds its lock): refused before any work, nothing touched."""
+    from test_faults_concurrency import Holder
+
+    w = WRITERS[command]
+    d = tmp_path / "out"
+    d.mkdir()
+    if command.endswith("--write"):
+        (d / "acquisition.json").write_text(json.dumps({"bit_depth": 12, "lines_per_second": 50000.0}))
+    target = w.outputs(d)[0]
+    other = Holder(lock_path(target))
+    try:
+        before = snapshot(d)
+        line = one_line_error(invoke(*w.args(d, inputs)), f"another planeray run (pid {other.pid}) is writing it")
+        assert target.name in line
+        assert snapshot(d) == before and temporaries(d) == []
+        assert lock_holder(target)["pid"] == other.pid  # the other run's lock, untouched
+    finally:
+        other.release()
 
 
 # ---------------------------------------------------------------------------- 6. resumed

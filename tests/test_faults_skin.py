@@ -388,3 +388,32 @@ def test_none_resumes_and_a_rerun_removes_what_a_killed_run_left(command, inputs
     assert res.exit_code == 0, res.output
     assert not any(p.exists() for p in stale), command
     assert live.exists() and all((tmp_path / name).exists() for name in outputs)
+
+
+# ---------------------------------------------------------------------------- a second run at the same time
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_second_run_at_the_same_time_is_refused_before_any_work(command, inputs, tmp_path, monkeypatch):
+    """Another planeray process is writing an output (it holds its lock): refused before any work, nothing touched."""
+    import importlib
+
+    from planeray.io.lock import lock_holder, lock_path
+    from test_faults_concurrency import Holder
+
+    module, name = WORK[command]
+
+    def work(*args, **kwargs):
+        raise AssertionError(f"{command}: the work started while another run held its output")
+
+    monkeypatch.setattr(importlib.import_module(module), name, work)
+    args, outputs = WRITERS[command]
+    d = tmp_path / "out"
+    d.mkdir()
+    target = d / outputs[-1]  # the last output: a companion file too is locked
+    other = Holder(lock_path(target))
+    try:
+        before = _snapshot(d)
+        line = one_line_error(invoke(*args(d, inputs)), f"another planeray run (pid {other.pid}) is writing it")
+        assert outputs[-1] in line
+        assert _snapshot(d) == before and lock_holder(target)["pid"] == other.pid
+    finally:
+        other.release()

@@ -275,7 +275,7 @@ def test_read_stack_errors(tmp_path):
     with pytest.raises(StackError, match="nope.zarr: path does not exist"):
         io.read_stack(tmp_path / "nope.zarr")
     (tmp_path / "empty").mkdir()
-    with pytest.raises(StackError, match="empty: not a Zarr group"):
+    with pytest.raises(StackError, match="empty: not a planeray store: no zarr.json"):
         io.read_stack(tmp_path / "empty")
     (tmp_path / "file.txt").write_text("x")
     with pytest.raises(StackError, match="file.txt"):

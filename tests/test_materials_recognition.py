@@ -130,6 +130,21 @@ def test_an_entry_from_a_fit_is_the_geometric_mean_spread_and_shares():
         entry_from_fit([np.nan], [np.nan], [0], name="y", class_id=8)
 
 
+def test_an_entry_needs_blocks_enough_to_measure_its_spread():
+    """One or two blocks give no spread: refused, never an invented one (issue 40)."""
+    for n in (1, 2):
+        with pytest.raises(InputError, match="at least 3 to measure its spread"):
+            entry_from_fit([2.0] * n, [0.01] * n, [0] * n, name="small", class_id=7)
+    e = entry_from_fit([2.0, 2.2, 1.8], [0.01, 0.012, 0.011], [0, 0, 0], name="three", class_id=7)
+    assert e.mu_s_prime_log_sd == pytest.approx(np.std(np.log([2.0, 2.2, 1.8]), ddof=1))
+
+
+def test_a_taken_entry_names_the_replace_option():
+    lib = _lib()
+    with pytest.raises(InputError, match=r"already has .*--replace \(replace=True\)"):
+        lib.add(lib.entries[0])
+
+
 def test_the_library_file_round_trips(tmp_path):
     lib = _lib()
     p = save_library(lib, tmp_path / "lib.json")
@@ -329,6 +344,13 @@ def test_library_add_fits_a_labelled_region_into_a_new_entry(capture):
     assert [x.name for x in lib.entries] == ["thin", "paste"]
     again = _cli([*args, "--library", str(root / "lib.json"), "--class-name", "2=paste", "--replace"])
     assert again.exit_code == 1 and "already exists" in again.output
+    # the guide's own example: a library planeray wrote, updated in place with --overwrite (never without)
+    in_place = [*args, "--library", str(out), "--class-name", "2=paste2", "--replace"]
+    res = _cli(in_place)
+    assert res.exit_code == 1 and "--overwrite" in res.output and load_library(out).entries == lib.entries
+    res = _cli([*in_place, "--overwrite"])
+    assert res.exit_code == 0, res.output
+    assert [x.name for x in load_library(out).entries] == ["thin", "paste2"]
     (root / "user.json").write_text("{}")  # a user's file is never replaced
     res = _cli([*args[:-1], str(root / "user.json"), "--class-name", "9=x", "--overwrite"])
     assert res.exit_code == 1 and (root / "user.json").read_text() == "{}"

@@ -373,3 +373,66 @@ def test_refused_before_reading(env, folder, monkeypatch):
     run_bad(_words((*PREDICT[:-1], "{d}/photo.png"), env), folder=folder, needles=("already exists",))
     monkeypatch.setattr("planeray.materials.load_model", never)
     run_bad(_words((*PREDICT, "--unclassified-below", 2), env), folder=folder, option="--unclassified-below")
+
+
+# ---------------------------------------------------------------------------- degenerate inputs (issue 40)
+def _label_image(path, shape, fill=0, pixels=(), dtype="uint8"):
+    """A label image: ``fill`` everywhere, class ids at ``pixels`` (``(row, col, id)``)."""
+    import numpy as np
+    import tifffile
+    from PIL import Image
+
+    lab = np.full(shape, fill, dtype)
+    for r, c, cid in pixels:
+        lab[r, c] = cid
+    if str(path).endswith(".tif"):
+        tifffile.imwrite(path, lab)
+    else:
+        Image.fromarray(lab).save(path)
+    return path
+
+
+DEGENERATE = [
+    # an all-zero label image: nothing to fit, recognize, train or score
+    (("materials", "fit", "{c}/stack.zarr", "--labels", "{d}/zero.png", "--out", "{d}/fit"), "--labels", ("no labelled pixel", "zero.png")),
+    (("materials", "recognize", "{c}/stack.zarr", "--regions", "{d}/zero.png", "--out", "{d}/rec"), "--regions", ("no labelled pixel", "zero.png")),
+    (("materials", "train", "{c}/stack.zarr", "--labels", "{d}/zero.png", "--out", "{d}/m.zip"), "--labels", ("no labelled pixel", "zero.png")),
+    # a class id beyond the 8-bit segmentations
+    (("materials", "train", "{c}/stack.zarr", "--labels", "{d}/big.tif", "--out", "{d}/m.zip"), "--labels", ("0-255", "300", "big.tif")),
+    # a capture as its own white reference: by path, and as a copy
+    (("materials", "fit", "{c}/stack.zarr", "--white-reference", "{c}/./stack.zarr", "--out", "{d}/fit"), "--white-reference", ("the capture itself",)),
+    (("materials", "fit", "{c}/stack.zarr", "--white-reference", "{d}/copy.zarr", "--out", "{d}/fit"), "--white-reference", ("the capture itself", "the same images", "copy.zarr")),
+    # one id named twice, one name given twice
+    (("materials", "train", "{c}/stack.zarr", "--labels", "{c}/labels.png", "--class-name", "7=a", "--class-name", "7=b", "--out", "{d}/m.zip"), "--class-name", ("named twice",)),
+    (("materials", "library-add", "{c}/stack.zarr", "--labels", "{c}/labels.png", "--class-name", "1=a", "--class-name", "2=a", "--out", "{d}/l.json"), "--class-name", ("two ids",)),
+    # a number that is no number
+    (("materials", "library-add", "{c}/stack.zarr", "--labels", "{c}/labels.png", "--class-name", "1=a", "--mm-per-row", "nan", "--out", "{d}/l.json"), "--mm-per-row", ("finite",)),
+    (("materials", "recognize", "{c}/stack.zarr", "--mm-per-row", "-1", "--out", "{d}/rec"), "--mm-per-row", ("> 0",)),
+    # an entry from a capture of another resolution than the library's (the shipped one: 128-row captures)
+    (("materials", "library-add", "{c}/stack.zarr", "--labels", "{c}/labels.png", "--class-name", "3=mine", "--out", "{d}/l.json"), "--library", ("5.625 projector rows per camera row", "has 18")),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("args", "option", "needles"), DEGENERATE, ids=[f"{i:02d}" for i in range(len(DEGENERATE))])
+def test_a_degenerate_input_is_refused_in_one_line_naming_the_option_and_the_file(
+    args, option, needles, env, folder, monkeypatch
+):
+    import shutil
+
+    import planeray.cli.materials as cli
+
+    def never(*a, **k):
+        raise AssertionError("the capture was demultiplexed or fitted before the input was checked")
+
+    monkeypatch.setattr("planeray.materials.model.capture_transport", never)  # refused before any demultiplexing
+    monkeypatch.setattr(cli, "progress_bar", never)
+    _label_image(folder / "zero.png", (40, 40))
+    _label_image(folder / "big.tif", (40, 40), fill=1, pixels=[(3, 3, 300)], dtype="uint16")
+    if any("copy.zarr" in str(a) for a in args):
+        shutil.copytree(env["c"] / "stack.zarr", folder / "copy.zarr")
+    run_bad(_words(args, env), folder=folder, option=option, needles=needles, may_create=_made(args))
+
+
+def _made(args):
+    """The inputs a case writes into the user's folder before it runs (they are not left by the command)."""
+    return [n for n in ("zero.png", "big.tif") if any(n in str(a) for a in args)]

@@ -261,7 +261,7 @@ CASES = [
     (("demux", S, "--out", "{d}/D.zarr", "--ambient", "estimate", "--method", "pinv"), "--ambient", ("--method pinv",)),
     (("demux", S, "--out", "{d}/D.zarr", "--ambient", "estimate", "--beta", 0), "--beta", ("not identifiable",)),
     (("demux", S, "--out", "{d}/notes.txt"), None, ("already exists",)),
-    (("demux", S, "--out", S, "--overwrite"), None, ("input stack",)),
+    (("demux", S, "--out", S, "--overwrite"), None, ("is also an input (STACK)",)),
     (("demux", "{d}/photo.png", "--out", "{d}/D.zarr"), None, ("photo.png",)),
     # ------------------------------------------------------------------ emulate, separate direct-global
     ((*EMU, "--delay-us", "1e12"), "--delay-us", ()),

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .devices.base import Device, apply_timing
+from .io.lock import writes_output
 from .stack import Stack
 from .timing import Sweep
 
@@ -81,6 +82,7 @@ def _capture_metadata(device: Device, sweep: Sweep) -> dict:
     return meta
 
 
+@writes_output("out")
 def acquire_to_store(
     device: Device,
     sweep: Sweep,

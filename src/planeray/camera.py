@@ -34,7 +34,7 @@ import numpy as np
 
 from ._validate import check_integer, check_nonnegative, check_number, check_positive
 
-__all__ = ["CameraModel", "row_shifts_rows"]
+__all__ = ["CameraModel", "binned_camera", "row_shifts_rows"]
 
 
 @dataclass(frozen=True)
@@ -221,3 +221,32 @@ def row_shifts_rows(
     if row_jitter_us <= 0:
         return None
     return rng.normal(0.0, row_jitter_us * 1e-6 * lines_per_second, size=(n_frames, camera_rows))
+
+
+def binned_camera(camera: CameraModel, pixels: float) -> CameraModel:
+    """The camera whose one pixel is the sum of ``pixels`` sensor pixels.
+
+    A simulated pixel stands for the pixels of the real sensor that see the same patch: their full
+    well, laser and ambient electrons add up (times ``pixels``), their read noise in quadrature
+    (times ``sqrt(pixels)``), and the ADC gains the bits the sum gains (up to 16), so that shot noise
+    per unit of scene is the real camera's whatever the simulated size.  ``pixels <= 1``: ``camera``.
+
+    Examples
+    --------
+    >>> binned_camera(CameraModel(), 16).bit_depth
+    16
+    """
+    from dataclasses import replace
+
+    if pixels <= 1:
+        return camera
+    bits = min(16, camera.bit_depth + int(np.floor(np.log2(pixels) / 2 + 0.5)) * 2)
+    return replace(
+        camera,
+        full_well_e=camera.full_well_e * pixels,
+        laser_electrons=camera.laser_electrons * pixels,
+        ambient_e_per_us=camera.ambient_e_per_us * pixels,
+        read_noise_e=camera.read_noise_e * float(np.sqrt(pixels)),
+        bit_depth=bits,
+        black_level=camera.black_level * 2 ** (bits - camera.bit_depth),
+    )

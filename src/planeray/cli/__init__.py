@@ -15,6 +15,7 @@ order) and holds the entry point:
 * ``analysis.py``   contact-sheet, profiles, synth, figure (look at stacks and transports)
 * ``baselines.py``  emulate, separate direct-global (conventional projector-camera)
 * ``calibrate.py``  calibrate lines | simulate-lines | delay-zero (Sec. 6)
+* ``rig.py``        project (the projector window), rig check (is the rig wired and set up right?)
 * ``mc.py``         mc profile (Monte Carlo subsurface scattering, Sec. 5.2)
 * ``study.py``      study demux (the Sec. 5.2 study)
 * ``materials.py``  materials classes | simulate | train | predict | report (Sec. 8, Fig. 10)
@@ -45,6 +46,7 @@ from . import (
     paper,
     pulse,
     render,
+    rig,
     simulate,
     skin,
     stacks,
@@ -81,6 +83,7 @@ app.command("contact-sheet")(analysis.contact_sheet)
 app.command()(analysis.profiles)
 app.command()(acquire.acquire)
 app.command()(acquire.devices)
+app.command()(rig.project)
 app.command()(baselines.emulate)
 app.command()(demux.demux)
 app.command()(analysis.synth)
@@ -94,6 +97,7 @@ app.command()(demo.demo)
 # Command groups (sub-apps).
 app.add_typer(baselines.separate_app, name="separate")
 app.add_typer(calibrate.calibrate_app, name="calibrate")
+app.add_typer(rig.rig_app, name="rig")
 app.add_typer(mc.mc_app, name="mc")
 app.add_typer(study.study_app, name="study")
 app.add_typer(materials.materials_app, name="materials")

@@ -6,6 +6,7 @@ the progress bar live in :mod:`planeray._console`, shared with the demo.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import os
@@ -17,7 +18,7 @@ import typer
 from rich.text import Text
 
 from .._console import console
-from ..errors import PlanerayError
+from ..errors import InputError, PlanerayError
 
 #: The positional argument of every command that reads a stack.
 StackArg = Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")]
@@ -25,6 +26,9 @@ StackArg = Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")
 
 #: ``planeray --debug ...``: show the traceback of an error instead of one line.
 DEBUG = {"enabled": False}
+
+#: The exit stacks of the running commands: the locks :func:`_check_outputs` takes are held there.
+_HELD: list[contextlib.ExitStack] = []
 
 
 def error_line(exc: BaseException, options: dict | None = None) -> str:
@@ -94,7 +98,12 @@ def _friendly_errors(fn=None, *, options: dict | None = None):
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
-            return fn(*args, **kwargs)
+            with contextlib.ExitStack() as held:  # the locks of the command's outputs, until it returns
+                _HELD.append(held)
+                try:
+                    return fn(*args, **kwargs)
+                finally:
+                    _HELD.remove(held)
         except (typer.Exit, typer.Abort, SystemExit):
             raise
         except KeyboardInterrupt:
@@ -112,23 +121,116 @@ def _friendly_errors(fn=None, *, options: dict | None = None):
     return wrapper
 
 
-def _check_outputs(*outputs, overwrite: bool) -> None:
-    """Refuse, before any work, outputs that exist (without ``--overwrite``) or may not be replaced.
+def _check_outputs(*outputs, overwrite: bool, inputs=()) -> None:
+    """Refuse, before any work, outputs that may not be written; lock the others until the command ends.
 
-    ``outputs``: ``(path, kind)`` pairs, ``kind`` as in :func:`planeray.io.atomic.planeray_output_kind`;
-    a None path is skipped.  Two outputs may not be the same path.
+    ``outputs``: ``(path, kind)`` pairs, ``kind`` as in :func:`planeray.io.atomic.planeray_output_kind`
+    (or ``(path, kind, option)``: the option that names it in messages, default ``--out``);
+    a None path is skipped.  Each output is refused when
+
+    * it exists (without ``--overwrite``) or may not be replaced (:func:`~planeray.io.atomic.check_replaceable`);
+    * it is named twice, or is one of the command's ``inputs`` (``(option, path)`` pairs), holds
+      one or lies inside one, however the paths are spelled (:func:`_not_an_input`);
+    * its folder cannot be written (read-only, full disk: :func:`~planeray.io.atomic.check_writable`);
+    * another planeray run is writing it (:func:`~planeray.io.lock.output_lock`): the lock is
+      then held by this command until it returns, so a second run is refused here.
     """
     from ..io.atomic import check_replaceable
 
     seen = set()
-    for path, kind in outputs:
+    pending = []
+    for output in outputs:
+        path, kind = output[:2]
+        option = output[2] if len(output) > 2 else "--out"
         if path is None:
             continue
+        _not_a_home(path, option)
         key = Path(path).resolve()
         if key in seen:
             raise ValueError(f"{path}: named twice as an output")
         seen.add(key)
+        _not_an_input(path, inputs, option=option)
         check_replaceable(path, overwrite=overwrite, kind=kind)
+        pending.append(path)
+    _claim(*pending)
+
+
+def _claim(*paths) -> None:
+    """Before any work: each output's folder can be written, and no other run writes it (its lock, held).
+
+    The lock is held until the running command returns (:func:`_friendly_errors`).
+    """
+    from ..io.atomic import check_writable
+    from ..io.lock import output_lock
+
+    for path in paths:
+        check_writable(path)
+        if _HELD:
+            _HELD[-1].enter_context(output_lock(path, on_stale=_note))
+
+
+def _not_a_home(path, option: str = "--out") -> None:
+    """Refuse, with or without ``--overwrite``, the current folder, one of its parents, the home folder or a root."""
+    from ..io.atomic import _is_protected
+
+    if _is_protected(Path(path)):
+        raise InputError(
+            f"{option} {path}: is the current folder, one of its parents or the home folder; name a new output "
+            "inside it (e.g. {option} out/)".replace("{option}", option)
+        )
+
+
+def _note(text: str) -> None:
+    console.print(Text("note: ", style="yellow") + Text(text), highlight=False, soft_wrap=True)
+
+
+def _same_place(a: Path, b: Path) -> bool:
+    """``a`` and ``b`` name the same file or folder (resolved; the same inode where both exist)."""
+    try:
+        if a.resolve() == b.resolve():
+            return True
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _inside(inner: Path, outer: Path) -> bool:
+    """``inner`` lies inside the folder ``outer`` (resolved paths)."""
+    try:
+        return inner.resolve().is_relative_to(outer.resolve()) and inner.resolve() != outer.resolve()
+    except OSError:
+        return False
+
+
+def _is_store(path: Path) -> bool:
+    """A Zarr store or a planeray result folder: a folder whose content a format defines (nothing may be added)."""
+    return (path / "zarr.json").is_file() or (path / "planeray.json").is_file()
+
+
+def _not_an_input(out, inputs, *, option: str = "--out") -> None:
+    """Refuse an output that is or holds one of the command's inputs, or lies inside an input store.
+
+    ``inputs``: ``(option, path)`` pairs (``("STACK", path)`` for a positional argument); None
+    paths are skipped; ``option`` names the output in the message.  Compared resolved (``./T.zarr``, ``T.zarr/``, an absolute path or a
+    symbolic link to it are the same) and by inode where both exist (hard links, bind mounts).
+    """
+    out = Path(out)
+    for name, path in inputs:
+        if path is None:
+            continue
+        path = Path(path)
+        if _same_place(out, path):
+            problem = "is also an input"
+        elif _inside(path, out):
+            problem = "holds an input"
+        elif _inside(out, path) and _is_store(path):
+            problem = "lies inside an input store"
+        else:
+            continue
+        which = name if problem == "is also an input" else f"{name} {path}"
+        raise InputError(
+            f"{option} {out} {problem} ({which}): planeray never writes over its inputs; choose another output"
+        )
 
 
 def _load_stack(path: Path):

@@ -52,8 +52,11 @@ def parse_device_options(texts) -> dict:
     return options
 
 
-def read_calibration(path) -> dict:
-    """The calibration fields of an ``acquisition.json`` (or of ``path/acquisition.json``)."""
+def read_calibration(path, *, fields=None) -> dict:
+    """The calibration fields of an ``acquisition.json`` (or of ``path/acquisition.json``).
+
+    ``fields``: the numeric fields to read (default :data:`CALIBRATION_FIELDS`).
+    """
     path = Path(path)
     if path.is_dir():
         path = path / "acquisition.json"
@@ -66,7 +69,7 @@ def read_calibration(path) -> dict:
     if not isinstance(acq, dict):
         raise InputError("expected a JSON object", path)
     found = {}
-    for key in CALIBRATION_FIELDS:
+    for key in CALIBRATION_FIELDS if fields is None else fields:
         value = acq.get(key)
         if value is None:
             continue
@@ -155,6 +158,8 @@ def check_device_options(options: dict, spellings: dict, defaults: dict | None =
         if problem is not None:
             raise InputError(f"{spellings.get(key, key)} must be {problem}, got {value!r}")
         check = _COMMON_CHECKS.get(key)
+        if key == "camera_id" and not isinstance((defaults or {}).get(key), int):
+            check = None  # a uEye camera's number; a GenICam camera's id or serial number is text
         if check is not None and value is not None:
             if key == "size" and isinstance(value, list):
                 value = tuple(value)
@@ -231,6 +236,27 @@ def _as_json(value) -> str:
         return json.dumps(value)
     except (TypeError, ValueError):
         return repr(value)
+
+
+def screen_options(name: str, screen, display, option_texts) -> dict:
+    """The device options that plug a simulated projector into ``--screen`` (and ``--display``).
+
+    A device that takes a ``screen`` option (the simulated Episcan: the X screen its
+    projector shows) is given the command's ``--screen`` unless ``-O screen=...``
+    says otherwise (``-O screen=0 --screen 1``: the projector cable on another
+    screen than the window's).
+    """
+    from ..devices import device_options
+
+    if screen is None or "screen" not in device_options(name):
+        return {}
+    given = parse_device_options(option_texts)
+    found = {}
+    if "screen" not in given:
+        found["screen"] = screen
+    if display is not None and "display" not in given and "display" in device_options(name):
+        found["display"] = display
+    return found
 
 
 def close_device(device) -> None:

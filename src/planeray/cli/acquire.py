@@ -19,7 +19,7 @@ from ._devices import CalibrationArg, DeviceOptionArg, close_device, describe_op
 def acquire(
     out_path: Annotated[Path, typer.Option("--out", "-o", help="Native stack to write (Zarr); resumable.")],
     device: Annotated[
-        str, typer.Option(help="Device by name: sim | replay | ueye | ... (`planeray devices`).")
+        str, typer.Option(help="Device by name: sim | replay | ueye | genicam | ... (`planeray devices`).")
     ] = "sim",
     sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep.")] = "paper",
     scene: Annotated[str | None, typer.Option(help="sim: built-in scene.", show_default="wax")] = None,
@@ -32,7 +32,8 @@ def acquire(
     seed: Annotated[int | None, typer.Option(help="sim: seed.", show_default="0")] = None,
     replay: Annotated[Path | None, typer.Option(help="replay: the recorded stack to serve.")] = None,
     camera_id: Annotated[
-        int | None, typer.Option(help="ueye: camera ID (0: the first free).", show_default="0")
+        int | None,
+        typer.Option(help="ueye: camera ID (0: the first free); genicam: -O camera_id=ID.", show_default="0"),
     ] = None,
     lines_per_second: Annotated[
         float | None,
@@ -57,7 +58,9 @@ def acquire(
     from ..acquire import acquire_to_store
     from ..devices import device_options
 
-    _check_outputs((out_path, "stack"), overwrite=overwrite)  # before the device opens
+    _check_outputs(
+        (out_path, "stack"), overwrite=overwrite, inputs=[("--replay", replay), ("--calibration", calibration)]
+    )  # before the device opens
     sw = lim.sweep(sweep)
     explicit = dict(
         scene=scene,

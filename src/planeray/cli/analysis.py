@@ -25,6 +25,11 @@ def _suffix(path: Path | None, option: str, suffixes: tuple[str, ...]) -> None:
         raise InputError(f"{option} must end in {', '.join(suffixes)}, got {path.name}")
 
 
+def _file(text: str | None) -> Path | None:
+    """An option that may name a file (``--relight ROW`` or ``--relight FILE``): the file, if it is one."""
+    return Path(text) if text is not None and Path(text).exists() else None
+
+
 def _print(text: str) -> None:
     """A result line, verbatim (paths with brackets are not markup)."""
     out.print(text, markup=False, highlight=False)
@@ -42,7 +47,7 @@ def contact_sheet(
     from ..figures import contact_sheet_figure
 
     _suffix(out_png, "--out", (".png",))
-    _check_outputs((out_png, "figure"), overwrite=overwrite)
+    _check_outputs((out_png, "figure"), overwrite=overwrite, inputs=[("STACK", stack_path)])
     lim.number(gamma, "--gamma", minimum=0.05, maximum=10.0)
     lim.optional(lim.integer, max_delays, "--max-delays", minimum=1, maximum=10_000)
     st = _load_stack(stack_path)
@@ -97,7 +102,13 @@ def profiles(
     _suffix(out_png, "--out", (".png",))
     _suffix(csv, "--csv", (".csv",))
     _suffix(classify, "--classify", (".png",))
-    _check_outputs((out_png if pixel else None, "figure"), (csv, "table"), (classify, "figure"), overwrite=overwrite)
+    _check_outputs(
+        (out_png if pixel else None, "figure"),
+        (csv, "table", "--csv"),
+        (classify, "figure", "--classify"),
+        overwrite=overwrite,
+        inputs=[("STACK", stack_path), ("--transport", transport), ("--direct-reference", direct_reference)],
+    )
     lim.optional(lim.positive, exposure_us, "--exposure-us", maximum=lim.MAX_TIME_US)
     pixels = [_parse_pixel(p) for p in pixel or ()]
     st = _load_stack(stack_path)
@@ -203,7 +214,9 @@ def synth(
             "choose exactly one of --epipolar, --non-epipolar, --sharpen, --relight, --band, --short-range, --long-range"
         )
     _suffix(out_path, "--out", (".png", ".tif", ".tiff"))
-    _check_outputs((out_path, "image"), overwrite=overwrite)
+    _check_outputs(
+        (out_path, "image"), overwrite=overwrite, inputs=[("TRANSPORT", transport_path), ("--relight", _file(relight))]
+    )
     if band is not None:
         lim.number(band[0], "--band (its delay)", minimum=-lim.MAX_TIME_US, maximum=lim.MAX_TIME_US)
         lim.positive(band[1], "--band (its exposure)", maximum=lim.MAX_TIME_US)

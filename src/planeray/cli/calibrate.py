@@ -13,8 +13,8 @@ from .._console import out
 from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND
 from . import _limits as lim
-from ._common import _check_outputs, _friendly_errors, _load_stack
-from ._devices import CalibrationArg, DeviceOptionArg, close_device, open_device_from_cli
+from ._common import _check_outputs, _claim, _friendly_errors, _load_stack
+from ._devices import CalibrationArg, DeviceOptionArg, close_device, open_device_from_cli, screen_options
 
 calibrate_app = typer.Typer(help="Calibration (Sec. 6): line velocity v_p and delay zero.", no_args_is_help=True)
 
@@ -31,9 +31,10 @@ def _check_write_target(write: Path | None) -> None:
         from ..calibration.files import calibration_target
 
         try:
-            calibration_target(write)
+            target, _ = calibration_target(write)
         except InputError as exc:
             raise InputError(f"--write: {exc}") from None
+        _claim(target)  # writable, and no other calibration writing it
 
 
 def _report_calibration(result, write: Path | None, as_json: bool, key: str):
@@ -52,12 +53,39 @@ def _report_calibration(result, write: Path | None, as_json: bool, key: str):
 @_friendly_errors
 def calibrate_lines(
     path: Annotated[
-        Path, typer.Argument(help="Line-sweep capture: .npz (from simulate-lines) or grayscale .tif/.png.")
-    ],
+        Path | None,
+        typer.Argument(help="Line-sweep capture: .npz (from simulate-lines) or grayscale .tif/.png (or --device)."),
+    ] = None,
     exposure_us: Annotated[
         float | None, typer.Option(help="Global-shutter exposure of the capture (default 500 us).")
     ] = None,
-    rows_per_line: Annotated[int | None, typer.Option(help="Projector rows between lit lines of the comb.")] = None,
+    rows_per_line: Annotated[
+        int | None, typer.Option(help="Projector rows between lit lines of the comb (--device: default 8).")
+    ] = None,
+    device: Annotated[
+        str | None,
+        typer.Option(help="Capture live: the camera (global shutter) images each comb phase shown on --screen."),
+    ] = None,
+    device_option: DeviceOptionArg = None,
+    calibration: CalibrationArg = None,
+    screen: Annotated[
+        int | None, typer.Option(help="--device: the projector's screen (`planeray project --list-screens`).")
+    ] = None,
+    display: Annotated[str | None, typer.Option(help="--device: X display (default $DISPLAY).")] = None,
+    trigger_delay_us: Annotated[
+        float | None,
+        typer.Option(help="--device: when the global exposure opens after VSYNC (us).", show_default="mid-frame"),
+    ] = None,
+    timing_jitter_us: Annotated[
+        float | None,
+        typer.Option(
+            help="--device: RMS jitter (us) of the exposure window per averaged image, for the uncertainty.",
+            show_default="the device's, else 0",
+        ),
+    ] = None,
+    save: Annotated[
+        Path | None, typer.Option(help="--device: also save the captured line sweep (.npz) to count again later.")
+    ] = None,
     write: Annotated[
         Path | None, typer.Option(help="Write lines_per_second into this acquisition.json (or folder).")
     ] = None,
@@ -65,8 +93,12 @@ def calibrate_lines(
 ):
     """Projector scanline velocity v_p = n_lines / t_e from a line-sweep capture, with its uncertainty.
 
-    ``--write`` updates (or creates) an acquisition.json: it sets the calibration
-    fields and keeps every other field; a value it changes is kept under
+    With ``--device NAME --screen N`` planeray captures it: a full-screen window on
+    screen N shows each phase of a comb of rows ``--rows-per-line`` apart, the
+    camera (switched to its global shutter, then back) takes one exposure of
+    ``--exposure-us`` per phase at a fixed delay after VSYNC, then a dark and a flat
+    frame.  ``--write`` updates (or creates) an acquisition.json: it sets the
+    calibration fields and keeps every other field; a value it changes is kept under
     ``calibration.replaced``.  The file is checked before any work and replaced
     atomically.
     """
@@ -74,8 +106,32 @@ def calibrate_lines(
 
     lim.optional(lim.positive, exposure_us, "--exposure-us", maximum=MAX_CALIBRATION_EXPOSURE_US)
     lim.optional(lim.integer, rows_per_line, "--rows-per-line", minimum=1, maximum=lim.MAX_PROJECTOR_ROWS)
+    if (path is None) == (device is None):
+        raise InputError("give a line-sweep capture PATH, or --device NAME --screen N to capture one")
+    live_only = {"--screen": screen, "--display": display, "--trigger-delay-us": trigger_delay_us, "--save": save}
+    live_only["--timing-jitter-us"] = timing_jitter_us
+    live_only.update({"--device-option": device_option or None, "--calibration": calibration})
+    for option, value in live_only.items():
+        if value is not None and device is None:
+            raise InputError(f"{option} applies to --device only")
     _check_write_target(write)
-    result = calibrate_lines_per_second(read_line_sweep(path, exposure_us=exposure_us, rows_per_line=rows_per_line))
+    if device is not None:
+        lim.optional(lim.nonnegative, timing_jitter_us, "--timing-jitter-us", maximum=10_000.0)
+        sweep = _capture_lines_live(
+            device,
+            device_option,
+            calibration,
+            screen,
+            display,
+            exposure_us,
+            rows_per_line,
+            trigger_delay_us,
+            save,
+            timing_jitter_us,
+        )
+    else:
+        sweep = read_line_sweep(path, exposure_us=exposure_us, rows_per_line=rows_per_line)
+    result = calibrate_lines_per_second(sweep)
     if not lim.MIN_LINES_PER_SECOND <= result.lines_per_second <= lim.MAX_LINES_PER_SECOND:
         raise InputError(
             f"{result.n_lines:.2f} lines in {result.exposure_us:g} us make {result.lines_per_second:,.0f} lines/s, "
@@ -91,6 +147,54 @@ def calibrate_lines(
             markup=False,
             highlight=False,
         )
+
+
+def _capture_lines_live(
+    device,
+    device_option,
+    calibration,
+    screen,
+    display,
+    exposure_us,
+    rows_per_line,
+    trigger_delay_us,
+    save,
+    timing_jitter_us=None,
+):
+    """The comb shown on the screen and captured by the device (``calibrate lines --device``)."""
+    from ..calibration import write_line_sweep
+    from ..calibration.files import LINE_SWEEP_KIND
+    from ..devices.capabilities import require
+    from ..linesweep import PAPER_CALIBRATION_EXPOSURE_US
+    from ..projector import ProjectorWindow, get_screen
+    from ..rig import DEFAULT_COMB_STEP_ROWS, capture_comb
+
+    if screen is None:
+        raise InputError("--device needs --screen N, the projector's screen (`planeray project --list-screens`)")
+    if save is not None:
+        if save.suffix.lower() != ".npz":
+            raise InputError(f"--save must end in .npz (a line sweep), got {save.name}")
+        _check_outputs((save, LINE_SWEEP_KIND, "--save"), overwrite=False)
+    lim.optional(lim.nonnegative, trigger_delay_us, "--trigger-delay-us", maximum=lim.MAX_TIME_US)
+    target = get_screen(screen, display)  # an unknown screen: one line, before the camera opens
+    explicit = screen_options(device, screen, display, device_option)
+    dev = open_device_from_cli(device, explicit, device_option, calibration)
+    try:
+        require(dev, "global_shutter", "calibrate lines --device")
+        with ProjectorWindow(target) as window:
+            sweep = capture_comb(
+                dev,
+                window,
+                exposure_us=PAPER_CALIBRATION_EXPOSURE_US if exposure_us is None else exposure_us,
+                line_step_rows=DEFAULT_COMB_STEP_ROWS if rows_per_line is None else rows_per_line,
+                trigger_delay_us=trigger_delay_us,
+                timing_jitter_us=timing_jitter_us,
+            )
+    finally:
+        close_device(dev)
+    if save is not None:
+        write_line_sweep(sweep, save)
+    return sweep
 
 
 @calibrate_app.command("simulate-lines")
@@ -169,6 +273,11 @@ def calibrate_delay_zero_cmd(
         float | None, typer.Option(help="--simulate: hidden sync error to recover (us).", show_default="0")
     ] = None,
     seed: Annotated[int | None, typer.Option(help="--simulate: seed.", show_default="0")] = None,
+    screen: Annotated[
+        int | None,
+        typer.Option(help="--device: show white on this screen (the projector's) for the whole calibration."),
+    ] = None,
+    display: Annotated[str | None, typer.Option(help="--screen: X display (default $DISPLAY).")] = None,
     write: Annotated[
         Path | None,
         typer.Option(help="Write delay_zero_us (and base_trigger_delay_us) into this acquisition.json (or folder)."),
@@ -201,6 +310,8 @@ def calibrate_delay_zero_cmd(
         "--frame-period-us": (frame_period_us, device is not None),
         "--device-option": (device_option or None, device is not None),
         "--calibration": (calibration, device is not None),
+        "--screen": (screen, device is not None),
+        "--display": (display, screen is not None),
         "--delay-error-us": (delay_error_us, simulate),
         "--seed": (seed, simulate),
     }
@@ -229,8 +340,17 @@ def calibrate_delay_zero_cmd(
     if device is not None:
         if sweep is not None:
             lim.sweep(sweep)
-        dev = open_device_from_cli(device, {}, device_option, calibration)
+        window = None
+        if screen is not None:
+            from ..projector import ProjectorWindow, get_screen, white
+
+            target = get_screen(screen, display)  # an unknown screen: one line, before the camera opens
+        explicit = screen_options(device, screen, display, device_option)
+        dev = open_device_from_cli(device, explicit, device_option, calibration)
         try:
+            if screen is not None:
+                window = ProjectorWindow(target)
+                window.show(white(window.shape))
             if hasattr(dev, "base_trigger_delay_us"):  # a camera triggered by VSYNC: find its base
                 result = calibrate_base_trigger_delay(
                     dev,
@@ -248,6 +368,8 @@ def calibrate_delay_zero_cmd(
                     lines_per_second=dev.lines_per_second,
                 )
         finally:
+            if window is not None:
+                window.close()
             close_device(dev)
     elif simulate:
         from ..devices import SimulatedEpiscan

@@ -82,8 +82,6 @@ def demux(
 
     if workers is not None and scheduler is not None:
         raise ValueError("give --workers or --scheduler, not both")
-    if Path(out_path).resolve() == Path(stack_path).resolve():
-        raise ValueError(f"{out_path}: is the input stack; name another output")
     alpha, beta = _weight(alpha, "--alpha"), _weight(beta, "--beta")
     auto = "auto" in (alpha, beta)
     if report is not None and not auto:
@@ -91,7 +89,9 @@ def demux(
     figure = None if report is None else Path(report) / "weights_cv.png"
     if figure is not None and Path(report).exists() and not Path(report).is_dir():
         raise InputError(f"--report {report}: exists and is not a directory")
-    _check_outputs((out_path, "transport"), (figure, "figure"), overwrite=overwrite)
+    _check_outputs(
+        (out_path, "transport"), (figure, "figure", "--report"), overwrite=overwrite, inputs=[("STACK", stack_path)]
+    )
     if method not in METHODS:
         raise InputError(f"--method {method}: unknown demultiplexing method; choose one of {', '.join(METHODS)}")
     if ambient is not None and ambient.strip().lower() not in AMBIENT:

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from .._console import console, out, print_json, progress_bar
-from ._common import _check_outputs, _friendly_errors, _load_stack
+from ._common import _check_outputs, _claim, _friendly_errors, _load_stack, _not_an_input, _same_place
 
 materials_app = typer.Typer(
     help="Material recognition from delay profiles (Sec. 8, Fig. 10): simulate, train, predict, report.",
@@ -21,48 +21,23 @@ def _choice(value: str, option: str, choices) -> None:
         raise ValueError(f"{option} must be one of {', '.join(choices)}, got {value!r}")
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.resolve() == b.resolve()
-    except OSError:
-        return False
+def _read_labels(path: Path, option: str, shape, *, labelled: bool = True):
+    """A label image of the stack's size, errors naming the option; ``labelled``: refuse one with no labelled pixel."""
+    import numpy as np
 
-
-def _not_an_input(out_path: Path, inputs) -> None:
-    """Refuse an output that is also one of the command's inputs (compared as resolved paths)."""
-    for option, path in inputs:
-        if path is not None and _same_file(out_path, Path(path)):
-            raise ValueError(
-                f"--out {out_path} is also an input ({option}): planeray never writes over its inputs; "
-                "choose another output"
-            )
-
-
-def _check_parent(path: Path) -> None:
-    """Refuse an output whose folder cannot be made: a file on its way."""
-    for parent in Path(path).absolute().parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise ValueError(f"--out {path} cannot be created: {parent} is a file, not a folder")
-            return
-
-
-def _outputs(*outputs, overwrite: bool) -> None:
-    """:func:`_check_outputs` (before any work), and outputs whose folder cannot be made refused too."""
-    for path, _ in outputs:
-        _check_parent(path)
-    _check_outputs(*outputs, overwrite=overwrite)
-
-
-def _read_labels(path: Path, option: str, shape):
-    """A label image of the stack's size, errors naming the option."""
     from ..errors import InputError
     from ..materials import read_label_image
 
     try:
-        return read_label_image(path, shape=shape)
+        lab = read_label_image(path, shape=shape)
     except InputError as exc:
         raise ValueError(f"{option} {exc}") from None
+    if labelled and not np.any(lab > 0):
+        raise ValueError(
+            f"{option} {path}: no labelled pixel (every pixel is 0, 'unlabelled'); mark the regions with class ids "
+            "1-255"
+        )
+    return lab
 
 
 @materials_app.command("classes")
@@ -146,7 +121,7 @@ def simulate(
         sweep=sweep,
     )
     check_capture_options(**options)
-    _outputs((out_dir, "materials capture"), overwrite=overwrite)
+    _check_outputs((out_dir, "materials capture"), overwrite=overwrite)
     trace = tables_to_trace(source=source, channel=channel, wall=wall)
     n = len(make_sweep(sweep))
     with progress_bar() as bar:
@@ -186,6 +161,12 @@ def _parse_class_names(items) -> dict:
             raise ValueError(f"--class-name expects ID=NAME (e.g. 7=mayonnaise), got {item!r}")
         if not 1 <= int(key) <= 255:
             raise ValueError(f"--class-name ids must be 1 to 255 (0 is unlabelled), got {item!r}")
+        if int(key) in names:
+            raise ValueError(
+                f"--class-name {int(key)} is named twice ({names[int(key)]!r} and {name.strip()!r}); give each id once"
+            )
+        if name.strip() in names.values():
+            raise ValueError(f"--class-name {name.strip()!r} is given to two ids; give each name once")
         names[int(key)] = name.strip()
     return names
 
@@ -234,9 +215,9 @@ def train(
         raise ValueError(f"--labels: {len(stacks)} stacks but {len(labels)} label images; give one per stack, in order")
     if out_path.suffix.lower() != ".zip":
         raise ValueError(f"--out must end in .zip (a model file: a JSON record and a skops estimator), got {out_path}")
-    _not_an_input(out_path, [("a stack", p) for p in stacks] + [("--labels", p) for p in labels])
-    _check_parent(out_path)
+    _not_an_input(out_path, [("STACKS", p) for p in stacks] + [("--labels", p) for p in labels])
     check_model_output(out_path, overwrite=overwrite)
+    _claim(out_path)
     loaded = [_load_stack(p) for p in stacks]
     labs = [_read_labels(lp, "--labels", st.shape) for lp, st in zip(labels, loaded)]
     with progress_bar() as bar:
@@ -308,16 +289,16 @@ def predict(
         raise ValueError(f"--out must end in .png, .tif or .tiff (a label image of class ids), got {out_png}")
     if near_wall is not None and labels is None:
         raise ValueError("--near-wall needs --labels: it splits the accuracies into near walls and away from them")
-    _not_an_input(
-        out_png,
-        [("the model", model_path), ("the stack", stack_path), ("--labels", labels), ("--near-wall", near_wall)],
+    _check_outputs(
+        (out_png, "segmentation"),
+        overwrite=overwrite,
+        inputs=[("MODEL", model_path), ("STACK", stack_path), ("--labels", labels), ("--near-wall", near_wall)],
     )
-    _outputs((out_png, "segmentation"), overwrite=overwrite)
     model = load_model(model_path)
     st = _load_stack(stack_path)
     model.check_stack(st, source=str(stack_path))
     truth = _read_labels(labels, "--labels", st.shape) if labels is not None else None
-    near = _read_labels(near_wall, "--near-wall", st.shape) > 0 if near_wall is not None else None
+    near = _read_labels(near_wall, "--near-wall", st.shape, labelled=False) > 0 if near_wall is not None else None
     blind = {c: p for c, p in model.smallest_typicality().items() if 0 < threshold <= p}
     if blind:
         console.print(
@@ -411,15 +392,48 @@ def _capture_and_row_size(input_path: Path, mm_per_row: float | None):
     return transport, meta, mm
 
 
-def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None):
-    """``--library`` (else the shipped one), read before the capture, then checked against its row size."""
+def _capture_shape(input_path: Path) -> tuple[int, int]:
+    """The image size of a capture (stack or transport store), read without demultiplexing it."""
+    return _capture_geometry(input_path)[:2]
+
+
+def _capture_geometry(input_path: Path) -> tuple[int, int, float]:
+    """``(H, W, rows_per_camera_row)`` of a capture (stack or transport store), read without demultiplexing it."""
+    from ..io import read_transport
+    from ..io.atomic import planeray_output_kind
+
+    if not Path(input_path).exists():
+        raise ValueError(f"the capture {input_path}: no such file or folder")
+    if planeray_output_kind(input_path) == "transport":
+        import zarr
+
+        try:
+            group = zarr.open_group(str(input_path), mode="r")
+            H, W = (int(n) for n in group["T"].shape[:2])
+            return H, W, float(group.attrs["projector_rows"]) / H
+        except Exception:  # a damaged store: read it properly, for the reader's one-line message
+            transport = read_transport(input_path)[0]
+            return (*transport.shape, float(transport.geometry.rows_per_camera_row))
+    st = _load_stack(input_path)
+    return (*st.shape, float(st.geometry.rows_per_camera_row))
+
+
+def _library(library: Path | None):
+    """``--library`` (else the shipped one), errors naming the option."""
     from ..errors import InputError
     from ..materials.library import default_library, load_library
 
     try:
-        lib = load_library(library) if library is not None else default_library()
+        return load_library(library) if library is not None else default_library()
     except InputError as exc:
         raise ValueError(f"--library {exc}") from None
+
+
+def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None):
+    """``--library`` (else the shipped one), read before the capture, then checked against its row size."""
+    from ..errors import InputError
+
+    lib = _library(library)
     transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
     try:
         lib.check_conditions(mm_per_row=mm, calibrated=False)
@@ -447,6 +461,21 @@ def _read_fit_input(path: Path, option: str, *, with_progress: bool = True):
     else:
         transport = capture_transport(st)
     return transport, dict(st.metadata or {})
+
+
+#: A capture given as its own white reference would "calibrate" it to an albedo of one.
+_WHITE_IS_CAPTURE = (
+    "--white-reference {white} is the capture itself: a white reference is a separate capture of a white "
+    "Lambertian target, with the same sweep and camera"
+)
+
+
+def _mm_per_row_option(value: float | None) -> None:
+    """``--mm-per-row``: a finite size in (0, 100] mm, or not given."""
+    from .._validate import check_number
+
+    if value is not None:
+        check_number(value, "--mm-per-row", minimum=0.0, maximum=100.0, min_inclusive=False)
 
 
 def _recorded_mm_per_row(meta: dict):
@@ -524,14 +553,18 @@ def fit_cmd(
         raise ValueError(f"--white-albedo must be in (0, 1], got {white_albedo:g}")
     if not 1.0 <= n <= 1.6:
         raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
-    if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
-        raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
-    _not_an_input(out_dir, [("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)])
-    _outputs((out_dir, "materials fit"), overwrite=overwrite)
+    _mm_per_row_option(mm_per_row)
+    _check_outputs(
+        (out_dir, "materials fit"),
+        overwrite=overwrite,
+        inputs=[("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)],
+    )
     from ..io.atomic import planeray_output_kind
 
     if not Path(input_path).exists():
         raise ValueError(f"the capture {input_path}: no such file or folder")
+    if white_reference is not None and _same_place(Path(white_reference), Path(input_path)):
+        raise ValueError(_WHITE_IS_CAPTURE.format(white=white_reference))
     is_transport = planeray_output_kind(input_path) == "transport"
     if method == "stack" and is_transport:
         raise ValueError(f"--method stack needs a stack: {input_path} is a transport store")
@@ -560,6 +593,8 @@ def fit_cmd(
                     f"{len(white)} images, the capture {stack.shape[0]}x{stack.shape[1]} over {len(stack)}: "
                     "capture it with the same sweep and camera"
                 )
+            if white.content_digest() == stack.content_digest():
+                raise ValueError(_WHITE_IS_CAPTURE.format(white=white_reference) + " (the same images)")
         transport = None
     else:
         transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
@@ -574,6 +609,8 @@ def fit_cmd(
                 f"{white.offsets_rows.size} offsets, the capture {transport.shape[0]}x{transport.shape[1]} over "
                 f"{transport.offsets_rows.size}: capture it with the same sweep and camera"
             )
+        if np.array_equal(white.dense, transport.dense):
+            raise ValueError(_WHITE_IS_CAPTURE.format(white=white_reference) + " (the same transport)")
         scale = mfit.white_reference_scale(white.dense, albedo=white_albedo)
     if n != mfit.DEFAULT_N:
         console.print(
@@ -723,7 +760,7 @@ def report(
     from ..experiments.materials import check_report_options, report_tasks, run_materials_report
 
     check_report_options(size=size, quick=quick)
-    _outputs((out_dir, "materials report"), overwrite=overwrite)
+    _check_outputs((out_dir, "materials report"), overwrite=overwrite)
     with progress_bar() as bar:
         task = bar.add_task("materials report", total=report_tasks(quick=quick))
 
@@ -832,15 +869,19 @@ def recognize_cmd(
         raise ValueError(f"--pool-mm must be in 0-100 mm, got {pool_mm:g}")
     if not 0.0 <= p_unknown < 1.0:
         raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
-    if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
-        raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
-    _not_an_input(
-        out_dir, [("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)]
+    _mm_per_row_option(mm_per_row)
+    _check_outputs(
+        (out_dir, "materials recognition"),
+        overwrite=overwrite,
+        inputs=[("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)],
     )
-    _outputs((out_dir, "materials recognition"), overwrite=overwrite)
+    if regions is not None or labels is not None:  # the label images before the capture is demultiplexed
+        shape = _capture_shape(input_path)
+        reg = _read_labels(regions, "--regions", shape) if regions is not None else None
+        truth = _read_labels(labels, "--labels", shape) if labels is not None else None
+    else:
+        reg = truth = None
     lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
-    truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
     H, W = transport.shape
     rpc = float(transport.geometry.rows_per_camera_row)
     mm_per_pixel = mm * rpc
@@ -939,16 +980,36 @@ def library_add(
 
     if out_json.suffix.lower() != ".json":
         raise ValueError(f"--out must end in .json (a media library), got {out_json}")
+    _mm_per_row_option(mm_per_row)
     names = _parse_class_names(class_name)
     if not names:
         raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
-    _not_an_input(out_json, [("the capture", input_path), ("--labels", labels), ("--library", library)])
-    _outputs((out_json, "media library"), overwrite=overwrite)
-    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    lab = _read_labels(labels, "--labels", transport.shape)
+    in_place = library is not None and _same_place(Path(out_json), Path(library))
+    if in_place and not overwrite:  # updating the library itself: a planeray library, replaced atomically
+        raise ValueError(
+            f"--out {out_json} is the --library to add to: pass --overwrite to update it in place (planeray replaces "
+            "only a library it wrote), or name a new --out"
+        )
+    _check_outputs(
+        (out_json, "media library"),
+        overwrite=overwrite,
+        inputs=[("the capture", input_path), ("--labels", labels)] + ([] if in_place else [("--library", library)]),
+    )
+    H, W, rpc = _capture_geometry(input_path)  # the labels and the resolution before any demultiplexing
+    lab = _read_labels(labels, "--labels", (H, W))
     missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
     if missing:
         raise ValueError(f"--class-name {', '.join(missing)}: --labels {labels} has no pixel of that id")
+    lib = _library(library)
+    lib_rpc = lib.conditions.get("rows_per_camera_row")
+    if lib.entries and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+        raise ValueError(
+            f"--library {library or '(the shipped one)'}: its media were fitted at {lib_rpc:g} projector rows per "
+            f"camera row, {input_path} has {rpc:g}: the fit's biases differ with the resolution, so an entry from "
+            "this capture would not be comparable with the others; start a new library from captures at this "
+            "resolution (--library of a library made from them)"
+        )
+    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
     block = int(lib.conditions.get("block_px", 2))
     regions = np.where(np.isin(lab, list(names)), lab, 0)
     with console.status("fitting the labelled regions"):

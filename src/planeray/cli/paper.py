@@ -9,7 +9,7 @@ import typer
 
 from .._console import console, print_verbatim, progress_bar
 from . import _limits as lim
-from ._common import _friendly_errors
+from ._common import _claim, _friendly_errors
 
 
 @_friendly_errors
@@ -39,6 +39,7 @@ def paper(
     lim.folder(out_dir, "--out")
     lim.optional(lim.integer, size, "--size", minimum=MIN_SIZE, maximum=MAX_SIZE)
     lim.seed(seed)
+    _claim(out_dir)  # writable, and no other run writing it
     plan = plan_paper_run(out_dir, quick=quick, size=size, seed=seed, overwrite=overwrite)  # before any work
     if plan.done:
         console.print(

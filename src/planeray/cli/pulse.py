@@ -47,6 +47,57 @@ def _check_bands_against(video, bands: dict, rate_option: str = "--rate-band") -
         )
 
 
+def _check_pulse_resources(video, out_dir: Path, opts: dict) -> None:
+    """Refuse, before any work, what memory or the disk beside ``out_dir`` cannot hold.
+
+    The analysis holds a bounded amount of memory (its allowance and a few frames: only frames too
+    large for the memory are refused) and keeps the rest in temporary files beside ``out_dir``,
+    which must have room for them.
+    """
+    import shutil
+
+    from .._validate import _bytes_text, check_memory
+    from ..pulse.analysis import scratch_bytes
+
+    H, W = video.shape
+    needs = scratch_bytes(
+        video.n_frames,
+        (H, W),
+        levels=opts["levels"],
+        pyramid=opts["pyramid"],
+        alpha=opts["alpha"],
+        search="region" not in opts,
+        fps=video.fps,
+        rate_band_hz=opts["rate_band_hz"],
+    )
+    check_memory(
+        _bounds.BASE_BYTES + needs["memory"],
+        f"{video.source}: magnifying frames of {H}x{W}",
+        advice="the frames are too large for this machine",
+    )
+    need = needs["disk"]
+    if not need:
+        return
+    folder = Path(out_dir).absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return
+    if need > free:
+        kept = ["the laplacian pyramid's bands" if opts["pyramid"] == "laplacian" else "the pyramid level it filters"]
+        if "region" not in opts:
+            kept.append("the magnified video of the region search")
+        kept = " and ".join(kept)
+        raise ValueError(
+            f"{video.source}: {video.n_frames:,} frames of {H}x{W} need about {_bytes_text(need)} of temporary disk "
+            f"space beside {out_dir} for {kept}, more than the {_bytes_text(free)} free there; "
+            + ("give --region (no search), " if "region" not in opts else "")
+            + "write --out on a disk with more room, or use a shorter video"
+        )
+
+
 def pulse(
     video_path: Annotated[Path, typer.Argument(help="Video: multi-page TIFF, folder of frames, mp4/avi/mkv/mov.")],
     out_dir: Annotated[Path, typer.Option("--out", "-o", help="Folder to write (pulse.json, CSVs, figures).")],
@@ -92,13 +143,17 @@ def pulse(
         bool, typer.Option(help="Replace a result folder (and --magnified video) planeray wrote.")
     ] = False,
 ):
-    """Magnify a video (Eulerian, Wu et al. 2012) and measure the heart rate and its SNR (Fig. 15a)."""
+    """Magnify a video (Eulerian, Wu et al. 2012) and measure the heart rate and its SNR (Fig. 15a).
+
+    The video is read frame by frame, in bounded memory: what must be kept of a long or large video
+    (the magnified video for the automatic region search) goes to temporary files beside --out.
+    """
     import numpy as np
 
     from .._validate import check_number, check_positive
     from ..experiments.pulse import write_pulse_analysis
     from ..pulse.rate import parse_region
-    from ..pulse.video_io import VIDEO_KIND, check_video_path, read_video
+    from ..pulse.video_io import VIDEO_KIND, check_video_path, open_video
 
     # every option and output before any work
     if fps is not None:
@@ -123,9 +178,14 @@ def pulse(
         raise ValueError(f"--channel must be one of gray, red, green, blue, got {channel!r}")
     if magnified is not None:
         check_video_path(magnified, "--magnified")
-    _check_outputs((out_dir, "pulse report"), (magnified, VIDEO_KIND), overwrite=overwrite)
-    with console.status(f"reading {video_path}"):
-        video = read_video(video_path, fps=fps, channel=channel)
+    _check_outputs(
+        (out_dir, "pulse report"),
+        (magnified, VIDEO_KIND, "--magnified"),
+        overwrite=overwrite,
+        inputs=[("VIDEO", video_path), ("--mask", mask)],
+    )
+    with console.status(f"opening {video_path}"):
+        video = open_video(video_path, fps=fps, channel=channel)  # the header only: no frame decoded yet
     _check_bands_against(video, {"--band": opts["band_hz"], "--rate-band": opts["rate_band_hz"]})
     from ..pulse.evm import _pyramid_sizes
 
@@ -145,12 +205,27 @@ def pulse(
             opts["mask"] = np.asarray(read_vein_mask(mask, video.shape)) > 0
         except InputError as exc:
             raise InputError(f"--mask {str(exc).replace('vein mask', 'mask')}") from None
-    with console.status(f"magnifying {video.n_frames} frames of {video.shape[0]}x{video.shape[1]}"):
+    _check_pulse_resources(video, out_dir, opts)
+    passes = 2 if region is not None else 3
+    with progress_bar() as bar:
+        task = bar.add_task(
+            f"{video.n_frames} frames of {video.shape[0]}x{video.shape[1]}", total=passes * video.n_frames
+        )
+        done_before = {"stage": None, "frames": 0, "last": 0}
+
+        def progress(stage, done, total):
+            if stage != done_before["stage"]:
+                done_before["frames"] += done_before["last"]
+                done_before["stage"] = stage
+            done_before["last"] = done
+            bar.update(task, completed=done_before["frames"] + done, description=stage)
+
         res = write_pulse_analysis(
             video,
             out_dir,
             overwrite=overwrite,
             magnified=magnified,
+            progress=progress,
             **opts,
         )
     if json_out:

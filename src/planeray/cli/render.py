@@ -31,7 +31,7 @@ MAX_SPP = 1_000_000
 #: Largest coordinate or baseline (scene units): Mitsuba computes in float32, which keeps no fraction beyond.
 MAX_COORDINATE = 1e6
 #: Most projector columns, and the widest projector (width / height).
-MAX_PROJECTOR_COLUMNS, MAX_PROJECTOR_ASPECT = 16_384, 10.0
+MAX_PROJECTOR_COLUMNS = 16_384
 
 
 def check_render_options(
@@ -70,7 +70,15 @@ def check_render_options(
     if max_depth is not None and max_depth != -1:
         lim.integer(max_depth, "--max-depth", minimum=1, maximum=1024)
     lim.optional(lim.number, baseline, "--baseline", minimum=-MAX_COORDINATE, maximum=MAX_COORDINATE)
-    lim.optional(lim.positive, projector_aspect, "--projector-aspect", maximum=MAX_PROJECTOR_ASPECT)
+    from ..render.rig import MAX_PROJECTOR_ASPECT, MIN_PROJECTOR_ASPECT
+
+    lim.optional(  # a projector is at most 10 times wider than tall, or taller than wide
+        lim.number,
+        projector_aspect,
+        "--projector-aspect",
+        minimum=MIN_PROJECTOR_ASPECT,
+        maximum=MAX_PROJECTOR_ASPECT,
+    )
     lim.optional(lim.integer, projector_columns, "--projector-columns", minimum=1, maximum=MAX_PROJECTOR_COLUMNS)
     # --projector-vfov: checked by the renderer's setup, before any work (in (0, 180) degrees)
     if size is not None and rows is not None:
@@ -143,7 +151,11 @@ def render(
     from ..render import render_to_store, render_work
     from ..scenes.mitsuba_scene import resolve_scene_file
 
-    _check_outputs((out_path, "transport"), overwrite=overwrite)
+    _check_outputs(
+        (out_path, "transport"),
+        overwrite=overwrite,
+        inputs=[("SCENE_FILE", Path(scene_file) if Path(scene_file).exists() else None)],
+    )
     if (look_from is None) != (look_at is None):
         raise ValueError("--look-from and --look-at go together")
     if look_from is None:

@@ -130,7 +130,13 @@ def simulate(
     from ..scenes import make_scene
     from ..scenes.store_scene import scene_from_transport_store
 
-    _check_outputs((out_path, "stack"), (truth, "transport"), overwrite=overwrite)
+    scene_file = Path(scene.removeprefix("mitsuba:")) if scene.startswith("mitsuba:") else Path(scene)
+    _check_outputs(
+        (out_path, "stack"),
+        (truth, "transport", "--truth"),
+        overwrite=overwrite,
+        inputs=[("SCENE", scene_file if scene_file.exists() else None)],
+    )
     if size is not None:
         size = lim.size(size, minimum=1)
     lim.projector_rows(projector_rows)

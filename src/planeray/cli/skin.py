@@ -21,7 +21,7 @@ import typer
 
 from .._console import console, out, progress_bar
 from . import _bounds
-from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack
+from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack, _not_a_home
 
 skin_app = typer.Typer(
     help="Skin and veins (Sec. 10): simulate captures, check the physics, vein images and metrics, Eq. 7.",
@@ -128,6 +128,7 @@ def simulate(
         raise ValueError(f"--sweep must be one of {', '.join(sorted(SWEEPS))}, got {sweep!r}")
     n = len(make_sweep(sweep))
     _bounds.scene_memory(shape, extra_bytes=3 * n * shape[0] * shape[1] * 4)
+    _not_a_home(out_path)  # before its name makes the ground truth's file names
     truth = truth_paths(out_path)
     _check_outputs(
         (out_path, "stack"),
@@ -473,7 +474,11 @@ def veins(
     _exposure_option(exposure_us)
     if mm_per_row is not None:
         _mm_per_row_option(mm_per_row)
-    _check_outputs((out_dir, "skin veins"), overwrite=overwrite)
+    _check_outputs(
+        (out_dir, "skin veins"),
+        overwrite=overwrite,
+        inputs=[("SOURCE", source), ("--transport", transport_path), ("--mask", mask)],
+    )
     from_transport = _source_kind(source, "SOURCE") == "transport"
     if from_transport and transport_path is not None:
         raise ValueError(f"--transport: {source} is already a transport store; give a stack with --transport")
@@ -594,7 +599,7 @@ def enhance(
     _delay_option(min_delay_us, "--min-delay-us")
     if mm_per_row is not None:
         _mm_per_row_option(mm_per_row)
-    _check_outputs((out_dir, "skin enhance"), overwrite=overwrite)
+    _check_outputs((out_dir, "skin enhance"), overwrite=overwrite, inputs=[("STACK", stack_path), ("--mask", mask)])
     _source_kind(stack_path, "STACK")
     stack = _load_stack(stack_path)
     if patch_px is not None:  # bounded by the image: a patch larger than the image is the image
@@ -779,7 +784,7 @@ def depth(
         _wavelength(wavelength)
     if mm_per_row is not None:
         _mm_per_row_option(mm_per_row)
-    _check_outputs((out_dir, "skin depth"), overwrite=overwrite)
+    _check_outputs((out_dir, "skin depth"), overwrite=overwrite, inputs=[("STACK", stack_path), ("--mask", mask)])
     if _source_kind(stack_path, "STACK") != "stack":
         raise InputError("a transport store has no delay sweep: give the stack (STACK)", stack_path)
     stack = _load_stack(stack_path)

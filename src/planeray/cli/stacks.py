@@ -63,7 +63,7 @@ def export(
     """Export a stack as 16-bit images + manifest.csv + acquisition.json (the import format)."""
     from ..io import export_folder
 
-    _check_outputs((out_dir, "export folder"), overwrite=overwrite)
+    _check_outputs((out_dir, "export folder"), overwrite=overwrite, inputs=[("STACK", stack_path)])
     if fmt.lower() not in ("tiff", "tif", "png"):
         raise InputError(f"--format must be tiff or png, got {fmt!r}")
     lim.integer(bit_depth, "--bit-depth", minimum=1, maximum=16)
@@ -83,7 +83,7 @@ def import_(
     """Import a captured stack folder into a native Zarr stack."""
     from ..io import import_folder, write_stack
 
-    _check_outputs((out_path, "stack"), overwrite=overwrite)
+    _check_outputs((out_path, "stack"), overwrite=overwrite, inputs=[("FOLDER", folder)])
     st = import_folder(folder)
     with progress_bar() as bar:
         task = bar.add_task("writing stack", total=len(st))

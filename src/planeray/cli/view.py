@@ -10,11 +10,19 @@ from typing import Annotated
 import typer
 
 from .._console import console, print_verbatim, progress_bar
+from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND
-from ._common import _friendly_errors
+from ._common import _check_outputs, _friendly_errors
+from ._devices import CalibrationArg, DeviceOptionArg
 
 PathArg = Annotated[
     str, typer.Argument(help="A scene name (a virtual Episcan: see `planeray scenes`), a transport store or a stack.")
+]
+ViewPathArg = Annotated[
+    str | None,
+    typer.Argument(
+        help="A scene name (a virtual Episcan: see `planeray scenes`), a transport store or a stack; or --device."
+    ),
 ]
 SizeOpt = Annotated[
     int, typer.Option(help="Scenes: image size (square, camera pixels; at least 8, at most what memory holds).")
@@ -73,9 +81,59 @@ def _can_open_browser() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+#: What ``view --device sim`` opens unless told otherwise: the pulsing skin (the vein view, Eq. 7 and the pulse),
+#: through a camera binned as the paper's 1200-row sensor, one frame per image (a live video).
+SIM_LIVE_DEFAULTS = {"scene": "skin", "pulse_bpm": 72.0, "sensor_rows": 1200}
+
+
+def _open_live(device: str, device_option, calibration, snapshots):
+    """The live source of ``view --device``: the device opened from its options, with the live defaults."""
+    from ..devices import SimulatedEpiscan, device_options
+    from ..viewer.live import DeviceSource
+    from ._devices import open_device_from_cli, parse_device_options
+
+    given = parse_device_options(device_option)
+    accepted = device_options(device)
+    defaults = dict(SIM_LIVE_DEFAULTS) if device == "sim" else {}
+    if given.get("scene", "skin") != "skin":
+        defaults.pop("pulse_bpm", None)  # only the skin pulses
+    if "frames_averaged" in accepted:
+        defaults["frames_averaged"] = 1
+    explicit = {k: v for k, v in defaults.items() if k not in given and k in accepted}
+
+    def check(options):
+        if "base_trigger_delay_us" in accepted and options.get("base_trigger_delay_us") is None:
+            raise InputError(
+                f"device {device!r} needs its base trigger delay: run `planeray calibrate delay-zero --device "
+                f"{device} --write acquisition.json` and pass --calibration acquisition.json (or -O "
+                "base_trigger_delay_us=...)"
+            )
+
+    with console.status(f"opening {device}"):
+        dev = open_device_from_cli(device, explicit, device_option, calibration, check=check)
+    max_fps = None
+    if isinstance(dev, SimulatedEpiscan):  # as fast as its projector and averaging allow, never every core
+        max_fps = dev.rig["frame_rate_hz"] / dev.camera.frames_averaged
+    try:
+        return DeviceSource(dev, name=device, max_fps=max_fps, snapshot_dir=snapshots), explicit
+    except BaseException:
+        dev.close()
+        raise
+
+
 @_friendly_errors
 def view(
-    path: PathArg,
+    path: ViewPathArg = None,
+    device: Annotated[
+        str | None,
+        typer.Option(help="Show this device live instead (`planeray devices`): sim, genicam, ueye, ..."),
+    ] = None,
+    device_option: DeviceOptionArg = None,
+    calibration: CalibrationArg = None,
+    snapshots: Annotated[
+        Path | None,
+        typer.Option(help="--device: the folder the page's 'save stack' writes to.", show_default="the current folder"),
+    ] = None,
     host: Annotated[
         str, typer.Option(help="Address to serve on. 127.0.0.1 (default): this machine only.")
     ] = "127.0.0.1",
@@ -93,25 +151,51 @@ def view(
     pattern: PatternOpt = None,
 ):
     """Explore a scene, a transport or a stack live in the browser: delay and exposure sliders, epipolar,
-    non-epipolar, sharpened, short/long range, relighting, pixel plots, snapshots (Ctrl-C stops)."""
+    non-epipolar, sharpened, short/long range, relighting, pixel plots, snapshots (Ctrl-C stops).
+
+    With ``--device NAME`` the page drives a device live: its sliders set the camera's trigger delay and
+    exposure; the band image, the vein view, Eq. 7's composite over a cycle of delays and the pulse of a
+    rolling window; 'save stack' writes what was captured into --snapshots.  ``--device sim`` is the
+    simulated pulsing skin (-O scene=... for another scene)."""
     from .._validate import check_integer, check_positive
     from ..viewer.server import ViewerServer
 
     check_integer(port, "--port", minimum=0, maximum=65535)
+    if (path is None) == (device is None):
+        raise InputError("give a PATH (a scene, a transport store or a stack) or --device NAME, one of them")
+    if device is None:
+        for option, value in (("--device-option", device_option or None), ("--calibration", calibration),
+                              ("--snapshots", snapshots)):  # fmt: skip
+            if value is not None:
+                raise InputError(f"{option} applies to --device only")
     if truth_scale is not None:
         check_positive(truth_scale, "--truth-scale")
-    _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
-
-    source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=truth, truth_scale=truth_scale,
-                   pattern=pattern)  # fmt: skip
-    server = ViewerServer(source, host=host, port=port)
+    if device is not None:
+        if truth is not None or pattern:
+            raise InputError("--truth and --pattern apply to a PATH, not to --device")
+        folder = Path.cwd() if snapshots is None else snapshots
+        if not folder.is_dir():
+            raise InputError("--snapshots must be an existing folder", folder)
+        source, used = _open_live(device, device_option, calibration, folder)
+    else:
+        _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
+        source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=truth,
+                       truth_scale=truth_scale, pattern=pattern)  # fmt: skip
+    try:
+        server = ViewerServer(source, host=host, port=port)
+    except BaseException:
+        getattr(source, "close", lambda: None)()
+        raise
     if server.port_fallback:
         console.print(f"port {port} is in use; serving on {server.port}")
     if not server.loopback:
         console.print(
             f"note: serving on {host}, reachable from other machines; the access token in the URL is the only lock"
         )
-    console.print(f"planeray view: {source.kind} {source.name} ({source.shape[0]}x{source.shape[1]}); Ctrl-C stops")
+    what = f"{source.kind} {source.name}"
+    if device is not None and used:
+        what += " (" + ", ".join(f"-O {k}={v}" for k, v in used.items()) + ")"
+    console.print(f"planeray view: {what} ({source.shape[0]}x{source.shape[1]}); Ctrl-C stops")
     print_verbatim(server.url)
     if browser and _can_open_browser():
         import webbrowser
@@ -164,7 +248,6 @@ def video(
 ):
     """Write a delay (or exposure) sweep as a video: the paper's "sweeping the band"."""
     from .._validate import check_integer, check_number, check_positive
-    from ..io.atomic import check_replaceable
     from ..viewer.display import check_display
     from ..viewer.session import ViewSettings
     from ..viewer.video import (
@@ -197,7 +280,9 @@ def video(
     if scale is not None:
         check_integer(scale, "--scale", minimum=1, maximum=64)
     _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
-    check_replaceable(out_path, overwrite=overwrite, kind=VIDEO_KIND)
+    _check_outputs(
+        (out_path, VIDEO_KIND), overwrite=overwrite, inputs=[("PATH", path if Path(path).exists() else None)]
+    )
     source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=None, truth_scale=None,
                    pattern=None)  # fmt: skip
     settings = ViewSettings(delay_us=delay_us, exposure_us=exposure_us, noise=noise, ambient=ambient)

@@ -29,6 +29,7 @@ from .._validate import check_integer, check_number
 from ..errors import InputError, TransportError
 from ..io import create_array, transport_attrs, writable
 from ..io.atomic import check_replaceable
+from ..io.lock import writes_output
 from ..stack import Stack
 from ..timing import RowGeometry
 from ..transport import Transport
@@ -516,6 +517,7 @@ def _write_chunk(group, res: ChunkResult, index: int) -> None:
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 
+@writes_output("out")
 def demultiplex_to_store(
     stack: Stack,
     out,

@@ -1,4 +1,4 @@
-"""Devices: the protocol, the registry, the simulated Episcan, a replay device and the IDS uEye driver.
+"""Devices: the protocol, the registry, the simulated Episcan, a replay device, the IDS uEye and GenICam drivers.
 
 Adding a camera is adding one module to this package (or an entry point in the
 group ``planeray.devices`` of another package) that registers a factory with
@@ -15,21 +15,24 @@ from .base import (
     open_device,
     register_device,
 )
+from .genicam import GenICamEpiscan, aravis_available
 from .replay import ReplayDevice
 from .simulated import SimulatedEpiscan
 from .ueye import UEyeEpiscan, pyueye_available
 
 #: The built-in devices by name (every registered one: :func:`list_devices`).
-DEVICES = {"sim": SimulatedEpiscan, "replay": ReplayDevice, "ueye": UEyeEpiscan}
+DEVICES = {"sim": SimulatedEpiscan, "replay": ReplayDevice, "ueye": UEyeEpiscan, "genicam": GenICamEpiscan}
 
 __all__ = [
     "DEVICES",
     "Device",
     "DeviceBase",
+    "GenICamEpiscan",
     "ReplayDevice",
     "SimulatedEpiscan",
     "UEyeEpiscan",
     "apply_timing",
+    "aravis_available",
     "device_options",
     "is_hardware",
     "list_devices",

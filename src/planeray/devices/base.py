@@ -208,7 +208,7 @@ def open_device(name: str, **options) -> Device:
     >>> open_device("sim", camera_id=0)
     Traceback (most recent call last):
     ...
-    planeray.errors.InputError: device 'sim' has no option 'camera_id'; its options: lines_per_second, noise, projector_rows, scene, seed, size
+    planeray.errors.InputError: device 'sim' has no option 'camera_id'; its options: delay_error_us, display, exposure_range_us, frame_rate_hz, frames_averaged, gamma, lines_per_second, noise, projector_rows, pulse_amplitude, pulse_bpm, row_time_error, scene, screen, seed, sensor_rows, shutter, size, trigger_delay_range_us, trigger_edge, trigger_wired
     """
     entry = _entry(name)
     accepted = device_options(name)

@@ -43,6 +43,10 @@ class ReplayDevice(DeviceBase):
             raise InputError(f"exposure must be positive, got {exposure_us}")
         self.exposure_us = float(exposure_us)
 
+    def get_timing_us(self) -> tuple[float, float]:
+        """The delay and exposure of the image the next grab serves (us)."""
+        return self.delay_us, self.exposure_us
+
     def grab(self):
         i = self.stack.index_of(self.delay_us, self.exposure_us)
         if i is None:

@@ -41,8 +41,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DeviceError, InputError
-from ..timing import PAPER_LINES_PER_SECOND, sync_offset_from_delay
+from ..timing import PAPER_LINES_PER_SECOND
+from ._triggered import TriggeredTiming
 from .base import DeviceBase, register_device
+from .capabilities import SHUTTER_MODES, TRIGGER_EDGES
 
 __all__ = ["UEyeEpiscan", "pyueye_available"]
 
@@ -95,7 +97,7 @@ def _code(ret) -> str:
 
 
 @register_device("ueye", "IDS uEye camera (pyueye), rolling shutter triggered by the projector's VSYNC", hardware=True)
-class UEyeEpiscan(DeviceBase):
+class UEyeEpiscan(TriggeredTiming, DeviceBase):
     """An Episcan-style rig with an IDS uEye camera (device protocol of :mod:`planeray.devices`).
 
     Opening the device initializes the camera and configures it completely; any
@@ -190,6 +192,9 @@ class UEyeEpiscan(DeviceBase):
         self.applied_trigger_delay_us = None
         self._allocated = False
         self._unsupported: list[str] = []
+        self.shutter_modes = ("rolling",)
+        self._shutter = "rolling"
+        self._global_timing = None  # (exposure, trigger delay) of a global exposure
 
         try:
             from pyueye import ueye
@@ -243,6 +248,9 @@ class UEyeEpiscan(DeviceBase):
         )
         if not int(_num(caps)) & rolling:
             raise DeviceError("this uEye camera has no rolling-shutter mode; plane-to-ray capture needs one")
+        has_global = bool(int(_num(caps)) & int(u.IS_DEVICE_FEATURE_CAP_SHUTTER_MODE_GLOBAL))
+        self.shutter_modes = ("rolling", "global") if has_global else ("rolling",)
+        self._shutter = "rolling"
         mode = u.c_uint(rolling)
         self._check(
             u.is_DeviceFeature(h, u.IS_DEVICE_FEATURE_CMD_SET_SHUTTER_MODE, mode, u.sizeof(mode)),
@@ -321,52 +329,105 @@ class UEyeEpiscan(DeviceBase):
         if self.pitch < 2 * self.width or self.pitch % 2:
             raise DeviceError(f"image line pitch {self.pitch} bytes cannot hold {self.width} 16-bit pixels")
 
+    # ---------------------------------------------------------- capabilities
+    def get_shutter(self) -> str:
+        """The shutter mode, read back from the camera (``is_DeviceFeature``)."""
+        self._require_open()
+        u = self._ueye
+        back = u.c_uint(0)
+        self._check(
+            u.is_DeviceFeature(self._h, u.IS_DEVICE_FEATURE_CMD_GET_SHUTTER_MODE, back, u.sizeof(back)),
+            "is_DeviceFeature (reading the shutter mode)",
+        )
+        value = int(_num(back))
+        if value == int(u.IS_DEVICE_FEATURE_CAP_SHUTTER_MODE_ROLLING):
+            return "rolling"
+        if value == int(u.IS_DEVICE_FEATURE_CAP_SHUTTER_MODE_GLOBAL):
+            return "global"
+        return f"unknown ({value})"
+
+    def set_shutter(self, mode: str) -> None:
+        """Select the rolling or the global shutter and read it back."""
+        if mode not in SHUTTER_MODES:
+            raise InputError(f"shutter mode must be 'rolling' or 'global', got {mode!r}")
+        if mode not in self.shutter_modes:
+            raise DeviceError(f"this uEye camera has no {mode}-shutter mode")
+        self._require_open()
+        u = self._ueye
+        flag = (
+            u.IS_DEVICE_FEATURE_CAP_SHUTTER_MODE_ROLLING
+            if mode == "rolling"
+            else u.IS_DEVICE_FEATURE_CAP_SHUTTER_MODE_GLOBAL
+        )
+        value = u.c_uint(int(flag))
+        self._check(
+            u.is_DeviceFeature(self._h, u.IS_DEVICE_FEATURE_CMD_SET_SHUTTER_MODE, value, u.sizeof(value)),
+            f"is_DeviceFeature ({mode} shutter)",
+        )
+        back = self.get_shutter()
+        if back != mode:
+            raise DeviceError(f"the camera did not switch to {mode} shutter (shutter mode read back: {back})")
+        self._shutter = mode
+        self._applied = None  # the exposure range and trigger timing are the mode's own: set them again
+
+    def get_trigger_edge(self) -> str:
+        """The VSYNC edge that starts a frame, read back (``is_SetExternalTrigger(IS_GET_EXTERNALTRIGGER)``)."""
+        self._require_open()
+        u = self._ueye
+        mode = int(_num(u.is_SetExternalTrigger(self._h, u.IS_GET_EXTERNALTRIGGER)))
+        return {int(u.IS_SET_TRIGGER_LO_HI): "rising", int(u.IS_SET_TRIGGER_HI_LO): "falling"}.get(
+            mode, f"off ({mode})"
+        )
+
+    def set_trigger_edge(self, edge: str) -> None:
+        """Trigger on the ``rising`` or ``falling`` edge of VSYNC."""
+        if edge not in TRIGGER_EDGES:
+            raise InputError(f"trigger edge must be 'rising' or 'falling', got {edge!r}")
+        self._require_open()
+        u = self._ueye
+        trigger = u.IS_SET_TRIGGER_LO_HI if edge == "rising" else u.IS_SET_TRIGGER_HI_LO
+        self._check(u.is_SetExternalTrigger(self._h, trigger), f"is_SetExternalTrigger ({edge} edge)")
+        self.trigger_edge = edge
+
+    def get_gamma(self) -> float:
+        """The software gamma, read back (``is_Gamma(IS_GAMMA_CMD_GET)``, in hundredths): 1.0 is linear."""
+        self._require_open()
+        u = self._ueye
+        value = u.c_int(0)
+        ret = u.is_Gamma(self._h, u.IS_GAMMA_CMD_GET, value, u.sizeof(value))
+        if _num(ret) == _IS_NOT_SUPPORTED:
+            return 1.0
+        self._check(ret, "is_Gamma (get)")
+        return int(_num(value)) / 100.0
+
+    def get_exposure_range_us(self) -> tuple[float, float]:
+        """Shortest and longest exposure at the current pixel clock (us)."""
+        return tuple(self.exposure_range_us)
+
+    def get_trigger_delay_range_us(self) -> tuple[float, float]:
+        """Shortest and longest trigger delay (us)."""
+        return tuple(self.trigger_delay_range_us)
+
+    def _read_timing(self) -> tuple[float, float]:
+        """The exposure and the trigger delay read back from the camera (us)."""
+        self._require_open()
+        u = self._ueye
+        got = u.c_double(0.0)
+        self._check(u.is_Exposure(self._h, u.IS_EXPOSURE_CMD_GET_EXPOSURE, got, u.sizeof(got)), "is_Exposure (get)")
+        exposure = float(_num(got)) * 1000.0
+        return exposure, float(int(_num(u.is_SetTriggerDelay(self._h, u.IS_GET_TRIGGER_DELAY))))
+
     # -------------------------------------------------------------- timing
-    @property
-    def base_trigger_delay_us(self) -> float | None:
-        """Trigger delay (us) at which ``t'_o = 0``; changing it re-applies the timing at the next grab."""
-        return self._base
-
-    @base_trigger_delay_us.setter
-    def base_trigger_delay_us(self, value):
-        if value is not None and not math.isfinite(value):
-            raise InputError(f"base_trigger_delay_us must be a number, got {value!r}")
-        self._base = None if value is None else float(value)
-        self._applied = None
-
-    def trigger_delay_for(self, delay_us: float, exposure_us: float) -> float:
-        """Trigger delay (us) realizing ``(t_d, t_e)`` by Eq. 1: ``base - (t_e/2 - t_p/2 - t_d)``."""
-        if self._base is None:
-            raise DeviceError(
-                "the base trigger delay is not calibrated: run `planeray calibrate delay-zero --device ueye "
-                "--write acquisition.json` and pass --calibration acquisition.json (or --base-trigger-delay-us)"
-            )
-        t_o = float(sync_offset_from_delay(delay_us, exposure_us, lines_per_second=self.lines_per_second))
-        return self._base - t_o
-
-    def set_delay(self, delay_us: float) -> None:
-        if not math.isfinite(delay_us):
-            raise InputError(f"delay must be a number, got {delay_us!r}")
-        self.delay_us = float(delay_us)
-
-    def set_exposure(self, exposure_us: float) -> None:
-        if not (math.isfinite(exposure_us) and exposure_us > 0):
-            raise DeviceError(f"exposure must be positive, got {exposure_us}")
-        self.exposure_us = float(exposure_us)
-
-    def set_timing(self, delay_us: float, exposure_us: float) -> None:
-        """Set one sweep point and apply it now (refusing a pair the camera cannot realize)."""
-        self.set_exposure(exposure_us)
-        self.set_delay(delay_us)
-        self._apply()
-
     def _apply(self):
         self._require_open()
-        want = (self.delay_us, self.exposure_us, self._base)
+        glob = self._shutter == "global"
+        if glob and self._global_timing is None:
+            raise DeviceError("a global-shutter grab needs its exposure and trigger delay: call set_global_timing")
+        want = ("global", *self._global_timing) if glob else (self.delay_us, self.exposure_us, self._base)
         if self._applied == want:
             return
         u, h = self._ueye, self._h
-        e = self.exposure_us
+        e = self._global_timing[0] if glob else self.exposure_us
         lo, hi = self.exposure_range_us
         if not lo - 1e-6 <= e <= hi + 1e-6:
             raise DeviceError(
@@ -388,10 +449,13 @@ class UEyeEpiscan(DeviceBase):
                 )
             self._exposure_set, self.realized_exposure_us = e, realized
         # Eq. 1 with the exposure the camera really uses, so the band is centred where asked
-        ideal = self.trigger_delay_for(self.delay_us, self.realized_exposure_us)
+        # (a global exposure opens at the trigger delay asked for)
+        ideal = self._global_timing[1] if glob else self.trigger_delay_for(self.delay_us, self.realized_exposure_us)
         step = self.trigger_delay_step_us
         trigger = int(round(ideal / step)) * step
         dmin, dmax = self.trigger_delay_range_us
+        if glob and not dmin <= trigger <= dmax:
+            raise DeviceError(f"trigger delay {ideal:g} us is outside the camera's {dmin:g}..{dmax:g} us")
         if not dmin <= trigger <= dmax:
             raise DeviceError(
                 f"delay {self.delay_us:g} us at exposure {e:g} us needs trigger delay {ideal:.1f} us "
@@ -465,6 +529,7 @@ class UEyeEpiscan(DeviceBase):
             "lines_per_second": self.lines_per_second,
             "base_trigger_delay_us": self._base,
             "shutter": "rolling",
+            "shutter_modes": list(self.shutter_modes),
             "trigger": {
                 "source": "projector VSYNC",
                 "edge": self.trigger_edge,

@@ -76,10 +76,10 @@ def _write_csv(path: Path, header, rows) -> None:
         w.writerows(rows)
 
 
-def _region_png(path: Path, frames, region) -> None:
+def _region_png(path: Path, mean_frame, region) -> None:
     from ..figures._common import new_figure, save_png
 
-    mean = np.asarray(frames).mean(axis=0)
+    mean = np.asarray(mean_frame)
     fig = new_figure((4.2, 4.2 * mean.shape[0] / mean.shape[1] + 0.4))
     ax = fig.subplots()
     lo, hi = np.percentile(mean, [0.5, 99.5])
@@ -92,46 +92,81 @@ def _region_png(path: Path, frames, region) -> None:
     save_png(fig, path, dpi=110)
 
 
-def write_pulse_analysis(video, out_dir, *, overwrite: bool = False, truth_bpm=None, magnified=None, **options):
+#: The folder, inside the result's temporary, where ``skin pulse`` keeps what does not fit in memory.
+SCRATCH_FOLDER = ".scratch"
+
+
+def write_pulse_analysis(
+    video, out_dir, *, overwrite: bool = False, truth_bpm=None, magnified=None, progress=None, **options
+):
     """Analyse ``video`` (:func:`planeray.pulse.analysis.analyze_pulse` with ``options``) and write ``out_dir``.
 
-    ``magnified``: also write the magnified video to this file (:func:`planeray.pulse.video_io.write_video`).
-    Both outputs are checked before any work and go into place together at the end (a failure
-    leaves neither).  Returns the :class:`~planeray.pulse.analysis.PulseAnalysis`.
+    ``video`` is a :class:`~planeray.pulse.video_io.Video` or a :class:`~planeray.pulse.video_io.VideoFile`
+    (read frame by frame: the analysis holds a bounded amount of memory and keeps the rest in temporary
+    files inside the result folder's own temporary, removed with it whatever happens).
+    ``magnified``: also write the magnified video to this file, frame by frame as the analysis makes
+    them (:func:`planeray.pulse.video_io.encode_frames`; 8-bit formats show the video's 99.9th percentile
+    as white).  Both outputs are checked before any work and go into place together at the end (a
+    failure leaves neither).  ``progress``: see :func:`~planeray.pulse.analysis.analyze_pulse`.
+    Returns the :class:`~planeray.pulse.analysis.PulseAnalysis`.
     """
     import contextlib
+    import shutil
 
     from ..figures.pulse import pulse_signal_figure
     from ..io import atomic_file
     from ..io.atomic import check_replaceable
-    from ..pulse.video_io import VIDEO_KIND, Video, check_video_path, encode_video
+    from ..pulse.video_io import VIDEO_KIND, FramePercentile, check_video_path, encode_frames
 
     check_replaceable(out_dir, overwrite=overwrite, kind="pulse report")
     if magnified is not None:
         check_video_path(magnified, "magnified")
         check_replaceable(magnified, overwrite=overwrite, kind=VIDEO_KIND)
-        options["keep_video"] = True
-    result = analyze_pulse(video, **options)
-    meta = {
-        "format": ANALYSIS_FORMAT,
-        "format_version": 1,
-        "kind": "analysis",
-        "video": video.source,
-        "fps": video.fps,
-        "frames": video.n_frames,
-        "size": list(video.shape),
-    }
     with contextlib.ExitStack() as outputs:
+        mag_tmp = white = None
         if magnified is not None:  # renamed into place after the folder
             mag_tmp = outputs.enter_context(atomic_file(magnified, overwrite=overwrite))
-            mag = Video(result.magnified, video.fps, str(video.source), {"magnified": result.settings})
-            encode_video(mag_tmp, mag, white=float(np.percentile(video.frames, 99.9)))
+            if Path(magnified).suffix.lower() not in (".tif", ".tiff"):
+                white = FramePercentile(99.9, video.n_frames * video.shape[0] * video.shape[1])
         tmp = outputs.enter_context(atomic_directory(out_dir, overwrite=overwrite, kind="pulse report"))
-        _write_analysis_folder(tmp, video, result, meta, truth_bpm, pulse_signal_figure)
+        scratch = tmp / SCRATCH_FOLDER
+        scratch.mkdir()
+
+        def write_magnified(frames, n_frames, settings):
+            encode_frames(
+                mag_tmp,
+                frames,
+                n_frames=n_frames,
+                shape=video.shape,
+                fps=video.fps,
+                meta={"magnified": settings},
+                white=white.value() if white is not None else 1.0,
+                suffix=Path(magnified).suffix,
+            )
+
+        result = analyze_pulse(
+            video,
+            scratch_dir=scratch,
+            observe=white.add if white is not None else None,
+            write_magnified=write_magnified if magnified is not None else None,
+            progress=progress,
+            **options,
+        )
+        shutil.rmtree(scratch)
+        meta = {
+            "format": ANALYSIS_FORMAT,
+            "format_version": 1,
+            "kind": "analysis",
+            "video": video.source,
+            "fps": video.fps,
+            "frames": video.n_frames,
+            "size": list(video.shape),
+        }
+        _write_analysis_folder(tmp, result, meta, truth_bpm, pulse_signal_figure)
     return result
 
 
-def _write_analysis_folder(tmp, video, result, meta, truth_bpm, pulse_signal_figure) -> None:
+def _write_analysis_folder(tmp, result, meta, truth_bpm, pulse_signal_figure) -> None:
     """The files of a ``skin pulse`` result folder, written into ``tmp``."""
     (tmp / "pulse.json").write_text(json.dumps({**meta, **result.to_dict()}, indent=1, default=float))
     _write_csv(
@@ -148,7 +183,7 @@ def _write_analysis_folder(tmp, video, result, meta, truth_bpm, pulse_signal_fig
     pulse_signal_figure(
         result.time_s, result.signal, est, raw=result.raw_signal, truth_bpm=truth_bpm, out=tmp / "fig15a_pulse.png"
     )
-    _region_png(tmp / "region.png", video.frames, result.region)
+    _region_png(tmp / "region.png", result.mean_frame, result.region)
     (tmp / MARKER).write_text(json.dumps(meta, indent=1))
 
 

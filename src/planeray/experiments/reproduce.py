@@ -34,6 +34,7 @@ from .._validate import check_integer
 from ..errors import InputError
 from ..io import atomic_directory, atomic_file
 from ..io.atomic import MARKER, check_replaceable, planeray_output_kind, storage_error
+from ..io.lock import writes_output
 from ._report import jsonable
 
 __all__ = [
@@ -690,6 +691,7 @@ def run_step(out: Path, name: str, settings: dict, *, advance=None) -> dict:
     return jsonable(record)
 
 
+@writes_output("out_dir")
 def run_paper(
     out_dir,
     *,

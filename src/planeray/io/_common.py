@@ -126,10 +126,13 @@ def open_group(path: Path, error):
         raise error("path does not exist", path)
     if not path.is_dir():
         raise error("not a Zarr store (expected a directory)", path)
+    if not (path / "zarr.json").is_file():
+        raise error("not a planeray store: no zarr.json (stacks and transports are Zarr v3 folders)", path)
     try:
         return zarr.open_group(str(path), mode="r")
     except Exception as exc:  # zarr raises several unrelated types
-        raise error(f"not a Zarr group ({type(exc).__name__}: {exc})", path) from exc
+        cause = " ".join(str(exc).split()) or type(exc).__name__
+        raise error(f"not a readable Zarr group: {cause}", path) from exc
 
 
 def get_array(group, name: str, path: Path, error, required: bool = True):

@@ -14,20 +14,21 @@ disk full) become one :class:`~planeray.errors.StorageError` naming the output.
 from __future__ import annotations
 
 import contextlib
-import errno
 import json
 import os
 import shutil
 import uuid
 from pathlib import Path
 
-from ..errors import InputError, StorageError
+from ..errors import InputError
+from ._storage import storage_error
 
 __all__ = [
     "ALREADY_EXISTS",
     "atomic_directory",
     "atomic_file",
     "check_replaceable",
+    "check_writable",
     "planeray_output_kind",
     "storage_error",
 ]
@@ -147,14 +148,47 @@ def check_replaceable(path, *, overwrite: bool, kind: str | None = None, error=I
         )
 
 
-def storage_error(exc: BaseException, path) -> StorageError:
-    """A one-line :class:`~planeray.errors.StorageError` for a file-system failure while writing ``path``."""
-    if isinstance(exc, OSError) and exc.errno is not None:
-        name = errno.errorcode.get(exc.errno, str(exc.errno))
-        cause = f"{exc.strerror or os.strerror(exc.errno)} [{name}]"
-        where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(path) else ""
-        return StorageError(f"cannot write: {cause}{where}", path)
-    return StorageError(f"cannot write: {type(exc).__name__}: {exc}", path)
+#: Bytes the write probe of :func:`check_writable` writes (a full disk refuses its first block).
+_PROBE_BYTES = 4096
+
+
+def check_writable(path) -> None:
+    """Raise unless a file can be written where ``path`` will be: before any work.
+
+    A file of :data:`_PROBE_BYTES` bytes is written (and removed) in the nearest
+    existing folder above ``path``: a read-only folder, a full disk or a folder the
+    user may not write into fails here, in one line, instead of after minutes of work.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output about to be written (it need not exist, nor its folder).
+
+    Raises
+    ------
+    StorageError
+        ``PATH: cannot write: Read-only file system [EROFS] (probe ...)`` and the like.
+    InputError
+        A file stands where a folder above ``path`` must be.
+    """
+    path = Path(path)
+    folder = path.absolute().parent
+    while not folder.exists() and folder.parent != folder:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"cannot be created: {folder} is a file, not a folder", path)
+    probe = folder / f".{path.name}.probe-{os.getpid()}-{uuid.uuid4().hex}"
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        try:
+            os.write(fd, b"\0" * _PROBE_BYTES)
+        finally:
+            os.close(fd)
+    except OSError as exc:
+        raise storage_error(exc, path) from None
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(probe)
 
 
 # ----------------------------------------------------------------------------
@@ -242,38 +276,41 @@ def atomic_directory(path, *, overwrite: bool = False, kind: str | None = None, 
         The file system refused (read-only folder, disk full...): one line naming
         ``path`` and the cause; nothing is left behind.
     """
+    from .lock import output_lock
+
     path = Path(path)
     check_replaceable(path, overwrite=overwrite, kind=kind, error=error)
     _make_parent(path, error)
-    remove_stale_temporaries(path)
-    tmp = _temp_sibling(path, "tmp")
-    try:
-        tmp.mkdir()
-    except OSError as exc:
-        raise storage_error(exc, path) from None
-    try:
+    with output_lock(path):
+        remove_stale_temporaries(path)
+        tmp = _temp_sibling(path, "tmp")
         try:
-            yield tmp
+            tmp.mkdir()
         except OSError as exc:
             raise storage_error(exc, path) from None
-        check_replaceable(path, overwrite=overwrite, kind=kind, error=error)  # it may have appeared meanwhile
         try:
-            if path.exists() or path.is_symlink():
-                backup = _temp_sibling(path, "bak")
-                os.rename(path, backup)
-                try:
+            try:
+                yield tmp
+            except OSError as exc:
+                raise storage_error(exc, path) from None
+            check_replaceable(path, overwrite=overwrite, kind=kind, error=error)  # it may have appeared meanwhile
+            try:
+                if path.exists() or path.is_symlink():
+                    backup = _temp_sibling(path, "bak")
+                    os.rename(path, backup)
+                    try:
+                        os.rename(tmp, path)
+                    except BaseException:
+                        os.rename(backup, path)
+                        raise
+                    _remove(backup)
+                else:
                     os.rename(tmp, path)
-                except BaseException:
-                    os.rename(backup, path)
-                    raise
-                _remove(backup)
-            else:
-                os.rename(tmp, path)
-        except OSError as exc:
-            raise storage_error(exc, path) from None
-    except BaseException:
-        _remove(tmp)
-        raise
+            except OSError as exc:
+                raise storage_error(exc, path) from None
+        except BaseException:
+            _remove(tmp)
+            raise
 
 
 @contextlib.contextmanager
@@ -310,15 +347,18 @@ def atomic_file(path, *, overwrite: bool = True, error=InputError):
         raise error(ALREADY_EXISTS, path)
     if path.is_symlink() or (path.exists() and not path.is_file()):
         raise error("is a symbolic link or a special file; planeray replaces only plain files", path)
+    from .lock import output_lock
+
     _make_parent(path, error)
-    remove_stale_temporaries(path)
-    tmp = _temp_sibling(path, "tmp", path.suffix)
-    try:
+    with output_lock(path):
+        remove_stale_temporaries(path)
+        tmp = _temp_sibling(path, "tmp", path.suffix)
         try:
-            yield tmp
-            os.replace(tmp, path)
-        except OSError as exc:
-            raise storage_error(exc, path) from None
-    except BaseException:
-        _remove(tmp)
-        raise
+            try:
+                yield tmp
+                os.replace(tmp, path)
+            except OSError as exc:
+                raise storage_error(exc, path) from None
+        except BaseException:
+            _remove(tmp)
+            raise

@@ -41,6 +41,10 @@ def class_colour(class_id: int) -> tuple[int, int, int]:
     return cycle[class_id % len(cycle)]
 
 
+#: The largest class id (label images and segmentations are 8-bit; 0 is unlabelled).
+MAX_CLASS_ID = 255
+
+
 def read_label_image(path, *, shape=None) -> np.ndarray:
     """Read a label image as ``(H, W)`` int64 class ids.
 
@@ -86,6 +90,13 @@ def read_label_image(path, *, shape=None) -> np.ndarray:
     arr = arr.astype(np.int64)
     if arr.min() < 0:
         raise InputError(f"class ids must be >= 0, got {int(arr.min())}", path)
+    if arr.max() > MAX_CLASS_ID:
+        bad = int((arr > MAX_CLASS_ID).sum())
+        raise InputError(
+            f"class ids must be 0-{MAX_CLASS_ID} (0: unlabelled), got {int(arr.max())} ({bad} pixel(s) above "
+            f"{MAX_CLASS_ID}): planeray's segmentations are 8-bit",
+            path,
+        )
     if shape is not None and tuple(arr.shape) != tuple(shape):
         raise InputError(f"label image is {arr.shape[0]}x{arr.shape[1]}, the stack {shape[0]}x{shape[1]}", path)
     return arr

@@ -207,7 +207,9 @@ class MediaLibrary:
         clash = [e for e in self.entries if e.name == entry.name or e.class_id == entry.class_id]
         if clash and not replace:
             c = clash[0]
-            raise InputError(f"the library already has {c.name!r} (class {c.class_id}); pass replace to replace it")
+            raise InputError(
+                f"the library already has {c.name!r} (class {c.class_id}); replace it with --replace (replace=True)"
+            )
         keep = tuple(e for e in self.entries if e not in clash)
         return MediaLibrary(keep + (entry,), dict(self.conditions))
 
@@ -288,6 +290,10 @@ def beyond_table_side(mask, model, *, offsets_rows, mm_per_row, rows_per_camera_
     return np.where((mask & 2) > 0, side, 0).astype(np.int8)
 
 
+#: Fewest blocks (fitted, or beyond the table) an entry is made of: its spread is measured, never assumed.
+MIN_ENTRY_BLOCKS = 3
+
+
 def entry_from_fit(
     mu_s_prime_per_mm,
     mu_a_per_mm,
@@ -330,6 +336,11 @@ def entry_from_fit(
     counted = fitted | (side != 0)
     if not counted.any():
         raise InputError(f"no block of {name!r} was fitted: its mu_s' is not identifiable in this capture")
+    if fitted.sum() == 1 or counted.sum() < MIN_ENTRY_BLOCKS:
+        raise InputError(
+            f"{name!r} has {int(fitted.sum())} fitted block(s) of {s.size}: an entry needs at least "
+            f"{MIN_ENTRY_BLOCKS} to measure its spread; label a larger region of it"
+        )
     n = int(counted.sum())
     above = float(((side > 0) & ~fitted).sum() / n)
     below = float(((side < 0) & ~fitted).sum() / n)
@@ -337,8 +348,6 @@ def entry_from_fit(
     if fitted.sum() >= 2:
         ls = np.log(s[fitted])
         ms, sds = float(np.exp(ls.mean())), max(float(ls.std(ddof=1)), MIN_LOG_SD)
-    elif fitted.sum() == 1:
-        ms, sds = float(s[fitted][0]), 0.1
     ma = sda = None
     corr = 0.0
     both = fitted & np.isfinite(a) & (a > 0)

@@ -59,6 +59,8 @@ __all__ = [
     "laplacian_pyramid",
     "level_alphas",
     "magnify",
+    "Magnifier",
+    "bandpass_tiles",
     "check_band",
 ]
 
@@ -171,20 +173,44 @@ def laplacian_pyramid(frames, levels: int) -> list[np.ndarray]:
 
     The frames are exactly the sum of every level up-sampled (the pyramid is lossless).
     """
-    import cv2
-
     g = np.asarray(frames, np.float32)
     sizes = _pyramid_sizes(g.shape[1:3], levels)
     bands = [np.empty((g.shape[0], *sz), np.float32) for sz in sizes]
     for t in range(g.shape[0]):
-        cur = g[t]
-        for level in range(levels):
-            down = cv2.pyrDown(cur)
-            h, w = sizes[level]
-            bands[level][t] = cur - cv2.pyrUp(down, dstsize=(w, h))
-            cur = down
-        bands[levels][t] = cur
+        for level, band in enumerate(_laplacian_frame(g[t], sizes)):
+            bands[level][t] = band
     return bands
+
+
+def _laplacian_frame(frame, sizes) -> list[np.ndarray]:
+    """One frame's Laplacian pyramid: ``len(sizes) - 1`` band-pass levels (finest first) and the residual."""
+    import cv2
+
+    out, cur = [], frame
+    for level in range(len(sizes) - 1):
+        down = cv2.pyrDown(cur)
+        h, w = sizes[level]
+        out.append(cur - cv2.pyrUp(down, dstsize=(w, h)))
+        cur = down
+    out.append(cur)
+    return out
+
+
+def _collapse(levels: dict, sizes) -> np.ndarray | None:
+    """Sum pyramid levels ``{level: (h_l, w_l) image}`` into the finest size, coarse to fine (``cv2.pyrUp``
+    the running sum, add the level); None when no level is given.  With only the coarsest level this is
+    the up-sampling of a Gaussian level (:func:`pyramid_up`), with the band levels the Laplacian collapse."""
+    import cv2
+
+    acc = None
+    for level in range(len(sizes) - 1, -1, -1):
+        if acc is not None:
+            h, w = sizes[level]
+            acc = cv2.pyrUp(acc, dstsize=(w, h))
+        band = levels.get(level)
+        if band is not None:
+            acc = np.array(band, np.float32) if acc is None else acc + band
+    return acc
 
 
 def level_alphas(shape, levels: int, alpha: float, lambda_c: float | None, *, exaggeration: float = 2.0) -> list[float]:
@@ -261,48 +287,135 @@ def magnify(
     frames = np.asarray(frames, np.float32)
     if frames.ndim != 3:
         raise InputError(f"expected frames (T, H, W), got shape {frames.shape}")
-    fps = check_positive(fps, "fps")
-    levels = check_integer(levels, "levels", minimum=0)
-    check_nonnegative(alpha, "alpha")
-    band = check_band(band_hz, fps)
-    if pyramid == "gaussian":
-        if lambda_c is not None:
-            raise InputError("lambda_c applies to the laplacian pyramid only")
-        small, sizes = pyramid_down(frames, levels)
-        filtered = ideal_bandpass(small, fps, band, axis=0)
-        filtered *= np.float32(alpha)
-        out = frames.copy()
-        added = np.empty_like(frames) if return_band else None
-        for t in range(frames.shape[0]):
-            up = _up_chain(filtered[t], sizes)
-            out[t] += up
-            if return_band:
-                added[t] = up
-    elif pyramid == "laplacian":
-        if lambda_c is not None:
-            check_positive(lambda_c, "lambda_c")
-        bands = laplacian_pyramid(frames, levels)
-        gains = level_alphas(frames.shape[1:3], levels, alpha, lambda_c)
-        sizes = [b.shape[1:3] for b in bands]
-        filtered = [ideal_bandpass(b, fps, band, axis=0) * np.float32(g) if g else None for b, g in zip(bands, gains)]
-        out = frames.copy()
-        added = np.empty_like(frames) if return_band else None
-        import cv2
-
-        for t in range(frames.shape[0]):
-            acc = None
-            for level in range(levels, -1, -1):  # coarse to fine: up-sample the running sum, add the band
-                if acc is not None:
-                    h, w = sizes[level]
-                    acc = cv2.pyrUp(acc, dstsize=(w, h))
-                if filtered[level] is not None:
-                    acc = filtered[level][t].copy() if acc is None else acc + filtered[level][t]
-            if acc is not None:
-                out[t] += acc
-                if return_band:
-                    added[t] = acc
-            elif return_band:
-                added[t] = 0
-    else:
-        raise InputError(f"pyramid must be gaussian or laplacian, got {pyramid!r}")
+    mag = Magnifier(
+        frames.shape[1:3],
+        fps,
+        n_frames=frames.shape[0],
+        levels=levels,
+        band_hz=band_hz,
+        alpha=alpha,
+        pyramid=pyramid,
+        lambda_c=lambda_c,
+    )
+    for frame in frames:
+        mag.add(frame)
+    mag.filter()
+    out = np.empty_like(frames)
+    added = np.zeros_like(frames) if return_band else None
+    for t in range(frames.shape[0]):
+        out[t] = mag.magnified(t, frames[t])
+        if return_band:
+            band = mag.added(t)
+            if band is not None:
+                added[t] = band
     return (out, added) if return_band else out
+
+
+def bandpass_tiles(levels, fps: float, band_hz, *, gain: float = 1.0, tile_bytes: int | None = None) -> None:
+    """Band-pass ``levels`` ``(T, h, w)`` in time, in place, and multiply by ``gain``: :func:`ideal_bandpass`
+    of tiles of pixels of at most ``tile_bytes`` of working memory (each pixel's time series whole).
+
+    ``levels`` is an array or a :class:`planeray.pulse._workspace.DiskArray`; every pixel's result is the
+    one :func:`ideal_bandpass` gives the whole array (the FFT of each time series is its own).
+    """
+    T, h, w = levels.shape
+    from ._workspace import pixel_tiles
+
+    for r0, r1, c0, c1 in pixel_tiles((h, w), _BANDPASS_BYTES * T, tile_bytes):
+        out = ideal_bandpass(levels[:, r0:r1, c0:c1], fps, band_hz, axis=0)
+        out *= np.float32(gain)
+        levels[:, r0:r1, c0:c1] = out
+
+
+#: Working memory of :func:`ideal_bandpass` per float32 sample (the input, its spectrum, the output), bytes.
+_BANDPASS_BYTES = 20
+
+
+class Magnifier:
+    """Eulerian magnification of a video given frame by frame: :meth:`add` every frame, :meth:`filter`
+    once, then :meth:`magnified` (or :meth:`added`) of any frame.
+
+    What :func:`magnify` does to an array, for videos too long or large to hold: only the pyramid levels
+    that are amplified are kept over time (the Gaussian pyramid's coarsest level -- 1/256 of the pixels
+    at 4 levels -- or the Laplacian's band levels), in arrays of ``workspace``
+    (:class:`planeray.pulse._workspace.Workspace`: memory, or files beyond its allowance), and they are
+    band-passed in tiles of pixels.  Parameters as :func:`magnify`; ``n_frames`` sizes the kept levels
+    (a video that turns out longer grows them).
+    """
+
+    def __init__(
+        self,
+        shape,
+        fps: float,
+        *,
+        n_frames: int,
+        levels: int = DEFAULT_LEVELS,
+        band_hz=DEFAULT_BAND_HZ,
+        alpha: float = DEFAULT_ALPHA,
+        pyramid: str = "gaussian",
+        lambda_c: float | None = None,
+        workspace=None,
+    ):
+        from ._workspace import Workspace
+
+        self.fps = check_positive(fps, "fps")
+        self.levels = check_integer(levels, "levels", minimum=0)
+        check_nonnegative(alpha, "alpha")
+        self.band_hz = check_band(band_hz, self.fps)
+        self.alpha = float(alpha)
+        self.pyramid = pyramid
+        self.workspace = Workspace(memory_bytes=None) if workspace is None else workspace
+        shape = tuple(int(s) for s in shape)
+        if pyramid == "gaussian":
+            if lambda_c is not None:
+                raise InputError("lambda_c applies to the laplacian pyramid only")
+            self.sizes = _pyramid_sizes(shape, self.levels)
+            self.gains = {self.levels: self.alpha}
+        elif pyramid == "laplacian":
+            if lambda_c is not None:
+                check_positive(lambda_c, "lambda_c")
+            self.sizes = _pyramid_sizes(shape, self.levels)
+            gains = level_alphas(shape, self.levels, alpha, lambda_c)
+            self.gains = {level: g for level, g in enumerate(gains) if g}
+        else:
+            raise InputError(f"pyramid must be gaussian or laplacian, got {pyramid!r}")
+        self._kept = {
+            level: self.workspace.frames(n_frames, self.sizes[level], name=f"level{level}") for level in self.gains
+        }
+        self._filtered = None  # the kept levels' arrays, once filtered
+
+    def add(self, frame) -> None:
+        """Decompose the next frame ``(H, W)`` float32 and keep its amplified levels."""
+        if not self._kept:
+            return
+        if self.pyramid == "gaussian":
+            self._kept[self.levels].append(_down_chain(frame, self.levels))
+        else:
+            bands = _laplacian_frame(frame, self.sizes)
+            for level, kept in self._kept.items():
+                kept.append(bands[level])
+
+    def filter(self) -> None:
+        """Band-pass every kept level in time and apply its gain (once, after the last :meth:`add`)."""
+        for level, kept in self._kept.items():
+            bandpass_tiles(
+                kept.data, self.fps, self.band_hz, gain=self.gains[level], tile_bytes=self.workspace.tile_bytes
+            )
+        self._filtered = {level: kept.data for level, kept in self._kept.items()}
+
+    def added(self, t: int) -> np.ndarray | None:
+        """What is added to frame ``t``: ``alpha * B`` at full size (None where no level is amplified)."""
+        if self._filtered is None:
+            raise RuntimeError("Magnifier.filter() must run before the magnified frames are read")
+        return _collapse({level: data[t] for level, data in self._filtered.items()}, self.sizes)
+
+    def magnified(self, t: int, frame) -> np.ndarray:
+        """Frame ``t`` magnified: ``frame + alpha * B`` (a new array)."""
+        band = self.added(t)
+        return np.array(frame, np.float32) if band is None else frame + band
+
+    def close(self) -> None:
+        """Give the kept levels back to the workspace."""
+        for kept in self._kept.values():
+            self.workspace.release(kept)
+        self._kept, self._filtered = {}, None

@@ -311,30 +311,86 @@ def region_signal(frames, region=None) -> np.ndarray:
 
 
 def find_pulse_region(
-    frames, fps: float, *, mask=None, band_hz=RATE_BAND_HZ, fraction: float = 0.05, min_pixels: int = 4
+    frames,
+    fps: float,
+    *,
+    mask=None,
+    band_hz=RATE_BAND_HZ,
+    fraction: float = 0.05,
+    min_pixels: int = 4,
+    workspace=None,
 ) -> np.ndarray:
     """Pixels where the pulse is strongest: a boolean mask (H, W).
 
-    Every pixel's spectrum (one FFT along time) is summed into a common spectrum, whose peak in
-    ``band_hz`` is the candidate rate ``f0``; the pixels whose power within one bin of ``f0`` is
-    highest relative to their power in the rest of the band -- the top ``fraction`` of ``mask``
-    (all pixels by default; e.g. a vein mask), at least ``min_pixels`` -- form the region.
+    Every pixel's spectrum (one FFT along time of its mean-free, Hann-windowed series) is normalized
+    to unit power in ``band_hz`` and summed into a common spectrum, whose peak is the candidate rate
+    bin ``k0``; the pixels with the most of their band power within one bin of ``k0`` -- the top
+    ``fraction`` of ``mask`` (all pixels by default; e.g. a vein mask), at least ``min_pixels`` --
+    form the region.
+
+    Parameters
+    ----------
+    frames : array_like (T, H, W)
+        The video (magnified or not); an array, or a :class:`planeray.pulse._workspace.DiskArray`.
+    fps : float
+        Frame rate (Hz).
+    mask : ndarray (H, W) bool, optional
+        Where to search.
+    band_hz : (float, float)
+        Band of the rate (Hz).
+    fraction : float
+        Share of the searched pixels kept.
+    min_pixels : int
+        Fewest pixels kept.
+    workspace : planeray.pulse._workspace.Workspace, optional
+        Bounds the memory: the spectra are taken in tiles of pixels of at most its ``tile_bytes``, and
+        each pixel's normalized band spectrum (``4 K`` bytes, ``K`` the band's FFT bins) is kept in
+        one of its arrays.  Default: the whole video at once, in memory.
     """
-    frames = np.asarray(frames, np.float32)
     T, H, W = frames.shape
     lo, hi = check_band(band_hz, fps, "rate band")
     sel = np.ones((H, W), bool) if mask is None else np.asarray(mask, bool)
     if sel.shape != (H, W) or not sel.any():
         raise InputError(f"the search mask must be a non-empty {H}x{W} boolean image")
-    x = frames[:, sel]
-    x = x - x.mean(axis=0)
-    spec = np.abs(np.fft.rfft(x * np.hanning(T)[:, None].astype(np.float32), axis=0)) ** 2
+    import scipy.fft
+
+    from ._workspace import pixel_tiles
+
     f = np.fft.rfftfreq(T, 1.0 / fps)
     inband = (f >= lo) & (f <= hi)
-    norm = spec[inband] / np.maximum(spec[inband].sum(axis=0, keepdims=True), 1e-30)
-    k0 = int(np.argmax(norm.sum(axis=1)))
-    near = np.abs(np.arange(norm.shape[0]) - k0) <= 1
-    score = norm[near].sum(axis=0)
+    K = int(inband.sum())
+    window = np.hanning(T)[:, None].astype(np.float32)
+    n_sel = int(sel.sum())
+    tile_bytes = None if workspace is None else workspace.tile_bytes
+    norm = np.empty((n_sel, K), np.float32) if workspace is None else workspace.array((n_sel, K), name="spectra")
+    common = np.zeros(K, np.float64)
+    p = 0
+    for r0, r1, c0, c1 in pixel_tiles((H, W), _REGION_BYTES * T, tile_bytes):
+        inside = sel[r0:r1, c0:c1]
+        if not inside.any():
+            continue
+        x = np.asarray(frames[:, r0:r1, c0:c1], np.float32)
+        x = x.reshape(T, -1) if inside.all() else x[:, inside]
+        x -= x.mean(axis=0)
+        x *= window
+        power = np.abs(scipy.fft.rfft(x, axis=0)[inband])
+        del x
+        power **= 2
+        power /= np.maximum(power.sum(axis=0, keepdims=True), 1e-30)
+        common += power.sum(axis=1, dtype=np.float64)
+        norm[p : p + power.shape[1]] = power.T
+        p += power.shape[1]
+    k0 = int(np.argmax(common))
+    near = np.flatnonzero(np.abs(np.arange(K) - k0) <= 1)
+    score = np.empty(n_sel, np.float32)
+    step = max(int(tile_bytes // (4 * K)), 1) if tile_bytes else n_sel
+    for a in range(0, n_sel, step):
+        block = norm[a : a + step][:, near[0] : near[-1] + 1]  # whole rows read, then the bins near k0
+        score[a : a + step] = block[:, 0]
+        for j in range(1, block.shape[1]):
+            score[a : a + step] += block[:, j]
+    if workspace is not None:
+        workspace.release(norm)
     n = max(int(min_pixels), int(np.ceil(fraction * score.size)))
     n = min(n, score.size)
     top = np.argsort(score)[::-1][:n]
@@ -342,3 +398,8 @@ def find_pulse_region(
     idx = np.flatnonzero(sel.ravel())[top]
     out.ravel()[idx] = True
     return out
+
+
+#: Working memory of :func:`find_pulse_region` per sample of a tile (the tile read, the searched
+#: pixels' series, their spectrum), bytes.
+_REGION_BYTES = 16

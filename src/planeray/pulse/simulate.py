@@ -51,7 +51,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .._validate import check_nonnegative, check_number, check_positive
-from ..camera import CameraModel
+from ..camera import CameraModel, binned_camera
 from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, Band
 from .video_io import Video
@@ -312,22 +312,6 @@ class LiveCapture:
     @property
     def fps(self) -> float:
         return next(iter(self.videos.values())).fps
-
-
-def binned_camera(camera: CameraModel, pixels: float) -> CameraModel:
-    """The camera whose one pixel is the sum of ``pixels`` sensor pixels (see the module docstring)."""
-    if pixels <= 1:
-        return camera
-    bits = min(16, camera.bit_depth + int(np.floor(np.log2(pixels) / 2 + 0.5)) * 2)
-    return replace(
-        camera,
-        full_well_e=camera.full_well_e * pixels,
-        laser_electrons=camera.laser_electrons * pixels,
-        ambient_e_per_us=camera.ambient_e_per_us * pixels,
-        read_noise_e=camera.read_noise_e * float(np.sqrt(pixels)),
-        bit_depth=bits,
-        black_level=camera.black_level * 2 ** (bits - camera.bit_depth),
-    )
 
 
 def _shift_frames(images: np.ndarray, shifts: np.ndarray) -> np.ndarray:

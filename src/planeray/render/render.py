@@ -45,6 +45,7 @@ import numpy as np
 
 from .._validate import check_integer, check_number, check_positive
 from ..errors import InputError
+from ..io.lock import writes_output
 from ..timing import RowGeometry
 from ..transport import SparseEntries, Transport, bin_projector_rows
 
@@ -569,6 +570,7 @@ def _store_arrays(result: RenderResult) -> dict:
 _CLASS_NAMES = ("direct", "subsurface", "diffuse_interreflection", "specular_interreflection")
 
 
+@writes_output("out")
 def render_to_store(
     scene_file,
     out,

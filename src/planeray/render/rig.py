@@ -55,6 +55,8 @@ __all__ = ["Rig", "xml_defaults"]
 
 #: The paper's projector (Celluon PicoPro): 1280 x 720.
 DEFAULT_PROJECTOR_ASPECT = 16 / 9
+#: The narrowest and widest projectors a rig takes (width / height): a tenth to ten times as wide as tall.
+MIN_PROJECTOR_ASPECT, MAX_PROJECTOR_ASPECT = 0.1, 10.0
 
 
 def xml_defaults(path) -> dict[str, str]:
@@ -106,8 +108,16 @@ class Rig:
             raise InputError(f"baseline must be finite, got {self.baseline}")
         if int(self.projector_rows) < 1:
             raise InputError(f"projector_rows must be at least 1, got {self.projector_rows}")
-        if not self.projector_aspect > 0:
-            raise InputError(f"projector_aspect must be positive, got {self.projector_aspect}")
+        if not MIN_PROJECTOR_ASPECT <= self.projector_aspect <= MAX_PROJECTOR_ASPECT:
+            raise InputError(
+                f"projector_aspect (width / height) must be in {MIN_PROJECTOR_ASPECT:g}-{MAX_PROJECTOR_ASPECT:g}, "
+                f"got {self.projector_aspect:g}"
+            )
+        if round(self.projector_rows * self.projector_aspect) < 1:
+            raise InputError(
+                f"projector_aspect {self.projector_aspect:g} with {self.projector_rows} rows leaves the projector "
+                "no column"
+            )
 
     # ------------------------------------------------------------ builders
     @classmethod

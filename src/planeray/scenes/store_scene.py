@@ -37,6 +37,20 @@ def is_transport_store(path) -> bool:
     return store_format(path) == "transport"
 
 
+def _refuse_negative(transport, path) -> None:
+    """Light transport is non-negative: a store with negative entries is no scene (a pinv demux, a bug, a sign)."""
+    dense = np.asarray(transport.dense)
+    sparse = np.asarray(transport.sparse.value) if transport.sparse is not None else np.zeros(0)
+    n = int((dense < 0).sum() + (sparse < 0).sum())
+    if n:
+        low = float(min(dense.min(initial=0.0), sparse.min(initial=0.0)))
+        raise InputError(
+            f"T has {n} negative entries (down to {low:.3g}): light transport is non-negative, so it is no scene to "
+            "simulate; clip it (numpy.clip(T, 0, None)) or demultiplex with a non-negative method (fast, nnls)",
+            path,
+        )
+
+
 def scene_from_transport_store(path, *, shape=None, projector_rows=None) -> Scene:
     """A :class:`Scene` whose ground truth is the transport stored at ``path``.
 
@@ -72,6 +86,7 @@ def scene_from_transport_store(path, *, shape=None, projector_rows=None) -> Scen
         raise InputError(f"the store is {H}x{W} pixels, --size asks for {shape[0]}x{shape[1]}", path)
     if projector_rows is not None and int(projector_rows) != P:
         raise InputError(f"the store has {P} projector rows, --projector-rows asks for {projector_rows}", path)
+    _refuse_negative(transport, path)
     maps = read_transport_maps(path)
     used = []
 

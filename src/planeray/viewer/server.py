@@ -22,11 +22,16 @@ or binary frames):
   -- padded with spaces to a multiple of 4 bytes), then the image as ``height * width``
   little-endian float32 values, row by row.  Render requests of a panel that arrive
   while one is being rendered replace each other: only the newest is rendered
-  (dragging a slider never builds a queue);
+  (dragging a slider never builds a queue).  A live device answers with the first frame newer than
+  the last one sent, captured at the request's settings (the page keeps asking: frames are shown
+  as they arrive);
 * ``{"type": "pixel", "panel": P, "id": N, "row": R, "col": C, "settings": {...}}`` is
   answered by ``{"type": "pixel", "panel": P, "id": N, "data": {...}}`` (the plot data of
   :meth:`~planeray.viewer.session.ViewSource.pixel`);
 * ``{"type": "ping", "id": N}`` by ``{"type": "pong", "id": N, "server_ms": ...}``;
+* ``{"type": "snapshot", "id": N, "settings": {...}}`` (a live device, :mod:`planeray.viewer.live`) by
+  ``{"type": "snapshot", "id": N, "data": {"path": ..., "images": ...}}``: what was shown written as a
+  stack into the folder the command line named (the page names no path);
 * ``{"type": "report", "stats": {...}}`` (a page opened with ``?bench=SECONDS``: its measured frame
   rate and timings) is kept in memory for the benchmark (the last 20), not answered;
 * anything wrong (not JSON, an unknown type, a bad setting, a pixel outside the image)
@@ -57,7 +62,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, PlanerayError
 from .display import auto_white, colormap_tables
 from .session import ViewSettings, ViewSource
 
@@ -128,8 +133,8 @@ def _check_request(msg) -> tuple[str, int | None, int]:
     if not isinstance(msg, dict):
         raise InputError("a message must be a JSON object")
     kind = msg.get("type")
-    if kind not in ("render", "pixel", "ping", "report"):
-        raise InputError(f"unknown message type {kind!r} (known: render, pixel, ping, report)")
+    if kind not in ("render", "pixel", "ping", "report", "snapshot"):
+        raise InputError(f"unknown message type {kind!r} (known: render, pixel, ping, report, snapshot)")
     mid = msg.get("id")
     if mid is not None and (isinstance(mid, bool) or not isinstance(mid, int)):
         raise InputError(f"message id must be an integer, got {mid!r}")
@@ -255,6 +260,7 @@ class _Connection:
                 continue
             if kind == "render":
                 self.latest[panel] = req  # the newest request of a panel wins
+                self._hint(req)
             elif len(self.others) >= MAX_WAITING:
                 await self.send_error(
                     f"too many requests waiting (at most {MAX_WAITING}); wait for answers", mid, panel
@@ -265,6 +271,16 @@ class _Connection:
             self.wake.set()
         self.closed = True
         self.wake.set()
+
+    def _hint(self, req: dict) -> None:
+        """Tell a live source what the newest request will want, before its turn (a camera starts now)."""
+        hint = getattr(self.source, "hint", None)
+        if hint is None:
+            return
+        try:
+            hint(self.source.check(ViewSettings.from_dict(req.get("settings"))))
+        except PlanerayError:
+            pass  # the render itself answers with the error
 
     async def work_loop(self) -> None:
         while not self.closed:
@@ -285,6 +301,13 @@ class _Connection:
                 return
             settings = ViewSettings.from_dict(req.get("settings"))
             loop = asyncio.get_running_loop()
+            if kind == "snapshot":
+                snapshot = getattr(self.source, "snapshot", None)
+                if snapshot is None:
+                    raise InputError("this source captures nothing to write (the page's PNG snapshot saves the view)")
+                data = await loop.run_in_executor(self.executor, snapshot, settings)
+                await self.send_text({"type": "snapshot", "id": mid, "panel": panel, "data": data})
+                return
             if kind == "pixel":
                 row, col = req.get("row"), req.get("col")
                 data = await loop.run_in_executor(self.executor, self.source.pixel, row, col, settings)
@@ -294,7 +317,7 @@ class _Connection:
             header["queue_ms"] = (time.perf_counter() - req["_received"]) * 1e3
             frame = await loop.run_in_executor(self.executor, render_frame, self.source, settings, header)
             await self._send(data=frame)
-        except InputError as exc:
+        except PlanerayError as exc:  # a bad setting, a device that stopped: one line to the page
             await self.send_error(str(exc), mid=mid, panel=panel)
         except Exception as exc:  # never let one request take the server down
             log.exception("viewer: %s request failed", kind)
@@ -565,6 +588,9 @@ class ViewerServer:
             self._thread = None
         self.executor.shutdown(wait=False, cancel_futures=True)
         self.sock.close()
+        close = getattr(self.source, "close", None)
+        if close is not None:  # a live source releases its device
+            close()
 
     def __enter__(self):
         return self.start()

@@ -194,6 +194,8 @@ class ViewSource:
 
     kind = "source"
     modes: tuple[str, ...] = ("band",)
+    #: The labels of the modes a source of this kind may show.
+    mode_labels: dict[str, str] = MODES
 
     def __init__(self, name: str, shape):
         self.name = str(name)
@@ -207,8 +209,8 @@ class ViewSource:
 
     def check(self, settings: ViewSettings) -> ViewSettings:
         """Refuse settings this source cannot show (one line naming the setting)."""
-        if settings.mode not in MODES:
-            raise InputError(f"unknown mode {settings.mode!r}; choose one of {sorted(MODES)}")
+        if settings.mode not in self.mode_labels:
+            raise InputError(f"unknown mode {settings.mode!r}; choose one of {sorted(self.mode_labels)}")
         if settings.mode not in self.modes:
             raise InputError(f"a {self.kind} shows only {', '.join(self.modes)}, not {settings.mode!r}")
         if not settings.exposure_us > 0:

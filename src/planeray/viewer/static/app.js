@@ -19,8 +19,8 @@ const PALETTE = ["#f0a030", "#6fc3ff", "#9be38f", "#ff7fa8", "#c9a6ff", "#ffe066
 const app = {
   ws: null, source: null, colormaps: null, version: null, panels: [], nextId: 0,
   plot: null, plotState: null, connected: false, framesPainted: 0, paintLog: [],
-  stats: { render: [], encode: [], queue: [], transfer: [], decode: [], paint: [], latency: [] },
-  sentAt: new Map(), lastSnapshot: null, errors: [],
+  stats: { render: [], encode: [], queue: [], transfer: [], decode: [], paint: [], latency: [], slider: [] },
+  sentAt: new Map(), inputAt: new Map(), lastSnapshot: null, lastStack: null, errors: [],
 };
 window.planeray = app;
 
@@ -75,6 +75,9 @@ function onText(msg) {
   } else if (msg.type === "pixel") {
     app.plotState = { panel: msg.panel, data: msg.data };
     drawPlot();
+  } else if (msg.type === "snapshot") {
+    app.lastStack = msg.data;
+    setStatus(`saved ${msg.data.images} image${msg.data.images === 1 ? "" : "s"}: ${msg.data.path}`);
   } else if (msg.type === "error") {
     app.errors.push(msg);
     const p = msg.panel !== null && msg.panel !== undefined ? app.panels[msg.panel] : null;
@@ -101,6 +104,7 @@ function onFrame(buf) {
   p.inflight = p.inflight.filter((id) => id > header.id);
   p.pending = { header, data };
   $(".error", p.el).textContent = "";
+  if (app.source.live) { p.dirty = true; } // a live device: keep asking, frames are shown as they arrive
   pump(p);
   schedulePaint();
 }
@@ -169,8 +173,13 @@ function paint(p, fresh) {
   record("transfer", h.received_ms - h.sent_at_ms);
   const sent = app.sentAt.get(h.id);
   if (sent !== undefined) { record("latency", t1 - sent); }
+  const shownDelay = h.delay_us !== undefined ? h.delay_us : (h.settings ? h.settings.delay_us : undefined);
+  const moved = app.inputAt.get(shownDelay); // the frame shows this delay: since when was it asked for?
+  if (moved !== undefined) { record("slider", t1 - moved); app.inputAt.delete(shownDelay); }
   $(".label", p.el).textContent = h.label + (h.saturated ? `  (${h.saturated} saturated)` : "");
-  if (app.plotState && app.plotState.panel === p.index) { drawPlot(); }
+  if (h.camera_fps !== undefined) { $("#camera-fps").textContent = `camera ${h.camera_fps.toFixed(1)} fps`; }
+  if (h.pulse !== undefined && p.index === 0) { app.plotState = { panel: p.index, data: { kind: "pulse", pulse: h.pulse } }; drawPlot(); }
+  else if (app.plotState && app.plotState.panel === p.index) { drawPlot(); }
 }
 
 // Painting happens in animation frames, and only when there is something new: an idle page asks for none.
@@ -236,7 +245,11 @@ function makeSlider(p, item) {
   const show = (v) => {
     if (grid) { const i = nearestIndex(grid, v); range.value = i; num.value = grid[i]; } else { range.value = v; num.value = v; }
   };
-  const set = (v) => { p.settings[item.key] = v; requestRender(p); };
+  const set = (v) => {
+    p.settings[item.key] = v;
+    if (item.key === "delay_us") { app.inputAt.set(v, performance.now()); if (app.inputAt.size > 500) { app.inputAt.delete(app.inputAt.keys().next().value); } }
+    requestRender(p);
+  };
   range.addEventListener("input", () => {
     const v = grid ? grid[Number(range.value)] : Number(range.value);
     num.value = v; set(v);
@@ -294,6 +307,11 @@ function updateVisibility(p) {
     c.div.classList.toggle("hidden", !on);
   }
   $(".ctl-pattern", p.el).classList.toggle("hidden", mode !== "relight_pattern");
+  if (app.source.live) { // a live device: the exposure counts in every view, the delay in all but Eq. 7's cycle
+    for (const key of ["delay_us", "exposure_us"]) {
+      if (p.controls[key]) { p.controls[key].div.classList.toggle("hidden", key === "delay_us" && mode === "composite"); }
+    }
+  }
   const toggles = app.source.toggles.length > 0 && mode === "band";
   $(".ctl-toggles", p.el).classList.toggle("hidden", !toggles);
 }
@@ -315,7 +333,11 @@ function makePanel(index, settings) {
   for (const m of src.modes) { const o = el("option", null, m.label); o.value = m.name; mode.appendChild(o); }
   mode.value = p.settings.mode;
   mode.addEventListener("change", () => {
-    p.settings.mode = mode.value; p.refWhite = null; updateVisibility(p); requestRender(p);
+    p.settings.mode = mode.value; p.refWhite = null;
+    const preset = (src.mode_defaults || {})[mode.value] || {};
+    for (const [k, v] of Object.entries(preset)) { p.settings[k] = v; if (p.controls[k]) { p.controls[k].show(v); } }
+    if (app.plotState && app.plotState.data.kind === "pulse") { app.plotState = null; }
+    updateVisibility(p); requestRender(p);
   });
   const sliders = $(".sliders", node);
   for (const item of sliderSpecs()) { sliders.appendChild(makeSlider(p, item)); }
@@ -406,6 +428,29 @@ function drawPlot() {
   const norm = $("#plot-normalize").checked;
   const series = [], spans = [], vlines = [];
   let notes = "";
+  if (d.kind === "pulse") {
+    const r = d.pulse;
+    if (!r) {
+      $("#plot-title").textContent = `Pulse: collecting frames (the rate needs 3 s of video, the window is ${app.source.pulse_window_s} s)`;
+      app.plot.setData({ series: [], xlabel: "heart rate (bpm)", ylabel: "power", xname: "bpm", yname: "P" });
+      $("#plot-notes").textContent = "";
+      return;
+    }
+    const rate = r.rate_bpm === null ? `no pulse found (peak ${formatNumber(r.peak_bpm)} bpm)` : `${r.rate_bpm.toFixed(1)} bpm`;
+    $("#plot-title").textContent = `Pulse: ${rate}; SNR ${r.snr_db.toFixed(1)} dB; ${r.frames} frames, ${r.window_s.toFixed(1)} s at ${r.fps.toFixed(1)} fps (skin pulse's analysis)`;
+    app.plot.setData({ series: [{ name: "spectrum of the region's signal", x: r.spectrum.bpm, y: r.spectrum.power, color: PALETTE[0], width: 2 }],
+      vlines: r.rate_bpm === null ? [] : [{ x: r.rate_bpm, color: "#ffffff" }], xlabel: "heart rate (bpm)",
+      ylabel: "power (relative)", xname: "bpm", yname: "P" });
+    $("#plot-notes").textContent = `region rows ${r.region[0]}-${r.region[2]}, columns ${r.region[1]}-${r.region[3]}; peak SNR ${r.band_snr_db.toFixed(1)} dB`;
+    return;
+  }
+  if (d.kind === "device") {
+    $("#plot-title").textContent = `Pixel (${d.row}, ${d.col}) over the last ${d.t_s.length} frames at t_d ${d.timing[0]} us, t_e ${d.timing[1]} us`;
+    app.plot.setData({ series: [{ name: "value", x: d.t_s, y: d.values, color: PALETTE[0], width: 2 }],
+      xlabel: "time (s, 0 = newest frame)", ylabel: "value", xname: "t", yname: "I" });
+    $("#plot-notes").textContent = "";
+    return;
+  }
   if (d.kind === "stack") {
     const x = d.delays_us;
     const cur = p.image && p.image.header.delay_us !== undefined ? p.image.header : d.current;
@@ -512,11 +557,22 @@ async function snapshot() {
   return meta;
 }
 app.snapshot = snapshot;
+app.saveStack = () => { const p = app.panels[0]; return send({ type: "snapshot", panel: 0, id: ++app.nextId, settings: p.settings }); };
 
 // ------------------------------------------------------------------ start
 function init() {
   const s = app.source;
   $("#source-name").textContent = s.name;
+  if (s.live) {
+    $("#side-by-side").parentElement.classList.add("hidden"); // one camera: one panel
+    const save = el("button", null, "save stack"); save.id = "save-stack"; save.type = "button";
+    save.title = "Write what is shown (the frame, or Eq. 7's cycle of frames) as a stack in the --snapshots folder";
+    save.addEventListener("click", () => { app.saveStack(); });
+    $("#snapshot").after(save);
+    const cam = el("span", null, "camera -- fps"); cam.id = "camera-fps"; cam.title = "Frames the device captures per second";
+    $("#fps").before(cam);
+    $("#plot-title").textContent = "Click a pixel to see its value over the recent frames; the pulse view plots the spectrum.";
+  }
   $("#source-info").textContent = `${s.kind}, ${s.shape[0]}x${s.shape[1]}, ${s.projector_rows} projector rows` +
     (s.kind === "stack" ? `, ${s.n_images} images` : "") + (s.units ? `; values: ${s.units}` : "");
   document.title = `planeray view: ${s.name}`;
@@ -540,6 +596,7 @@ function init() {
 }
 
 function median(a) { const s = [...a].sort((x, y) => x - y); return s.length ? s[Math.floor(s.length / 2)] : null; }
+function percentile(a, q) { const s = [...a].sort((x, y) => x - y); return s.length ? s[Math.min(s.length - 1, Math.floor(q * s.length))] : null; }
 
 function runBench(seconds) {
   const p = app.panels[0];
@@ -562,6 +619,7 @@ function runBench(seconds) {
         const stats = { frames: app.framesPainted, seconds: secs, fps: app.framesPainted / secs, display_hz: displayHz,
           width: p.image.width, height: p.image.height };
         for (const k of Object.keys(app.stats)) { stats[`${k}_ms`] = median(app.stats[k]); }
+        stats.slider_p90_ms = percentile(app.stats.slider, 0.9); stats.slider_n = app.stats.slider.length;
         app.benchResult = stats;
         send({ type: "report", stats });
       }, seconds * 1000);

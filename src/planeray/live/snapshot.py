@@ -1,0 +1,73 @@
+"""A live capture written as a stack the rest of planeray reads (``planeray view --device``'s snapshot)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io import write_stack
+from ..io.lock import writes_output
+from ..stack import Stack
+from ..timing import boundary_images
+
+__all__ = ["write_snapshot", "snapshot_path"]
+
+
+def snapshot_path(folder, view: str, *, now: float | None = None) -> Path:
+    """A new name in ``folder`` for a snapshot of ``view``: ``snapshot-YYYYmmdd-HHMMSS-VIEW.zarr`` (``-2``... if taken)."""
+    folder = Path(folder)
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
+    path = folder / f"snapshot-{stamp}-{view}.zarr"
+    k = 2
+    while path.exists():
+        path = folder / f"snapshot-{stamp}-{view}-{k}.zarr"
+        k += 1
+    return path
+
+
+@writes_output("out")
+def write_snapshot(
+    frames, out, *, device: dict, lines_per_second: float, projector_rows=None, view: str = "band"
+) -> Path:
+    """Write captured frames as a native stack (one image per frame, in order): locked while written, atomic.
+
+    Parameters
+    ----------
+    frames : sequence of Frame
+        What was captured (one frame, or a cycle of delays).
+    out : path
+        The stack to create (never replaced).
+    device : dict
+        The device's description (recorded in the metadata, as ``planeray acquire`` records it).
+    lines_per_second : float
+        The projector's ``v_p``.
+    projector_rows : int, optional
+    view : str
+        The view it was taken in (recorded).
+    """
+    frames = list(frames)
+    if not frames:
+        raise InputError("nothing captured yet to write")
+    delay = np.array([f.delay_us for f in frames], np.float64)
+    exposure = np.array([f.exposure_us for f in frames], np.float64)
+    meta = dict(device)
+    meta["live"] = {
+        "view": view,
+        "frame_indices": [int(f.index) for f in frames],
+        "time_s": [float(f.time_s) for f in frames],
+        "taken": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    stack = Stack(
+        np.stack([f.image for f in frames]).astype(np.float32),
+        delay,
+        exposure,
+        float(lines_per_second),
+        excluded=boundary_images(delay, exposure),
+        saturated=np.stack([f.saturated for f in frames]),
+        projector_rows=projector_rows,
+        metadata=meta,
+    )
+    return write_stack(stack, out)
