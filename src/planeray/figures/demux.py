@@ -20,8 +20,9 @@ def weights_cv_figure(choice, *, ax=None, out=None):
     """The criterion's score against the weights tried, with the chosen pair marked.
 
     The score is generalized cross-validation (the default), Stein's risk estimate or K-fold
-    cross-validation over the images (``choice.criterion``); a best weight on an end of what
-    was searched (``choice.edge``) is said in the panel.
+    cross-validation over the images (``choice.criterion``); the lowest score is marked where the
+    choice is a pair nearer the paper's weights within one standard error of it, and a choice on
+    an end of what was searched (``choice.edge``) is said in the panel.
 
     Parameters
     ----------
@@ -98,6 +99,10 @@ def weights_cv_figure(choice, *, ax=None, out=None):
         lo, hi = getattr(choice, f"{name}_range")
         ax_.axvspan(lo / 1.15, hi * 1.15, color="tab:green", alpha=0.12, label="within 1 SE of the best")
         ax_.plot([xb], [yb], marker="*", ms=16, color="tab:red", zorder=5, label=f"chosen {name} = {xb:.3g}")
+        low = (choice.alphas == choice.lowest[0]) & (choice.betas == choice.lowest[1])
+        if low.any() and not (low & best).any():  # the lowest score, when the choice is a nearer pair within 1 SE
+            xl = choice.lowest[0 if name == "alpha" else 1]
+            ax_.plot([xl], [float(s[low][0])], "kx", ms=8, zorder=6, label="lowest score")
         side = choice.edge.get(name)
         if side:
             ax_.annotate(
