@@ -712,17 +712,23 @@ def _end(curve: dict, pair: tuple, name: str):
 def edges(curve: dict, requested: dict, *, pair=None) -> dict:
     """The automatic weights whose chosen value lies on an end of what was searched: ``{name: "low"/"high"}``.
 
-    ``pair``: the chosen pair (default: the lowest score).  After :func:`search` such an end is
-    the weight's limit (or a value the search could not go past, such as 0): the best may lie
+    ``pair``: the chosen pair (default: the lowest score); an end is the smallest (largest) value
+    of the weight tried anywhere.  After :func:`search` the lowest score lies on one only at the
+    weight's limit (or a value the search could not go past, such as 0): the best may lie
     beyond it.
     """
     best = _best(curve) if pair is None else (float(pair[0]), float(pair[1]))
     out = {}
-    for name in ("alpha", "beta"):
-        if requested.get(name) == AUTO:
-            side = _end(curve, best, name)
-            if side is not None:
-                out[name] = side
+    for i, name in enumerate(("alpha", "beta")):
+        if requested.get(name) != AUTO:
+            continue
+        values = {k[i] for k in curve}
+        if len(values) < 2:
+            continue
+        if best[i] == min(values):
+            out[name] = "low"
+        elif best[i] == max(values):
+            out[name] = "high"
     return out
 
 
