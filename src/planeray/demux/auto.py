@@ -486,12 +486,12 @@ def risk_score(
     record: dict | None = None,
     warm: dict | None = None,
 ):
-    """Stein's unbiased risk estimate (``C_p``) of every pixel at ``(alpha, beta)``, or GCV (:mod:`planeray.demux.risk`).
+    """GCV or Stein's unbiased risk estimate (``C_p``) of every pixel at ``(alpha, beta)`` (:mod:`planeray.demux.risk`).
 
     One solve of each pixel on all its observations (the fast solver, certified to ``tol``: the
-    plain demultiplexer's accuracy), then ``(sum w r^2 + 2 df) / n`` with ``df`` the trace of the
-    influence matrix on the pixel's free set; with ``gcv`` (no camera model)
-    ``n sum r^2 / (n - df)^2``.
+    plain demultiplexer's accuracy), then, with ``df`` the trace of the influence matrix on the
+    pixel's free set, ``n sum w r^2 / (n - df)^2`` (``gcv``, the default criterion) or
+    ``(sum w r^2 + 2 df) / n``.
 
     Parameters
     ----------
@@ -512,7 +512,7 @@ def risk_score(
     -------
     ndarray (P,)
         Per pixel: the expected noise-weighted squared error of a new image at the same settings
-        (1 at the noise level); with ``gcv`` the squared error (units of the images squared).
+        (1 at the camera model's noise level; GCV's noise level is the residuals').
     """
     pool = _Tasks(Bs, threads)
     tasks = [(g, k) for k in range(pool.n_parts) for g in range(len(groups))]

@@ -23,16 +23,18 @@ Without a camera model the variances are unknown and generalized cross-validatio
 place, ``n sum r^2 / (n - df)^2`` (Craven & Wahba 1979), which estimates the noise from the
 residual.
 
-Why not cross-validation over images.  Measured on 40+ transports (the demultiplexing guide):
-a fold left out shrinks the sweep from 75 to 60 images, and the problem is underdetermined
-(229 offsets, rank of ``A`` ~ 40-70), so K-fold CV scores the weights a *smaller* sweep needs --
-more smoothing (the mirror ball: 1.21x the best error, 13 % worse than 0.01 / 0.01).  And its
-predictions of left-out images go through directions the training images do not see, where a
-solve stopped at a certified *objective* gap of 1e-3 is still far from its optimum: early
-stopping regularizes, so CV's curve at small ``alpha`` measured where ADMM stopped (it chose the
-grid's lowest ``alpha`` on the issue's corner scene; exact solves move its best to 0.01-0.03).
-``R`` needs only the fit to the pixel's own observations, which a certified gap pins down,
-and one solve per pair instead of five.
+Which of them (measured on 46 stacks nobody tuned them on, ``docs/user_guide/demux_weights.md``).
+GCV is the default: the camera model gives the observations' *relative* noise, but the camera's
+row jitter and other unmodelled noise scale it by 1.5-4x, and SURE at the model's level then
+charges too little for ``df`` and smooths too little (wax: 1.22x the best error); GCV takes the
+level from the residuals.  Both need only the fit to the pixel's own observations, which a
+certified objective gap pins down, and one solve per pair.  K-fold cross-validation over the
+images (issue 26's criterion) needs neither ``df`` nor a noise level, but a fold left out shrinks
+the sweep from 75 to 60 images of an underdetermined problem (229 offsets, rank of ``A`` ~ 40-70):
+it scores the weights a *smaller* sweep needs -- more smoothing (the mirror ball: 1.21x the best,
+13 % worse than 0.01 / 0.01) -- and its predictions of left-out images go through directions the
+training images barely see, where a solve certified to an objective gap of 1e-3 is still far from
+its optimum: its curve at small ``alpha`` measured where ADMM stopped.
 
 References
 ----------
