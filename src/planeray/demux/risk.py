@@ -1,4 +1,4 @@
-"""Stein's unbiased estimate of a demultiplexed pixel's prediction risk (the automatic weights' criterion).
+"""A demultiplexed pixel's prediction risk: GCV and Stein's estimate (the automatic weights' criterion).
 
 For one pixel with ``n`` used observations ``b``, noise variances ``sigma_i^2`` (the stack's
 camera model, :func:`planeray.demux.auto.observation_variance`) and the Sec. 4 estimator
@@ -16,12 +16,12 @@ unbiased estimate of the noise-weighted error of predicting the noise-free image
 ``F`` the pixel's free unknowns (``x_F > 0``).  The estimator is a QP whose active set is locally
 constant, so ``x_F = H_FF^{-1} (A_F^T b - beta/2)`` there: the sparsity term only shifts it and
 ``df`` is the trace of the ridge-like smoother on the free set (for the lasso, the number of
-non-zeros; Tibshirani & Taylor 2012).  The score reported is ``(sum w r^2 + 2 df) / n = 1 +
-R / n``: Mallows' ``C_p``, the expected noise-weighted squared error of a *new* image at the same
-settings, 1 at the noise level -- on the scale of the cross-validation score it replaces.
-Without a camera model the variances are unknown and generalized cross-validation takes its
-place, ``n sum r^2 / (n - df)^2`` (Craven & Wahba 1979), which estimates the noise from the
-residual.
+non-zeros; Tibshirani & Taylor 2012).  SURE's score is ``(sum w r^2 + 2 df) / n = 1 + R / n``:
+Mallows' ``C_p``, the expected noise-weighted squared error of a *new* image at the same
+settings, 1 at the noise level.  Generalized cross-validation, ``n sum w r^2 / (n - df)^2``
+(Craven & Wahba 1979), estimates the same with the noise *level* taken from the residual
+instead of the camera model (the weights ``w`` keep the model's relative noise; ``w = 1``
+without a camera model).
 
 Which of them (measured on 46 stacks nobody tuned them on, ``docs/user_guide/demux_weights.md``).
 GCV is the default: the camera model gives the observations' *relative* noise, but the camera's
