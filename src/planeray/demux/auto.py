@@ -594,6 +594,8 @@ def _test_columns(solver: AdmmRowSolver, A_test, e_test) -> np.ndarray:
     return np.column_stack([A_test, e / solver.ambient_scale])
 
 
+#: Pairs within this fraction of the lowest score (and one paired standard error of it) count as ties.
+TIE_RELATIVE = 0.01
 #: How far the search goes past the grid's ends when the best pair lies on one (half-decade steps):
 #: alpha 1e-5 ... 1e6 (the command's largest weight), beta 1e-6 ... 100.
 ALPHA_LIMITS = (1e-5, 1e6)
@@ -737,7 +739,9 @@ def summarize(curve: dict, *, anchor=(PAPER_WEIGHT, PAPER_WEIGHT)):
 
     The lowest-score pair has the smallest mean score over everything tried.  The pairs the
     data cannot tell from it are those whose mean exceeds its mean by at most one standard error
-    of the *paired* difference over pixels; among them the **chosen** pair is the one nearest
+    of the *paired* difference over pixels and at most :data:`TIE_RELATIVE` (1 %) of it (a small
+    sample's standard error alone admits pairs whose scores differ by far more than the solves'
+    tolerance moves them: the Sec. 5.2 study pools 5 pixels); among them the **chosen** pair is the one nearest
     ``anchor`` (the paper's 0.01 / 0.01; distance in decades, ``|log10 alpha / 0.01| + |log10 beta
     / 0.01|``, the lower score breaking ties): move away from the paper's weights only as far as
     the data demand (the one-standard-error rule, towards the weights the paper validated).  A
@@ -753,7 +757,7 @@ def summarize(curve: dict, *, anchor=(PAPER_WEIGHT, PAPER_WEIGHT)):
     lowest = int(np.argmin(means))
     ref = curve[keys[lowest]]
     diff_se = np.array([np.std(curve[k] - ref, ddof=1) / np.sqrt(ref.size) if ref.size > 1 else 0.0 for k in keys])
-    near = means - means[lowest] <= diff_se
+    near = (means - means[lowest] <= diff_se) & (means - means[lowest] <= TIE_RELATIVE * abs(means[lowest]))
     la, lb = (np.log10(max(v, 1e-300)) for v in anchor)
 
     def distance(k):
