@@ -611,13 +611,16 @@ class Sweep:
 
     ``excluded`` marks the images that sit on the epipolar/non-epipolar boundary
     (``||t_d| - t_e/2| <= boundary_margin_us``); they are captured and stored but
-    left out of demultiplexing (Sec. 4).
+    left out of demultiplexing (Sec. 4).  ``record`` holds what a sweep file says about
+    where the sweep came from (a designed sweep: its prior, camera and criterion;
+    :func:`planeray.io.read_sweep`), or None.
     """
 
     delay_us: np.ndarray
     exposure_us: np.ndarray
     excluded: np.ndarray
     name: str = "custom"
+    record: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
         d = np.asarray(self.delay_us, dtype=float).ravel()
