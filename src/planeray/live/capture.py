@@ -1,13 +1,15 @@
 """A device captured continuously in a thread of its own: the frames, their timing, and what to capture next.
 
 :class:`LiveCapture` owns an open device (:mod:`planeray.devices`).  Its thread grabs one image after
-another at the timing it was last given -- one delay and exposure (:meth:`LiveCapture.set_timing`) or a
-cycle of delays at one exposure (:meth:`LiveCapture.set_cycle`, Eq. 7's set) -- and keeps the recent
+another at the timing it was last given -- one delay and exposure (:meth:`LiveCapture.set_timing`), a
+cycle of delays at one exposure (:meth:`LiveCapture.set_cycle`, Eq. 7's set) or a sweep's settings
+(:meth:`LiveCapture.set_sweep`, a live transport's window) -- and keeps the recent
 frames (:class:`Frame`), each with the timing it was captured at, its index and its time on the
 device's clock (the camera's own time stamps where it has them, :mod:`planeray.devices.capabilities`).
 Readers wait for a frame newer than the one they have (:meth:`LiveCapture.wait_frame`), take the
-frames of a rolling window (:meth:`LiveCapture.window`) or the latest complete cycle
-(:meth:`LiveCapture.latest_cycle`).  A device error ends the thread, is kept, and is raised to every
+frames of a rolling window (:meth:`LiveCapture.window`), the latest complete cycle
+(:meth:`LiveCapture.latest_cycle`) or the newest frame of each of a sweep's settings
+(:meth:`LiveCapture.latest_sweep`).  A device error ends the thread, is kept, and is raised to every
 reader as the one line it is; the device is closed when the thread ends, however it ends.
 
 Nothing here knows about a browser: the explorer (:mod:`planeray.viewer`) and any other front end
@@ -131,6 +133,17 @@ class LiveCapture:
             raise InputError("a cycle needs at least one delay")
         self._set((delays, float(exposure_us)))
 
+    def set_sweep(self, delays_us, exposures_us) -> None:
+        """Capture a sweep's settings, one frame each, round and round (a live transport's window).
+
+        ``delays_us`` and ``exposures_us`` pair up; the target is then ``(delays, exposures)``, both tuples.
+        """
+        delays = tuple(float(d) for d in delays_us)
+        exposures = tuple(float(e) for e in exposures_us)
+        if not delays or len(delays) != len(exposures):
+            raise InputError(f"a sweep needs one exposure per delay, got {len(delays)} delays, {len(exposures)} exposures")
+        self._set((delays, exposures))
+
     def _set(self, target) -> None:
         with self._cond:
             if target != self._target:
@@ -140,8 +153,8 @@ class LiveCapture:
                 self._cond.notify_all()
 
     @property
-    def target(self) -> tuple[tuple[float, ...], float]:
-        """``(delays_us, exposure_us)`` being captured."""
+    def target(self) -> tuple[tuple[float, ...], float | tuple[float, ...]]:
+        """``(delays_us, exposure_us)`` being captured (a sweep: ``(delays_us, exposures_us)``)."""
         return self._target
 
     @property
@@ -166,6 +179,8 @@ class LiveCapture:
                     delays, exposure = self._target
                     generation = self._generation
                     delay = delays[self._cycle_pos % len(delays)]
+                    if isinstance(exposure, tuple):  # a sweep: one exposure per delay
+                        exposure = exposure[self._cycle_pos % len(delays)]
                     self._cycle_pos += 1
                 t0 = time.monotonic()
                 apply_timing(self.device, delay, exposure)
@@ -306,6 +321,39 @@ class LiveCapture:
         if len(got) < len(want) or min(f.index for f in got.values()) <= after:
             return None
         return [got[d] for d in want]
+
+    def latest_sweep(self, delays_us, exposures_us) -> list[Frame] | None:
+        """The newest frame of every setting of a sweep, in the sweep's order; None while one is missing."""
+        want = list(zip((float(d) for d in delays_us), (float(e) for e in exposures_us)))
+        with self._cond:
+            frames = list(self._frames)
+        got: dict[tuple[float, float], Frame] = {}
+        wanted = set(want)
+        for frame in reversed(frames):
+            key = (frame.delay_us, frame.exposure_us)
+            if key in wanted and key not in got:
+                got[key] = frame
+                if len(got) == len(wanted):
+                    break
+        if len(got) < len(wanted):
+            return None
+        return [got[k] for k in want]
+
+    def wait_sweep(self, delays_us, exposures_us, *, after: int = -1, timeout_s: float = 10.0) -> list[Frame]:
+        """Wait for a complete window of a sweep (:meth:`latest_sweep`) holding a frame newer than ``after``."""
+        self.start()
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while True:
+                window = self.latest_sweep(delays_us, exposures_us)
+                if window is not None and max(f.index for f in window) > after:
+                    return window
+                self._raise()
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    n = len(list(delays_us))
+                    raise DeviceError(f"no new frame of the {n} settings of the sweep from the device within {timeout_s:g} s")
+                self._cond.wait(left)
 
     def wait_cycle(self, delays_us, exposure_us: float, *, after: int = -1, timeout_s: float = 10.0) -> list[Frame]:
         """Wait for a complete cycle whose every frame is newer than ``after`` (see :meth:`latest_cycle`)."""
