@@ -138,10 +138,11 @@ def _flush32(M) -> np.ndarray:
 def _lower_inverse(S) -> np.ndarray:
     """``L^{-1}`` of the Cholesky factor ``S = L L^T`` (LAPACK potrf + trtri)."""
     L = np.linalg.cholesky(S)
-    Li, info = sla.lapack.dtrtri(L, lower=1)
+    # dtrtri reads and writes the lower triangle only: the upper one stays the zeros cholesky left there
+    Li, info = sla.lapack.dtrtri(L, lower=1, overwrite_c=1)
     if info != 0:  # pragma: no cover - L is a valid Cholesky factor
         raise np.linalg.LinAlgError(f"dtrtri failed ({info})")
-    return np.tril(Li)
+    return Li
 
 
 class _Factor:
@@ -603,18 +604,26 @@ def row_solver(group: RowGroup, alpha: float, beta: float, ambient=None) -> Admm
     key = (alpha, beta) if ambient is None else (alpha, beta, np.asarray(ambient, np.float64).tobytes())
     with _CACHE_LOCK:
         cache = group.__dict__.setdefault("_admm_cache", {})
-        if key not in cache:
-            cache.clear()
-            shared = _solver_key(group.A, alpha, beta, ambient)
-            solver = _SOLVERS.get(shared)
-            if solver is None:
-                solver = AdmmRowSolver(group.A, alpha, beta, ambient=ambient)
-                _SOLVERS[shared] = solver
+        if key in cache:
+            return cache[key]
+    # the key and a new factorization outside the lock: the other solver thread goes on with its own group
+    # (at the image's top and bottom every row is a group of its own, each factored when first met)
+    shared = _solver_key(group.A, alpha, beta, ambient)
+    with _CACHE_LOCK:
+        solver = _SOLVERS.get(shared)
+        if solver is not None:
+            _SOLVERS.move_to_end(shared)
+    if solver is None:
+        built = AdmmRowSolver(group.A, alpha, beta, ambient=ambient)
+        with _CACHE_LOCK:
+            solver = _SOLVERS.setdefault(shared, built)  # a thread that built the same one first wins
+            if solver is built:
                 held = sum(map(_solver_bytes, _SOLVERS.values()))
                 while len(_SOLVERS) > 1 and held > SOLVER_CACHE_BYTES:
                     held -= _solver_bytes(_SOLVERS.popitem(last=False)[1])
-            else:
-                _SOLVERS.move_to_end(shared)
+    with _CACHE_LOCK:
+        if key not in cache:
+            cache.clear()
             cache[key] = solver
         return cache[key]
 
