@@ -113,8 +113,10 @@ def main():
                     results[c].append(r)
         print(f"planeray demux, {args.size}x{args.size} random transports (paper sweep, no ambient), "
               f"{args.rounds} interleaved rounds, medians; {os.cpu_count()} cores")  # fmt: skip
-        print("| commit | process CPU s | solver threads CPU s | rest CPU s | quiet 2-core wall estimate s | "
-              "iterations | load average |")
+        print(
+            "| commit | process CPU s | solver threads CPU s | rest CPU s | quiet 2-core wall estimate s | "
+            "iterations | load average |"
+        )
         print("|---|---|---|---|---|---|---|")
         base = None
         for c, rs in results.items():
@@ -123,8 +125,10 @@ def main():
             rest = float(np.median([r["cpu"] - r["task_cpu"] for r in rs]))
             est = float(np.median([r["cpu"] - r["task_cpu"] / 2 for r in rs]))
             base = base or cpu
-            print(f"| {c} | {cpu:.2f} ({cpu / base:.2f}x) | {task:.2f} | {rest:.2f} | {est:.2f} | "
-                  f"{np.mean([r['iterations'] for r in rs]):.1f} | {np.median([r['load'] for r in rs]):.1f} |")
+            print(
+                f"| {c} | {cpu:.2f} ({cpu / base:.2f}x) | {task:.2f} | {rest:.2f} | {est:.2f} | "
+                f"{np.mean([r['iterations'] for r in rs]):.1f} | {np.median([r['load'] for r in rs]):.1f} |"
+            )
 
 
 if __name__ == "__main__":

@@ -78,7 +78,9 @@ def main():
         t0 = time.process_time()
         design = design_sweep(24)
         sweep = design.sweep
-        print(f"design of 24 images: {time.process_time() - t0:.1f} CPU s (expected relative error {design.expected_error:.3f})")
+        print(
+            f"design of 24 images: {time.process_time() - t0:.1f} CPU s (expected relative error {design.expected_error:.3f})"
+        )
         args.sweep = Path(tempfile.mkdtemp()) / "design24.json"
         write_sweep(sweep, args.sweep)
     sweep = read_sweep(args.sweep)
@@ -112,10 +114,14 @@ def main():
           f"{_load()}]")  # fmt: skip
     print(f"  updates                     : {n} in {dt:.1f} s -> **{n / dt:.2f} per second** (host clock)")
     print(f"  solve (wall)                : median {np.median(solve_s):.2f} s; iterations mean {np.mean(iters):.1f}")
-    print(f"  age at update               : median {np.median(ages):.2f} s (newest image to transport); "
-          f"window spans {last.window_span_s:.1f} s")
-    print(f"  process CPU per update      : {dc / max(n, 1):.2f} s (capture included: the device "
-          f"{capture_cpu:.3f} CPU s per image)")
+    print(
+        f"  age at update               : median {np.median(ages):.2f} s (newest image to transport); "
+        f"window spans {last.window_span_s:.1f} s"
+    )
+    print(
+        f"  process CPU per update      : {dc / max(n, 1):.2f} s (capture included: the device "
+        f"{capture_cpu:.3f} CPU s per image)"
+    )
     # ---- replay in the same process
     solver_w = WindowSolver(sweep, (args.size, args.size), lines_per_second=lps, projector_rows=720, jitter_us=jitter)
     solver_c = WindowSolver(sweep, (args.size, args.size), lines_per_second=lps, projector_rows=720, jitter_us=jitter)
@@ -137,18 +143,26 @@ def main():
     cpu_off = time.process_time() - c0
     w, c = float(np.median(cpu_w)), float(np.median(cpu_c))
     print(f"\n[replay of the {len(windows) - 1} windows, in process; {_load()}]")
-    print(f"  warm-started (live)         : {w:.2f} CPU s per update, iterations {np.mean(it_w):.1f} -> "
-          f"**{2 / w:.1f} updates per second on 2 free cores**")
-    print(f"  cold, same solver           : {c:.2f} CPU s, iterations {np.mean(it_c):.1f} -> warm is **{c / w:.1f}x** less")
-    print(f"  offline demultiplex()       : {cpu_off:.2f} CPU s on the last window (iterations "
-          f"{offline.maps['iterations'].mean():.1f})")
+    print(
+        f"  warm-started (live)         : {w:.2f} CPU s per update, iterations {np.mean(it_w):.1f} -> "
+        f"**{2 / w:.1f} updates per second on 2 free cores**"
+    )
+    print(
+        f"  cold, same solver           : {c:.2f} CPU s, iterations {np.mean(it_c):.1f} -> warm is **{c / w:.1f}x** less"
+    )
+    print(
+        f"  offline demultiplex()       : {cpu_off:.2f} CPU s on the last window (iterations "
+        f"{offline.maps['iterations'].mean():.1f})"
+    )
     f_live = last.maps["objective"]
     f_off = offline.maps["objective"].astype(np.float64)
     rel = np.abs(f_live - f_off) / np.maximum(f_off, 1e-300)
     qn, ratio = q_norm_bound(solver_w.problem, last, offline)
-    print(f"  live vs offline (last window): objectives differ by median {np.median(rel):.1e}, at most {rel.max():.1e} "
-          f"(tol 1e-4 each); ||x_live - x_off||_Q at most {ratio:.2f} of its certified bound; certified "
-          f"{last.maps['converged'].mean() * 100:.1f} % / {offline.maps['converged'].mean() * 100:.1f} %")
+    print(
+        f"  live vs offline (last window): objectives differ by median {np.median(rel):.1e}, at most {rel.max():.1e} "
+        f"(tol 1e-4 each); ||x_live - x_off||_Q at most {ratio:.2f} of its certified bound; certified "
+        f"{last.maps['converged'].mean() * 100:.1f} % / {offline.maps['converged'].mean() * 100:.1f} %"
+    )
 
 
 if __name__ == "__main__":

@@ -195,7 +195,9 @@ def test_band_rows_are_the_demultiplexers_matrix():
 
 def test_impossible_designs_are_refused_in_one_line():
     prior, _ = _prior(n=50)
-    few = candidate_settings(DesignCamera(), support_rows=14, exposure_range_us=(150.0, 170.0), delay_step_us=8 * ROW_US)
+    few = candidate_settings(
+        DesignCamera(), support_rows=14, exposure_range_us=(150.0, 170.0), delay_step_us=8 * ROW_US
+    )
     with pytest.raises(InputError, match="at least 4 images"):
         design_sweep(3, prior=prior, candidates=few)
     with pytest.raises(InputError, match="cannot see every offset|candidate settings"):

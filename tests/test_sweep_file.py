@@ -42,7 +42,11 @@ def test_a_sweep_file_round_trips_and_hand_written_ones_get_the_defaults(tmp_pat
     np.testing.assert_array_equal(back.excluded, sweep.excluded)
     assert back.name == "mine" and back.record == rec
     doc = json.loads((tmp_path / "s.json").read_text())
-    assert doc["format"] == "planeray-sweep" and doc["format_version"] == 1 and doc["planeray_mark"].startswith("planeray:sweep:")
+    assert (
+        doc["format"] == "planeray-sweep"
+        and doc["format_version"] == 1
+        and doc["planeray_mark"].startswith("planeray:sweep:")
+    )
     # hand-written: the name is the stem, the paper's boundary rule flags the excluded images
     path, d, e = _small(tmp_path)
     mine = read_sweep(path)
@@ -52,7 +56,7 @@ def test_a_sweep_file_round_trips_and_hand_written_ones_get_the_defaults(tmp_pat
 
 
 @pytest.mark.parametrize(
-    "text, message",
+    ("text", "message"),
     [
         ("not json", "not JSON"),
         ("[1, 2]", "a JSON object with delay_us and exposure_us"),

@@ -211,14 +211,18 @@ def convex_design(k: int, prior, camera: DesignCamera, rank: int = 20) -> Sweep:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", nargs="*", default=list(list_scenes()))
-    ap.add_argument("--store", nargs="*", default=[], help="transport stores (planeray render of tools/sweep_design_scenes)")
+    ap.add_argument(
+        "--store", nargs="*", default=[], help="transport stores (planeray render of tools/sweep_design_scenes)"
+    )
     ap.add_argument("--ks", nargs="*", type=int, default=[8, 12, 16, 24, 32, 40, 51, 68, 85])
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--projector-rows", type=int, default=PAPER_PROJECTOR_ROWS)
     ap.add_argument("--cols", type=int, default=16, help="columns demultiplexed (evenly spaced)")
     ap.add_argument("--ambient", type=float, default=None, help="the camera's ambient e-/us (default: its 0.5)")
     ap.add_argument("--draws", type=int, default=3, help="random sweeps per K")
-    ap.add_argument("--loo", action="store_true", help="also K = 24 designs leaving each built-in scene out of the prior")
+    ap.add_argument(
+        "--loo", action="store_true", help="also K = 24 designs leaving each built-in scene out of the prior"
+    )
     ap.add_argument("--methods", action="store_true", help="also the design choices compared at K = 24")
     ap.add_argument("--cache", type=Path, required=True)
     ap.add_argument("--json", type=Path, default=None)
@@ -229,7 +233,9 @@ def main(argv=None) -> None:
     cache = Cache(args.cache)
     shape = (args.size, args.size)
     cols = np.unique(np.round(np.linspace(0, args.size - 1, args.cols)).astype(int))
-    scenes = [(n, lambda n=n: make_scene(n, shape, projector_rows=args.projector_rows, seed=EVAL_SEED)) for n in args.scenes]
+    scenes = [
+        (n, lambda n=n: make_scene(n, shape, projector_rows=args.projector_rows, seed=EVAL_SEED)) for n in args.scenes
+    ]
     for p in args.store:
         from planeray.scenes.store_scene import scene_from_transport_store
 
@@ -284,7 +290,9 @@ def main(argv=None) -> None:
             "bayes-d": dict(criterion="bayes-d"),
         }
         for label, kw in variants.items():
-            methods[label] = designed(24, PAPER_FRAMES, label="m-" + label.split()[0] + ("x" if "exch" in label else ""), **kw)
+            methods[label] = designed(
+                24, PAPER_FRAMES, label="m-" + label.split()[0] + ("x" if "exch" in label else ""), **kw
+            )
         cam = DesignCamera(model=base)
         for label, (es, ds) in {"coarser grid (4 / 2 rows)": (4, 2), "coarser grid (2 / 1 rows)": (2, 1),
                                 "finer grid (2 / 0.5 rows)": (2, 0.5)}.items():  # fmt: skip
@@ -297,15 +305,27 @@ def main(argv=None) -> None:
         t0 = time.perf_counter()
         for (family, k, frames, name), sw in sweeps.items():
             key = f"{scene_name}|{tag}|{family}|{k}|{frames}|{name}"
-            r = cache.get(key, lambda sw=sw, frames=frames: t_error(scene, sw, replace(base, frames_averaged=frames), cols))
+            r = cache.get(
+                key,
+                lambda sw=sw, frames=frames, scene=scene: t_error(
+                    scene, sw, replace(base, frames_averaged=frames), cols
+                ),
+            )
             rows.append({"scene": scene_name, "family": family, "k": k, "frames": frames, "name": name, **r})
         for (excluded, frames), sw in loo.items():
             key = f"{scene_name}|{tag}|loo|24|{frames}|no-{excluded}"
-            r = cache.get(key, lambda sw=sw, frames=frames: t_error(scene, sw, replace(base, frames_averaged=frames), cols))
-            rows.append({"scene": scene_name, "family": "loo", "k": 24, "frames": frames, "name": f"no-{excluded}", **r})
+            r = cache.get(
+                key,
+                lambda sw=sw, frames=frames, scene=scene: t_error(
+                    scene, sw, replace(base, frames_averaged=frames), cols
+                ),
+            )
+            rows.append(
+                {"scene": scene_name, "family": "loo", "k": 24, "frames": frames, "name": f"no-{excluded}", **r}
+            )
         for label, sw in methods.items():
             key = f"{scene_name}|{tag}|method|24|8|{label}"
-            r = cache.get(key, lambda sw=sw: t_error(scene, sw, base, cols))
+            r = cache.get(key, lambda sw=sw, scene=scene: t_error(scene, sw, base, cols))
             rows.append({"scene": scene_name, "family": "method", "k": 24, "frames": 8, "name": label, **r})
         print(f"{scene_name}: {time.perf_counter() - t0:.0f} s", flush=True)
     summary = summarize(rows, args.ks, methods, loo, base, prior_for)
@@ -330,8 +350,10 @@ def summarize(rows, ks, methods, loo, base, prior_for) -> dict:
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     out = {"k24": {}, "curve": {}}
     print("\nK = 24 (relative T error; indirect |u| > 8 rows in brackets):")
-    print("| scene | paper 85 x 8 frames | designed 24 x 8 | / paper | best uniform 24 x 8 | designed 24 x 28 (equal time) "
-          "| / paper | designed without this scene in the prior, x 8 / x 28 |")
+    print(
+        "| scene | paper 85 x 8 frames | designed 24 x 8 | / paper | best uniform 24 x 8 | designed 24 x 28 (equal time) "
+        "| / paper | designed without this scene in the prior, x 8 / x 28 |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     et = equal_time_frames(24)
     for s in scenes:
@@ -344,9 +366,11 @@ def summarize(rows, ks, methods, loo, base, prior_for) -> dict:
         loo_text = "" if l8 is None else f"{l8['error']:.3f} / {lt['error']:.3f}"
         out["k24"][s] = {"paper": p, "designed_8": d8, "designed_equal_time": dt, "best_uniform_8": u8,
                          "loo_8": l8, "loo_equal_time": lt}  # fmt: skip
-        print(f"| {s} | {p['error']:.3f} ({p['indirect_error']:.3f}) | {d8['error']:.3f} ({d8['indirect_error']:.3f}) "
-              f"| {d8['error'] / p['error']:.2f} | {u8['error']:.3f} ({u8['name']}) | {dt['error']:.3f} "
-              f"({dt['indirect_error']:.3f}) | {dt['error'] / p['error']:.2f} | {loo_text} |")
+        print(
+            f"| {s} | {p['error']:.3f} ({p['indirect_error']:.3f}) | {d8['error']:.3f} ({d8['indirect_error']:.3f}) "
+            f"| {d8['error'] / p['error']:.2f} | {u8['error']:.3f} ({u8['name']}) | {dt['error']:.3f} "
+            f"({dt['indirect_error']:.3f}) | {dt['error'] / p['error']:.2f} | {loo_text} |"
+        )
     for s in scenes:
         out["curve"][s] = {
             fam: {str(k): {str(f): (best(rows, scene=s, family=fam, k=k, frames=f) or {}).get("error")
@@ -362,12 +386,19 @@ def summarize(rows, ks, methods, loo, base, prior_for) -> dict:
         print("|---|" + "---|" * (len(scenes) + 3))
         out["methods"] = {}
         for label, sw in methods.items():
-            errs = [(best(rows, scene=s, family="method", name=label) or {"error": float("nan")})["error"] for s in scenes]
+            errs = [
+                (best(rows, scene=s, family="method", name=label) or {"error": float("nan")})["error"] for s in scenes
+            ]
             exp = expected_error(sw, prior=prior_for(), camera=cam)
             cpu = (sw.record or {}).get("study_cpu_s")
             out["methods"][label] = {"errors": errs, "expected": exp, "cpu_s": cpu}
-            print(f"| {label} | " + " | ".join(f"{e:.3f}" for e in errs) + f" | {np.mean(errs):.3f} | {exp:.3f} | "
-                  + ("" if cpu is None else f"{cpu:.1f}") + " |")
+            print(
+                f"| {label} | "
+                + " | ".join(f"{e:.3f}" for e in errs)
+                + f" | {np.mean(errs):.3f} | {exp:.3f} | "
+                + ("" if cpu is None else f"{cpu:.1f}")
+                + " |"
+            )
     return out
 
 
@@ -406,7 +437,7 @@ def figure(rows, ks, out: Path) -> None:
         ax.set_xlabel("images K")
         ax.set_ylabel("relative T error")
         ax.set_xscale("log")
-        ax.set_xticks([k for k in ks])
+        ax.set_xticks(list(ks))
         ax.set_xticklabels([str(k) for k in ks], fontsize=7)
         ax.minorticks_off()
     for ax in axes.ravel()[n:]:

@@ -155,7 +155,9 @@ def design(
     lim.optional(lim.positive, exposure_step_us, "--exposure-step-us", maximum=lim.MAX_TIME_US)
     lim.optional(lim.positive, delay_step_us, "--delay-step-us", maximum=lim.MAX_TIME_US)
     sources = list(prior or ["scenes"])
-    _check_outputs((out_path, "sweep"), overwrite=overwrite, inputs=[("--prior", p) for p in sources if Path(p).exists()])
+    _check_outputs(
+        (out_path, "sweep"), overwrite=overwrite, inputs=[("--prior", p) for p in sources if Path(p).exists()]
+    )
     cam = _camera(camera, device, device_option, calibration, frames)
     t0 = time.perf_counter()
     with console.status(f"building the prior ({', '.join(sources)})"):

@@ -70,11 +70,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-from dataclasses import dataclass
 import sys
 import threading
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -679,6 +679,7 @@ def solve_fast(
     slices = [slice(s, min(P, s + _CHUNK)) for s in range(0, P, _CHUNK)]
     with blas_one_thread():
         solver = row_solver(group, alpha, beta, ambient)
+
         def run(s):
             return solver.solve(
                 B[s],

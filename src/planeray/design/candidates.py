@@ -155,7 +155,9 @@ def candidate_settings(
     origin = camera.exposure_range_us[0] if camera.exposure_step_us > 0 else 0.0
     exposures = _grid(e_lo, e_hi, e_step, origin)
     reach_us = K * row_us
-    d_lo, d_hi = (-reach_us, reach_us) if delay_range_us is None else (float(delay_range_us[0]), float(delay_range_us[1]))
+    d_lo, d_hi = (
+        (-reach_us, reach_us) if delay_range_us is None else (float(delay_range_us[0]), float(delay_range_us[1]))
+    )
     delays = _grid(d_lo, d_hi, d_step)
     if exposures.size == 0 or delays.size == 0:
         raise InputError("no candidate settings: widen the exposure or delay range, or shorten the steps")

@@ -82,9 +82,7 @@ class ExpectedError:
         on a shared 2-core machine a two-thread OpenBLAS inverts a 229 x 229 matrix 40x slower).
     """
 
-    def __init__(
-        self, rows, variance, second_moment, *, alpha: float = 0.01, criterion: str = "mse", threads: int = 1
-    ):
+    def __init__(self, rows, variance, second_moment, *, alpha: float = 0.01, criterion: str = "mse", threads: int = 1):
         if criterion not in CRITERIA:
             raise ValueError(f"unknown criterion {criterion!r}; choose one of {', '.join(CRITERIA)}")
         self.rows = np.ascontiguousarray(rows, np.float64)

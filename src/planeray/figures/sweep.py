@@ -71,7 +71,9 @@ def sweep_figure(
             label=f"boundary images (±{boundary_margin_us:g} us)" if sign > 0 else None,
         )
     if compare is not None:
-        ax.scatter(compare.delay_us, compare.exposure_us, s=22, c="0.6", marker="s", label=f"{compare.name} ({len(compare)})")
+        ax.scatter(
+            compare.delay_us, compare.exposure_us, s=22, c="0.6", marker="s", label=f"{compare.name} ({len(compare)})"
+        )
     used = ~sweep.excluded
     ax.scatter(sweep.delay_us[used], sweep.exposure_us[used], s=30, c="tab:blue", zorder=3,
                label=f"{sweep.name} ({int(used.sum())} used)")  # fmt: skip

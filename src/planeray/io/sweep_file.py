@@ -111,8 +111,10 @@ def read_sweep(path) -> Sweep:
         seen[key] = i
     if "excluded" in doc:
         excluded = doc["excluded"]
-        if not isinstance(excluded, list) or len(excluded) != delay.size or not all(
-            isinstance(x, bool) for x in excluded
+        if (
+            not isinstance(excluded, list)
+            or len(excluded) != delay.size
+            or not all(isinstance(x, bool) for x in excluded)
         ):
             raise InputError(f"'excluded' must be a list of {delay.size} booleans (true/false)", path)
         excluded = np.asarray(excluded, bool)

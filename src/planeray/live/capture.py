@@ -141,7 +141,9 @@ class LiveCapture:
         delays = tuple(float(d) for d in delays_us)
         exposures = tuple(float(e) for e in exposures_us)
         if not delays or len(delays) != len(exposures):
-            raise InputError(f"a sweep needs one exposure per delay, got {len(delays)} delays, {len(exposures)} exposures")
+            raise InputError(
+                f"a sweep needs one exposure per delay, got {len(delays)} delays, {len(exposures)} exposures"
+            )
         self._set((delays, exposures))
 
     def _set(self, target) -> None:
@@ -352,7 +354,9 @@ class LiveCapture:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     n = len(list(delays_us))
-                    raise DeviceError(f"no new frame of the {n} settings of the sweep from the device within {timeout_s:g} s")
+                    raise DeviceError(
+                        f"no new frame of the {n} settings of the sweep from the device within {timeout_s:g} s"
+                    )
                 self._cond.wait(left)
 
     def wait_cycle(self, delays_us, exposure_us: float, *, after: int = -1, timeout_s: float = 10.0) -> list[Frame]:

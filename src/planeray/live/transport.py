@@ -277,8 +277,13 @@ class LiveTransport:
     >>> from planeray.live import LiveCapture
     >>> from planeray.timing import quick_sweep
     >>> dev = open_device("sim", scene="wax", size=(16, 16), projector_rows=90, frames_averaged=1)
-    >>> with LiveTransport(LiveCapture(dev), quick_sweep(), lines_per_second=dev.lines_per_second,
-    ...                    projector_rows=90, jitter_us=dev.camera.jitter_us) as live:
+    >>> with LiveTransport(
+    ...     LiveCapture(dev),
+    ...     quick_sweep(),
+    ...     lines_per_second=dev.lines_per_second,
+    ...     projector_rows=90,
+    ...     jitter_us=dev.camera.jitter_us,
+    ... ) as live:
     ...     update = live.wait_update(timeout_s=60)
     >>> update.transport.shape, bool(update.maps["converged"].all())
     ((16, 16), True)
