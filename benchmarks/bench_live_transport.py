@@ -145,7 +145,7 @@ def main():
     print(f"\n[replay of the {len(windows) - 1} windows, in process; {_load()}]")
     print(
         f"  warm-started (live)         : {w:.2f} CPU s per update, iterations {np.mean(it_w):.1f} -> "
-        f"**{2 / w:.1f} updates per second on 2 free cores**"
+        f"{1 / w:.1f} updates per second on one free core, **{2 / w:.1f} on 2 free cores**"
     )
     print(
         f"  cold, same solver           : {c:.2f} CPU s, iterations {np.mean(it_c):.1f} -> warm is **{c / w:.1f}x** less"
