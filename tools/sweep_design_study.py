@@ -46,6 +46,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from demux_auto_table import columns  # the stack restricted to some columns (tools/ is on the path)
 
 from planeray.acquire import simulate_stack
 from planeray.camera import CameraModel
@@ -60,20 +61,6 @@ PAPER_FRAMES = 8
 PAPER_IMAGES = 85
 INDIRECT_ROWS = 8
 EVAL_SEED = 1  # the scenes' textures (the prior's are seed 0)
-
-
-def columns(stack: Stack, cols) -> Stack:
-    sat = None if stack.saturated is None else np.asarray(stack.saturated)[:, :, cols]
-    return Stack(
-        np.asarray(stack.images)[:, :, cols],
-        stack.delay_us,
-        stack.exposure_us,
-        stack.lines_per_second,
-        excluded=stack.excluded,
-        saturated=sat,
-        projector_rows=stack.projector_rows,
-        metadata=stack.metadata,
-    )
 
 
 def equal_time_frames(k: int) -> int:

@@ -33,6 +33,24 @@ from ..errors import DeviceError, InputError, PlanerayError
 __all__ = ["Frame", "LiveCapture"]
 
 
+def wait_on(cond: threading.Condition, found, check, timeout_s: float, what: str):
+    """Wait on ``cond`` (held by the caller) until ``found()`` returns something, and return it.
+
+    ``check()`` raises when waiting is pointless (the capture stopped on an error); after ``timeout_s``
+    a DeviceError says what was waited for: ``"{what} within {timeout_s} s"``.
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = found()
+        if value is not None:
+            return value
+        check()
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise DeviceError(f"{what} within {timeout_s:g} s")
+        cond.wait(left)
+
+
 @dataclass(frozen=True)
 class Frame:
     """One captured image and how it was captured.
@@ -269,7 +287,6 @@ class LiveCapture:
         device's own error when the capture stopped on one.
         """
         self.start()
-        deadline = time.monotonic() + timeout_s
 
         def found():
             for frame in reversed(self._frames):
@@ -281,17 +298,9 @@ class LiveCapture:
                     return frame
             return None
 
+        what = "" if timing is None else f" at delay {timing[0]:g} us, exposure {timing[1]:g} us"
         with self._cond:
-            while True:
-                frame = found()
-                if frame is not None:
-                    return frame
-                self._raise()
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    what = "" if timing is None else f" at delay {timing[0]:g} us, exposure {timing[1]:g} us"
-                    raise DeviceError(f"no frame{what} from the device within {timeout_s:g} s")
-                self._cond.wait(left)
+            return wait_on(self._cond, found, self._raise, timeout_s, f"no frame{what} from the device")
 
     def window(self, seconds: float, *, timing: tuple[float, float] | None = None) -> list[Frame]:
         """The latest run of consecutive frames (one timing, nothing else between) spanning up to ``seconds``."""
@@ -344,37 +353,23 @@ class LiveCapture:
     def wait_sweep(self, delays_us, exposures_us, *, after: int = -1, timeout_s: float = 10.0) -> list[Frame]:
         """Wait for a complete window of a sweep (:meth:`latest_sweep`) holding a frame newer than ``after``."""
         self.start()
-        deadline = time.monotonic() + timeout_s
+
+        def found():
+            window = self.latest_sweep(delays_us, exposures_us)
+            return window if window is not None and max(f.index for f in window) > after else None
+
+        what = f"no new frame of the {len(list(delays_us))} settings of the sweep from the device"
         with self._cond:
-            while True:
-                window = self.latest_sweep(delays_us, exposures_us)
-                if window is not None and max(f.index for f in window) > after:
-                    return window
-                self._raise()
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    n = len(list(delays_us))
-                    raise DeviceError(
-                        f"no new frame of the {n} settings of the sweep from the device within {timeout_s:g} s"
-                    )
-                self._cond.wait(left)
+            return wait_on(self._cond, found, self._raise, timeout_s, what)
 
     def wait_cycle(self, delays_us, exposure_us: float, *, after: int = -1, timeout_s: float = 10.0) -> list[Frame]:
         """Wait for a complete cycle whose every frame is newer than ``after`` (see :meth:`latest_cycle`)."""
         self.start()
-        deadline = time.monotonic() + timeout_s
+        what = f"no complete cycle of {len(list(delays_us))} delays from the device"
         with self._cond:
-            while True:
-                cycle = self.latest_cycle(delays_us, exposure_us, after=after)
-                if cycle is not None:
-                    return cycle
-                self._raise()
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise DeviceError(
-                        f"no complete cycle of {len(list(delays_us))} delays from the device within {timeout_s:g} s"
-                    )
-                self._cond.wait(left)
+            return wait_on(
+                self._cond, lambda: self.latest_cycle(delays_us, exposure_us, after=after), self._raise, timeout_s, what
+            )
 
     @property
     def fps(self) -> float:

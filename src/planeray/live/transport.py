@@ -34,6 +34,7 @@ from ..errors import DeviceError, InputError, PlanerayError
 from ..stack import Stack
 from ..timing import RowGeometry, Sweep
 from ..transport import Transport
+from .capture import wait_on
 
 __all__ = ["WindowSolver", "LiveTransport", "LiveUpdate", "window_stack"]
 
@@ -397,18 +398,14 @@ class LiveTransport:
     def wait_update(self, after: int = 0, *, timeout_s: float = 10.0) -> LiveUpdate:
         """The newest update numbered above ``after``; DeviceError saying what it waited for after ``timeout_s``."""
         self.start()
-        deadline = time.monotonic() + timeout_s
+
+        def found():
+            self._raise()
+            return self._latest if self._latest is not None and self._latest.number > after else None
+
+        what = f"no update of the live transport (a window of {len(self.sweep)} images)"
         with self._cond:
-            while True:
-                self._raise()
-                if self._latest is not None and self._latest.number > after:
-                    return self._latest
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise DeviceError(
-                        f"no update of the live transport within {timeout_s:g} s (a window of {len(self.sweep)} images)"
-                    )
-                self._cond.wait(left)
+            return wait_on(self._cond, found, self._raise, timeout_s, what)
 
     @property
     def rate_hz(self) -> float:

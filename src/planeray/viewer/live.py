@@ -221,20 +221,7 @@ class DeviceSource(ViewSource):
     # ------------------------------------------------------------------ snapshot and close
     def snapshot(self, settings: ViewSettings) -> dict:
         """Write what was shown last (a frame, or Eq. 7's cycle) as a native stack; its path and size."""
-        with self._lock:
-            frames = list(self._shown)
-        if not frames:
-            raise InputError("nothing shown yet to write")
-        out = snapshot_path(self.snapshot_dir, settings.mode)
-        path = write_snapshot(
-            frames,
-            out,
-            device=self.description,
-            lines_per_second=self.lines_per_second,
-            projector_rows=self.projector_rows,
-            view=settings.mode,
-        )
-        return {"path": str(path), "images": len(frames), "delays_us": [f.delay_us for f in frames]}
+        return _snapshot(self, settings)
 
     def close(self) -> None:
         """Stop the capture and release the device (idempotent)."""
@@ -426,16 +413,10 @@ class LiveTransportSource(ViewSource):
 
     # ------------------------------------------------------------------ snapshot and close
     def snapshot(self, settings: ViewSettings) -> dict:
-        """Write the window of the transport shown (or the image shown) as a native stack; its path and size."""
-        with self._lock:
-            frames = list(self._shown)
-        if not frames:
-            raise InputError("nothing shown yet to write")
-        out = snapshot_path(self.snapshot_dir, settings.mode)
-        path = write_snapshot(frames, out, device=self.description, lines_per_second=self.lines_per_second,
-                              projector_rows=self.projector_rows, view=settings.mode,
-                              excluded=np.zeros(len(frames), bool))  # fmt: skip
-        return {"path": str(path), "images": len(frames), "delays_us": [f.delay_us for f in frames]}
+        """Write the window of the transport shown (or the image shown) as a native stack; its path and size.
+
+        Every image of the window is used (the sweep's excluded images are not captured)."""
+        return _snapshot(self, settings, all_used=True)
 
     def close(self) -> None:
         """Stop the demultiplexing and the capture, and release the device (idempotent)."""
@@ -443,3 +424,21 @@ class LiveTransportSource(ViewSource):
             self.live.stop()
         finally:
             self.capture.stop()
+
+
+def _snapshot(source, settings: ViewSettings, *, all_used: bool = False) -> dict:
+    """Write the frames a live source showed last as a native stack in its snapshot folder; its path and size."""
+    with source._lock:
+        frames = list(source._shown)
+    if not frames:
+        raise InputError("nothing shown yet to write")
+    path = write_snapshot(
+        frames,
+        snapshot_path(source.snapshot_dir, settings.mode),
+        device=source.description,
+        lines_per_second=source.lines_per_second,
+        projector_rows=source.projector_rows,
+        view=settings.mode,
+        excluded=np.zeros(len(frames), bool) if all_used else None,
+    )
+    return {"path": str(path), "images": len(frames), "delays_us": [f.delay_us for f in frames]}
