@@ -43,6 +43,7 @@ LAYERS = [
     "acquire",
     "rig",
     "demux",
+    "design",
     "synthesis",
     "profiles",
     "classify",

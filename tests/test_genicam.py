@@ -78,6 +78,7 @@ def test_setup_reads_back_a_rolling_triggered_linear_camera_and_releases_it():
         "gamma",
         "row_time",
         "ranges",
+        "steps",
         "timing",
     }
     assert dev.get_gamma() == 1.0 and dev.get_row_time_us() == pytest.approx(18.5185)

@@ -95,3 +95,40 @@ def test_the_fake_genicam_camera_live_in_the_page(browser):
         assert any(np.array_equal(data, expected_image([i], data.shape, 600.0, gain=1)) for i in ids)
         done(page)
     assert dev.aravis_device is None  # released when the server stopped
+
+
+def test_the_live_transport_of_a_sweep_in_the_page(browser, tmp_path):
+    """``view --device sim --sweep``: the transport's views painted as updates arrive, with rate and age."""
+    from planeray import synthesis as syn
+    from planeray.timing import quick_sweep
+    from planeray.viewer.live import LiveTransportSource
+
+    dev = open_device("sim", scene="wax", size=(16, 20), projector_rows=90, frames_averaged=1)
+    source = LiveTransportSource(dev, quick_sweep(), name="sim", max_fps=120.0, snapshot_dir=tmp_path)
+    with ViewerServer(source) as server:
+        page = open_page(browser, server)
+        assert page.is_visible("#save-stack")
+        wait_for(page, "window.planeray.panels[0].image.header.transport_number >= 3", timeout_s=60)
+        # a painted frame is the sharpened epipolar image of the transport it names
+        for _ in range(50):
+            data, header, _, _ = frame(page)
+            update = source._update
+            if header["transport_number"] == update.number:
+                break
+        else:  # pragma: no cover - the page always catches up within 50 tries
+            raise AssertionError("no frame of the newest transport")
+        np.testing.assert_array_equal(data, syn.sharpened_epipolar(update.transport, width_rows=1.0))
+        label = page.text_content(".panel[data-panel='0'] .label")
+        assert "live transport #" in label and "updates/s" in label and "age" in label
+        assert header["update_rate_hz"] > 0 and header["age_s"] >= 0
+        # relit by a projector row: the transport's relighting
+        page.select_option(".panel[data-panel='0'] select.mode", "relight_row")
+        wait_for(page, "window.planeray.panels[0].image.header.settings.mode === 'relight_row'")
+        # save stack: the window of the transport shown, a stack planeray demux reads
+        page.click("#save-stack")
+        saved = wait_for(page, "window.planeray.lastStack")
+        st = read_stack(saved["path"], lazy=False)
+        assert len(st) == int((~quick_sweep().excluded).sum()) and not st.excluded.any()
+        page.screenshot(path=str(tmp_path / "live_transport.png"))
+        done(page)
+    assert not source.capture._thread.is_alive()

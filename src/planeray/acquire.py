@@ -79,6 +79,8 @@ def _capture_metadata(device: Device, sweep: Sweep) -> dict:
     meta = dict(device.describe())
     meta["sweep"] = sweep.name
     meta["sweep_settings"] = {"delay_us": sweep.delay_us.tolist(), "exposure_us": sweep.exposure_us.tolist()}
+    if sweep.record:  # a sweep file's record (a design's prior, camera and criterion) travels with the stack
+        meta["sweep_record"] = sweep.record
     return meta
 
 

@@ -121,6 +121,58 @@ class Stack:
         """Sorted unique exposures."""
         return np.unique(self.exposure_us)
 
+    def restricted_to(self, sweep: Sweep) -> Stack:
+        """The same stack with only ``sweep``'s images used for demultiplexing (the others excluded).
+
+        Every setting of ``sweep`` must be in the stack (within 1e-6 us); an image the sweep
+        excludes stays excluded, as does one the stack excludes.  The images are not copied (a
+        lazily read stack stays lazy); :class:`planeray.demux.DemuxProblem` then uses exactly the
+        sweep's images, e.g. a designed sweep's 24 out of a captured 85 (``planeray demux --sweep``).
+
+        Raises
+        ------
+        StackError
+            A setting of the sweep that the stack does not have (the first few named).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from planeray.timing import paper_sweep, quick_sweep
+        >>> q = quick_sweep()
+        >>> st = Stack(np.zeros((len(q), 4, 4), np.float32), q.delay_us, q.exposure_us, 54_000.0)
+        >>> sub = Sweep(q.delay_us[:6], q.exposure_us[:6], q.excluded[:6])
+        >>> int((~st.restricted_to(sub).excluded).sum())
+        6
+        """
+        index = np.full(len(sweep), -1)
+        for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
+            hit = np.flatnonzero((np.abs(self.delay_us - d) <= 1e-6) & (np.abs(self.exposure_us - e) <= 1e-6))
+            if hit.size:
+                index[i] = hit[0]
+        missing = np.flatnonzero(index < 0)
+        if missing.size:
+            shown = ", ".join(f"({sweep.delay_us[i]:g}, {sweep.exposure_us[i]:g})" for i in missing[:3])
+            more = f" and {missing.size - 3} more" if missing.size > 3 else ""
+            raise StackError(
+                f"the stack has no image at {missing.size} of the sweep {sweep.name!r}'s {len(sweep)} settings "
+                f"(delay us, exposure us): {shown}{more}"
+            )
+        excluded = np.ones(len(self), bool)
+        excluded[index] = np.asarray(sweep.excluded, bool)
+        excluded |= self.excluded
+        meta = dict(self.metadata)
+        meta["demux_sweep"] = sweep.name
+        return Stack(
+            self.images,
+            self.delay_us,
+            self.exposure_us,
+            self.lines_per_second,
+            excluded=excluded,
+            saturated=self.saturated,
+            projector_rows=self.projector_rows,
+            metadata=meta,
+        )
+
     def index_of(self, delay_us: float, exposure_us: float) -> int | None:
         """Index of the image with this (delay, exposure), or None."""
         hit = np.flatnonzero(np.isclose(self.delay_us, delay_us) & np.isclose(self.exposure_us, exposure_us))

@@ -534,7 +534,7 @@ def _keep_jittered(key: tuple, w: np.ndarray) -> np.ndarray:
         return _JITTERED[key]
 
 
-def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_rows) -> np.ndarray:
+def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_rows, *, profile=None) -> np.ndarray:
     """:meth:`Band.weights` of many bands at one camera row, ``(N, U)``, in one vectorized pass.
 
     The same numbers as ``np.stack([b.weights(geometry, camera_row, offsets_rows) for b in bands])``
@@ -550,6 +550,10 @@ def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_r
         Camera row ``t``.
     offsets_rows : array_like of int, shape (U,)
         Offset bins ``u = v - t`` (projector rows).
+    profile : ndarray (N, U), optional
+        The bands' common profile on these offsets (``[b.profile(offsets_rows) for b in bands]``), when
+        the caller has it already (a demultiplexing problem: one for all its row groups); only the bins
+        the projector's end cuts are then computed here.
 
     Returns
     -------
@@ -565,10 +569,13 @@ def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_r
     ((sigma, line),) = blur
     centre = np.array([b.centre_rows for b in bands])[:, None]
     width = np.array([b.width_rows for b in bands])[:, None]
-    k = offsets.astype(float)[None, :]
-    w = np.minimum(
-        band_interval_weights(k - 0.5, k + 0.5, centre, width, blur_sigma_rows=sigma, line_width_rows=line), 1.0
-    )
+    if profile is not None:
+        w = np.array(profile, dtype=np.float64)
+    else:
+        k = offsets.astype(float)[None, :]
+        w = np.minimum(
+            band_interval_weights(k - 0.5, k + 0.5, centre, width, blur_sigma_rows=sigma, line_width_rows=line), 1.0
+        )
     lo, hi = geometry.bin_parts(camera_row, offsets)
     edge = hi - lo < 1.0 - 1e-12
     if edge.any():
@@ -611,13 +618,16 @@ class Sweep:
 
     ``excluded`` marks the images that sit on the epipolar/non-epipolar boundary
     (``||t_d| - t_e/2| <= boundary_margin_us``); they are captured and stored but
-    left out of demultiplexing (Sec. 4).
+    left out of demultiplexing (Sec. 4).  ``record`` holds what a sweep file says about
+    where the sweep came from (a designed sweep: its prior, camera and criterion;
+    :func:`planeray.io.read_sweep`), or None.
     """
 
     delay_us: np.ndarray
     exposure_us: np.ndarray
     excluded: np.ndarray
     name: str = "custom"
+    record: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
         d = np.asarray(self.delay_us, dtype=float).ravel()

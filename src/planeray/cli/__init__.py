@@ -23,6 +23,7 @@ order) and holds the entry point:
 * ``pulse.py``      skin pulse | video | pulse-report (the pulse, Sec. 10, Fig. 15), on the skin group
 * ``paper.py``      paper (every figure of the paper, resumable, with a report beside the paper's numbers)
 * ``view.py``       view (the live explorer in the browser), video (a delay or exposure sweep as a video)
+* ``sweep.py``      sweep design | show (the few images that determine the transport best; a sweep drawn)
 * ``demo.py``       demo (``make demo``)
 * ``_devices.py``   opening a registered device from options (--device-option, --calibration)
 * ``_common.py``    shared helpers: one-line errors, stack loading, ``--pixel`` parsing, image saving
@@ -51,6 +52,7 @@ from . import (
     skin,
     stacks,
     study,
+    sweep,
     view,
 )
 from ._common import DEBUG, _friendly_errors, _join_pixel_args
@@ -96,6 +98,7 @@ app.command()(view.video)
 app.command()(demo.demo)
 # Command groups (sub-apps).
 app.add_typer(baselines.separate_app, name="separate")
+app.add_typer(sweep.sweep_app, name="sweep")
 app.add_typer(calibrate.calibrate_app, name="calibrate")
 app.add_typer(rig.rig_app, name="rig")
 app.add_typer(mc.mc_app, name="mc")

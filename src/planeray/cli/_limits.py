@@ -88,12 +88,24 @@ def lines_per_second(value, option: str = "--lines-per-second") -> float | None:
 
 
 def sweep(name: str, option: str = "--sweep"):
-    """The named sweep (:func:`planeray.timing.make_sweep`); an unknown name is refused naming ``option``."""
+    """A named sweep (:func:`planeray.timing.make_sweep`) or a sweep file (``.json``,
+    :func:`planeray.io.read_sweep`); anything else is refused in one line naming ``option``."""
     from ..timing import SWEEPS, make_sweep
 
-    if name not in SWEEPS:
-        raise InputError(f"{option} {name}: unknown sweep; choose one of {', '.join(sorted(SWEEPS))}")
-    return make_sweep(name)
+    if name in SWEEPS:
+        return make_sweep(name)
+    text = str(name)
+    if text.lower().endswith(".json") or Path(text).exists():
+        from ..io import read_sweep
+
+        try:
+            return read_sweep(text)
+        except InputError as exc:
+            raise InputError(f"{option} {exc}") from None
+    raise InputError(
+        f"{option} {name}: unknown sweep; choose one of {', '.join(sorted(SWEEPS))} or give a sweep file (.json, "
+        "`planeray sweep design`)"
+    )
 
 
 def scene(name: str, option: str = "--scene") -> str:

@@ -21,7 +21,12 @@ def acquire(
     device: Annotated[
         str, typer.Option(help="Device by name: sim | replay | ueye | genicam | ... (`planeray devices`).")
     ] = "sim",
-    sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep.")] = "paper",
+    sweep: Annotated[
+        str,
+        typer.Option(
+            help="Delay-exposure sweep: paper (85 images), quick, or a sweep file (.json, `planeray sweep design`)."
+        ),
+    ] = "paper",
     scene: Annotated[str | None, typer.Option(help="sim: built-in scene.", show_default="wax")] = None,
     size: Annotated[
         tuple[int, int] | None, typer.Option(help="sim: image size H W (camera pixels).", show_default="128 128")

@@ -72,6 +72,14 @@ def demux(
         Path | None,
         typer.Option(help="With 'auto' weights: write the criterion's curve to DIR/weights_cv.png."),
     ] = None,
+    sweep: Annotated[
+        str | None,
+        typer.Option(
+            help="Use only the stack's images at this sweep's settings (paper, quick, or a sweep file .json, e.g. "
+            "a design's 24 of a captured 85); its boundary flags apply.",
+            show_default="every image of the stack",
+        ),
+    ] = None,
 ):
     """Demultiplex a delay-exposure stack into 3D light transport (Sec. 4); resumable."""
     import time
@@ -110,7 +118,13 @@ def demux(
     lim.optional(lim.integer, workers, "--workers", minimum=1, maximum=MAX_WORKERS)
     lim.integer(chunk_rows, "--chunk-rows", minimum=1, maximum=lim.MAX_SIDE)
     lim.optional(lim.number, tol, "--tol", minimum=0.0, maximum=1.0, min_inclusive=False, max_inclusive=False)
+    chosen_sweep = None if sweep is None else lim.sweep(sweep)
     st = _load_stack(stack_path)
+    if chosen_sweep is not None:
+        try:
+            st = st.restricted_to(chosen_sweep)
+        except InputError as exc:
+            raise InputError(f"--sweep {sweep}: {exc}", stack_path) from None
     t0 = time.perf_counter()
     chosen = {}
 

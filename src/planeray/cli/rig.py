@@ -96,7 +96,9 @@ def check(
     display: DisplayArg = None,
     device_option: DeviceOptionArg = None,
     calibration: CalibrationArg = None,
-    sweep: Annotated[str, typer.Option(help="The sweep the rig must serve.")] = "paper",
+    sweep: Annotated[
+        str, typer.Option(help="The sweep the rig must serve (paper, quick, or a sweep file .json).")
+    ] = "paper",
     frame_rate_hz: Annotated[
         float | None, typer.Option(help="The projector's frame rate.", show_default="the screen's, else 60")
     ] = None,

@@ -71,7 +71,12 @@ def simulate(
         int | None, typer.Option(help="Projector rows spanned by the image (default: H; a store's own).")
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the scene textures and the camera noise.")] = 0,
-    sweep: Annotated[str, typer.Option(help="Named delay-exposure sweep: paper (85 images) or quick.")] = "paper",
+    sweep: Annotated[
+        str,
+        typer.Option(
+            help="Delay-exposure sweep: paper (85 images), quick, or a sweep file (.json, `planeray sweep design`)."
+        ),
+    ] = "paper",
     lines_per_second: Annotated[
         float, typer.Option(help="Projector scanline velocity v_p (lines/s).")
     ] = PAPER_LINES_PER_SECOND,

@@ -86,10 +86,19 @@ def _can_open_browser() -> bool:
 SIM_LIVE_DEFAULTS = {"scene": "skin", "pulse_bpm": 72.0, "sensor_rows": 1200}
 
 
-def _open_live(device: str, device_option, calibration, snapshots):
-    """The live source of ``view --device``: the device opened from its options, with the live defaults."""
+def _sweep_frames(sweep) -> int:
+    """Frames per image a sweep was designed for (its record's camera), else the paper's 8."""
+    try:
+        return int(sweep.record["camera"]["model"]["frames_averaged"])
+    except (TypeError, KeyError, ValueError):
+        return 8
+
+
+def _open_live(device: str, device_option, calibration, snapshots, sweep=None):
+    """The live source of ``view --device``: the device opened from its options, with the live defaults
+    (with a sweep: the live transport, :class:`planeray.viewer.live.LiveTransportSource`)."""
     from ..devices import SimulatedEpiscan, device_options
-    from ..viewer.live import DeviceSource
+    from ..viewer.live import DeviceSource, LiveTransportSource
     from ._devices import open_device_from_cli, parse_device_options
 
     given = parse_device_options(device_option)
@@ -98,7 +107,8 @@ def _open_live(device: str, device_option, calibration, snapshots):
     if given.get("scene", "skin") != "skin":
         defaults.pop("pulse_bpm", None)  # only the skin pulses
     if "frames_averaged" in accepted:
-        defaults["frames_averaged"] = 1
+        # a live video: one frame per image; a live transport: the frames its sweep was designed for
+        defaults["frames_averaged"] = 1 if sweep is None else _sweep_frames(sweep)
     explicit = {k: v for k, v in defaults.items() if k not in given and k in accepted}
 
     def check(options):
@@ -115,7 +125,11 @@ def _open_live(device: str, device_option, calibration, snapshots):
     if isinstance(dev, SimulatedEpiscan):  # as fast as its projector and averaging allow, never every core
         max_fps = dev.rig["frame_rate_hz"] / dev.camera.frames_averaged
     try:
-        return DeviceSource(dev, name=device, max_fps=max_fps, snapshot_dir=snapshots), explicit
+        if sweep is not None:
+            source = LiveTransportSource(dev, sweep, name=device, max_fps=max_fps, snapshot_dir=snapshots)
+        else:
+            source = DeviceSource(dev, name=device, max_fps=max_fps, snapshot_dir=snapshots)
+        return source, explicit
     except BaseException:
         dev.close()
         raise
@@ -133,6 +147,14 @@ def view(
     snapshots: Annotated[
         Path | None,
         typer.Option(help="--device: the folder the page's 'save stack' writes to.", show_default="the current folder"),
+    ] = None,
+    sweep: Annotated[
+        str | None,
+        typer.Option(
+            help="--device: cycle this sweep (a sweep file from `planeray sweep design`, or paper, quick) and show "
+            "the live transport of its rolling window (sharpened, relit, short/long range), updated as images arrive.",
+            show_default=False,
+        ),
     ] = None,
     host: Annotated[
         str, typer.Option(help="Address to serve on. 127.0.0.1 (default): this machine only.")
@@ -156,7 +178,9 @@ def view(
     With ``--device NAME`` the page drives a device live: its sliders set the camera's trigger delay and
     exposure; the band image, the vein view, Eq. 7's composite over a cycle of delays and the pulse of a
     rolling window; 'save stack' writes what was captured into --snapshots.  ``--device sim`` is the
-    simulated pulsing skin (-O scene=... for another scene)."""
+    simulated pulsing skin (-O scene=... for another scene).  With ``--sweep sweep.json`` the device cycles the
+    sweep and the page shows the live transport of its rolling window (sharpened epipolar, relit, short/long
+    range), updated as images arrive, with its update rate and age."""
     from .._validate import check_integer, check_positive
     from ..viewer.server import ViewerServer
 
@@ -165,7 +189,7 @@ def view(
         raise InputError("give a PATH (a scene, a transport store or a stack) or --device NAME, one of them")
     if device is None:
         for option, value in (("--device-option", device_option or None), ("--calibration", calibration),
-                              ("--snapshots", snapshots)):  # fmt: skip
+                              ("--snapshots", snapshots), ("--sweep", sweep)):  # fmt: skip
             if value is not None:
                 raise InputError(f"{option} applies to --device only")
     if truth_scale is not None:
@@ -176,7 +200,10 @@ def view(
         folder = Path.cwd() if snapshots is None else snapshots
         if not folder.is_dir():
             raise InputError("--snapshots must be an existing folder", folder)
-        source, used = _open_live(device, device_option, calibration, folder)
+        from . import _limits as lim
+
+        chosen = None if sweep is None else lim.sweep(sweep)
+        source, used = _open_live(device, device_option, calibration, folder, chosen)
     else:
         _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
         source = _open(path, size=size, projector_rows=projector_rows, seed=seed, truth=truth,

@@ -74,6 +74,7 @@ import sys
 import threading
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -84,7 +85,7 @@ from ._finish import finish_pixels
 from .problem import RowGroup, difference_matrix, pixel_terms
 from .result import SolveResult
 
-__all__ = ["solve_fast", "AdmmRowSolver", "DEFAULT_TOL"]
+__all__ = ["solve_fast", "AdmmRowSolver", "WarmStart", "DEFAULT_TOL"]
 
 #: Certified relative objective gap at which a pixel stops.
 DEFAULT_TOL = 1e-4
@@ -92,8 +93,6 @@ _RELAX = 1.8
 #: Pixels per batch (one task of a worker thread).
 _CHUNK = 512
 _FIRST_CHECK = 30
-#: The first certificate of a warm-started solve (it often holds at once).
-_FIRST_CHECK_WARM = 10
 _CHECK_EVERY = 10
 _MAX_ITER = 2000
 
@@ -117,6 +116,11 @@ def _ambient_start(beta: float) -> int:
     return int(np.clip(np.round(np.log2(rho / _RHO_LADDER[0])), 0, len(_RHO_LADDER) - 1))
 
 
+#: A warm-started pixel's first certificate comes after this many iterations, and the next ones
+#: every :data:`WARM_CHECK_EVERY` (it starts near its optimum: a live transport's pixels after one
+#: new image of the window).
+WARM_FIRST_CHECK = 6
+WARM_CHECK_EVERY = 8
 _BALANCE_AFTER = 30
 #: A pixel's rho moves at most this often (balancing can otherwise cycle).
 _MAX_MOVES = 6
@@ -134,10 +138,11 @@ def _flush32(M) -> np.ndarray:
 def _lower_inverse(S) -> np.ndarray:
     """``L^{-1}`` of the Cholesky factor ``S = L L^T`` (LAPACK potrf + trtri)."""
     L = np.linalg.cholesky(S)
-    Li, info = sla.lapack.dtrtri(L, lower=1)
+    # dtrtri reads and writes the lower triangle only: the upper one stays the zeros cholesky left there
+    Li, info = sla.lapack.dtrtri(L, lower=1, overwrite_c=1)
     if info != 0:  # pragma: no cover - L is a valid Cholesky factor
         raise np.linalg.LinAlgError(f"dtrtri failed ({info})")
-    return np.tril(Li)
+    return Li
 
 
 class _Factor:
@@ -153,6 +158,27 @@ class _Factor:
         self.G1 = (2.0 * relax) * self.AM  # r c M = b G1 + g0 with c = 2 A^T b - beta (1, 0)
         self.g0 = -beta * relax * Minv[: U if n_x is None else n_x].sum(axis=0)
         self.K = self.AM @ A.T  # A M A^T (N, N): Woodbury blocks of pixels with dropped observations
+
+
+@dataclass
+class WarmStart:
+    """The ADMM state of a batch of pixels: a previous solve's end, the next solve's start.
+
+    ``V`` (P, U) float32 is each pixel's ADMM vector ``v`` (its iterate ``z = max(v, 0)`` and scaled
+    multiplier ``min(v, 0)``) and ``level`` (P,) its penalty's place on the ladder.  A pixel's state
+    depends only on its own data and start, so a solve warm-started from it gives the same answer to
+    the certified accuracy as a cold one (``tests/test_live_transport.py``).
+    """
+
+    V: np.ndarray
+    level: np.ndarray
+
+    @classmethod
+    def empty(cls, n_pixels: int, n_unknowns: int) -> WarmStart:
+        return cls(np.zeros((n_pixels, n_unknowns), np.float32), np.zeros(n_pixels, np.int64))
+
+    def __getitem__(self, rows) -> WarmStart:
+        return WarmStart(self.V[rows], self.level[rows])
 
 
 class AdmmRowSolver:
@@ -255,7 +281,7 @@ class AdmmRowSolver:
         return self._AQ
 
     # ------------------------------------------------------------------ solve
-    def solve(self, B, tol=DEFAULT_TOL, max_iter=None, *, mask=None, start=None):
+    def solve(self, B, tol=DEFAULT_TOL, max_iter=None, *, mask=None, start=None, state=None):
         """ADMM for a batch of pixels ``B`` (P, N).
 
         Parameters
@@ -268,10 +294,15 @@ class AdmmRowSolver:
         mask : ndarray (P, N) bool, optional
             Observations to use (False: dropped, e.g. saturated).  A pixel without any
             is returned as 0, not converged, with 0 iterations.
-        start : ndarray (P, U), optional
-            A warm start in the solver's variables (e.g. each pixel's solution at nearby
-            weights): ADMM starts there, with the multipliers this problem's gradient gives
-            on its zero entries.  The result is certified all the same.
+        start : WarmStart or ndarray (P, U), optional
+            Where each pixel starts.  A :class:`WarmStart` is a previous solve's ``state`` (e.g. of
+            the same pixels a moment ago): its iterate, multiplier and penalty on the ladder.  An
+            array is a start in the solver's variables (e.g. each pixel's solution at nearby
+            weights), with the multipliers this problem's gradient gives on its zero entries.  The
+            first certificate then comes after :data:`WARM_FIRST_CHECK` iterations, not 30; the
+            result is certified all the same.
+        state : WarmStart, optional
+            Filled with each pixel's final state (a warm start for the next solve).
 
         Returns
         -------
@@ -312,11 +343,14 @@ class AdmmRowSolver:
             done = run if U == 0 else np.zeros(P, bool)
             gap[done] = 0.0
             return X, iters, done, np.where(done, 0.0, np.inf), fval, kkt, rss
-        if start is not None:
-            start = np.maximum(np.asarray(start, np.float64), 0.0)
-            if start.shape != (P, U):
-                raise ValueError(f"start must be {(P, U)}, got {start.shape}")
-        self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss, start)
+        if start is not None and not isinstance(start, WarmStart):
+            X0 = np.maximum(np.asarray(start, np.float64), 0.0)
+            if X0.shape != (P, U):
+                raise ValueError(f"start must be {(P, U)}, got {X0.shape}")
+            lv = _ambient_start(self.beta) if self.ambient else _RHO_START
+            keep = np.zeros((0, 0), bool) if mask is None else mask
+            start = WarmStart(self._warm(X0, B, keep, _RHO_LADDER[lv]), np.full(P, lv, np.int64))
+        self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss, start, state)
         capped = np.flatnonzero(run & (iters >= max_iter) & ~(gap <= tol * np.maximum(fval - gap, 0.0)))
         if capped.size:  # the few pixels left at the cap: finished exactly in float64 (certified or kept)
             finish_pixels(self, B, mask, capped, tol, X, gap, fval, kkt, rss)
@@ -357,30 +391,33 @@ class AdmmRowSolver:
         lam = np.where(X0 > 0, 0.0, np.maximum(G, 0.0))
         return (X0 - lam / rho).astype(np.float32)
 
-    def _admm(self, Ball, tol, max_iter, idx, wb, mask, X, iters, gap, fval, kkt, rss, start=None):
+    def _admm(self, Ball, tol, max_iter, idx, wb, mask, X, iters, gap, fval, kkt, rss, warm=None, out_state=None):
         ladder = np.asarray(_RHO_LADDER)
         U = self.A.shape[1]
         P = idx.size
         Bb = Ball[idx]
         keep = np.zeros((0, 0), bool) if mask is None else np.ascontiguousarray(mask[idx])
         masked = np.full(P, -1) if wb is None else wb.index[idx]
-        if wb is not None:  # masked pixels lead the batch (then: each level's rows)
-            first = np.argsort(masked < 0, kind="stable")
-            idx, Bb, masked = idx[first], Bb[first], masked[first]
+        start = _ambient_start(self.beta) if self.ambient else _RHO_START
+        level = np.full(P, start) if warm is None else np.asarray(warm.level, np.int64)[idx].copy()
+        if wb is not None or warm is not None:  # rows by level, masked pixels first within each level
+            first = np.lexsort((masked < 0, level))
+            idx, Bb, masked, level = idx[first], Bb[first], masked[first], level[first]
             if keep.size:
                 keep = keep[first]
-        start_level = _ambient_start(self.beta) if self.ambient else _RHO_START
-        level = np.full(P, start_level)
         moves = np.zeros(P, np.int32)
         if wb is not None:
-            wb.refactor(self.factor(start_level).K, np.arange(wb.n))
-        V = np.zeros((P, U), np.float32)
-        if start is not None:
-            V[:] = self._warm(start[idx], Bb, keep, _RHO_LADDER[start_level])
-        elif self.ambient:
+            for lv in np.unique(level):
+                m = masked[level == lv]
+                wb.refactor(self.factor(int(lv)).K, m[m >= 0])
+        if warm is not None:
+            V = np.ascontiguousarray(np.asarray(warm.V, np.float32)[idx])
+        else:
+            V = np.zeros((P, U), np.float32)
+        if self.ambient and warm is None:
             # start: every offset's multiplier at beta (the sparsity term's pull balanced) and the
             # ambient at its upper bound min_i b_i / I_w,i over the observations used (T >= 0), scaled
-            V[:, : self.n_x] = -self.beta / _RHO_LADDER[start_level]
+            V[:, : self.n_x] = -self.beta / _RHO_LADDER[start]
             e = self.ambient_column
             if e.min(initial=0.0) > 0:
                 ratio = Bb / e
@@ -390,10 +427,16 @@ class AdmmRowSolver:
                 V[:, -1] = np.where(np.isfinite(a0), np.maximum(a0, 0.0), 0.0) * self.ambient_scale
         absV = np.abs(V)
         T = np.empty_like(V)
-        C = self._constants(Bb, start_level, masked, wb)
+        if warm is None:
+            C = self._constants(Bb, start, masked, wb)
+        else:
+            C = np.empty((P, U), np.float32)
+            for lv in np.unique(level):
+                m = level == lv
+                C[m] = self._constants(Bb[m], int(lv), masked[m], wb)
         dz2 = np.zeros(P)
         dw2 = np.zeros(P)
-        k, n = 0, (_FIRST_CHECK_WARM if start is not None else _FIRST_CHECK)
+        k, n = 0, (_FIRST_CHECK if warm is None else WARM_FIRST_CHECK)
         AQ = None if wb is None else self.certificate_woodbury()[0]
         while P:
             # rows are sorted by level: one product per level, on views
@@ -432,6 +475,8 @@ class AdmmRowSolver:
             if done.any():
                 d = idx[done]
                 X[d], iters[d], gap[d], fval[d], kkt[d], rss[d] = Z[done], k, g[done], f[done], kk[done], rr[done]
+                if out_state is not None:
+                    out_state.V[d], out_state.level[d] = V[done], level[done]
             # ---- residual balancing on the ladder (only pixels still running late)
             dz, dw = np.sqrt(dz2), np.sqrt(dw2)
             free = (k >= _BALANCE_AFTER) & ~done & (moves < _MAX_MOVES)
@@ -460,7 +505,7 @@ class AdmmRowSolver:
                 P = idx.size
                 T = np.empty_like(V)
                 dz2, dw2 = dz2[:P], dw2[:P]
-            n = _CHECK_EVERY
+            n = _CHECK_EVERY if warm is None else WARM_CHECK_EVERY
 
 
 def _woodbury(X, AM, masked, wb, scale) -> np.ndarray:
@@ -584,24 +629,42 @@ def row_solver(group: RowGroup, alpha: float, beta: float, ambient=None) -> Admm
     key = (alpha, beta) if ambient is None else (alpha, beta, np.asarray(ambient, np.float64).tobytes())
     with _CACHE_LOCK:
         cache = group.__dict__.setdefault("_admm_cache", {})
-        if key not in cache:
-            cache.clear()
-            shared = _solver_key(group.A, alpha, beta, ambient)
-            solver = _SOLVERS.get(shared)
-            if solver is None:
-                solver = AdmmRowSolver(group.A, alpha, beta, ambient=ambient)
-                _SOLVERS[shared] = solver
+        if key in cache:
+            return cache[key]
+    # the key and a new factorization outside the lock: the other solver thread goes on with its own group
+    # (at the image's top and bottom every row is a group of its own, each factored when first met)
+    shared = _solver_key(group.A, alpha, beta, ambient)
+    with _CACHE_LOCK:
+        solver = _SOLVERS.get(shared)
+        if solver is not None:
+            _SOLVERS.move_to_end(shared)
+    if solver is None:
+        built = AdmmRowSolver(group.A, alpha, beta, ambient=ambient)
+        with _CACHE_LOCK:
+            solver = _SOLVERS.setdefault(shared, built)  # a thread that built the same one first wins
+            if solver is built:
                 held = sum(map(_solver_bytes, _SOLVERS.values()))
                 while len(_SOLVERS) > 1 and held > SOLVER_CACHE_BYTES:
                     held -= _solver_bytes(_SOLVERS.popitem(last=False)[1])
-            else:
-                _SOLVERS.move_to_end(shared)
+    with _CACHE_LOCK:
+        if key not in cache:
+            cache.clear()
             cache[key] = solver
         return cache[key]
 
 
 def solve_fast(
-    group: RowGroup, B, alpha=0.01, beta=0.01, tol=None, *, mask=None, threads=None, ambient=None
+    group: RowGroup,
+    B,
+    alpha=0.01,
+    beta=0.01,
+    tol=None,
+    *,
+    mask=None,
+    threads=None,
+    ambient=None,
+    start: WarmStart | None = None,
+    state: WarmStart | None = None,
 ) -> SolveResult:
     """Solve every pixel of ``B`` (P, N) sharing ``group``'s illumination matrix.
 
@@ -622,6 +685,12 @@ def solve_fast(
     ambient : ndarray (N,), optional
         The ambient column ``I_w`` (exposure in projector rows) of Eq. 6a: each pixel
         then also has an ambient unknown, returned in ``SolveResult.ambient``.
+    start : WarmStart, optional
+        Each pixel's ADMM state to start from (``state`` of an earlier solve of the same pixels and
+        group, e.g. a live transport's previous window): far fewer iterations when little changed.
+    state : WarmStart, optional
+        Filled with each pixel's final state (``WarmStart.empty(P, U)``; ``U`` the group's unknowns,
+        one more with the ambient).
 
     Returns
     -------
@@ -636,7 +705,16 @@ def solve_fast(
     slices = [slice(s, min(P, s + _CHUNK)) for s in range(0, P, _CHUNK)]
     with blas_one_thread():
         solver = row_solver(group, alpha, beta, ambient)
-        run = lambda s: solver.solve(B[s], tol, mask=None if mask is None else mask[s])  # noqa: E731
+
+        def run(s):
+            return solver.solve(
+                B[s],
+                tol,
+                mask=None if mask is None else mask[s],
+                start=None if start is None else start[s],
+                state=None if state is None else state[s],
+            )
+
         if threads > 1 and len(slices) > 1:
             with ThreadPoolExecutor(threads) as pool:
                 parts = list(pool.map(run, slices))

@@ -281,7 +281,7 @@ class DemuxProblem:
             valid = slice(int(nz[0]), int(nz[-1]) + 1) if nz.size else slice(0, 0)
             # the edge rule: a band lights the fraction of a bin's part on the projector that it covers
             # (Band.weights); the unknown is the light per row, so A carries the part's length too
-            W_lit = band_weights_at_row(bands, geometry, t0, offsets)
+            W_lit = band_weights_at_row(bands, geometry, t0, offsets, profile=profile)
             on = coverage[t0][valid].astype(np.float64)
             partial = None if np.all(on == 1.0) else on
             groups.append(RowGroup(members, (W_lit[:, valid] * on).astype(np.float64), valid, partial))

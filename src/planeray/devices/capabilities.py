@@ -13,6 +13,7 @@ uEye driver implement):
 ``gamma``           the camera's gamma, read back (1.0: linear)
 ``row_time``        the rolling shutter's row time, read back (us per camera row)
 ``ranges``          the exposure and trigger-delay ranges the camera can realize (us)
+``steps``           the steps of its exposure and trigger delay (us): the settings it realizes exactly
 ``timing``          the delay and exposure the device realizes now, read back from the camera (us)
 ==================  =============================================================================
 
@@ -41,6 +42,7 @@ __all__ = [
     "Gamma",
     "RowTime",
     "Ranges",
+    "Steps",
     "TimingReadback",
     "CAPABILITIES",
     "capabilities",
@@ -123,6 +125,17 @@ class Ranges(Protocol):
 
 
 @runtime_checkable
+class Steps(Protocol):
+    """A camera whose exposure and trigger delay move in steps (a sweep designer puts its candidates on them)."""
+
+    def get_exposure_step_us(self) -> float:
+        """The exposure's step (us; 0: continuous)."""
+
+    def get_trigger_delay_step_us(self) -> float:
+        """The trigger delay's step (us; 0: continuous); the delay of Eq. 1 moves with it."""
+
+
+@runtime_checkable
 class TimingReadback(Protocol):
     """A device that says which delay and exposure it realizes now (the conformance suite reads it back)."""
 
@@ -138,6 +151,7 @@ CAPABILITIES = {
     "gamma": Gamma,
     "row_time": RowTime,
     "ranges": Ranges,
+    "steps": Steps,
     "timing": TimingReadback,
 }
 

@@ -576,6 +576,14 @@ class GenICamEpiscan(TriggeredTiming, DeviceBase):
         """Shortest and longest trigger delay (us)."""
         return tuple(self.trigger_delay_range_us)
 
+    def get_exposure_step_us(self) -> float:
+        """The exposure's step as the camera reports it (us; 0: none reported)."""
+        return float(self.exposure_step_us or 0.0)
+
+    def get_trigger_delay_step_us(self) -> float:
+        """The trigger delay's step as the camera reports it (us; 0: none reported)."""
+        return float(self.trigger_delay_step_us or 0.0)
+
     def frame_times_s(self) -> np.ndarray:
         """The camera's time stamps (s) of the frames of the last grab (the host's where it gives none)."""
         return self._frame_times.copy()

@@ -179,6 +179,14 @@ class SimulatedEpiscan(DeviceBase):
     def get_exposure_range_us(self) -> tuple[float, float]:
         return self.rig["exposure_range_us"]
 
+    def get_exposure_step_us(self) -> float:
+        """0: the simulated camera realizes any exposure in its range."""
+        return 0.0
+
+    def get_trigger_delay_step_us(self) -> float:
+        """0: the simulated camera realizes any delay."""
+        return 0.0
+
     def get_timing_us(self) -> tuple[float, float]:
         """The delay and exposure the next grab renders (us)."""
         return self.delay_us, self.exposure_us

@@ -408,6 +408,14 @@ class UEyeEpiscan(TriggeredTiming, DeviceBase):
         """Shortest and longest trigger delay (us)."""
         return tuple(self.trigger_delay_range_us)
 
+    def get_exposure_step_us(self) -> float:
+        """The exposure's step as the camera reports it (us; 0: none reported)."""
+        return float(self.exposure_step_us or 0.0)
+
+    def get_trigger_delay_step_us(self) -> float:
+        """The trigger delay's step as the camera reports it (us; 0: none reported)."""
+        return float(self.trigger_delay_step_us or 0.0)
+
     def _read_timing(self) -> tuple[float, float]:
         """The exposure and the trigger delay read back from the camera (us)."""
         self._require_open()

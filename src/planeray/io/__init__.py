@@ -105,6 +105,12 @@ consecutive integer offsets ``u = v - t``, in projector rows), ``lines_per_secon
 ``[-1/2, P - 1/2)``: the binning and edge rules of
 :meth:`planeray.timing.RowGeometry.row_bins` and :meth:`~planeray.timing.RowGeometry.bin_parts`.
 
+Sweep file (public format)
+--------------------------
+A small JSON file naming the images of a sweep (``delay_us``, ``exposure_us``, optional
+``excluded``, ``name`` and ``record``), read by :func:`read_sweep` and written by
+:func:`write_sweep`; see :mod:`planeray.io.sweep_file`.
+
 Complete chunks (both stores)
 -----------------------------
 Writers store every chunk, also those equal to the fill value, and mark the
@@ -132,10 +138,14 @@ from .atomic import atomic_directory, atomic_file
 from .folder import export_folder, import_folder
 from .images import write_image
 from .stack_store import create_stack_group, read_stack, validate_images, write_stack
+from .sweep_file import SWEEP_FORMAT, read_sweep, write_sweep
 from .transport_store import read_transport, read_transport_maps, transport_attrs, write_transport
 
 __all__ = [
     "STACK_FORMAT",
+    "SWEEP_FORMAT",
+    "read_sweep",
+    "write_sweep",
     "TRANSPORT_FORMAT",
     "FORMAT_VERSION",
     "LazyArray",

@@ -1,13 +1,15 @@
 """A device captured continuously in a thread of its own: the frames, their timing, and what to capture next.
 
 :class:`LiveCapture` owns an open device (:mod:`planeray.devices`).  Its thread grabs one image after
-another at the timing it was last given -- one delay and exposure (:meth:`LiveCapture.set_timing`) or a
-cycle of delays at one exposure (:meth:`LiveCapture.set_cycle`, Eq. 7's set) -- and keeps the recent
+another at the timing it was last given -- one delay and exposure (:meth:`LiveCapture.set_timing`), a
+cycle of delays at one exposure (:meth:`LiveCapture.set_cycle`, Eq. 7's set) or a sweep's settings
+(:meth:`LiveCapture.set_sweep`, a live transport's window) -- and keeps the recent
 frames (:class:`Frame`), each with the timing it was captured at, its index and its time on the
 device's clock (the camera's own time stamps where it has them, :mod:`planeray.devices.capabilities`).
 Readers wait for a frame newer than the one they have (:meth:`LiveCapture.wait_frame`), take the
-frames of a rolling window (:meth:`LiveCapture.window`) or the latest complete cycle
-(:meth:`LiveCapture.latest_cycle`).  A device error ends the thread, is kept, and is raised to every
+frames of a rolling window (:meth:`LiveCapture.window`), the latest complete cycle
+(:meth:`LiveCapture.latest_cycle`) or the newest frame of each of a sweep's settings
+(:meth:`LiveCapture.latest_sweep`).  A device error ends the thread, is kept, and is raised to every
 reader as the one line it is; the device is closed when the thread ends, however it ends.
 
 Nothing here knows about a browser: the explorer (:mod:`planeray.viewer`) and any other front end
@@ -29,6 +31,24 @@ from ..devices.capabilities import has
 from ..errors import DeviceError, InputError, PlanerayError
 
 __all__ = ["Frame", "LiveCapture"]
+
+
+def wait_on(cond: threading.Condition, found, check, timeout_s: float, what: str):
+    """Wait on ``cond`` (held by the caller) until ``found()`` returns something, and return it.
+
+    ``check()`` raises when waiting is pointless (the capture stopped on an error); after ``timeout_s``
+    a DeviceError says what was waited for: ``"{what} within {timeout_s} s"``.
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = found()
+        if value is not None:
+            return value
+        check()
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise DeviceError(f"{what} within {timeout_s:g} s")
+        cond.wait(left)
 
 
 @dataclass(frozen=True)
@@ -131,6 +151,19 @@ class LiveCapture:
             raise InputError("a cycle needs at least one delay")
         self._set((delays, float(exposure_us)))
 
+    def set_sweep(self, delays_us, exposures_us) -> None:
+        """Capture a sweep's settings, one frame each, round and round (a live transport's window).
+
+        ``delays_us`` and ``exposures_us`` pair up; the target is then ``(delays, exposures)``, both tuples.
+        """
+        delays = tuple(float(d) for d in delays_us)
+        exposures = tuple(float(e) for e in exposures_us)
+        if not delays or len(delays) != len(exposures):
+            raise InputError(
+                f"a sweep needs one exposure per delay, got {len(delays)} delays, {len(exposures)} exposures"
+            )
+        self._set((delays, exposures))
+
     def _set(self, target) -> None:
         with self._cond:
             if target != self._target:
@@ -140,8 +173,8 @@ class LiveCapture:
                 self._cond.notify_all()
 
     @property
-    def target(self) -> tuple[tuple[float, ...], float]:
-        """``(delays_us, exposure_us)`` being captured."""
+    def target(self) -> tuple[tuple[float, ...], float | tuple[float, ...]]:
+        """``(delays_us, exposure_us)`` being captured (a sweep: ``(delays_us, exposures_us)``)."""
         return self._target
 
     @property
@@ -166,6 +199,8 @@ class LiveCapture:
                     delays, exposure = self._target
                     generation = self._generation
                     delay = delays[self._cycle_pos % len(delays)]
+                    if isinstance(exposure, tuple):  # a sweep: one exposure per delay
+                        exposure = exposure[self._cycle_pos % len(delays)]
                     self._cycle_pos += 1
                 t0 = time.monotonic()
                 apply_timing(self.device, delay, exposure)
@@ -252,7 +287,6 @@ class LiveCapture:
         device's own error when the capture stopped on one.
         """
         self.start()
-        deadline = time.monotonic() + timeout_s
 
         def found():
             for frame in reversed(self._frames):
@@ -264,17 +298,9 @@ class LiveCapture:
                     return frame
             return None
 
+        what = "" if timing is None else f" at delay {timing[0]:g} us, exposure {timing[1]:g} us"
         with self._cond:
-            while True:
-                frame = found()
-                if frame is not None:
-                    return frame
-                self._raise()
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    what = "" if timing is None else f" at delay {timing[0]:g} us, exposure {timing[1]:g} us"
-                    raise DeviceError(f"no frame{what} from the device within {timeout_s:g} s")
-                self._cond.wait(left)
+            return wait_on(self._cond, found, self._raise, timeout_s, f"no frame{what} from the device")
 
     def window(self, seconds: float, *, timing: tuple[float, float] | None = None) -> list[Frame]:
         """The latest run of consecutive frames (one timing, nothing else between) spanning up to ``seconds``."""
@@ -307,22 +333,43 @@ class LiveCapture:
             return None
         return [got[d] for d in want]
 
+    def latest_sweep(self, delays_us, exposures_us) -> list[Frame] | None:
+        """The newest frame of every setting of a sweep, in the sweep's order; None while one is missing."""
+        want = list(zip((float(d) for d in delays_us), (float(e) for e in exposures_us)))
+        with self._cond:
+            frames = list(self._frames)
+        got: dict[tuple[float, float], Frame] = {}
+        wanted = set(want)
+        for frame in reversed(frames):
+            key = (frame.delay_us, frame.exposure_us)
+            if key in wanted and key not in got:
+                got[key] = frame
+                if len(got) == len(wanted):
+                    break
+        if len(got) < len(wanted):
+            return None
+        return [got[k] for k in want]
+
+    def wait_sweep(self, delays_us, exposures_us, *, after: int = -1, timeout_s: float = 10.0) -> list[Frame]:
+        """Wait for a complete window of a sweep (:meth:`latest_sweep`) holding a frame newer than ``after``."""
+        self.start()
+
+        def found():
+            window = self.latest_sweep(delays_us, exposures_us)
+            return window if window is not None and max(f.index for f in window) > after else None
+
+        what = f"no new frame of the {len(list(delays_us))} settings of the sweep from the device"
+        with self._cond:
+            return wait_on(self._cond, found, self._raise, timeout_s, what)
+
     def wait_cycle(self, delays_us, exposure_us: float, *, after: int = -1, timeout_s: float = 10.0) -> list[Frame]:
         """Wait for a complete cycle whose every frame is newer than ``after`` (see :meth:`latest_cycle`)."""
         self.start()
-        deadline = time.monotonic() + timeout_s
+        what = f"no complete cycle of {len(list(delays_us))} delays from the device"
         with self._cond:
-            while True:
-                cycle = self.latest_cycle(delays_us, exposure_us, after=after)
-                if cycle is not None:
-                    return cycle
-                self._raise()
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise DeviceError(
-                        f"no complete cycle of {len(list(delays_us))} delays from the device within {timeout_s:g} s"
-                    )
-                self._cond.wait(left)
+            return wait_on(
+                self._cond, lambda: self.latest_cycle(delays_us, exposure_us, after=after), self._raise, timeout_s, what
+            )
 
     @property
     def fps(self) -> float:

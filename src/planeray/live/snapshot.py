@@ -30,7 +30,7 @@ def snapshot_path(folder, view: str, *, now: float | None = None) -> Path:
 
 @writes_output("out")
 def write_snapshot(
-    frames, out, *, device: dict, lines_per_second: float, projector_rows=None, view: str = "band"
+    frames, out, *, device: dict, lines_per_second: float, projector_rows=None, view: str = "band", excluded=None
 ) -> Path:
     """Write captured frames as a native stack (one image per frame, in order): locked while written, atomic.
 
@@ -47,6 +47,8 @@ def write_snapshot(
     projector_rows : int, optional
     view : str
         The view it was taken in (recorded).
+    excluded : ndarray of bool, optional
+        The images left out of demultiplexing (default: the paper's boundary rule).
     """
     frames = list(frames)
     if not frames:
@@ -65,7 +67,7 @@ def write_snapshot(
         delay,
         exposure,
         float(lines_per_second),
-        excluded=boundary_images(delay, exposure),
+        excluded=boundary_images(delay, exposure) if excluded is None else np.asarray(excluded, bool),
         saturated=np.stack([f.saturated for f in frames]),
         projector_rows=projector_rows,
         metadata=meta,

@@ -8,12 +8,17 @@ those settings, in the page's view (:data:`planeray.live.VIEWS`): the band image
 Eq. 7's composite, or the frame with the pulse of the rolling window (rate and spectrum).  A
 snapshot writes what was shown -- the frame, or the cycle of frames -- as a native stack into the
 folder the command line named.
+
+:class:`LiveTransportSource` (``--sweep``) cycles a sweep instead and shows the live transport of its
+rolling window (:class:`planeray.live.LiveTransport`): sharpened epipolar, relit, short/long range,
+as they update, with the update rate and age.
 """
 
 from __future__ import annotations
 
 import math
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,9 +37,9 @@ from ..live import (
     vein_view,
     write_snapshot,
 )
-from .session import FrameBuffers, ViewSettings, ViewSource
+from .session import MODES, PATTERNS, FrameBuffers, ViewSettings, ViewSource
 
-__all__ = ["DeviceSource", "MODE_DEFAULTS", "DELAY_REACH_US"]
+__all__ = ["DeviceSource", "LiveTransportSource", "MODE_DEFAULTS", "DELAY_REACH_US", "TRANSPORT_MODES"]
 
 #: The delay slider's reach (us): a projector frame's worth around the epipolar plane is +-8,333 us;
 #: the paper's sweep spans +-1,500.
@@ -216,22 +221,224 @@ class DeviceSource(ViewSource):
     # ------------------------------------------------------------------ snapshot and close
     def snapshot(self, settings: ViewSettings) -> dict:
         """Write what was shown last (a frame, or Eq. 7's cycle) as a native stack; its path and size."""
-        with self._lock:
-            frames = list(self._shown)
-        if not frames:
-            raise InputError("nothing shown yet to write")
-        out = snapshot_path(self.snapshot_dir, settings.mode)
-        path = write_snapshot(
-            frames,
-            out,
-            device=self.description,
-            lines_per_second=self.lines_per_second,
-            projector_rows=self.projector_rows,
-            view=settings.mode,
-        )
-        return {"path": str(path), "images": len(frames), "delays_us": [f.delay_us for f in frames]}
+        return _snapshot(self, settings)
 
     def close(self) -> None:
         """Stop the capture and release the device (idempotent)."""
         self._analysis.shutdown(wait=False, cancel_futures=True)
         self.capture.stop()
+
+
+#: The views of a live transport: the captured image nearest the sliders, and the transport's syntheses.
+TRANSPORT_MODES = ("band", "epipolar", "non_epipolar", "sharpened", "short_range", "long_range", "relight_row",
+                   "relight_pattern")  # fmt: skip
+
+
+class LiveTransportSource(ViewSource):
+    """A device cycling a sweep, its rolling window demultiplexed as images arrive (``view --device NAME --sweep``).
+
+    The capture cycles the sweep's settings (:class:`planeray.live.LiveTransport`); every view but ``band``
+    shows the newest transport -- epipolar, non-epipolar, sharpened, short/long range, relit -- rendered as
+    :class:`~planeray.viewer.session.TransportSource` renders a transport store, with the update's
+    number, the update rate and its age in the label; ``band`` shows the newest captured image of the
+    setting nearest the sliders.  A render waits for the next update (or image), so the page shows them as
+    they come; a snapshot writes the window of the transport shown as a stack.
+
+    Parameters
+    ----------
+    device : Device
+        An open device; closed by :meth:`close`.
+    sweep : Sweep
+        The sweep cycled (a design: ``planeray sweep design``).
+    name : str
+    max_fps : float, optional
+        Capture at most this many images a second (a simulated device).
+    snapshot_dir : path, optional
+    frame_timeout_s : float
+        How long a render waits for its update (the first, cold one, may take several seconds).
+    alpha, beta : float
+        The demultiplexing's weights.
+    """
+
+    kind = "device"
+    modes = TRANSPORT_MODES
+    mode_labels = {**MODES, "band": "captured image (delay, exposure of the sweep)"}
+
+    def __init__(
+        self,
+        device,
+        sweep,
+        *,
+        name: str,
+        max_fps=None,
+        snapshot_dir=None,
+        frame_timeout_s: float = 30.0,
+        alpha: float = 0.01,
+        beta: float = 0.01,
+    ):
+        from ..live import LiveTransport
+
+        description = device.describe()
+        super().__init__(name, description["image_shape"])
+        self.description = description
+        self.lines_per_second = float(device.lines_per_second)
+        self.projector_rows = int(description.get("projector_rows") or self.shape[0])
+        jitter = float((description.get("sync") or {}).get("jitter_us", 0.0))
+        self.capture = LiveCapture(device, history=max(256, 8 * len(sweep)), max_fps=max_fps)
+        try:
+            self.live = LiveTransport(self.capture, sweep, lines_per_second=self.lines_per_second,
+                                      projector_rows=self.projector_rows, jitter_us=jitter, alpha=alpha, beta=beta,
+                                      frame_timeout_s=frame_timeout_s)  # fmt: skip
+        except BaseException:
+            self.capture.stop()
+            raise
+        self.sweep = self.live.sweep
+        self.snapshot_dir = Path(snapshot_dir) if snapshot_dir is not None else Path.cwd()
+        self.frame_timeout_s = float(frame_timeout_s)
+        self._view = None  # TransportSource of the update shown
+        self._view_number = 0
+        self._last_frame = -1
+        self._shown: list = []
+        self._delays = np.unique(self.sweep.delay_us)
+        self._exposures = np.unique(self.sweep.exposure_us)
+
+    # ------------------------------------------------------------------ description
+    def describe(self) -> dict:
+        K = int(np.abs(self.live.solver.offsets_rows).max())
+        defaults = ViewSettings(mode="sharpened", delay_us=float(self.sweep.delay_us[0]),
+                                exposure_us=float(self.sweep.exposure_us[0]), row=self.projector_rows // 2)  # fmt: skip
+        return {
+            "kind": "device",
+            "live": True,
+            "transport": self.live.describe(),
+            "name": self.name,
+            "shape": list(self.shape),
+            "projector_rows": self.projector_rows,
+            "lines_per_second": self.lines_per_second,
+            "modes": [{"name": m, "label": self.mode_labels[m]} for m in self.modes],
+            "mode_defaults": {},
+            "delay_us": {"min": float(self._delays[0]), "max": float(self._delays[-1]), "grid": self._delays.tolist()},
+            "exposure_us": {
+                "min": float(self._exposures[0]),
+                "max": float(self._exposures[-1]),
+                "grid": self._exposures.tolist(),
+            },
+            "width_rows": {"min": 0.25, "max": 64.0, "step": 0.25},
+            "max_rows": {"min": 1.0, "max": float(K), "step": 1.0},
+            "row": {"min": 0, "max": self.projector_rows - 1, "step": 1},
+            "patterns": sorted(PATTERNS),
+            "toggles": [],
+            "has_truth": False,
+            "truth_scale": None,
+            "units": "camera (normalized: 0 = black level, 1 = top code)",
+            "epipolar_resolution_rows": self.live.solver.problem.epipolar_resolution_rows,
+            "device": self.description,
+            "defaults": defaults.to_dict(),
+        }
+
+    def check(self, settings: ViewSettings) -> ViewSettings:
+        settings = super().check(settings)
+        if settings.mode != "band":
+            if self._view is not None:
+                settings = self._view.check(settings)
+            elif settings.mode == "relight_row" and settings.row is None:
+                settings = replace(settings, row=self.projector_rows // 2)
+        return settings
+
+    # ------------------------------------------------------------------ capture and transport
+    def warm(self) -> None:
+        """Start the capture and the demultiplexing, and wait for the first transport (a cold solve)."""
+        self.live.start()
+        update = self.live.wait_update(timeout_s=max(self.frame_timeout_s, 120.0))
+        self._adopt(update)
+
+    def _adopt(self, update) -> None:
+        """Show ``update``'s transport from now on (a new TransportSource: prefix sums of Eqs. 5-6)."""
+        from .session import TransportSource
+
+        if update.number != self._view_number:
+            self._view = TransportSource(update.transport, name=self.name, lines_per_second=self.lines_per_second,
+                                         attrs={"epipolar_resolution_rows": self.live.solver.problem.epipolar_resolution_rows})  # fmt: skip
+            self._view_number = update.number
+            self._update = update
+
+    def _nearest(self, delay_us: float, exposure_us: float) -> tuple[float, float]:
+        """The sweep's setting nearest to (delay, exposure): the nearest exposure, then the nearest delay at it."""
+        e = float(self._exposures[np.argmin(np.abs(self._exposures - exposure_us))])
+        at = self.sweep.delay_us[self.sweep.exposure_us == e]
+        return float(at[np.argmin(np.abs(at - delay_us))]), e
+
+    def _render(self, s: ViewSettings, buffers):
+        if s.mode == "band":
+            timing = self._nearest(s.delay_us, s.exposure_us)
+            frame = self.capture.wait_frame(self._last_frame, timing=timing,
+                                            timeout_s=self.frame_timeout_s)  # fmt: skip
+            self._last_frame = max(self._last_frame, frame.index)
+            self._shown = [frame]
+            info = {
+                "label": f"captured  t_d {timing[0]:g} us  t_e {timing[1]:g} us  (the sweep's setting nearest the sliders)",
+                "frame_index": frame.index,
+                "delay_us": frame.delay_us,
+                "exposure_us": frame.exposure_us,
+                "saturated": int(frame.saturated.sum()),
+                "camera_fps": round(self.capture.fps, 2),
+            }
+            return np.asarray(frame.image, np.float32), info
+        update = self.live.wait_update(self._view_number, timeout_s=self.frame_timeout_s)
+        self._adopt(update)
+        image, info = self._view._render(s, buffers)
+        self._shown = list(update.frames)
+        rate = self.live.rate_hz
+        info["label"] = (
+            f"{info['label']}  |  live transport #{update.number}: {rate:.1f} updates/s, age {update.age_s():.2f} s, "
+            f"{float(update.maps['iterations'].mean()):.0f} iterations{' (warm)' if update.warm else ''}"
+        )
+        info.update(
+            transport_number=update.number,
+            update_rate_hz=round(rate, 3),
+            age_s=round(update.age_s(), 3),
+            solve_s=round(update.seconds, 3),
+            window_span_s=round(update.window_span_s, 3),
+            converged=float(update.maps["converged"].mean()),
+            camera_fps=round(self.capture.fps, 2),
+        )
+        return image, info
+
+    def _pixel(self, row, col, s) -> dict:
+        if self._view is None:
+            raise InputError("no transport yet")
+        data = self._view._pixel(row, col, replace(s, mode="sharpened") if s.mode == "band" else s)
+        data["live_transport"] = self._view_number
+        return data
+
+    # ------------------------------------------------------------------ snapshot and close
+    def snapshot(self, settings: ViewSettings) -> dict:
+        """Write the window of the transport shown (or the image shown) as a native stack; its path and size.
+
+        Every image of the window is used (the sweep's excluded images are not captured)."""
+        return _snapshot(self, settings, all_used=True)
+
+    def close(self) -> None:
+        """Stop the demultiplexing and the capture, and release the device (idempotent)."""
+        try:
+            self.live.stop()
+        finally:
+            self.capture.stop()
+
+
+def _snapshot(source, settings: ViewSettings, *, all_used: bool = False) -> dict:
+    """Write the frames a live source showed last as a native stack in its snapshot folder; its path and size."""
+    with source._lock:
+        frames = list(source._shown)
+    if not frames:
+        raise InputError("nothing shown yet to write")
+    path = write_snapshot(
+        frames,
+        snapshot_path(source.snapshot_dir, settings.mode),
+        device=source.description,
+        lines_per_second=source.lines_per_second,
+        projector_rows=source.projector_rows,
+        view=settings.mode,
+        excluded=np.zeros(len(frames), bool) if all_used else None,
+    )
+    return {"path": str(path), "images": len(frames), "delays_us": [f.delay_us for f in frames]}

@@ -307,7 +307,7 @@ function updateVisibility(p) {
     c.div.classList.toggle("hidden", !on);
   }
   $(".ctl-pattern", p.el).classList.toggle("hidden", mode !== "relight_pattern");
-  if (app.source.live) { // a live device: the exposure counts in every view, the delay in all but Eq. 7's cycle
+  if (app.source.live && !app.source.transport) { // a live device: the exposure counts in every view, the delay in all but Eq. 7's cycle
     for (const key of ["delay_us", "exposure_us"]) {
       if (p.controls[key]) { p.controls[key].div.classList.toggle("hidden", key === "delay_us" && mode === "composite"); }
     }
@@ -571,7 +571,9 @@ function init() {
     $("#snapshot").after(save);
     const cam = el("span", null, "camera -- fps"); cam.id = "camera-fps"; cam.title = "Frames the device captures per second";
     $("#fps").before(cam);
-    $("#plot-title").textContent = "Click a pixel to see its value over the recent frames; the pulse view plots the spectrum.";
+    $("#plot-title").textContent = s.transport
+      ? `Live transport of a ${s.transport.images}-image sweep: click a pixel to see its T(u) in the newest transport.`
+      : "Click a pixel to see its value over the recent frames; the pulse view plots the spectrum.";
   }
   $("#source-info").textContent = `${s.kind}, ${s.shape[0]}x${s.shape[1]}, ${s.projector_rows} projector rows` +
     (s.kind === "stack" ? `, ${s.n_images} images` : "") + (s.units ? `; values: ${s.units}` : "");
