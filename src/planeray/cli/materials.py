@@ -450,12 +450,32 @@ def _read_fit_input(path: Path, option: str, *, with_progress: bool = True):
 
 
 def _recorded_mm_per_row(meta: dict):
-    """The row size a capture records (its scene's ``mm_per_row``), or None."""
-    for where in (meta, meta.get("scene") or {}):
-        v = where.get("mm_per_row") if isinstance(where, dict) else None
-        if isinstance(v, (int, float)) and v > 0:
-            return float(v)
-    return None
+    """The row size a capture records (its ``acquisition.json``, else its scene's ``mm_per_row``), or None."""
+    from ..stack import recorded_mm_per_row
+
+    return recorded_mm_per_row(meta)[0]
+
+
+def _forward_table(n: float):
+    """The forward table of index ``n``: loaded silently when shipped or cached, else traced -- announced with
+    a time estimate measured on a pilot run, and counted on a progress bar."""
+    from ..materials import fit as mfit
+    from ..mc.cache import cache_dir
+
+    if mfit.forward_table_stored(n=n):
+        return mfit.forward_table(n=n)
+    with console.status(f"estimating the time to trace the forward table of n = {n:g}"):
+        seconds = mfit.forward_table_seconds(n=n)
+    console.print(
+        f"note: no forward table for n = {n:g} is shipped or cached: tracing it by Monte Carlo first "
+        f"({mfit.TABLE_RUNS} runs, about {seconds / 60:.0f} minutes on this machine, measured on a pilot run; "
+        f"once: cached in {cache_dir()})",
+        highlight=False,
+        markup=False,
+    )
+    with progress_bar() as bar:
+        task = bar.add_task(f"tracing the forward table of n = {n:g} (Monte Carlo runs)", total=mfit.TABLE_RUNS)
+        return mfit.forward_table(n=n, progress=lambda k: bar.advance(task, k))
 
 
 @materials_app.command("fit")
@@ -503,16 +523,35 @@ def fit_cmd(
             "the model includes the light lost through it. --no-walls: the media are unbounded.",
         ),
     ] = True,
+    wall_kind: Annotated[
+        str,
+        typer.Option(
+            help="The containers' walls: clear (a thin clear wall with air behind) or black (nothing returns).",
+        ),
+    ] = "clear",
+    depth_mm: Annotated[
+        float | None,
+        typer.Option(
+            help="The layer's depth, mm: the medium lies on a support that returns no light (a black or clear "
+            "bottom). Default: semi-infinite (deep enough that no light reaches the bottom).",
+        ),
+    ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a fit folder planeray wrote.")] = False,
 ):
-    """Measure the medium: maps of mu_s' and mu_a (1/mm) with standard errors, per region and per pixel block."""
+    """Measure the medium: maps of mu_s' and mu_a (1/mm) with standard errors, per region and per pixel block.
+
+    Every fit says whether its forward model fits the data (reduced chi-square against the camera's noise
+    model and the model's own error): a fit that does not, or a parameter at the forward model's edge, is
+    flagged on the console, in planeray.json and in the flag layer flags.tif.
+    """
     import json
 
     import numpy as np
 
     from ..experiments._report import jsonable
     from ..figures.materials import fit_figure
+    from ..goodness import DEFAULT_P_MISFIT, FLAGS
     from ..io import atomic_directory
     from ..materials import fit as mfit
 
@@ -526,6 +565,10 @@ def fit_cmd(
         raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
     if mm_per_row is not None and not 0.0 < mm_per_row <= 100.0:
         raise ValueError(f"--mm-per-row must be in (0, 100], got {mm_per_row:g}")
+    if wall_kind not in mfit.WALL_KINDS:
+        raise ValueError(f"--wall-kind must be one of {', '.join(mfit.WALL_KINDS)}, got {wall_kind!r}")
+    if depth_mm is not None and not (np.isfinite(depth_mm) and 0.0 < depth_mm <= 10_000.0):
+        raise ValueError(f"--depth-mm must be a depth in (0, 10000] mm, got {depth_mm:g}")
     _not_an_input(out_dir, [("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)])
     _outputs((out_dir, "materials fit"), overwrite=overwrite)
     from ..io.atomic import planeray_output_kind
@@ -545,9 +588,13 @@ def fit_cmd(
                 "target's stack (or --method transport)"
             )
         stack = _load_stack(input_path)
-        mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(dict(stack.metadata or {}))
+        meta = dict(stack.metadata or {})
+        mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
         if mm is None:
-            raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+            raise ValueError(
+                f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
+                '"mm_per_row" to its acquisition.json'
+            )
         lab = _read_labels(labels, "--labels", stack.shape) if labels is not None else None
         white = None
         if white_reference is not None:
@@ -575,14 +622,12 @@ def fit_cmd(
                 f"{transport.offsets_rows.size}: capture it with the same sweep and camera"
             )
         scale = mfit.white_reference_scale(white.dense, albedo=white_albedo)
-    if n != mfit.DEFAULT_N:
-        console.print(
-            f"note: --n {n:g} is not the shipped table's {mfit.DEFAULT_N:g}: tracing a forward table "
-            "(90 Monte Carlo runs, about 6 minutes on 2 cores; cached afterwards)",
-            highlight=False,
-            markup=False,
-        )
-    table = mfit.forward_table(n=n)
+    from ..camera import CameraModel
+    from ..stack import recorded_mm_per_row
+
+    mm_source = "--mm-per-row" if mm_per_row is not None else recorded_mm_per_row(meta)[1]
+    camera = CameraModel.from_metadata(meta) if method == "stack" else None
+    table = _forward_table(n)
     H, W = transport.shape if transport is not None else stack.shape
     regions = lab if lab is not None else np.ones((H, W), np.int64)
     n_regions = sum(1 for r in np.unique(regions) if r != 0)
@@ -612,6 +657,9 @@ def fit_cmd(
                 white_albedo=white_albedo,
                 block_px=block,
                 table=table,
+                camera=camera,
+                depth_mm=depth_mm,
+                wall_kind=wall_kind,
                 progress=lambda k: bar.advance(task, k),
             )
         else:
@@ -624,6 +672,8 @@ def fit_cmd(
                 block_px=block,
                 containers=lab if walls else None,
                 table=table,
+                depth_mm=depth_mm,
+                wall_kind=wall_kind,
                 progress=lambda k: bar.advance(task, k),
             )
     calibrated = white_reference is not None
@@ -637,8 +687,21 @@ def fit_cmd(
             else "transport: the demultiplexed (or given) transport's profiles fitted"
         ),
         "mm_per_row": mm,
+        "mm_per_row_source": mm_source,
         "refractive_index": n,
         "anisotropy_g": mfit.DEFAULT_G,
+        "depth_mm": depth_mm,
+        "bottom": "none: semi-infinite" if depth_mm is None else f"at {depth_mm:g} mm: returns no light",
+        "noise_model": (
+            "the camera's (its record: shot, read, quantization and row jitter) and the forward model's error"
+            if camera is not None
+            else "the pixels' spread (the capture records no camera) and the forward model's error"
+        ),
+        "goodness_of_fit": (
+            "reduced chi-square against the noise model; a fit less probable than p = "
+            f"{DEFAULT_P_MISFIT:g} is flagged 'model does not fit' and its standard errors are scaled by "
+            "sqrt(chi2 / dof); parameters at the forward model's edge are flagged and not reported"
+        ),
         "calibration": (
             f"white reference {white_reference} (albedo {white_albedo:g}): absolute reflectance"
             if calibrated
@@ -646,15 +709,17 @@ def fit_cmd(
         ),
         "block_px": block,
         "walls": (
-            "modelled: each --labels region is a container with a clear wall at its boundary"
+            f"modelled: each --labels region is a container with a {wall_kind} wall at its boundary"
             if walls and lab is not None
             else "none: unbounded media"
         ),
         "regions": {str(k): v for k, v in result.regions.items()},
         "mask_bits": {str(k): v for k, v in mfit.REASONS.items()} | {"255": "not fitted (outside every region)"},
+        "flag_bits": {str(k): v for k, v in FLAGS.items()} | {"255": "outside every region"},
         "files": {
             **{k: f"{k}.tif" for k in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")},
             "mask": "identifiability_mask.tif",
+            "flags": "flags.tif",
             "figure": "fit.png",
         },
     }
@@ -677,6 +742,19 @@ def fit_cmd(
             f"{f(r['mu_s_prime_se_per_mm'])} /mm, mu_a {f(r['mu_a_per_mm'])} +- {f(r['mu_a_se_per_mm'])} /mm{why}",
             highlight=False,
         )
+        q = r.get("fit_quality")
+        if q is not None:
+            out.print(
+                f"    reduced chi-square {q['reduced_chi2']:.3g} (threshold {q['threshold']:.3g} at {q['dof']} degrees "
+                "of freedom)",
+                highlight=False,
+            )
+        for text in r.get("flags", []):
+            out.print(f"    FLAGGED: {text}", highlight=False, markup=False)
+        if r.get("blocks_flagged"):
+            out.print(
+                f"    FLAGGED: {r['blocks_flagged']:.0%} of its blocks (flags.tif)", highlight=False, markup=False
+            )
 
 
 _MAP_UNITS = {
@@ -685,6 +763,7 @@ _MAP_UNITS = {
     "mu_s_prime_se_per_mm": ("standard error of mu_s'", "1/mm"),
     "mu_a_se_per_mm": ("standard error of mu_a", "1/mm"),
     "mask": ("identifiability mask: bits of the reasons in planeray.json (0: both measured)", "bits"),
+    "flags": ("flag layer: bits of flag_bits in planeray.json (0: the model fits, nothing at an edge)", "bits"),
 }
 
 
@@ -699,7 +778,7 @@ def _write_map_tiff(path: Path, image, key: str) -> None:
     from ..io.marks import mark_text
 
     what, unit = _MAP_UNITS[key]
-    arr = np.asarray(image, np.uint8 if key == "mask" else np.float32)
+    arr = np.asarray(image, np.uint8 if key in ("mask", "flags") else np.float32)
     with atomic_file(path) as tmp:
         tifffile.imwrite(
             tmp,
