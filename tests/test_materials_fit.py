@@ -449,6 +449,29 @@ def test_a_layer_fitted_with_its_depth_is_recovered_and_biased_without(table):
         fit.fit_transport(transport, mm_per_row=MM, table=table, depth_mm=-1.0)
 
 
+def test_a_mismatched_model_is_flagged_and_a_consistent_one_is_not(table):
+    """Goodness of fit (issue 41): a 3 mm layer of a weakly scattering medium (its kernel cut by the bottom)
+    fitted as semi-infinite does not fit within the noise and is flagged (in the region's summary and the flag
+    layer); fitted with its depth it fits and nothing is flagged.  (A deep layer's loss reads as absorption
+    within the noise -- the 10 mm layer above: not every wrong model shows in the chi-square.)"""
+    from planeray.goodness import FLAG_MISFIT
+    from planeray.transport import Transport
+
+    off = np.arange(-60, 61)
+    k = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table,
+                        walls=[[3.0 / MM, fit.BOTTOM_ANGLE_DEG, 0.0, 1.0]])  # fmt: skip
+    rng = np.random.default_rng(5)
+    transport = Transport((k * 50.0 * (1.0 + 0.002 * rng.standard_normal((4, 4, off.size)))).astype(np.float32), off)
+    right = fit.fit_transport(transport, mm_per_row=MM, block_px=4, table=table, depth_mm=3.0, regions_only=True)
+    wrong = fit.fit_transport(transport, mm_per_row=MM, block_px=4, table=table, regions_only=True)
+    r, w = right.regions[1], wrong.regions[1]
+    assert r["model_fits"] and r["flags"] == [] and r["fit_quality"]["reduced_chi2"] < r["fit_quality"]["threshold"]
+    assert not w["model_fits"] and w["flag_bits"] & FLAG_MISFIT and "model does not fit" in w["flags"][0]
+    assert np.all(wrong.maps["flags"] == FLAG_MISFIT) and np.all(right.maps["flags"] == 0)
+    # the misfit widens the standard errors by sqrt(chi2 / dof)
+    assert w["fit_quality"]["se_inflation"] == pytest.approx(np.sqrt(w["fit_quality"]["reduced_chi2"]))
+
+
 # ---------------------------------------------------------------- Fig. 10 extended (`materials report`, `paper`)
 def test_the_report_measures_each_container_away_from_its_walls_with_its_walls_modelled(monkeypatch, tmp_path):
     """`materials report` (full) fits each tray's pixels >= 3 mm from its walls as one region, the walls from

@@ -411,13 +411,14 @@ def _capture_and_row_size(input_path: Path, mm_per_row: float | None):
     return transport, meta, mm
 
 
-def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None):
+def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None, lib=None):
     """``--library`` (else the shipped one), read before the capture, then checked against its row size."""
     from ..errors import InputError
     from ..materials.library import default_library, load_library
 
     try:
-        lib = load_library(library) if library is not None else default_library()
+        if lib is None:
+            lib = load_library(library) if library is not None else default_library()
     except InputError as exc:
         raise ValueError(f"--library {exc}") from None
     transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
@@ -849,7 +850,7 @@ def _wall_distance_from_labels(labels, mm_per_pixel):
 @materials_app.command("recognize")
 @_friendly_errors
 def recognize_cmd(
-    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    input_path: Annotated[Path, typer.Argument(help="Stack or transport store of the capture.")],
     out_dir: Annotated[
         Path, typer.Option("--out", "-o", help="Folder to write: segmentation.png, planeray.json, recognition.png.")
     ],
@@ -860,18 +861,20 @@ def recognize_cmd(
     regions: Annotated[
         Path | None,
         typer.Option(
-            "--regions", help="Label image of regions (e.g. containers outlined, 0: none): pooled per region."
+            "--regions", help="Label image of the containers (0: none); default: found in the capture's images."
         ),
     ] = None,
     pool_mm: Annotated[
         float | None,
         typer.Option(
-            help="Pool the evidence over a disc of this radius (mm) around each pixel (default 2.5); 0: per pixel."
+            help="Fit pixel blocks of the demultiplexed capture and pool their evidence over a disc of this radius "
+            "(mm, at least a pixel; 0: per block) instead of fitting each container; the default for a transport "
+            "store or a version-1 library (2.5 mm).",
         ),
     ] = None,
-    block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels, 1-16 (the library's: 2).")] = 2,
+    block: Annotated[int, typer.Option(help="With --pool-mm: fit blocks of BLOCK x BLOCK pixels, 1-16.")] = 2,
     p_unknown: Annotated[
-        float, typer.Option(help="A pixel whose fit is less typical of every medium than this p-value is unknown (0).")
+        float, typer.Option(help="A fit less typical of every medium than this p-value is none of these (0).")
     ] = 1e-3,
     labels: Annotated[
         Path | None,
@@ -879,35 +882,43 @@ def recognize_cmd(
     ] = None,
     mm_per_row: Annotated[
         float | None,
-        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's acquisition.json)."),
     ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a recognition folder planeray wrote.")] = False,
 ):
-    """Name each pixel's medium by its fitted mu_s' and mu_a against a library of known media."""
+    """Name each container's medium by its measured mu_s' and mu_a against a library of known media.
+
+    With a stack and a library of physical parameters (the shipped one; library-add), the containers are
+    found in the images (pixels with light from below the surface; a table or a wall is none of them),
+    each is fitted as a whole with its walls, and named by the library's entry its parameters match -- or
+    "none of these".  A library of parameters travels: one built at one resolution recognizes another.
+    """
     import json
 
     import numpy as np
 
+    from ..errors import InputError
     from ..experiments._report import jsonable
     from ..figures.materials import recognition_by_distance_figure
     from ..io import atomic_directory
+    from ..io.atomic import planeray_output_kind
     from ..materials.labels import write_label_image
-    from ..materials.library import FLAGS
+    from ..materials.library import FLAGS, default_library, load_library
     from ..materials.recognize import (
         DEFAULT_POOL_MM,
         accuracy_by_distance,
         fit_image,
         recognize_image,
         recognize_regions,
+        recognize_stack,
     )
 
     if not 1 <= block <= 16:
         raise ValueError(f"--block must be an integer in 1-16, got {block}")
     if regions is not None and pool_mm is not None:
-        raise ValueError("--regions and --pool-mm: pool over the regions or over a disc, not both")
-    pool_mm = DEFAULT_POOL_MM if pool_mm is None else pool_mm
-    if not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
+        raise ValueError("--regions and --pool-mm: fit the regions or pool over a disc, not both")
+    if pool_mm is not None and not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
         raise ValueError(f"--pool-mm must be in 0-100 mm, got {pool_mm:g}")
     if not 0.0 <= p_unknown < 1.0:
         raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
@@ -917,55 +928,115 @@ def recognize_cmd(
         out_dir, [("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)]
     )
     _outputs((out_dir, "materials recognition"), overwrite=overwrite)
-    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
-    truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
-    H, W = transport.shape
-    rpc = float(transport.geometry.rows_per_camera_row)
-    mm_per_pixel = mm * rpc
-    lib_rpc = lib.conditions.get("rows_per_camera_row")
-    if isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
-        console.print(
-            f"note: the library's media were fitted at {lib_rpc:g} projector rows per camera row, this capture has "
-            f"{rpc:g}: the fit's biases differ with the resolution, so its parameters may not match the entries; "
-            "make a library from such captures (planeray materials library-add)",
-            highlight=False,
-            markup=False,
-        )
-    if reg is not None:  # each region's pooled profile fitted once (measured best next to walls)
-        with console.status("fitting each region's pooled profile"):
-            rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
-    else:
+    try:
+        lib = load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    if not Path(input_path).exists():
+        raise ValueError(f"the capture {input_path}: no such file or folder")
+    by_containers = lib.physical and pool_mm is None and planeray_output_kind(input_path) != "transport"
+    details = None
+    if by_containers:  # each container fitted from the stack's images (issue 41)
+        from ..camera import CameraModel
+        from ..stack import recorded_mm_per_row
+
+        stack = _load_stack(input_path)
+        meta = dict(stack.metadata or {})
+        mm = mm_per_row if mm_per_row is not None else recorded_mm_per_row(meta)[0]
+        if mm is None:
+            raise ValueError(
+                f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
+                '"mm_per_row" to its acquisition.json'
+            )
+        H, W = stack.shape
+        rpc = float(stack.geometry.rows_per_camera_row)
+        reg = _read_labels(regions, "--regions", stack.shape) if regions is not None else None
+        truth = _read_labels(labels, "--labels", stack.shape) if labels is not None else None
+        for n, _ in lib.hypotheses():
+            _forward_table(n)  # announced and traced once where not shipped or cached
         with progress_bar() as bar:
-            task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
-            maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
-        rec = recognize_image(lib, maps, mm_per_pixel=mm_per_pixel, pool_mm=pool_mm, p_unknown=p_unknown)
+            task = bar.add_task("fitting the containers (one pass per index and depth)", total=len(lib.hypotheses()))
+            rec, details = recognize_stack(
+                lib, stack, mm_per_row=mm, regions=reg, camera=CameraModel.from_metadata(meta), p_unknown=p_unknown,
+                progress=lambda k: bar.advance(task, k),
+            )  # fmt: skip
+        pooling = (
+            f"each region of {regions} fitted as a whole" if reg is not None
+            else "each container found in the images (light from below the surface) fitted as a whole"
+        )  # fmt: skip
+    else:
+        lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row, lib=lib)
+        reg = _read_labels(regions, "--regions", transport.shape) if regions is not None else None
+        truth = _read_labels(labels, "--labels", transport.shape) if labels is not None else None
+        H, W = transport.shape
+        rpc = float(transport.geometry.rows_per_camera_row)
+        px_mm = mm * rpc
+        pool = DEFAULT_POOL_MM if pool_mm is None else pool_mm
+        if 0.0 < pool < px_mm:
+            if pool_mm is not None:
+                raise ValueError(
+                    f"--pool-mm {pool_mm:g} is smaller than a pixel ({px_mm:.3g} mm at {mm:g} mm per row): it would "
+                    f"pool nothing; give at least {px_mm:.3g} mm, or 0 (per block)"
+                )
+            console.print(
+                f"note: the default pooling radius {pool:g} mm is smaller than a pixel ({px_mm:.3g} mm): no pooling",
+                highlight=False,
+                markup=False,
+            )
+            pool = 0.0
+        lib_rpc = lib.conditions.get("rows_per_camera_row")
+        if not lib.physical and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+            console.print(
+                f"note: the library's media were fitted at {lib_rpc:g} projector rows per camera row, this capture "
+                f"has {rpc:g}: a version-1 library's fits are bound to their resolution; a library of physical "
+                "parameters (planeray materials library-add from a stack) travels",
+                highlight=False,
+                markup=False,
+            )
+        if reg is not None:  # each region's pooled profile fitted once
+            with console.status("fitting each region's pooled profile"):
+                rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
+        else:
+            with progress_bar() as bar:
+                task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
+                maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
+            rec = recognize_image(lib, maps, mm_per_pixel=mm * rpc, pool_mm=pool, p_unknown=p_unknown)
+        pooling = (
+            f"regions of {regions}: each region's pooled profile fitted"
+            if reg is not None
+            else (f"log-likelihoods over a disc of {pool:g} mm" if pool else "none: per pixel block")
+        )
+    mm_per_pixel = mm * rpc
     names = {e.class_id: e.name for e in lib.entries}
     counts = {names[c]: int((rec.class_ids == c).sum()) for c in lib.class_ids}
-    counts["unclassified"] = int((rec.class_ids == 0).sum())
+    counts["none of these"] = int((rec.class_ids == 0).sum())
     numbers = {
         "format": "planeray-materials-recognition",
         "format_version": 1,
         "capture": str(input_path),
         "library": str(library) if library is not None else "shipped (the five Fig. 10 media)",
+        "library_version": lib.version,
         "mm_per_row": mm,
         "mm_per_pixel": mm_per_pixel,
-        "block_px": block,
-        "pooling": (
-            f"regions of {regions}: each region's pooled profile fitted"
-            if reg is not None
-            else (f"log-likelihoods over a disc of {pool_mm:g} mm" if pool_mm else "none: per pixel block")
-        ),
+        "block_px": None if by_containers else block,
+        "pooling": pooling,
         "p_unknown": p_unknown,
         "pixels": counts,
         "flags": {text: int(((rec.flags & bit) > 0).sum()) for bit, text in FLAGS.items()},
         "files": {"segmentation": "segmentation.png"},
     }
+    if details is not None:
+        numbers["containers"] = details
     table = None
     if truth is not None:
         wall = _wall_distance_from_labels(truth, mm_per_pixel)
         scored = {c: n for c, n in names.items() if (truth == c).any()}
         table = accuracy_by_distance(rec.class_ids, truth, wall, classes=scored)
+        others = np.isin(truth, list(scored), invert=True) & (truth > 0)
+        table["none_of_these"] = {
+            "pixels": int(others.sum()),
+            "labelled_none": float((rec.class_ids[others] == 0).mean()) if others.any() else None,
+        }
         numbers["score"] = {**table, "wall_distance": "from --labels: distance to the edge of each labelled region"}
         numbers["files"]["figure"] = "recognition.png"
     with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition") as tmp:
@@ -979,6 +1050,8 @@ def recognize_cmd(
     out.print(f"recognition: {out_dir}  ({numbers['pooling']}; library: {numbers['library']})")
     for name, n in counts.items():
         out.print(f"  {name}: {n} px")
+    for d in details or ():
+        out.print(f"  container {d['region']} ({d['pixels']} px): {d['decision']}", highlight=False, markup=False)
     for text, n in numbers["flags"].items():
         if n:
             out.print(f"  {n} px: {text}")
@@ -988,12 +1061,14 @@ def recognize_cmd(
         for name, row in table["classes"].items():
             bins = ", ".join(f"{span} {_acc(b['accuracy'])}" for span, b in zip(spans, row["bins"]))
             out.print(f"  accuracy {name}: {_acc(row['all'])}  (by distance to the wall: {bins})", highlight=False)
+        if table["none_of_these"]["labelled_none"] is not None:
+            out.print(f"  other pixels labelled none: {table['none_of_these']['labelled_none']:.3f}")
 
 
 @materials_app.command("library-add")
 @_friendly_errors
 def library_add(
-    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    input_path: Annotated[Path, typer.Argument(help="Stack of the capture (a transport store: version-1 libraries).")],
     labels: Annotated[Path, typer.Option("--labels", help="Label image: the region(s) of the new medium.")],
     class_name: Annotated[
         list[str], typer.Option("--class-name", help="ID=NAME of a labelled region to add (repeatable), ID 1-255.")
@@ -1005,35 +1080,101 @@ def library_add(
     replace: Annotated[bool, typer.Option(help="Replace an entry of the same name or id.")] = False,
     mm_per_row: Annotated[
         float | None,
-        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's acquisition.json)."),
     ] = None,
+    n: Annotated[
+        float, typer.Option("--n", help="Refractive index of the new medium (the fit's; stored with it).")
+    ] = 1.33,
+    depth_mm: Annotated[
+        float | None,
+        typer.Option(help="Depth of its layer, mm, on a support that returns no light (default: semi-infinite)."),
+    ] = None,
+    white_reference: Annotated[
+        Path | None,
+        typer.Option("--white-reference", help="A white target's stack, same sweep and camera: calibrates the fit."),
+    ] = None,
+    white_albedo: Annotated[float, typer.Option(help="Albedo of the white reference, in (0, 1].")] = 0.99,
     overwrite: Annotated[bool, typer.Option(help="Replace a library file planeray wrote.")] = False,
 ):
-    """Add media to a library from labelled regions of a capture (fitted as the library's media were)."""
+    """Add media to a library from labelled regions of a capture.
+
+    A library of physical parameters (version 2, the shipped one) gets each region's mu_s' and mu_a, measured
+    from the stack's images with its walls modelled, with their uncertainties, the index and the layer's depth:
+    values of the medium, which recognize it in captures of any resolution and row size.
+    """
     import numpy as np
 
     from ..errors import InputError
-    from ..materials.library import save_library
-    from ..materials.recognize import entries_from_capture, fit_image
+    from ..io.atomic import planeray_output_kind
+    from ..materials.library import default_library, load_library, save_library
+    from ..materials.recognize import entries_from_capture, entries_from_stack, fit_image
 
     if out_json.suffix.lower() != ".json":
         raise ValueError(f"--out must end in .json (a media library), got {out_json}")
     names = _parse_class_names(class_name)
     if not names:
         raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
-    _not_an_input(out_json, [("the capture", input_path), ("--labels", labels), ("--library", library)])
+    if not 1.0 <= n <= 1.6:
+        raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
+    if depth_mm is not None and not (np.isfinite(depth_mm) and 0.0 < depth_mm <= 10_000.0):
+        raise ValueError(f"--depth-mm must be a depth in (0, 10000] mm, got {depth_mm:g}")
+    if not 0.0 < white_albedo <= 1.0:
+        raise ValueError(f"--white-albedo must be in (0, 1], got {white_albedo:g}")
+    _not_an_input(
+        out_json,
+        [
+            ("the capture", input_path),
+            ("--labels", labels),
+            ("--library", library),
+            ("--white-reference", white_reference),
+        ],
+    )
     _outputs((out_json, "media library"), overwrite=overwrite)
-    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    lab = _read_labels(labels, "--labels", transport.shape)
-    missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
+    try:
+        lib = load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise ValueError(f"--library {exc}") from None
+    if lib.physical:
+        from ..camera import CameraModel
+        from ..stack import recorded_mm_per_row
+
+        if not Path(input_path).exists():
+            raise ValueError(f"the capture {input_path}: no such file or folder")
+        if planeray_output_kind(input_path) == "transport":
+            raise ValueError(
+                f"{input_path} is a transport store: a library of physical parameters is measured from a stack's "
+                "images (give the stack)"
+            )
+        stack = _load_stack(input_path)
+        meta = dict(stack.metadata or {})
+        mm = mm_per_row if mm_per_row is not None else recorded_mm_per_row(meta)[0]
+        if mm is None:
+            raise ValueError(
+                f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
+                '"mm_per_row" to its acquisition.json'
+            )
+        lab = _read_labels(labels, "--labels", stack.shape)
+        white = _load_stack(white_reference) if white_reference is not None else None
+    else:
+        lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row, lib=lib)
+        lab = _read_labels(labels, "--labels", transport.shape)
+    missing = [f"{c}={nm}" for c, nm in names.items() if not (lab == c).any()]
     if missing:
         raise ValueError(f"--class-name {', '.join(missing)}: --labels {labels} has no pixel of that id")
-    block = int(lib.conditions.get("block_px", 2))
-    regions = np.where(np.isin(lab, list(names)), lab, 0)
-    with console.status("fitting the labelled regions"):
-        maps = fit_image(transport, mm_per_row=mm, block_px=block, regions=regions)
     try:
-        entries = entries_from_capture(maps, regions, names, source=f"{input_path} ({labels})")
+        if lib.physical:
+            table = _forward_table(n)
+            with console.status("measuring the labelled regions (each fitted as a whole, walls modelled)"):
+                entries = entries_from_stack(
+                    stack, lab, names, mm_per_row=mm, n=n, depth_mm=depth_mm, camera=CameraModel.from_metadata(meta),
+                    white=white, white_albedo=white_albedo, table=table, source=f"{input_path} ({labels})",
+                )  # fmt: skip
+        else:
+            block = int(lib.conditions.get("block_px", 2))
+            regions = np.where(np.isin(lab, list(names)), lab, 0)
+            with console.status("fitting the labelled regions"):
+                maps = fit_image(transport, mm_per_row=mm, block_px=block, regions=regions)
+            entries = entries_from_capture(maps, regions, names, source=f"{input_path} ({labels})")
         for e in entries:
             lib = lib.add(e, replace=replace)
     except InputError as exc:
@@ -1042,6 +1183,15 @@ def library_add(
     out.print(f"library: {out_json}  ({len(lib.entries)} media)")
     for e in entries:
         f = lambda v: "n/a" if v is None else f"{v:.4g}"  # noqa: E731
+        if lib.physical:
+            sa = "" if e.mu_a_log_sd is None else f" (+- {100 * e.mu_a_log_sd:.0f} %)"
+            out.print(
+                f"  added {e.name} (class {e.class_id}): mu_s' {f(e.mu_s_prime_per_mm)} /mm (+- "
+                f"{100 * e.mu_s_prime_log_sd:.1f} %), mu_a {f(e.mu_a_per_mm)} /mm{sa}, n {e.n:g}"
+                + ("" if e.depth_mm is None else f", a {e.depth_mm:g} mm layer"),
+                highlight=False,
+            )
+            continue
         out.print(
             f"  added {e.name} (class {e.class_id}): mu_s' {f(e.mu_s_prime_per_mm)} /mm (log sd "
             f"{e.mu_s_prime_log_sd:.2f}), mu_a {f(e.mu_a_per_mm)} /mm, beyond the table: "

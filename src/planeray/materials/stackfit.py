@@ -444,7 +444,9 @@ def _fit_region(
     chi2 = quality.reduced_chi2
     cov = np.linalg.pinv(J.T @ J) * quality.inflation**2
     se_log = np.sqrt(np.maximum(np.diag(cov)[:2], 0.0))
+    corr = float(cov[0, 1] / (se_log[0] * se_log[1])) if se_log[0] > 0 and se_log[1] > 0 else 0.0
     out.update(
+        log_correlation=corr,
         x=x, se_log=se_log, c=c, b=b, chi2=chi2, dof=n_dof, quality=quality, model=c * (Abar @ k) + b * Iw,
         kernel=c * k,
     )  # fmt: skip
@@ -675,6 +677,7 @@ def fit_stack(
             "ambient_per_row_exposure": _num(r["b"]),
             "log_estimate_per_mm": None if x is None else [float(v - math.log(h)) for v in x],
             "log_se": None if x is None else [float(v) for v in r["se_log"]],
+            "log_correlation": r.get("log_correlation"),
             "blocks": len(blocks_s),
             "blocks_flagged": float(np.mean(blocks_flagged)) if blocks_flagged else None,
             "blocks_median_mu_s_prime_per_mm": _median(blocks_s),
