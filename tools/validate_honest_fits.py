@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import honest_cases as hc  # noqa: E402
+import honest_cases as hc
 
 OUT = Path("/work/cache-honest-fits/validation")
 
