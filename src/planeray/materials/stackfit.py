@@ -97,6 +97,13 @@ STACK_MODEL_RELATIVE_SD = MODEL_RELATIVE_SD
 #: The forward model's correlated relative error: the kernel off by this much in each of a few smooth bumps
 #: over the offsets (table interpolation: 2-6 % against direct Monte Carlo, tests and tools/validate_stack_fit.py).
 STACK_MODEL_CORRELATED_SD = 0.03
+#: The walls' effect on the kernel (diffusion theory's method of images) is off by this share of itself: against
+#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect (issue 27;
+#: docs/user_guide/materials.md, "Container walls").
+WALL_EFFECT_SD = 0.2
+#: A layer's bottom's effect (the slab's image series) is off by this share of itself: against planeray's Monte
+#: Carlo of the soap's 30 mm layer it removes 3.8 % of the kernel where the Monte Carlo removes 2.1 % (issue 27).
+BOTTOM_EFFECT_SD = 0.5
 
 
 @dataclass(frozen=True)
@@ -341,6 +348,8 @@ def _fit_region(
     wall_kind="clear",
     jitter=None,
     p_misfit=DEFAULT_P_MISFIT,
+    wall_effect_sd=0.0,
+    bottom_effect_sd=0.0,
 ):
     """One region's fit: ``dict`` of per-row estimates (log), standard errors, mask bits, scale, ambient, model.
 
@@ -348,8 +357,9 @@ def _fit_region(
     or the pixels' spread), the camera's row jitter (``jitter``: ``(A_g (N, N_img, U), weights (N,),
     variance in rows^2)``: each camera row's band moved as a whole, ``(c A_g K')^2`` per row, the rows'
     weights squared) plus the forward model's error: ``model_relative_sd`` of the modelled laser light per
-    image (independent) and a correlated part -- the kernel off by ``model_correlated_sd`` (relative) in
-    each smooth bump of ``basis`` over the offsets, independently, seen through the illumination matrix.
+    image (independent), a correlated part -- the kernel off by ``model_correlated_sd`` (relative) in
+    each smooth bump of ``basis`` over the offsets, independently, seen through the illumination matrix --
+    and the walls' and the bottom's effects off by ``wall_effect_sd`` and ``bottom_effect_sd`` of themselves.
     Residuals are whitened by it (held at the current estimate during a least-squares pass; three passes).
     The chi-square of the whitened residuals at ``images - 4`` (shape only; 3 calibrated) degrees of
     freedom is the fit's :class:`planeray.goodness.FitQuality`.
@@ -371,6 +381,25 @@ def _fit_region(
     def kernel(x):
         return _model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind)
 
+    # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
+    # :data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`), a correlated error of the model along their shapes
+    parts = []
+    if walls is not None and len(walls):
+        w = np.asarray(walls, np.float64)
+        is_bottom = w[:, 1] == BOTTOM_ANGLE_DEG
+        parts = [(w[~is_bottom], wall_effect_sd), (w[is_bottom], bottom_effect_sd)]
+        parts = [(ww, sd) for ww, sd in parts if len(ww) and sd > 0]
+
+    def effect_columns(x, c):
+        """``(N, P)``: the images' change when each part's effect (walls, bottom) is off by its sd."""
+        if not parts or x is None:
+            return None
+        free = _model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
+        cols = [
+            sd * c * (A @ (_model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free)) for ww, sd in parts
+        ]
+        return np.stack(cols, axis=1)
+
     def jitter_var(c, k):
         """Variance of each image of the mean from the row jitter: ``sum_g w_g (c A_g K')^2 var_rows``."""
         if jitter is None:
@@ -378,12 +407,15 @@ def _fit_region(
         dk = np.gradient(np.concatenate([[0.0], k, [0.0]]))[1:-1]
         return var_rows * (w_g[:, None] * (c * (A_g @ dk)) ** 2).sum(axis=0)
 
-    def whitener(m, c, k):
+    def whitener(m, c, k, x=None):
         """Inverse Cholesky factor of the covariance at modelled laser images ``c m`` and kernel ``c k``."""
         cov = np.diag(se0**2 + (model_relative_sd * c * m) ** 2 + (jitter_var(c, k) if k is not None else 0.0))
         if model_correlated_sd > 0 and k is not None:
             B = A @ (c * k[:, None] * basis)  # (N, J): the images' change per bump of relative kernel error
             cov = cov + model_correlated_sd**2 * (B @ B.T)
+        E = effect_columns(x, c)
+        if E is not None:
+            cov = cov + E @ E.T
         return np.linalg.inv(np.linalg.cholesky(cov))
 
     def linear(m, L):
@@ -417,7 +449,7 @@ def _fit_region(
             k = kernel(x0)
             m = A @ k
             c, _, _ = linear(m, L)
-            L = whitener(m, abs(c), k)
+            L = whitener(m, abs(c), k, x0)
         res = least_squares(resid, x0, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
     except (ValueError, np.linalg.LinAlgError):
         out["mask"] |= 64
@@ -484,6 +516,8 @@ def fit_stack(
     depth_mm=None,
     wall_kind: str = "clear",
     p_misfit=DEFAULT_P_MISFIT,
+    wall_effect_sd=WALL_EFFECT_SD,
+    bottom_effect_sd=BOTTOM_EFFECT_SD,
     progress=None,
 ) -> TransportFit:
     """Fit ``mu_s'`` and ``mu_a`` (1/mm) of each region from a stack's images directly (see the module).
@@ -526,6 +560,9 @@ def fit_stack(
         The containers' walls (:data:`planeray.materials.fit.WALL_KINDS`).
     p_misfit : float
         Chi-square probability below which a fit is flagged "model does not fit" (:mod:`planeray.goodness`).
+    wall_effect_sd, bottom_effect_sd : float
+        The model's error in the walls' and the bottom's effects, shares of them (:data:`WALL_EFFECT_SD`,
+        :data:`BOTTOM_EFFECT_SD`; 0: taken as exact): in the data's covariance along their shapes.
     progress : callable, optional
         Called with the number of fits just done.
 
@@ -577,6 +614,7 @@ def fit_stack(
         table=table, calibrated=calibrated, h=h, max_relative_se=max_relative_se,
         model_relative_sd=model_relative_sd, model_correlated_sd=model_correlated_sd, lo=lo, hi=hi,
         starts=starts, Kg=Kg, basis=_model_error_basis(offsets), wall_kind=wall_kind, p_misfit=p_misfit,
+        wall_effect_sd=wall_effect_sd, bottom_effect_sd=bottom_effect_sd,
     )  # fmt: skip
     var_rows = None if camera is None else camera.row_jitter_rows(stack.lines_per_second) ** 2
 
