@@ -377,3 +377,54 @@ def test_a_user_folder_or_file_is_never_the_output(capture, tmp_path):
         + ["--out", "{d}/mine.json", "--overwrite"],
         folder=tmp_path,
     )
+
+
+# ---------------------------------------------------------------- issue 41: a library of physical parameters travels
+@pytest.fixture(scope="module")
+def travel(tmp_path_factory):
+    """A library of the three milks measured at 64 px (one arrangement) and a capture at 128 px (another)."""
+    from planeray.experiments.materials import simulate_capture
+
+    root = tmp_path_factory.mktemp("travel")
+    simulate_capture(root / "small", size=(64, 64), seed=11, placement=5, sweep="quick")
+    simulate_capture(root / "big", size=(128, 128), seed=12, placement=2, sweep="quick")
+    save_library(MediaLibrary((MediumEntry("placeholder", 99, 1.0, 0.1, n=1.33),), {}, 2), root / "seed.json")
+    return root
+
+
+@pytest.mark.slow
+def test_a_library_measured_at_64_px_recognizes_a_128_px_capture(travel):
+    """Issue 41: library-add measures the three milks of a 64 x 64 capture (physical parameters, version 2);
+    recognize finds the containers of a 128 x 128 capture of another arrangement in its images and names the
+    milks' pixels -- those within 3 mm of a wall included -- by them; the toothpaste, the soap (no entry) and
+    the table (no medium) are none of these."""
+    from planeray.materials import read_label_image
+    from planeray.optical_data import BACKGROUND_CLASS
+
+    root = travel
+    lib_path = root / "milks.json"
+    res = _cli(
+        ["library-add", str(root / "small" / "stack.zarr"), "--labels", str(root / "small" / "labels.png"),
+         "--library", str(root / "seed.json"), "--out", str(lib_path), "--class-name", "1=fat-free milk",
+         "--class-name", "2=2% milk", "--class-name", "3=whole milk"]
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    lib = load_library(lib_path)
+    assert lib.version == 2 and lib.physical
+    for e in lib.entries[1:]:  # physical parameters: the milks' published mu_s' within their uncertainty x 3
+        pub = {1: 0.892, 2: 2.485, 3: 4.553}[e.class_id]
+        assert abs(math.log(e.mu_s_prime_per_mm / pub)) < 3 * e.mu_s_prime_log_sd + 0.02, (e.name, e.mu_s_prime_per_mm)
+        assert e.n == 1.33
+    out = root / "rec"
+    res = _cli(["recognize", str(root / "big" / "stack.zarr"), "--library", str(lib_path), "--out", str(out),
+                "--labels", str(root / "big" / "labels.png"), "--json"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    meta = json.loads((out / "planeray.json").read_text())
+    score = meta["score"]
+    for name in ("fat-free milk", "2% milk", "whole milk"):
+        assert score["classes"][name]["all"] >= 0.9 and score["within_3_mm"][name] >= 0.9, (name, score["classes"])
+    seg = read_label_image(out / "segmentation.png")
+    truth = read_label_image(root / "big" / "labels.png")
+    for cid in (4, 5, BACKGROUND_CLASS):  # toothpaste, soap, the table
+        assert (seg[truth == cid] == 0).mean() > 0.95, cid
+    assert "found in the images" in meta["pooling"] and len(meta["containers"]) >= 4

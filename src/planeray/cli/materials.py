@@ -1009,7 +1009,7 @@ def recognize_cmd(
     mm_per_pixel = mm * rpc
     names = {e.class_id: e.name for e in lib.entries}
     counts = {names[c]: int((rec.class_ids == c).sum()) for c in lib.class_ids}
-    counts["none of these"] = int((rec.class_ids == 0).sum())
+    counts["unclassified"] = int((rec.class_ids == 0).sum())  # none of these, or not fitted
     numbers = {
         "format": "planeray-materials-recognition",
         "format_version": 1,

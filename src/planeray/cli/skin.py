@@ -285,14 +285,14 @@ def _metrics(image, truth, mm_per_px):
 def _scale(option: float | None, *records) -> tuple[float, str]:
     """``mm_per_row`` and where it came from: ``--mm-per-row``, a stack's or store's record, or the default."""
     from ..scenes.base import DEFAULT_MM_PER_ROW
-    from ..skin.imaging import recorded_mm_per_row
+    from ..stack import recorded_mm_per_row
 
     if option is not None:
         return _mm_per_row_option(option), "--mm-per-row"
     for what, meta in records:
-        value = recorded_mm_per_row(meta)
+        value, source = recorded_mm_per_row(meta)
         if value is not None:
-            return value, what
+            return value, ("acquisition.json" if source == "acquisition.json" else what)
     return float(DEFAULT_MM_PER_ROW), "assumed (the simulator's default; set --mm-per-row for a real capture)"
 
 

@@ -545,6 +545,13 @@ def _half_lines(x_abs, d, b_values):
     return tail[:, k] * (1.0 - w) + tail[:, k + 1] * w
 
 
+def _on_grid(t, values):
+    """Linear interpolation of ``values`` (on a uniform grid) at fractional indices ``t >= 0``: ``np.interp``
+    without its search (the grid is uniform), exact at the grid's points."""
+    i = np.minimum(t.astype(np.int64), values.size - 2)
+    return values[i] + (values[i + 1] - values[i]) * (t - i)
+
+
 def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls, wall_kind="clear"):
     """The walls' change of the footprint-averaged kernel (``(U,)``), to add to the wall-free kernel.
 
@@ -568,8 +575,8 @@ def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls, wall_kind="clear"
         img = 2.0 * (aa + d["z_b"]) - xx
         grid = np.arange(0.0, max(float(np.abs(xx).max()), float(np.abs(img).max())) + 2 * _L_STEP, _L_STEP)
         Lg = _dipole_line(grid, d)  # smooth in x; |xx| lies on the grid, the images between its points
-        L = np.interp(np.abs(xx), grid, Lg)
-        Lw = np.where(xx < aa, L - np.interp(np.abs(img), grid, Lg), 0.0)
+        L = _on_grid(np.abs(xx) / _L_STEP, Lg)
+        Lw = np.where(xx < aa, L - _on_grid(np.abs(img) / _L_STEP, Lg), 0.0)
         ratio = Lw.sum(axis=0) / np.maximum(L.sum(axis=0), 1e-300)
         term += (wt[:, None] * ((ratio - 1.0) * kk[None] * w).sum(axis=-1)).sum(axis=0)
     per = walls[walls[:, 1] == 90.0]
