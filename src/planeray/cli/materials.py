@@ -765,6 +765,7 @@ _MAP_UNITS = {
     "mu_a_se_per_mm": ("standard error of mu_a", "1/mm"),
     "mask": ("identifiability mask: bits of the reasons in planeray.json (0: both measured)", "bits"),
     "flags": ("flag layer: bits of flag_bits in planeray.json (0: the model fits, nothing at an edge)", "bits"),
+    "recognition_flags": ("recognition flags: bits of flag_bits in planeray.json (8: none of these)", "bits"),
 }
 
 
@@ -779,7 +780,7 @@ def _write_map_tiff(path: Path, image, key: str) -> None:
     from ..io.marks import mark_text
 
     what, unit = _MAP_UNITS[key]
-    arr = np.asarray(image, np.uint8 if key in ("mask", "flags") else np.float32)
+    arr = np.asarray(image, np.uint8 if key in ("mask", "flags", "recognition_flags") else np.float32)
     with atomic_file(path) as tmp:
         tifffile.imwrite(
             tmp,
@@ -1023,7 +1024,8 @@ def recognize_cmd(
         "p_unknown": p_unknown,
         "pixels": counts,
         "flags": {text: int(((rec.flags & bit) > 0).sum()) for bit, text in FLAGS.items()},
-        "files": {"segmentation": "segmentation.png"},
+        "flag_bits": {str(bit): text for bit, text in FLAGS.items()},
+        "files": {"segmentation": "segmentation.png", "flags": "flags.tif"},
     }
     if details is not None:
         numbers["containers"] = details
@@ -1041,6 +1043,7 @@ def recognize_cmd(
         numbers["files"]["figure"] = "recognition.png"
     with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition") as tmp:
         write_label_image(tmp / "segmentation.png", rec.class_ids.astype(np.uint8), kind="segmentation")
+        _write_map_tiff(tmp / "flags.tif", np.asarray(rec.flags, np.uint8), "recognition_flags")
         if table is not None:
             recognition_by_distance_figure({"parameters": table}, out=tmp / "recognition.png")
         (tmp / "planeray.json").write_text(json.dumps(jsonable(numbers), indent=1))
