@@ -178,8 +178,8 @@ def test_the_shipped_library_has_the_five_fig10_media_with_their_published_const
     index (and the soap's depth) it was fitted with -- the milks and the toothpaste within 3 of their
     uncertainties (+ 2 %) of the published constants; the soap's walls and 30 mm bottom bias its mu_s' (the
     entry holds what the fit measures, documented)."""
-    from planeray.mc.cache import TABLES_DIR
     from planeray.materials import fit
+    from planeray.mc.cache import TABLES_DIR
 
     lib = default_library()
     assert lib.class_ids == [1, 2, 3, 4, 5] and lib.version == 2 and lib.physical
