@@ -181,6 +181,13 @@ def _write_labels(path: Path, labels) -> None:
     write_label_image(path, np.asarray(labels, np.uint8), kind="labels")
 
 
+def _write_mask(path: Path, mask) -> None:
+    """A vein mask as a user draws it: grayscale PNG, 255 on the vein, 0 elsewhere."""
+    from PIL import Image
+
+    Image.fromarray(np.where(np.asarray(mask, bool), 255, 0).astype(np.uint8), mode="L").save(path)
+
+
 def _simulate(scene, *, seed, camera):
     from planeray.acquire import simulate_stack
     from planeray.timing import make_sweep
@@ -530,7 +537,7 @@ def make(c: dict, root: Path = ROOT) -> Path:
     if made.get("wall_distance_mm") is not None:
         np.save(folder / "wall_distance_mm.npy", np.asarray(made["wall_distance_mm"], np.float32))
     if made.get("veins") is not None:
-        _write_labels(folder / "veins.png", made["veins"].astype(np.uint8))
+        _write_mask(folder / "veins.png", made["veins"])
     truth = dict(c)
     truth["white_albedo"] = made.get("white_albedo", 1.0)
     (folder / "truth.json").write_text(json.dumps(truth, indent=1))

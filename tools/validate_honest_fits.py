@@ -7,9 +7,9 @@ tone, wavelength, thicknesses, ``--n``), and recognition (``planeray materials l
 ``planeray materials recognize`` on another of another resolution and arrangement).  Cases with a "wrong"
 model are also fitted with it (expected flagged).  The table -- truth, fit, error, standard error, flag --
 and the summary against the issue's targets are printed and written as JSON and Markdown
-(docs/user_guide/honest_fits_table.md is this script's output).
+(``--markdown docs/user_guide/trust.md`` puts it between the page's markers).
 
-    nice -n 19 python tools/validate_honest_fits.py [--only ID ...] [--out DIR] [--markdown FILE]
+    nice -n 19 python tools/validate_honest_fits.py [--only ID ...] [--out DIR] [--markdown docs/user_guide/trust.md]
 """
 
 from __future__ import annotations
@@ -151,9 +151,53 @@ def skin_case(c, folder: Path, out: Path) -> list[dict]:
     return rows
 
 
+def recognition(root: Path, out: Path, *, library_case="MW2", test_case="MW1") -> dict | None:
+    """A library measured on one capture (library-add, each medium with its index and depth) recognizing another
+    of another resolution and arrangement (recognize, containers found in its images), scored by its labels."""
+    from planeray.optical_data import BACKGROUND_CLASS, MATERIAL_CLASSES, material_medium
+
+    lib_folder, test_folder = root / library_case, root / test_case
+    if not ((lib_folder / "done").exists() and (test_folder / "done").exists()):
+        return None
+    lib = out / "recognition" / "library.json"
+    lib.parent.mkdir(parents=True, exist_ok=True)
+    current = None  # the shipped library, each entry replaced by the measured one
+    for cid, name in MATERIAL_CLASSES.items():
+        med = material_medium(cid)
+        args = ["materials", "library-add", lib_folder / "capture", "--labels", lib_folder / "labels.png",
+                "--class-name", f"{cid}={name}", "--out", lib, "--overwrite", "--replace", "--n", round(med.n, 4)]  # fmt: skip
+        if math.isfinite(med.thickness_mm):
+            args += ["--depth-mm", med.thickness_mm]
+        if current is not None:
+            args += ["--library", current]
+        if _cli(args) is None:
+            return None
+        current = out / "recognition" / f"library_{cid}.json"
+        current.write_text(lib.read_text())
+    doc = _cli(["materials", "recognize", test_folder / "capture", "--library", lib, "--out",
+                out / "recognition" / "rec", "--overwrite", "--labels", test_folder / "labels.png"])  # fmt: skip
+    if doc is None:
+        return None
+    sc = doc["score"]
+    from planeray.materials import read_label_image
+
+    seg = read_label_image(out / "recognition" / "rec" / "segmentation.png")
+    truth = read_label_image(test_folder / "labels.png")
+    return {
+        "library": f"{library_case} (library-add, every medium with its index and depth)",
+        "capture": test_case,
+        "per_class": {n: {"all": v["all"], "within_3_mm": sc["within_3_mm"][n]} for n, v in sc["classes"].items()},
+        "table_labelled_none": float((seg[truth == BACKGROUND_CLASS] == 0).mean()),
+        "min_class_accuracy": sc["min_class_accuracy"],
+        "min_within_3_mm": min(v for v in sc["within_3_mm"].values() if v is not None),
+        "containers": [d["decision"] for d in doc.get("containers", [])],
+    }
+
+
 def summary(rows) -> dict:
     """The issue's targets over the rows (per parameter estimate)."""
-    fits = [r for r in rows if r.get("truth") is not None and r.get("status") in ("ok", "flagged")]
+    stated = [r for r in rows if r["model"] == "stated"]
+    fits = [r for r in stated if r.get("truth") is not None and r.get("status") in ("ok", "flagged")]
     ok = [r for r in fits if r["status"] == "ok" and r.get("z") is not None]
     within2 = [r for r in ok if abs(r["z"]) <= 2.0]
     off3 = [r for r in fits if r.get("z") is not None and abs(r["z"]) > 3.0]
@@ -166,7 +210,13 @@ def summary(rows) -> dict:
     wrong = [r for r in rows if r["model"] != "stated" and r.get("kind") != "table"]
     return {
         "captures": len({r["case"].split(":")[0] for r in rows}),
+        "note": "estimates of the stated models (truth known); the wrong-model rows are listed apart",
         "estimates": len(fits),
+        "not_reported": [
+            f"{r['case']} {r['quantity']}: {r['status']}"
+            for r in stated
+            if r.get("truth") is not None and r.get("status") not in ("ok", "flagged")
+        ],
         "unflagged": len(ok),
         "unflagged_within_2_se": len(within2),
         "share_within_2_se": len(within2) / len(ok) if ok else None,
@@ -241,12 +291,28 @@ def main(argv=None):
                   flush=True)  # fmt: skip
         print(f"  ({time.time() - t0:.0f} s)", flush=True)
     summ = summary(rows)
+    if a.only is None or "recognition" in a.only:
+        summ["recognition"] = recognition(a.root, a.out)
     print(json.dumps(summ, indent=1))
     (a.out / "validation.json").write_text(json.dumps({"rows": rows, "summary": summ}, indent=1, default=str))
     md = markdown(rows, summ)
     (a.out / "validation.md").write_text(md)
     if a.markdown is not None:
-        a.markdown.write_text(md)
+        _write_block(a.markdown, md)
+
+
+BEGIN, END = "<!-- validation table: begin (tools/validate_honest_fits.py) -->", "<!-- validation table: end -->"
+
+
+def _write_block(path: Path, md: str) -> None:
+    """Put the table between the markers of a docs page (the rest of the page is kept); a new file otherwise."""
+    text = path.read_text() if path.exists() else ""
+    if BEGIN in text and END in text:
+        head, rest = text.split(BEGIN, 1)
+        tail = rest.split(END, 1)[1]
+        path.write_text(f"{head}{BEGIN}\n\n{md}\n{END}{tail}")
+    else:
+        path.write_text(f"{BEGIN}\n\n{md}\n{END}\n")
 
 
 if __name__ == "__main__":

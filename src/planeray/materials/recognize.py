@@ -404,10 +404,13 @@ POOL_EVIDENCE_FACTOR_LOG = math.log(10.0)
 #: coefficient), 29 pixels ~15 +- 6; 60 lies 7 standard deviations above.
 POOLED_DCHI2 = 60.0
 #: A container takes up to this many pixels of its border whose brightness lies within this share of its median
-#: and whose own evidence reaches this (a surface's pixel gains less than 1 in 80 % of cases).
+#: (and nearer to it than to the brightness outside the containers) and whose own evidence reaches this (a
+#: surface's pixel gains less than 0.5 in 70 % of cases) ...
 GROW_PX = 2
 GROW_BRIGHTNESS_TOLERANCE = 0.3
-GROW_EVIDENCE = 1.0
+GROW_EVIDENCE = 0.5
+#: ... and a pooled pixel must show at least this much of its own (a surface's: in 80 % of cases less).
+POOL_OWN_EVIDENCE = 1.0
 
 
 def _kernel_or_none(s, a, *, mm_per_row, offsets, rpc, table):
@@ -493,6 +496,14 @@ def subsurface_evidence(stack, *, mm_per_row, library=None, camera=None, table=N
     return out
 
 
+def stack_brightness(stack) -> np.ndarray:
+    """Each pixel's brightness: the sum of its used images (saturated ones counted as they read)."""
+    from .stackfit import _images, stack_design
+
+    imgs, _ = _images(stack, stack_design(stack))
+    return np.where(np.isfinite(imgs), imgs, 0.0).sum(axis=0)
+
+
 def pooled_evidence(evidence, brightness, *, radius_px=POOL_RADIUS_PX, tolerance=POOL_BRIGHTNESS_TOLERANCE):
     """The evidence of light from below the surface summed over a pixel's neighbours of its own brightness.
 
@@ -543,8 +554,10 @@ def find_containers(
     ndarray (H, W) of int
     """
     mask = np.asarray(evidence) > float(threshold)
-    if brightness is not None:
-        mask |= pooled_evidence(evidence, brightness) > float(pooled_threshold)
+    if brightness is not None:  # a pixel that shows a little of its own and whose alike neighbours show much
+        mask |= (pooled_evidence(evidence, brightness) > float(pooled_threshold)) & (
+            np.asarray(evidence) >= POOL_OWN_EVIDENCE
+        )
     votes = ndimage.uniform_filter(mask.astype(np.float64), size=3, mode="nearest")
     mask = np.where(votes >= 5.0 / 9.0 - 1e-9, True, np.where(votes <= 4.0 / 9.0 + 1e-9, False, mask))
     lab, n = ndimage.label(mask)
@@ -561,11 +574,14 @@ def find_containers(
         lb = np.log(np.maximum(np.asarray(brightness, np.float64), 1e-12))
         E = np.asarray(evidence, np.float64)
         median = np.array([np.median(lb[out == k]) for k in range(1, out.max() + 1)])
+        outside = float(np.median(lb[out == 0])) if (out == 0).any() else -np.inf
         cross = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
         for _ in range(GROW_PX):
             grown = ndimage.grey_dilation(out, footprint=cross)
             new = (out == 0) & (grown > 0) & (E >= GROW_EVIDENCE)
-            new &= np.abs(lb - median[np.maximum(grown, 1) - 1]) <= math.log1p(GROW_BRIGHTNESS_TOLERANCE)
+            near = np.abs(lb - median[np.maximum(grown, 1) - 1])
+            # of the container's brightness, and nearer to it than to what lies outside the containers (a table)
+            new &= (near <= math.log1p(GROW_BRIGHTNESS_TOLERANCE)) & (near < np.abs(lb - outside))
             if not new.any():
                 break
             out = np.where(new, grown, out)
@@ -653,7 +669,7 @@ def recognize_stack(
     if regions is None:
         if evidence is None:
             evidence = subsurface_evidence(stack, mm_per_row=mm_per_row, library=library, camera=camera)
-        regions = find_containers(evidence, mm_per_pixel=mm_per_row * rpc)
+        regions = find_containers(evidence, mm_per_pixel=mm_per_row * rpc, brightness=stack_brightness(stack))
     reg = np.asarray(regions, np.int64)
     if reg.shape != (H, W):
         raise InputError(f"regions have shape {reg.shape}, the stack {(H, W)}")
