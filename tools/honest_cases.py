@@ -552,7 +552,7 @@ def main(argv=None):
     ap.add_argument("--only", nargs="*", default=None)
     ap.add_argument("--root", type=Path, default=ROOT)
     a = ap.parse_args(argv)
-    todo = [c for c in cases() if a.only is None or c["id"] in a.only]
+    todo = cases() if a.only is None else [case(i) for i in a.only]  # in the order asked
     if a.what == "list":
         for c in todo:
             print(json.dumps(c))

@@ -17,7 +17,8 @@ verdict that travels with the numbers:
   Birge ratio), so a fit that misses its data by more than their noise reports a wider
   uncertainty -- on top of the model-error floor each method puts in its noise model;
 * **flags** (:data:`FLAGS`, bits of the maps' flag layer): the model does not fit, a parameter
-  at the edge of the forward model's tables (never reported as a fit), no fit.
+  at the edge of the forward model's tables (never reported as a fit), no fit, the data outside
+  the forward model's range of validity.
 
 References
 ----------
@@ -41,6 +42,7 @@ __all__ = [
     "FLAG_MISFIT",
     "FLAG_EDGE",
     "FLAG_NOT_FITTED",
+    "FLAG_RANGE",
     "FLAGS",
     "FitQuality",
     "fit_quality",
@@ -54,10 +56,13 @@ DEFAULT_P_MISFIT = 1e-3
 FLAG_MISFIT = 1
 FLAG_EDGE = 2
 FLAG_NOT_FITTED = 4
+FLAG_RANGE = 8
 FLAGS = {
     FLAG_MISFIT: "model does not fit: chi-square past the threshold of its noise model (standard errors inflated)",
     FLAG_EDGE: "a parameter at the edge of the forward model (not reported as a fit)",
     FLAG_NOT_FITTED: "not fitted",
+    FLAG_RANGE: "outside the forward model's range: walls or a bottom within a few transport mean free paths, "
+    "where diffusion theory's method of images is not known to hold",
 }
 
 

@@ -398,7 +398,7 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
     state = np.where(mask == 255, 0, np.where(mask == 0, 1, np.where(np.isfinite(maps["mu_s_prime_per_mm"]), 2, 3)))
     flags = maps.get("flags")
     if flags is not None:  # the flag layer (issue 41): the model does not fit, or a parameter at the model's edge
-        state = np.where((flags != 255) & (flags & 3 > 0), 4, state)
+        state = np.where((flags != 255) & (flags & 11 > 0), 4, state)
     cmap = ListedColormap(["0.85", "#3b8f3b", "#e0a030", "#c03030", "#7b3fa0"])
     ax.imshow(state, cmap=cmap, vmin=-0.5, vmax=4.5, interpolation="nearest")
     ax.set_xticks([])
@@ -409,7 +409,7 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
             Patch(color="#3b8f3b", label="both measured"),
             Patch(color="#e0a030", label="mu_a not identifiable"),
             Patch(color="#c03030", label="neither"),
-            Patch(color="#7b3fa0", label="FLAGGED: model does not fit / at an edge"),
+            Patch(color="#7b3fa0", label="FLAGGED: no fit / at an edge / out of range"),
             Patch(color="0.85", label="not fitted"),
         ],
         fontsize=7,

@@ -95,7 +95,15 @@ from scipy.optimize import least_squares
 from scipy.special import k1e
 
 from ..errors import InputError
-from ..goodness import DEFAULT_P_MISFIT, FLAG_EDGE, FLAG_MISFIT, FLAG_NOT_FITTED, describe_flags, fit_quality
+from ..goodness import (
+    DEFAULT_P_MISFIT,
+    FLAG_EDGE,
+    FLAG_MISFIT,
+    FLAG_NOT_FITTED,
+    FLAG_RANGE,
+    describe_flags,
+    fit_quality,
+)
 from ..mc.cache import TABLES_DIR, cache_dir, save_table, write_or_warn
 from ..mc.diffusion import boundary_mismatch_A
 from ..mc.engine import mc_line_profile
@@ -150,6 +158,9 @@ TABLE_PHOTONS = 100_000
 DIPOLE_MU_S_PRIME_MAX_PER_ROW = 30.0
 #: A parameter whose relative standard error exceeds this is not identifiable (NaN).
 MAX_RELATIVE_SE = 0.5
+#: Walls or a bottom closer than this many transport mean free paths (1 / mu_s') lie outside the range where
+#: diffusion theory's method of images -- the walls' and the bottom's models -- is trusted: the fit is flagged.
+DIFFUSION_RANGE_MFP = 5.0
 #: Relative uncertainty of the forward model (table noise and interpolation; the forward-model
 #: test allows 3 % against direct Monte Carlo), added in quadrature to the data's noise.
 MODEL_RELATIVE_SD = 0.02
@@ -1307,8 +1318,19 @@ def fit_transport(
             y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=s, calibrated=calibrated,
             rows_per_camera_row=rpc, table=table, walls=rw, **fit_kw,
         )  # fmt: skip
+        flag0 = int(rr.flags[0])
+        if np.isfinite(rr.log_estimate_per_mm[0, 0]):  # walls or a bottom within diffusion theory's range?
+            mfp_mm = math.exp(-rr.log_estimate_per_mm[0, 0])
+            near = None
+            if dist is not None:
+                d = dist[inside]
+                near = np.median(np.nanmin(np.where(np.isfinite(d), d, np.inf), axis=1)) * float(mm_per_row)
+            if (bottom is not None and bottom[0, 0] * float(mm_per_row) < DIFFUSION_RANGE_MFP * mfp_mm) or (
+                near is not None and near < DIFFUSION_RANGE_MFP * mfp_mm
+            ):
+                flag0 |= FLAG_RANGE
         if res is None:
-            maps["flags"][inside] = rr.flags[0]
+            maps["flags"][inside] = flag0
         q = rr.quality(0)
         regions[region] = {
             "pixels": int(inside.sum()),
@@ -1321,8 +1343,8 @@ def fit_transport(
             "chi2_per_dof": _num(rr.chi2_per_dof[0]),
             "fit_quality": None if q is None else q.to_json(),
             "model_fits": None if q is None else q.fits,
-            "flags": describe_flags(int(rr.flags[0])),
-            "flag_bits": int(rr.flags[0]),
+            "flags": describe_flags(flag0),
+            "flag_bits": flag0,
             "blocks_flagged": None if res is None else float(((res.flags & (FLAG_MISFIT | FLAG_EDGE)) > 0).mean()),
             "blocks_median_mu_s_prime_per_mm": None if res is None else _nanmedian(res.mu_s_prime_per_mm),
             "blocks_median_mu_a_per_mm": None if res is None else _nanmedian(res.mu_a_per_mm),

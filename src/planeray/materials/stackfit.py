@@ -64,13 +64,22 @@ from scipy.optimize import least_squares
 from ..camera import CameraModel
 from ..demux.problem import DemuxProblem
 from ..errors import InputError
-from ..goodness import DEFAULT_P_MISFIT, FLAG_EDGE, FLAG_MISFIT, FLAG_NOT_FITTED, describe_flags, fit_quality
+from ..goodness import (
+    DEFAULT_P_MISFIT,
+    FLAG_EDGE,
+    FLAG_MISFIT,
+    FLAG_NOT_FITTED,
+    FLAG_RANGE,
+    describe_flags,
+    fit_quality,
+)
 from ..stack import Stack
 from .fit import (
     _MAP_NAMES,
     _MU_A_BAD,
     _MU_S_BAD,
     BOTTOM_ANGLE_DEG,
+    DIFFUSION_RANGE_MFP,
     MAX_RELATIVE_SE,
     MODEL_RELATIVE_SD,
     ForwardTable,
@@ -101,9 +110,14 @@ STACK_MODEL_CORRELATED_SD = 0.03
 #: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect (issue 27;
 #: docs/user_guide/materials.md, "Container walls").
 WALL_EFFECT_SD = 0.2
+#: (and, both, their distances by a transport mean free path: ``_fit_region``'s ``effect_columns``)
+#: Diffusion theory's walls and bottom are trusted DIFFUSION_RANGE_MFP transport mean free paths (1 / mu_s') away
+#: and beyond (planeray.materials.fit): a region whose bottom, or whose median pixel's nearest wall, lies closer
+#: is flagged (FLAG_RANGE).  The soap's 30 mm layer (6 mean free paths) already showed the bottom's model 80 % off.
 #: A layer's bottom's effect (the slab's image series) is off by this share of itself: against planeray's Monte
-#: Carlo of the soap's 30 mm layer it removes 3.8 % of the kernel where the Monte Carlo removes 2.1 % (issue 27).
-BOTTOM_EFFECT_SD = 0.5
+#: Carlo of the soap's 30 mm layer (6 transport mean free paths) it removes 3.8 % of the kernel where the Monte
+#: Carlo removes 2.1 % (issue 27): 80 % too much, and diffusion theory errs more in thinner layers.
+BOTTOM_EFFECT_SD = 1.0
 
 
 @dataclass(frozen=True)
@@ -384,6 +398,7 @@ def _fit_region(
     # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
     # :data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`), a correlated error of the model along their shapes
     parts = []
+    foot_rows = float(np.ptp(foot[0]) + 1) if foot[0].size > 1 else 1.0  # a camera row's extent, projector rows
     if walls is not None and len(walls):
         w = np.asarray(walls, np.float64)
         is_bottom = w[:, 1] == BOTTOM_ANGLE_DEG
@@ -391,13 +406,24 @@ def _fit_region(
         parts = [(ww, sd) for ww, sd in parts if len(ww) and sd > 0]
 
     def effect_columns(x, c):
-        """``(N, P)``: the images' change when each part's effect (walls, bottom) is off by its sd."""
+        """``(N, 2 P)``: the images' change when each part's effect (walls, bottom) is off by its sd, and when its
+        distances are off by a transport mean free path (diffusion theory's boundaries are uncertain by about
+        one, Haskell et al. 1994) -- for walls also by the pixel's half (their positions come from the labels)."""
         if not parts or x is None:
             return None
         free = _model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
-        cols = [
-            sd * c * (A @ (_model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free)) for ww, sd in parts
-        ]
+        mfp_rows = 1.0 / math.exp(x[0])  # 1 / mu_s' in rows (x[0] = log of the per-row mu_s')
+        cols = []
+        for ww, sd in parts:
+            cols.append(sd * c * (A @ (_model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free)))
+            bottom = bool(np.all(ww[:, 1] == BOTTOM_ANGLE_DEG))
+            shift = mfp_rows if bottom else math.hypot(mfp_rows, 0.5 * foot_rows)
+            hi, lo = ww.copy(), ww.copy()
+            hi[:, 0] += shift
+            lo[:, 0] = np.maximum(lo[:, 0] - shift, 0.0)
+            k_hi = _model_kernel(table, x[0], x[1], offsets, foot, hi, wall_kind)
+            k_lo = _model_kernel(table, x[0], x[1], offsets, foot, lo, wall_kind)
+            cols.append(0.5 * c * (A @ (k_hi - k_lo)))
         return np.stack(cols, axis=1)
 
     def jitter_var(c, k):
@@ -657,7 +683,22 @@ def fit_stack(
         if r["quality"] is None:
             return FLAG_NOT_FITTED
         f = 0 if r["quality"].fits else FLAG_MISFIT
+        f |= FLAG_RANGE if r.get("out_of_range") else 0
         return f | (FLAG_EDGE if r["mask"] & (2 | 4) else 0)
+
+    def out_of_range(r, rows, cols, region):
+        """Walls or a bottom closer than DIFFUSION_RANGE_MFP transport mean free paths at the fitted mu_s'."""
+        if r["x"] is None:
+            return False
+        mfp_rows = 1.0 / math.exp(r["x"][0])
+        bottom = bottom_of(region)
+        if bottom is not None and bottom[0, 0] < DIFFUSION_RANGE_MFP * mfp_rows:
+            return True
+        if dist is not None:
+            nearest = np.nanmin(np.where(np.isfinite(dist[rows, cols]), dist[rows, cols], np.inf), axis=1)
+            if np.median(nearest) < DIFFUSION_RANGE_MFP * mfp_rows:
+                return True
+        return False
 
     maps = {k: np.full((H, W), np.nan, np.float32) for k in _MAP_NAMES}
     maps["mask"] = np.full((H, W), 255, np.uint8)
@@ -667,6 +708,7 @@ def fit_stack(
         inside = lab == region
         rows, cols = np.nonzero(inside)
         r, y, se = fit_pixels(rows, cols, region)
+        r["out_of_range"] = out_of_range(r, rows, cols, region)
         s, a, se_s, se_a = estimates(r)
         blocks_s, blocks_a, blocks_flagged = [], [], []
         if b is None:
@@ -682,6 +724,7 @@ def fit_stack(
                     if not sub.any():
                         continue
                     rb = fit_pixels(*np.nonzero(sub), region)[0]
+                    rb["out_of_range"] = out_of_range(rb, *np.nonzero(sub), region)
                     vals = estimates(rb)
                     for name, val in zip(_MAP_NAMES, vals):
                         maps[name][sub] = val
@@ -689,7 +732,7 @@ def fit_stack(
                     maps["flags"][sub] = flags_of(rb)
                     blocks_s.append(vals[0])
                     blocks_a.append(vals[1])
-                    blocks_flagged.append(bool(flags_of(rb) & (FLAG_MISFIT | FLAG_EDGE)))
+                    blocks_flagged.append(bool(flags_of(rb) & (FLAG_MISFIT | FLAG_EDGE | FLAG_RANGE)))
                     if progress is not None:
                         progress(1)
         if progress is not None:
