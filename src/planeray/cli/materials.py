@@ -457,6 +457,20 @@ def _recorded_mm_per_row(meta: dict):
     return recorded_mm_per_row(meta)[0]
 
 
+def _stack_and_row_size(input_path: Path, mm_per_row: float | None):
+    """``(stack, metadata, mm per row)``: ``--mm-per-row``, else the capture's (its acquisition.json); neither:
+    one line naming both (no default stands in)."""
+    stack = _load_stack(input_path)
+    meta = dict(stack.metadata or {})
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(
+            f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
+            '"mm_per_row" to its acquisition.json'
+        )
+    return stack, meta, mm
+
+
 def _forward_table(n: float):
     """The forward table of index ``n``: loaded silently when shipped or cached, else traced -- announced with
     a time estimate measured on a pilot run, and counted on a progress bar."""
@@ -596,14 +610,7 @@ def fit_cmd(
                 f"--white-reference {white_reference} is a transport store: the stack fit needs the white "
                 "target's stack (or --method transport)"
             )
-        stack = _load_stack(input_path)
-        meta = dict(stack.metadata or {})
-        mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
-        if mm is None:
-            raise ValueError(
-                f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
-                '"mm_per_row" to its acquisition.json'
-            )
+        stack, meta, mm = _stack_and_row_size(input_path, mm_per_row)
         lab = _read_labels(labels, "--labels", stack.shape) if labels is not None else None
         white = None
         if white_reference is not None:
@@ -956,16 +963,8 @@ def recognize_cmd(
     details = None
     if by_containers:  # each container fitted from the stack's images (issue 41)
         from ..camera import CameraModel
-        from ..stack import recorded_mm_per_row
 
-        stack = _load_stack(input_path)
-        meta = dict(stack.metadata or {})
-        mm = mm_per_row if mm_per_row is not None else recorded_mm_per_row(meta)[0]
-        if mm is None:
-            raise ValueError(
-                f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
-                '"mm_per_row" to its acquisition.json'
-            )
+        stack, meta, mm = _stack_and_row_size(input_path, mm_per_row)
         H, W = stack.shape
         rpc = float(stack.geometry.rows_per_camera_row)
         reg = _read_labels(regions, "--regions", stack.shape) if regions is not None else None
@@ -1156,7 +1155,6 @@ def library_add(
         raise ValueError(f"--library {exc}") from None
     if lib.physical:
         from ..camera import CameraModel
-        from ..stack import recorded_mm_per_row
 
         if not Path(input_path).exists():
             raise ValueError(f"the capture {input_path}: no such file or folder")
@@ -1165,14 +1163,7 @@ def library_add(
                 f"{input_path} is a transport store: a library of physical parameters is measured from a stack's "
                 "images (give the stack)"
             )
-        stack = _load_stack(input_path)
-        meta = dict(stack.metadata or {})
-        mm = mm_per_row if mm_per_row is not None else recorded_mm_per_row(meta)[0]
-        if mm is None:
-            raise ValueError(
-                f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
-                '"mm_per_row" to its acquisition.json'
-            )
+        stack, meta, mm = _stack_and_row_size(input_path, mm_per_row)
         lab = _read_labels(labels, "--labels", stack.shape)
         white = _load_stack(white_reference) if white_reference is not None else None
     else:

@@ -857,6 +857,35 @@ def _grid_starts(table: ForwardTable, offsets, foot):
     return starts, _kernel_per_row(table, starts[:, 0], starts[:, 1], offsets, foot)
 
 
+def _bottom_row(depth_mm, region, mm_per_row):
+    """A region's bottom as a ``walls`` row (``depth_mm``: one value or ``{region: depth}``), None: semi-infinite."""
+    v = depth_mm.get(region) if isinstance(depth_mm, dict) else depth_mm
+    if v is None or not np.isfinite(float(v)):
+        return None
+    if not float(v) > 0:
+        raise InputError(f"depth_mm must be positive, got {v!r}")
+    return np.array([[float(v) / float(mm_per_row), BOTTOM_ANGLE_DEG, 0.0, 1.0]])
+
+
+def _out_of_range(log_s_per_row, bottom, distances) -> bool:
+    """Whether a fit's walls or bottom lie within :data:`DIFFUSION_RANGE_MFP` transport mean free paths.
+
+    ``log_s_per_row``: the fitted ``log(mu_s' h)``; ``bottom``: :func:`_bottom_row` (rows) or None; ``distances``:
+    the region's pixels' wall distances (:func:`container_wall_distances`, rows) or None -- the median pixel's
+    nearest wall counts.
+    """
+    if not np.isfinite(log_s_per_row):
+        return False
+    reach = DIFFUSION_RANGE_MFP / math.exp(float(log_s_per_row))  # rows
+    if bottom is not None and bottom[0, 0] < reach:
+        return True
+    if distances is not None and len(distances):
+        d = np.asarray(distances, np.float64).reshape(-1, 4)
+        nearest = np.min(np.where(np.isfinite(d), d, np.inf), axis=1)
+        return bool(np.median(nearest) < reach)
+    return False
+
+
 def _regions_and_walls(labels, containers, shape, rows_per_camera_row, what):
     """The region labels (default one region) and each pixel's wall distances (None without ``containers``)."""
     lab = np.ones(shape, np.int64) if labels is None else np.asarray(labels, np.int64)
@@ -1238,12 +1267,7 @@ def fit_transport(
         raise InputError(f"block_px must be >= 1, got {block_px!r}")
 
     def depth_of(region):
-        v = depth_mm.get(region) if isinstance(depth_mm, dict) else depth_mm
-        if v is None or not np.isfinite(float(v)):
-            return None
-        if not float(v) > 0:
-            raise InputError(f"depth_mm must be positive, got {v!r}")
-        return np.array([[float(v) / float(mm_per_row), BOTTOM_ANGLE_DEG, 0.0, 1.0]])
+        return _bottom_row(depth_mm, region, mm_per_row)
 
     def with_bottom(walls, bottom):
         if bottom is None:
@@ -1319,16 +1343,9 @@ def fit_transport(
             rows_per_camera_row=rpc, table=table, walls=rw, **fit_kw,
         )  # fmt: skip
         flag0 = int(rr.flags[0])
-        if np.isfinite(rr.log_estimate_per_mm[0, 0]):  # walls or a bottom within diffusion theory's range?
-            mfp_mm = math.exp(-rr.log_estimate_per_mm[0, 0])
-            near = None
-            if dist is not None:
-                d = dist[inside]
-                near = np.median(np.nanmin(np.where(np.isfinite(d), d, np.inf), axis=1)) * float(mm_per_row)
-            if (bottom is not None and bottom[0, 0] * float(mm_per_row) < DIFFUSION_RANGE_MFP * mfp_mm) or (
-                near is not None and near < DIFFUSION_RANGE_MFP * mfp_mm
-            ):
-                flag0 |= FLAG_RANGE
+        log_s_row = rr.log_estimate_per_mm[0, 0] + math.log(float(mm_per_row))
+        if _out_of_range(log_s_row, bottom, None if dist is None else dist[inside]):
+            flag0 |= FLAG_RANGE
         if res is None:
             maps["flags"][inside] = flag0
         q = rr.quality(0)

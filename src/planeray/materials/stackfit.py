@@ -79,11 +79,11 @@ from .fit import (
     _MU_A_BAD,
     _MU_S_BAD,
     BOTTOM_ANGLE_DEG,
-    DIFFUSION_RANGE_MFP,
     MAX_RELATIVE_SE,
     MODEL_RELATIVE_SD,
     ForwardTable,
     TransportFit,
+    _bottom_row,
     _check_wall_kind,
     _footprint,
     _grid_starts,
@@ -92,6 +92,7 @@ from .fit import (
     _log_bounds,
     _model_kernel,
     _num,
+    _out_of_range,
     _regions_and_walls,
     describe_reasons,
     forward_table,
@@ -645,12 +646,7 @@ def fit_stack(
     var_rows = None if camera is None else camera.row_jitter_rows(stack.lines_per_second) ** 2
 
     def bottom_of(region):
-        v = depth_mm.get(region) if isinstance(depth_mm, dict) else depth_mm
-        if v is None or not np.isfinite(float(v)):
-            return None
-        if not float(v) > 0:
-            raise InputError(f"depth_mm must be positive, got {v!r}")
-        return np.array([[float(v) / h, BOTTOM_ANGLE_DEG, 0.0, 1.0]])
+        return _bottom_row(depth_mm, region, h)
 
     def fit_pixels(rows, cols, region):
         y, se, m = _region_data(imgs, ok, rows, cols, variance)
@@ -687,18 +683,10 @@ def fit_stack(
         return f | (FLAG_EDGE if r["mask"] & (2 | 4) else 0)
 
     def out_of_range(r, rows, cols, region):
-        """Walls or a bottom closer than DIFFUSION_RANGE_MFP transport mean free paths at the fitted mu_s'."""
-        if r["x"] is None:
-            return False
-        mfp_rows = 1.0 / math.exp(r["x"][0])
-        bottom = bottom_of(region)
-        if bottom is not None and bottom[0, 0] < DIFFUSION_RANGE_MFP * mfp_rows:
-            return True
-        if dist is not None:
-            nearest = np.nanmin(np.where(np.isfinite(dist[rows, cols]), dist[rows, cols], np.inf), axis=1)
-            if np.median(nearest) < DIFFUSION_RANGE_MFP * mfp_rows:
-                return True
-        return False
+        """Walls or a bottom closer than the range of diffusion theory at the fitted mu_s' (fit._out_of_range)."""
+        return r["x"] is not None and _out_of_range(
+            r["x"][0], bottom_of(region), None if dist is None else dist[rows, cols]
+        )
 
     maps = {k: np.full((H, W), np.nan, np.float32) for k in _MAP_NAMES}
     maps["mask"] = np.full((H, W), 255, np.uint8)
