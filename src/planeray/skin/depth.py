@@ -852,6 +852,19 @@ def _fit_vein(
             c2 = float(r @ r)
             if best is None or c2 < best[0]:
                 best = (c2, start)
+    if model_relative_sd > 0:
+        # the centre line comes from the mask, to a pixel: each pixel's distance from the vein is uncertain by
+        # a pixel / sqrt(12) (the mask's quantization), which enters each sample's variance through the
+        # contrast's slope at the grid's best fit (a shift of all distances is the fitted offset delta)
+        th = np.array(best[1], float)
+        step = 0.25 * px
+        hi_r, _ = model_of(np.concatenate([[th[0], th[1], th[2] + step], th[3:]]))
+        lo_r, _ = model_of(np.concatenate([[th[0], th[1], th[2] - step], th[3:]]))
+        _, Bg, _, cg, fg = inner(*model_of(th), c_null)
+        slope = Bg[:, None] * (phi @ cg)[None, :] * (1.0 + fg[:, row_of]) * (hi_r - lo_r) / (2.0 * step)
+        wts = 1.0 / (1.0 / wts + (px / math.sqrt(12.0) * slope) ** 2)
+        res_null = inner(o_ratio, o_flood * amb_on, c_flat)[0]
+        chi2_null = float(np.sum(res_null**2))
     lo = [d_lo, D_lo, -px] + ([-0.8] if s_sd > 0 else [])
     hi = [d_hi, D_hi, px] + ([2.0] if s_sd > 0 else [])
     x0 = np.clip(best[1], np.array(lo) + 1e-6, np.array(hi) - 1e-6)
