@@ -382,13 +382,14 @@ def _make_mc_media(c, folder: Path) -> dict:
 
 # ----------------------------------------------------------------------------- skin
 def _vein_mask(H, W, P, h, c):
-    """Pixels whose centre lies over the vein (within its radius of the axis projected on the surface)."""
+    """The pixels the vein crosses (as a user outlines it: a pixel whose area meets the vein's projection); also
+    each pixel's signed distance from the vein's axis, mm."""
     x, y = _pixel_centres_mm(H, W, P, h)
     if c["source"] == "mc":  # the vein on a pixel centre (the brute-force runs are at pixel centres)
         x, y = x - x[H // 2], y - y[W // 2]
     X, Y = np.meshgrid(x, y, indexing="ij")
     rho = X if c["angle"] == 0.0 else -Y
-    return np.abs(rho) <= 0.5 * c["diameter_mm"], rho
+    return np.abs(rho) < 0.5 * c["diameter_mm"] + 0.5 * P * h / H, rho
 
 
 def _skin_scene(c, kernel_of):
@@ -544,6 +545,13 @@ def make(c: dict, root: Path = ROOT) -> Path:
     (folder / "done").write_text(f"{time.time() - t0:.0f} s\n")
     print(f"{c['id']}: {folder} ({time.time() - t0:.0f} s)", flush=True)
     return folder
+
+
+def write_mask(c: dict, root: Path = ROOT) -> None:
+    """(Re)write a skin case's vein mask from its definition (the capture is left as it is)."""
+    H, W = SKIN_SHAPE
+    mask, _ = _vein_mask(H, W, SKIN_PROJECTOR_ROWS, SKIN_MM_PER_ROW, c)
+    _write_mask(root / c["id"] / "veins.png", mask)
 
 
 def main(argv=None):
