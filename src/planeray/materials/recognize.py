@@ -407,7 +407,7 @@ POOLED_DCHI2 = 60.0
 #: (and nearer to it than to the brightness outside the containers) and whose own evidence reaches this (a
 #: surface's pixel gains less than 0.5 in 70 % of cases) ...
 GROW_PX = 2
-GROW_BRIGHTNESS_TOLERANCE = 0.3
+GROW_BRIGHTNESS_TOLERANCE = 0.5
 GROW_EVIDENCE = 0.5
 #: ... and a pooled pixel must show at least this much of its own (a surface's: in 80 % of cases less).
 POOL_OWN_EVIDENCE = 1.0
@@ -585,6 +585,8 @@ def find_containers(
             if not new.any():
                 break
             out = np.where(new, grown, out)
+    for k in range(1, out.max() + 1):  # a container has no holes (a pixel it surrounds is its medium)
+        out[ndimage.binary_fill_holes(out == k) & (out == 0)] = k
     return out
 
 
@@ -733,7 +735,17 @@ def _compare(entry, r, p_unknown=DEFAULT_P_UNKNOWN) -> dict:
     out["fit"] = {k: r.get(k) for k in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")}
     out["model_fits"] = q.get("model_fits")
     out["flags"] = r.get("flags", [])
-    if r.get("mask", 0) & 2 or r.get("mu_s_prime_per_mm") is None:  # mu_s' at the edge or not measured: not this
+    if r.get("mask", 0) & 2 and r.get("mu_s_prime_edge") in ("lower", "upper"):
+        # mu_s' at the forward model's edge is a censored measurement: "at most" (or "at least") the edge's value;
+        # an entry beyond the edge agrees with it, one inside it by its distance from the edge in its own sd
+        edge = float(r["log_estimate_per_mm"][0])
+        m = math.log(entry.mu_s_prime_per_mm)
+        beyond = m <= edge if r["mu_s_prime_edge"] == "lower" else m >= edge
+        d2 = 0.0 if beyond else ((m - edge) / entry.mu_s_prime_log_sd) ** 2
+        chi_data = (q.get("reduced_chi2") or 0.0) * (q.get("dof") or 0)
+        out.update(d2=d2, limit=float(chi2.isf(p_unknown, 1)), score=d2 + chi_data, parameters=1, censored=True)
+        return out
+    if r.get("mask", 0) & 2 or r.get("mu_s_prime_per_mm") is None:  # mu_s' not measured: not this entry
         return out
     x = np.array(r["log_estimate_per_mm"], float)
     se = np.array(r["log_se"], float)

@@ -747,6 +747,7 @@ def fit_stack(
             "log_estimate_per_mm": None if x is None else [float(v - math.log(h)) for v in x],
             "log_se": None if x is None else [float(v) for v in r["se_log"]],
             "log_correlation": r.get("log_correlation"),
+            "mu_s_prime_edge": _edge_side(x, lo, hi) if x is not None and r["mask"] & 2 else None,
             "blocks": len(blocks_s),
             "blocks_flagged": float(np.mean(blocks_flagged)) if blocks_flagged else None,
             "blocks_median_mu_s_prime_per_mm": _median(blocks_s),
@@ -755,6 +756,11 @@ def fit_stack(
         model = r["model"] if r["model"] is not None else np.full(y.shape, np.nan)
         profiles[region] = (y, se, model)
     return TransportFit(maps, regions, profiles, design.image_index, calibrated, source="stack")
+
+
+def _edge_side(x, lo, hi) -> str:
+    """Which edge of the forward model a ``mu_s'`` flagged "at the edge" sits on."""
+    return "lower" if x[0] - lo[0] < hi[0] - x[0] else "upper"
 
 
 def _median(v):
