@@ -650,10 +650,11 @@ def recognize_stack(
     2. **Fits**: each container as a whole from its images (:func:`planeray.materials.stackfit.fit_stack`, its
        walls modelled), once per ``(n, depth)`` the library's entries were fitted with.
     3. **Decision**: an entry is compared with the fit under its own ``(n, depth)``: the squared Mahalanobis
-       distance ``d^2`` of the fitted log parameters from the entry's, under the sum of both covariances.  The
-       container is the entry of least ``d^2`` plus the fit's chi-square, unless no entry is within the
-       chi-square quantile of ``1 - p_unknown`` (at the parameters compared) or the fit's ``mu_s'`` lies at the
-       forward model's edge: then "none of these" (0).
+       distance ``d^2`` of the fitted log parameters from the entry's, under the sum of both covariances (a
+       ``mu_s'`` at the forward model's edge is censored: "at most" the edge's value).  An entry whose model
+       does not fit the container (its chi-square past the threshold) is not it.  The container is the entry
+       of least ``d^2`` plus the fit's chi-square, unless no entry is within the chi-square quantile of
+       ``1 - p_unknown`` (at the parameters compared): then "none of these" (0).
 
     Returns
     -------
@@ -735,6 +736,8 @@ def _compare(entry, r, p_unknown=DEFAULT_P_UNKNOWN) -> dict:
     out["fit"] = {k: r.get(k) for k in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")}
     out["model_fits"] = q.get("model_fits")
     out["flags"] = r.get("flags", [])
+    if q.get("model_fits") is False:  # the entry's model (its index, its depth) does not fit this container
+        return out
     if r.get("mask", 0) & 2 and r.get("mu_s_prime_edge") in ("lower", "upper"):
         # mu_s' at the forward model's edge is a censored measurement: "at most" (or "at least") the edge's value;
         # an entry beyond the edge agrees with it, one inside it by its distance from the edge in its own sd
