@@ -259,6 +259,16 @@ def summary(rows) -> dict:
     }
 
 
+#: Short names of the flags for the table.
+_SHORT = {
+    "model does not fit: chi-square past the threshold of its noise model (standard errors inflated)": "misfit",
+    "a parameter at the edge of the forward model (not reported as a fit)": "at the table's edge",
+    "outside the forward model's range: walls or a bottom within a few transport mean free paths, where "
+    "diffusion theory's method of images is not known to hold": "out of range",
+    "not fitted": "not fitted",
+}
+
+
 def _fmt(v, spec=".3g"):
     return "" if v is None else format(v, spec)
 
@@ -276,17 +286,51 @@ def markdown(rows, summ) -> str:
         if r.get("background_chi2") is not None:
             chi += f"; bg {r['background_chi2']:.2f} ({_fmt(r.get('background_threshold'), '.2f')})"
         status = r.get("status", "")
-        why = r.get("reason") or "; ".join(r.get("flags") or r.get("not_identifiable") or [])
+        short = [_SHORT.get(f, f) for f in r.get("flags") or []]
+        why = "; ".join(short) or r.get("reason") or "; ".join(r.get("not_identifiable") or [])
+        if r.get("status") == "unresolved" and r.get("reason") and not short:
+            why = r["reason"]
         if why and status != "ok":
-            status += f": {why}"
+            status += f" ({why})"
+        if r.get("truth_unusable"):
+            status = "not counted: " + r["truth_unusable"]
         lines.append(
             f"| {r['case']} | {r['source']} | {r['kind']} | {r['model']} | {r['quantity']} | {_fmt(r.get('truth'), '.4g')} "
             f"| {fit} | {err_s} | {_fmt(r.get('z'), '+.1f')} | {chi} | {status} |"
         )
     lines.append("")
-    lines.append("```json")
-    lines.append(json.dumps(summ, indent=1))
-    lines.append("```")
+    pct = lambda v: "n/a" if v is None else f"{100 * v:.1f} %"  # noqa: E731
+    lines += [
+        f"**Summary** ({summ['captures']} captures; {summ['note']}):",
+        "",
+        f"* estimates with the stated model: {summ['estimates']}; not reported (with the reason): "
+        f"{', '.join(summ['not_reported']) or 'none'};",
+        f"* unflagged: {summ['unflagged']}, of which {summ['unflagged_within_2_se']} have the truth within 2 standard "
+        f"errors: **{pct(summ['share_within_2_se'])}** (target >= 90 %);",
+        f"* more than 3 standard errors off: {summ['more_than_3_se_off']}, unflagged among them: "
+        f"**{', '.join(summ['more_than_3_se_off_unflagged']) or 'none'}** (target: none);",
+        f"* median errors of the unflagged: `mu_s'` **{pct(summ['median_abs_rel_error_mu_s_prime'])}** (target <= 10 %), "
+        f"`mu_a` **{pct(summ['median_abs_rel_error_mu_a'])}** (<= 25 %), vein depth "
+        f"**{_fmt(summ['median_abs_error_depth_mm'], '.2f')} mm** (<= 0.5 mm);",
+        f"* wrong models: {'; '.join(summ['wrong_models'])};",
+        f"* the table around a tray: {'; '.join(summ['tables_flagged'])};",
+        f"* not counted: {'; '.join(summ['not_counted']) or 'none'}.",
+    ]
+    rec = summ.get("recognition")
+    if rec:
+        lines += [
+            "",
+            f"**Recognition** (a library measured on {rec['library']}; recognizing {rec['capture']}: 128 x 128, "
+            "another arrangement, 1.5x noise, 3x ambient light; accuracy per class over all its pixels, and within "
+            "3 mm of a wall):",
+            "",
+            "| class | all pixels | within 3 mm of a wall |",
+            "|---|---|---|",
+        ]
+        for name, v in rec["per_class"].items():
+            lines.append(f"| {name} | {_fmt(v['all'], '.3f')} | {_fmt(v['within_3_mm'], '.3f')} |")
+        lines += ["", f"The table's pixels labelled none of these: {_fmt(rec['table_labelled_none'], '.4f')}; the "
+                      "containers: " + "; ".join(rec["containers"]) + "."]  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
@@ -296,7 +340,15 @@ def main(argv=None):
     ap.add_argument("--root", type=Path, default=hc.ROOT)
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--markdown", type=Path, default=None)
+    ap.add_argument("--from-json", type=Path, default=None, help="only rewrite the table from a validation.json")
     a = ap.parse_args(argv)
+    if a.from_json is not None:
+        doc = json.loads(a.from_json.read_text())
+        md = markdown(doc["rows"], doc["summary"])
+        if a.markdown is not None:
+            _write_block(a.markdown, md)
+        print(md)
+        return
     a.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for c in hc.cases():
