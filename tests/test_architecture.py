@@ -22,6 +22,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "planeray"
 LAYERS = [
     "errors",
     "_validate",
+    "goodness",
     "timing",
     "medium",
     "optical_data",

@@ -7,6 +7,8 @@ built from; tolerances come from the Monte Carlo standard errors.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -449,6 +451,32 @@ def test_a_layer_fitted_with_its_depth_is_recovered_and_biased_without(table):
         fit.fit_transport(transport, mm_per_row=MM, table=table, depth_mm=-1.0)
 
 
+def test_a_mismatched_model_is_flagged_and_a_consistent_one_is_not(table):
+    """Goodness of fit (issue 41): a 3 mm layer of a weakly scattering medium (its kernel cut by the bottom)
+    fitted as semi-infinite does not fit within the noise and is flagged (in the region's summary and the flag
+    layer); fitted with its depth it fits and nothing is flagged.  (A deep layer's loss reads as absorption
+    within the noise -- the 10 mm layer above: not every wrong model shows in the chi-square.)"""
+    from planeray.goodness import FLAG_MISFIT, FLAG_RANGE
+    from planeray.transport import Transport
+
+    off = np.arange(-60, 61)
+    k = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table,
+                        walls=[[3.0 / MM, fit.BOTTOM_ANGLE_DEG, 0.0, 1.0]])  # fmt: skip
+    rng = np.random.default_rng(5)
+    transport = Transport((k * 50.0 * (1.0 + 0.002 * rng.standard_normal((4, 4, off.size)))).astype(np.float32), off)
+    right = fit.fit_transport(transport, mm_per_row=MM, block_px=4, table=table, depth_mm=3.0, regions_only=True)
+    wrong = fit.fit_transport(transport, mm_per_row=MM, block_px=4, table=table, regions_only=True)
+    r, w = right.regions[1], wrong.regions[1]
+    assert r["model_fits"] and r["fit_quality"]["reduced_chi2"] < r["fit_quality"]["threshold"]
+    # the right model fits; its 3 mm bottom lies within 5 transport mean free paths (1 / 0.2 mm): flagged out of
+    # diffusion theory's range, never as a misfit
+    assert r["flag_bits"] == FLAG_RANGE and np.all(right.maps["flags"] == FLAG_RANGE)
+    assert not w["model_fits"] and w["flag_bits"] & FLAG_MISFIT and "model does not fit" in w["flags"][0]
+    assert np.all(wrong.maps["flags"] & FLAG_MISFIT)
+    # the misfit widens the standard errors by sqrt(chi2 / dof)
+    assert w["fit_quality"]["se_inflation"] == pytest.approx(np.sqrt(w["fit_quality"]["reduced_chi2"]))
+
+
 # ---------------------------------------------------------------- Fig. 10 extended (`materials report`, `paper`)
 def test_the_report_measures_each_container_away_from_its_walls_with_its_walls_modelled(monkeypatch, tmp_path):
     """`materials report` (full) fits each tray's pixels >= 3 mm from its walls as one region, the walls from
@@ -665,3 +693,67 @@ def test_the_command_fits_a_stack_through_its_images(stacks, tmp_path):
                 option=option)  # fmt: skip
     run_bad(["materials", "fit", tmp_path / "t.zarr", "--out", "{d}/fit", "--method", "stack"],
             folder=tmp_path / "u", option="--method")  # fmt: skip
+
+
+def _import_folder(stack, folder, **acquisition):
+    """The stack as a user's import folder: its acquisition.json states the camera and ``acquisition``, no scene."""
+    from dataclasses import asdict
+
+    from planeray.camera import CameraModel
+    from planeray.io import export_folder
+
+    export_folder(stack, folder)
+    path = folder / "acquisition.json"
+    acq = json.loads(path.read_text())
+    acq["planeray_metadata"] = {"camera": asdict(CameraModel())}
+    acq.update(acquisition)
+    path.write_text(json.dumps(acq))
+    return folder
+
+
+def test_the_row_size_comes_from_acquisition_json_and_is_never_assumed(stacks, tmp_path):
+    """Issue 41: an import folder's acquisition.json states mm_per_row; the fit uses it (and says so), and a
+    capture that states none is refused in one line -- no default stands in for it."""
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    stated = _import_folder(stacks["noisy"], tmp_path / "stated", mm_per_row=0.35)
+    res = CliRunner().invoke(app, ["materials", "fit", str(stated), "--out", str(tmp_path / "fit")])
+    assert res.exit_code == 0, res.output
+    meta = json.loads((tmp_path / "fit" / "planeray.json").read_text())
+    assert meta["mm_per_row"] == 0.35 and meta["mm_per_row_source"] == "acquisition.json"
+    assert "reduced chi-square" in res.output and meta["regions"]["1"]["fit_quality"]["dof"] > 50
+    assert "camera" in meta["noise_model"]
+    silent = _import_folder(stacks["noisy"], tmp_path / "silent")
+    res = CliRunner().invoke(app, ["materials", "fit", str(silent), "--out", str(tmp_path / "fit2")])
+    assert res.exit_code == 1 and "mm_per_row" in res.output and "acquisition.json" in res.output
+    assert len(res.output.strip().splitlines()) == 1 and not (tmp_path / "fit2").exists()
+
+
+def test_a_cached_forward_table_is_reused_silently_and_a_missing_one_announced(monkeypatch, table, tmp_path):
+    """--n of a table that is shipped or cached: no note; of one that is not: the note with the estimate from a
+    pilot run, then a progress bar over its runs (here the tracing is a stand-in returning the shipped table)."""
+    from planeray.cli.materials import _forward_table
+
+    calls = []
+    monkeypatch.setattr(fit, "forward_table_stored", lambda **kw: kw["n"] == fit.DEFAULT_N)
+    monkeypatch.setattr(fit, "forward_table_seconds", lambda **kw: 120.0)
+
+    def trace(**kw):
+        calls.append(kw)
+        if kw.get("progress"):
+            kw["progress"](fit.TABLE_RUNS)
+        return table
+
+    monkeypatch.setattr(fit, "forward_table", trace)
+    from planeray import _console
+
+    with _console.console.capture() as cap:
+        _forward_table(fit.DEFAULT_N)
+    assert "note" not in cap.get() and calls[-1] == {"n": fit.DEFAULT_N}
+    with _console.console.capture() as cap:
+        _forward_table(1.45)
+    text = cap.get()
+    assert "no forward table for n = 1.45" in text and "about 2 minutes" in text and "pilot" in text
+    assert calls[-1]["n"] == 1.45 and callable(calls[-1]["progress"])

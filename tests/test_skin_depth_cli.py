@@ -176,3 +176,41 @@ def test_killed_mid_write_leaves_no_output_and_no_temporaries(capture, tmp_path,
     r = _run("skin", "depth", capture / "arm.zarr", "--out", tmp_path / "depth")
     assert r.exit_code == 130 and "interrupted" in r.output, r.output
     assert calls and sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_the_row_size_comes_from_acquisition_json_and_the_fit_says_whether_the_model_fits(capture, tmp_path):
+    """Issue 41: a user's import folder states mm_per_row in its acquisition.json (and nothing of the scene): the
+    depth fit uses it and says so; without it the command refuses in one line (no default stands in).  The fit's
+    goodness is in the JSON (chi-square of the contrast and of the backgrounds) and in the flag layer."""
+    from dataclasses import asdict
+
+    import tifffile
+
+    from planeray.camera import CameraModel
+    from planeray.io import export_folder, read_stack
+
+    def folder(name, **acquisition):
+        export_folder(read_stack(capture / "arm.zarr"), tmp_path / name)
+        path = tmp_path / name / "acquisition.json"
+        acq = json.loads(path.read_text())
+        acq["planeray_metadata"] = {"camera": asdict(CameraModel())}
+        acq.update(acquisition)
+        path.write_text(json.dumps(acq))
+        return tmp_path / name
+
+    common = ("--mask", capture / "mask.png", "--tone", "fair", "--wavelength", "638")
+    out = tmp_path / "depth"
+    r = _run("skin", "depth", folder("stated", mm_per_row=0.3), "--out", out, *common)
+    assert r.exit_code == 0, r.output
+    meta = json.loads((out / "planeray.json").read_text())
+    assert meta["mm_per_row"] == 0.3 and meta["mm_per_row_source"] == "acquisition.json"
+    assert meta["skin_model"]["layers"][1]["thickness_mm"] == 1.5 and meta["skin_model_sources"]["dermis_mm"]
+    (v,) = meta["veins"]
+    assert v["fit_quality"]["dof"] > 100 and v["background_quality"]["dof"] >= 5
+    assert v["model_fits"] is True and v["flags"] == [] and "reduced chi-square" in r.output
+    flags = tifffile.imread(out / "flags.tif")
+    mask = np.asarray(Image.open(capture / "mask.png")) > 0
+    assert flags.dtype == np.uint8 and np.all(flags[mask] == 0) and np.all(flags[~mask] == 255)
+    r = _run("skin", "depth", folder("silent"), "--out", tmp_path / "depth2", *common)
+    assert one_line_error(r) and "mm_per_row" in r.output and "acquisition.json" in r.output
+    assert not (tmp_path / "depth2").exists()

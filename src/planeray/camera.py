@@ -28,6 +28,7 @@ are interchangeable downstream.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -103,6 +104,40 @@ class CameraModel:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    @classmethod
+    def from_metadata(cls, metadata) -> CameraModel | None:
+        """The camera a stack's metadata records (``camera``: a simulated capture, or an import folder's
+        ``acquisition.json`` ``planeray_metadata``), or None when it records none (or an unusable one)."""
+        cam = metadata.get("camera") if isinstance(metadata, dict) else None
+        if not isinstance(cam, dict):
+            return None
+        try:
+            return cls(**cam)
+        except (TypeError, ValueError):
+            return None
+
+    def pixel_variance(self, image) -> np.ndarray:
+        """Variance of a stack image's pixels (normalized units) under this camera's noise model, from
+        the image's own values (:meth:`image_variance` takes the expected signal instead).
+
+        ``frames_averaged`` frames of Poisson electrons (``image * full_well``), Gaussian read noise and
+        a uniform rounding to ADC codes per frame, averaged:
+        ``var = (e + r^2) / (n FW^2) + 1 / (12 n span^2)``.  (The row jitter, which moves a whole camera
+        row's band, is not in it: it depends on the scene, :meth:`row_jitter_rows`.)
+        """
+        e = np.maximum(np.asarray(image, float), 0.0) * self.full_well_e
+        n = self.frames_averaged
+        span = self.max_code - self.black_level
+        return (e + self.read_noise_e**2) / (n * self.full_well_e**2) + 1.0 / (12.0 * n * span**2)
+
+    def row_jitter_rows(self, lines_per_second: float) -> float:
+        """Standard deviation of a stack image's band position per camera row, projector rows.
+
+        The trigger offset of every frame and camera row (``row_jitter_us``) moves the band by
+        ``row_jitter_us * lines_per_second`` rows; averaged over ``frames_averaged`` frames.
+        """
+        return float(self.row_jitter_us) * 1e-6 * float(lines_per_second) / math.sqrt(self.frames_averaged)
 
     def mean_electrons(self, signal, exposure_us, *, ambient_albedo=None, out=None):
         """Expected electrons per frame: laser signal plus ambient over the row exposure.

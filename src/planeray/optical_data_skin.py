@@ -55,7 +55,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .errors import InputError
 from .medium import Medium
@@ -73,6 +73,8 @@ __all__ = [
     "dermis_medium",
     "fat_medium",
     "skin_layers",
+    "skin_model",
+    "LAYER_NAMES",
     "tone_fraction",
 ]
 
@@ -230,3 +232,90 @@ def skin_layers(
         fat_medium(line, fat_mm),
     )
     return SkinLayers(line, layers, blood_medium(line, blood_saturation))
+
+
+#: The layers of the skin model, top first (the names :func:`skin_model` takes optics for).
+LAYER_NAMES = ("epidermis", "dermis", "fat")
+
+
+def skin_model(
+    wavelength_nm=638,
+    tone="fair",
+    *,
+    epidermis_mm=0.1,
+    dermis_mm=1.5,
+    fat_mm=8.0,
+    n=SKIN_N,
+    g=SKIN_G,
+    optics=None,
+    blood_saturation=_VENOUS_S,
+    blood_mu_a=None,
+    blood_mu_s=None,
+) -> SkinLayers:
+    """A skin model stated by its user: :func:`skin_layers` with any of its constants replaced.
+
+    Parameters
+    ----------
+    wavelength_nm : {638, 850}
+    tone : str or float
+        Skin tone (the epidermis' melanin; ignored for a layer whose ``optics`` are given).
+    epidermis_mm, dermis_mm, fat_mm : float
+        Layer thicknesses, mm.
+    n : float
+        Refractive index of every layer (the top face against air; 1 for an index-matched surface).
+    g : float
+        Henyey-Greenstein anisotropy of every layer and of the blood (``mu_s' = mu_s (1 - g)`` is kept
+        for layers whose ``optics`` give it; the published layers keep their ``mu_s'``).
+    optics : dict, optional
+        ``{layer: (mu_s_prime_per_mm, mu_a_per_mm)}`` for layers of :data:`LAYER_NAMES`: their own
+        reduced scattering and absorption instead of the published ones.
+    blood_saturation : float
+        Oxygen saturation of the veins' blood (the published haemoglobin spectra).
+    blood_mu_a, blood_mu_s : float, optional
+        The blood's absorption and scattering coefficients, mm^-1, instead of the published ones.
+
+    Returns
+    -------
+    SkinLayers
+
+    Examples
+    --------
+    >>> s = skin_model(850, "dark", dermis_mm=5.0, n=1.0, optics={"fat": (2.0, 0.03)})
+    >>> [m.thickness_mm for m in s.layers], s.layers[0].n, round(s.layers[2].sigma_s * (1 - s.layers[2].g), 3)
+    ([0.1, 5.0, 8.0], 1.0, 2.0)
+    """
+    base = skin_layers(
+        wavelength_nm, tone, epidermis_mm=epidermis_mm, dermis_mm=dermis_mm, fat_mm=fat_mm,
+        blood_saturation=blood_saturation,
+    )  # fmt: skip
+    n, g = float(n), float(g)
+    if not 1.0 <= n <= 2.0:
+        raise InputError(f"the skin's refractive index must be in [1, 2], got {n}")
+    if not -1.0 < g < 1.0:
+        raise InputError(f"the anisotropy g must be in (-1, 1), got {g}")
+    optics = dict(optics or {})
+    unknown = set(optics) - set(LAYER_NAMES)
+    if unknown:
+        raise InputError(f"unknown skin layer {sorted(unknown)[0]!r}; the layers are {', '.join(LAYER_NAMES)}")
+    layers = []
+    for name, m in zip(LAYER_NAMES, base.layers):
+        if name in optics:
+            mu_s_prime, mu_a = (float(v) for v in optics[name])
+            if not (mu_s_prime > 0 and mu_a >= 0):
+                raise InputError(f"the {name}'s mu_s' must be > 0 and mu_a >= 0, got {mu_s_prime}, {mu_a}")
+            layers.append(Medium.from_reduced(mu_s_prime, mu_a, g=g, n=n, thickness_mm=m.thickness_mm))
+        elif g == m.g:  # the published layer as it is (the same numbers: the shipped tables' keys)
+            layers.append(replace(m, n=n))
+        else:
+            layers.append(
+                Medium.from_reduced(m.sigma_s * (1.0 - m.g), m.sigma_a, g=g, n=n, thickness_mm=m.thickness_mm)
+            )
+    b = base.blood
+    blood = replace(
+        b, n=n, g=g,
+        sigma_s=b.sigma_s if blood_mu_s is None else float(blood_mu_s),
+        sigma_a=b.sigma_a if blood_mu_a is None else float(blood_mu_a),
+    )  # fmt: skip
+    if not (blood.sigma_s > 0 and blood.sigma_a > 0):
+        raise InputError(f"the blood's mu_s and mu_a must be positive, got {blood.sigma_s}, {blood.sigma_a}")
+    return SkinLayers(base.wavelength_nm, tuple(layers), blood)

@@ -18,7 +18,7 @@ import numpy as np
 from .errors import StackError
 from .timing import RowGeometry, Sweep, boundary_images
 
-__all__ = ["Stack"]
+__all__ = ["Stack", "recorded_mm_per_row"]
 
 
 @dataclass
@@ -227,3 +227,48 @@ class Stack:
             if progress is not None:
                 progress(1)
         return h.hexdigest()
+
+
+def _positive_number(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    value = float(value)
+    return value if np.isfinite(value) and value > 0 else None
+
+
+def recorded_mm_per_row(metadata) -> tuple[float | None, str | None]:
+    """The size of a projector row on the surface (mm) a capture records, and where it came from.
+
+    Looked up, in this order: the import folder's ``acquisition.json`` (its optional ``mm_per_row``,
+    kept in the stack's metadata under ``acquisition``: the user's statement of the capture), the
+    metadata's own ``mm_per_row``, and the scene a simulated stack (or a transport store's attributes)
+    records (``scene.mm_per_row``).
+
+    Parameters
+    ----------
+    metadata : dict or None
+        :attr:`Stack.metadata`, or a transport store's attributes.
+
+    Returns
+    -------
+    (float or None, str or None)
+        The row size and ``"acquisition.json"``, ``"the capture's record"`` or ``"the scene's record"``;
+        ``(None, None)`` when nothing records it.
+
+    Examples
+    --------
+    >>> recorded_mm_per_row({"acquisition": {"mm_per_row": 0.25}, "scene": {"mm_per_row": 0.3}})
+    (0.25, 'acquisition.json')
+    >>> recorded_mm_per_row({})
+    (None, None)
+    """
+    if not isinstance(metadata, dict):
+        return None, None
+    acq = metadata.get("acquisition")
+    for where, source in ((acq, "acquisition.json"), (metadata, "the capture's record"),
+                          (metadata.get("scene"), "the scene's record")):  # fmt: skip
+        if isinstance(where, dict):
+            value = _positive_number(where.get("mm_per_row"))
+            if value is not None:
+                return value, source
+    return None, None

@@ -429,11 +429,12 @@ def _library(library: Path | None):
         raise ValueError(f"--library {exc}") from None
 
 
-def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None):
-    """``--library`` (else the shipped one), read before the capture, then checked against its row size."""
+def _library_and_capture(library: Path | None, input_path: Path, mm_per_row: float | None, lib=None):
+    """``--library`` (else the shipped one, or ``lib`` already read), read before the capture, then checked
+    against its row size."""
     from ..errors import InputError
 
-    lib = _library(library)
+    lib = _library(library) if lib is None else lib
     transport, meta, mm = _capture_and_row_size(input_path, mm_per_row)
     try:
         lib.check_conditions(mm_per_row=mm, calibrated=False)
@@ -479,12 +480,46 @@ def _mm_per_row_option(value: float | None) -> None:
 
 
 def _recorded_mm_per_row(meta: dict):
-    """The row size a capture records (its scene's ``mm_per_row``), or None."""
-    for where in (meta, meta.get("scene") or {}):
-        v = where.get("mm_per_row") if isinstance(where, dict) else None
-        if isinstance(v, (int, float)) and v > 0:
-            return float(v)
-    return None
+    """The row size a capture records (its ``acquisition.json``, else its scene's ``mm_per_row``), or None."""
+    from ..stack import recorded_mm_per_row
+
+    return recorded_mm_per_row(meta)[0]
+
+
+def _stack_and_row_size(input_path: Path, mm_per_row: float | None):
+    """``(stack, metadata, mm per row)``: ``--mm-per-row``, else the capture's (its acquisition.json); neither:
+    one line naming both (no default stands in)."""
+    stack = _load_stack(input_path)
+    meta = dict(stack.metadata or {})
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(meta)
+    if mm is None:
+        raise ValueError(
+            f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row) or add "
+            '"mm_per_row" to its acquisition.json'
+        )
+    return stack, meta, mm
+
+
+def _forward_table(n: float):
+    """The forward table of index ``n``: loaded silently when shipped or cached, else traced -- announced with
+    a time estimate measured on a pilot run, and counted on a progress bar."""
+    from ..materials import fit as mfit
+    from ..mc.cache import cache_dir
+
+    if mfit.forward_table_stored(n=n):
+        return mfit.forward_table(n=n)
+    with console.status(f"estimating the time to trace the forward table of n = {n:g}"):
+        seconds = mfit.forward_table_seconds(n=n)
+    console.print(
+        f"note: no forward table for n = {n:g} is shipped or cached: tracing it by Monte Carlo first "
+        f"({mfit.TABLE_RUNS} runs, about {seconds / 60:.0f} minutes on this machine, measured on a pilot run; "
+        f"once: cached in {cache_dir()})",
+        highlight=False,
+        markup=False,
+    )
+    with progress_bar() as bar:
+        task = bar.add_task(f"tracing the forward table of n = {n:g} (Monte Carlo runs)", total=mfit.TABLE_RUNS)
+        return mfit.forward_table(n=n, progress=lambda k: bar.advance(task, k))
 
 
 @materials_app.command("fit")
@@ -505,8 +540,14 @@ def fit_cmd(
     ] = None,
     white_albedo: Annotated[float, typer.Option(help="Albedo of the white reference, in (0, 1].")] = 0.99,
     n: Annotated[
-        float, typer.Option("--n", help="Refractive index of the medium (the shipped forward table: 1.33).")
-    ] = 1.33,
+        float | None,
+        typer.Option(
+            "--n",
+            help="Refractive index of the medium against air (1 for an index-matched surface). Default 1.33 "
+            "(water-based media), said so: a wrong index biases mu_s' by tens of percent and does not show in the "
+            "fit's chi-square.",
+        ),
+    ] = None,
     mm_per_row: Annotated[
         float | None,
         typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
@@ -532,16 +573,35 @@ def fit_cmd(
             "the model includes the light lost through it. --no-walls: the media are unbounded.",
         ),
     ] = True,
+    wall_kind: Annotated[
+        str,
+        typer.Option(
+            help="The containers' walls: clear (a thin clear wall with air behind) or black (nothing returns).",
+        ),
+    ] = "clear",
+    depth_mm: Annotated[
+        float | None,
+        typer.Option(
+            help="The layer's depth, mm: the medium lies on a support that returns no light (a black or clear "
+            "bottom). Default: semi-infinite (deep enough that no light reaches the bottom).",
+        ),
+    ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on stdout.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a fit folder planeray wrote.")] = False,
 ):
-    """Measure the medium: maps of mu_s' and mu_a (1/mm) with standard errors, per region and per pixel block."""
+    """Measure the medium: maps of mu_s' and mu_a (1/mm) with standard errors, per region and per pixel block.
+
+    Every fit says whether its forward model fits the data (reduced chi-square against the camera's noise
+    model and the model's own error): a fit that does not, or a parameter at the forward model's edge, is
+    flagged on the console, in planeray.json and in the flag layer flags.tif.
+    """
     import json
 
     import numpy as np
 
     from ..experiments._report import jsonable
     from ..figures.materials import fit_figure
+    from ..goodness import DEFAULT_P_MISFIT, FLAGS
     from ..io import atomic_directory
     from ..materials import fit as mfit
 
@@ -551,9 +611,15 @@ def fit_cmd(
         raise ValueError(f"--method must be stack or transport, got {method!r}")
     if not 0.0 < white_albedo <= 1.0:
         raise ValueError(f"--white-albedo must be in (0, 1], got {white_albedo:g}")
+    n_source = "--n" if n is not None else "assumed (water-based media; state --n)"
+    n = mfit.DEFAULT_N if n is None else n
     if not 1.0 <= n <= 1.6:
         raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
     _mm_per_row_option(mm_per_row)
+    if wall_kind not in mfit.WALL_KINDS:
+        raise ValueError(f"--wall-kind must be one of {', '.join(mfit.WALL_KINDS)}, got {wall_kind!r}")
+    if depth_mm is not None and not (np.isfinite(depth_mm) and 0.0 < depth_mm <= 10_000.0):
+        raise ValueError(f"--depth-mm must be a depth in (0, 10000] mm, got {depth_mm:g}")
     _check_outputs(
         (out_dir, "materials fit"),
         overwrite=overwrite,
@@ -577,10 +643,7 @@ def fit_cmd(
                 f"--white-reference {white_reference} is a transport store: the stack fit needs the white "
                 "target's stack (or --method transport)"
             )
-        stack = _load_stack(input_path)
-        mm = mm_per_row if mm_per_row is not None else _recorded_mm_per_row(dict(stack.metadata or {}))
-        if mm is None:
-            raise ValueError(f"{input_path} does not record its row size: pass --mm-per-row (mm per projector row)")
+        stack, meta, mm = _stack_and_row_size(input_path, mm_per_row)
         lab = _read_labels(labels, "--labels", stack.shape) if labels is not None else None
         white = None
         if white_reference is not None:
@@ -612,14 +675,20 @@ def fit_cmd(
         if np.array_equal(white.dense, transport.dense):
             raise ValueError(_WHITE_IS_CAPTURE.format(white=white_reference) + " (the same transport)")
         scale = mfit.white_reference_scale(white.dense, albedo=white_albedo)
-    if n != mfit.DEFAULT_N:
+    from ..camera import CameraModel
+    from ..stack import recorded_mm_per_row
+
+    mm_source = "--mm-per-row" if mm_per_row is not None else recorded_mm_per_row(meta)[1]
+    camera = CameraModel.from_metadata(meta) if method == "stack" else None
+    if n_source != "--n":
         console.print(
-            f"note: --n {n:g} is not the shipped table's {mfit.DEFAULT_N:g}: tracing a forward table "
-            "(90 Monte Carlo runs, about 6 minutes on 2 cores; cached afterwards)",
+            f"note: the medium's refractive index is assumed {n:g} (water-based media): a wrong index biases mu_s' "
+            "by tens of percent without showing in the fit's chi-square; state it with --n (1 for an index-matched "
+            "surface)",
             highlight=False,
             markup=False,
         )
-    table = mfit.forward_table(n=n)
+    table = _forward_table(n)
     H, W = transport.shape if transport is not None else stack.shape
     regions = lab if lab is not None else np.ones((H, W), np.int64)
     n_regions = sum(1 for r in np.unique(regions) if r != 0)
@@ -649,6 +718,9 @@ def fit_cmd(
                 white_albedo=white_albedo,
                 block_px=block,
                 table=table,
+                camera=camera,
+                depth_mm=depth_mm,
+                wall_kind=wall_kind,
                 progress=lambda k: bar.advance(task, k),
             )
         else:
@@ -661,6 +733,8 @@ def fit_cmd(
                 block_px=block,
                 containers=lab if walls else None,
                 table=table,
+                depth_mm=depth_mm,
+                wall_kind=wall_kind,
                 progress=lambda k: bar.advance(task, k),
             )
     calibrated = white_reference is not None
@@ -674,8 +748,22 @@ def fit_cmd(
             else "transport: the demultiplexed (or given) transport's profiles fitted"
         ),
         "mm_per_row": mm,
+        "mm_per_row_source": mm_source,
         "refractive_index": n,
+        "refractive_index_source": n_source,
         "anisotropy_g": mfit.DEFAULT_G,
+        "depth_mm": depth_mm,
+        "bottom": "none: semi-infinite" if depth_mm is None else f"at {depth_mm:g} mm: returns no light",
+        "noise_model": (
+            "the camera's (its record: shot, read, quantization and row jitter) and the forward model's error"
+            if camera is not None
+            else "the pixels' spread (the capture records no camera) and the forward model's error"
+        ),
+        "goodness_of_fit": (
+            "reduced chi-square against the noise model; a fit less probable than p = "
+            f"{DEFAULT_P_MISFIT:g} is flagged 'model does not fit' and its standard errors are scaled by "
+            "sqrt(chi2 / dof); parameters at the forward model's edge are flagged and not reported"
+        ),
         "calibration": (
             f"white reference {white_reference} (albedo {white_albedo:g}): absolute reflectance"
             if calibrated
@@ -683,15 +771,17 @@ def fit_cmd(
         ),
         "block_px": block,
         "walls": (
-            "modelled: each --labels region is a container with a clear wall at its boundary"
+            f"modelled: each --labels region is a container with a {wall_kind} wall at its boundary"
             if walls and lab is not None
             else "none: unbounded media"
         ),
         "regions": {str(k): v for k, v in result.regions.items()},
         "mask_bits": {str(k): v for k, v in mfit.REASONS.items()} | {"255": "not fitted (outside every region)"},
+        "flag_bits": {str(k): v for k, v in FLAGS.items()} | {"255": "outside every region"},
         "files": {
             **{k: f"{k}.tif" for k in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")},
             "mask": "identifiability_mask.tif",
+            "flags": "flags.tif",
             "figure": "fit.png",
         },
     }
@@ -714,6 +804,19 @@ def fit_cmd(
             f"{f(r['mu_s_prime_se_per_mm'])} /mm, mu_a {f(r['mu_a_per_mm'])} +- {f(r['mu_a_se_per_mm'])} /mm{why}",
             highlight=False,
         )
+        q = r.get("fit_quality")
+        if q is not None:
+            out.print(
+                f"    reduced chi-square {q['reduced_chi2']:.3g} (threshold {q['threshold']:.3g} at {q['dof']} degrees "
+                "of freedom)",
+                highlight=False,
+            )
+        for text in r.get("flags", []):
+            out.print(f"    FLAGGED: {text}", highlight=False, markup=False)
+        if r.get("blocks_flagged"):
+            out.print(
+                f"    FLAGGED: {r['blocks_flagged']:.0%} of its blocks (flags.tif)", highlight=False, markup=False
+            )
 
 
 _MAP_UNITS = {
@@ -722,6 +825,8 @@ _MAP_UNITS = {
     "mu_s_prime_se_per_mm": ("standard error of mu_s'", "1/mm"),
     "mu_a_se_per_mm": ("standard error of mu_a", "1/mm"),
     "mask": ("identifiability mask: bits of the reasons in planeray.json (0: both measured)", "bits"),
+    "flags": ("flag layer: bits of flag_bits in planeray.json (0: the model fits, nothing at an edge)", "bits"),
+    "recognition_flags": ("recognition flags: bits of flag_bits in planeray.json (8: none of these)", "bits"),
 }
 
 
@@ -736,7 +841,7 @@ def _write_map_tiff(path: Path, image, key: str) -> None:
     from ..io.marks import mark_text
 
     what, unit = _MAP_UNITS[key]
-    arr = np.asarray(image, np.uint8 if key == "mask" else np.float32)
+    arr = np.asarray(image, np.uint8 if key in ("mask", "flags", "recognition_flags") else np.float32)
     with atomic_file(path) as tmp:
         tifffile.imwrite(
             tmp,
@@ -807,7 +912,7 @@ def _wall_distance_from_labels(labels, mm_per_pixel):
 @materials_app.command("recognize")
 @_friendly_errors
 def recognize_cmd(
-    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    input_path: Annotated[Path, typer.Argument(help="Stack or transport store of the capture.")],
     out_dir: Annotated[
         Path, typer.Option("--out", "-o", help="Folder to write: segmentation.png, planeray.json, recognition.png.")
     ],
@@ -818,18 +923,20 @@ def recognize_cmd(
     regions: Annotated[
         Path | None,
         typer.Option(
-            "--regions", help="Label image of regions (e.g. containers outlined, 0: none): pooled per region."
+            "--regions", help="Label image of the containers (0: none); default: found in the capture's images."
         ),
     ] = None,
     pool_mm: Annotated[
         float | None,
         typer.Option(
-            help="Pool the evidence over a disc of this radius (mm) around each pixel (default 2.5); 0: per pixel."
+            help="Fit pixel blocks of the demultiplexed capture and pool their evidence over a disc of this radius "
+            "(mm, at least a pixel; 0: per block) instead of fitting each container; the default for a transport "
+            "store or a version-1 library (2.5 mm).",
         ),
     ] = None,
-    block: Annotated[int, typer.Option(help="Fit blocks of BLOCK x BLOCK pixels, 1-16 (the library's: 2).")] = 2,
+    block: Annotated[int, typer.Option(help="With --pool-mm: fit blocks of BLOCK x BLOCK pixels, 1-16.")] = 2,
     p_unknown: Annotated[
-        float, typer.Option(help="A pixel whose fit is less typical of every medium than this p-value is unknown (0).")
+        float, typer.Option(help="A fit less typical of every medium than this p-value is none of these (0).")
     ] = 1e-3,
     labels: Annotated[
         Path | None,
@@ -837,12 +944,18 @@ def recognize_cmd(
     ] = None,
     mm_per_row: Annotated[
         float | None,
-        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's acquisition.json)."),
     ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the numbers as JSON on stdout.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace a recognition folder planeray wrote.")] = False,
 ):
-    """Name each pixel's medium by its fitted mu_s' and mu_a against a library of known media."""
+    """Name each container's medium by its measured mu_s' and mu_a against a library of known media.
+
+    With a stack and a library of physical parameters (the shipped one; library-add), the containers are
+    found in the images (pixels with light from below the surface; a table or a wall is none of them),
+    each is fitted as a whole with its walls, and named by the library's entry its parameters match -- or
+    "none of these".  A library of parameters travels: one built at one resolution recognizes another.
+    """
     import json
 
     import numpy as np
@@ -850,6 +963,7 @@ def recognize_cmd(
     from ..experiments._report import jsonable
     from ..figures.materials import recognition_by_distance_figure
     from ..io import atomic_directory
+    from ..io.atomic import planeray_output_kind
     from ..materials.labels import write_label_image
     from ..materials.library import FLAGS
     from ..materials.recognize import (
@@ -858,14 +972,14 @@ def recognize_cmd(
         fit_image,
         recognize_image,
         recognize_regions,
+        recognize_stack,
     )
 
     if not 1 <= block <= 16:
         raise ValueError(f"--block must be an integer in 1-16, got {block}")
     if regions is not None and pool_mm is not None:
-        raise ValueError("--regions and --pool-mm: pool over the regions or over a disc, not both")
-    pool_mm = DEFAULT_POOL_MM if pool_mm is None else pool_mm
-    if not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
+        raise ValueError("--regions and --pool-mm: fit the regions or pool over a disc, not both")
+    if pool_mm is not None and not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
         raise ValueError(f"--pool-mm must be in 0-100 mm, got {pool_mm:g}")
     if not 0.0 <= p_unknown < 1.0:
         raise ValueError(f"--p-unknown must be in [0, 1), got {p_unknown:g}")
@@ -875,63 +989,109 @@ def recognize_cmd(
         overwrite=overwrite,
         inputs=[("the capture", input_path), ("--library", library), ("--regions", regions), ("--labels", labels)],
     )
-    if regions is not None or labels is not None:  # the label images before the capture is demultiplexed
-        shape = _capture_shape(input_path)
-        reg = _read_labels(regions, "--regions", shape) if regions is not None else None
-        truth = _read_labels(labels, "--labels", shape) if labels is not None else None
-    else:
-        reg = truth = None
-    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    H, W = transport.shape
-    rpc = float(transport.geometry.rows_per_camera_row)
-    mm_per_pixel = mm * rpc
-    lib_rpc = lib.conditions.get("rows_per_camera_row")
-    if isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
-        console.print(
-            f"note: the library's media were fitted at {lib_rpc:g} projector rows per camera row, this capture has "
-            f"{rpc:g}: the fit's biases differ with the resolution, so its parameters may not match the entries; "
-            "make a library from such captures (planeray materials library-add)",
-            highlight=False,
-            markup=False,
-        )
-    if reg is not None:  # each region's pooled profile fitted once (measured best next to walls)
-        with console.status("fitting each region's pooled profile"):
-            rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
-    else:
+    lib = _library(library)
+    if not Path(input_path).exists():
+        raise ValueError(f"the capture {input_path}: no such file or folder")
+    shape = _capture_shape(input_path) if regions is not None or labels is not None else None
+    reg = _read_labels(regions, "--regions", shape) if regions is not None else None  # before any demultiplexing
+    truth = _read_labels(labels, "--labels", shape) if labels is not None else None
+    by_containers = lib.physical and pool_mm is None and planeray_output_kind(input_path) != "transport"
+    details = None
+    if by_containers:  # each container fitted from the stack's images (issue 41)
+        from ..camera import CameraModel
+
+        stack, meta, mm = _stack_and_row_size(input_path, mm_per_row)
+        H, W = stack.shape
+        rpc = float(stack.geometry.rows_per_camera_row)
+        for n, _ in lib.hypotheses():
+            _forward_table(n)  # announced and traced once where not shipped or cached
         with progress_bar() as bar:
-            task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
-            maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
-        rec = recognize_image(lib, maps, mm_per_pixel=mm_per_pixel, pool_mm=pool_mm, p_unknown=p_unknown)
+            task = bar.add_task("fitting the containers (one pass per index and depth)", total=len(lib.hypotheses()))
+            rec, details = recognize_stack(
+                lib, stack, mm_per_row=mm, regions=reg, camera=CameraModel.from_metadata(meta), p_unknown=p_unknown,
+                progress=lambda k: bar.advance(task, k),
+            )  # fmt: skip
+        pooling = (
+            f"each region of {regions} fitted as a whole" if reg is not None
+            else "each container found in the images (light from below the surface) fitted as a whole"
+        )  # fmt: skip
+    else:
+        lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row, lib=lib)
+        H, W = transport.shape
+        rpc = float(transport.geometry.rows_per_camera_row)
+        px_mm = mm * rpc
+        pool = DEFAULT_POOL_MM if pool_mm is None else pool_mm
+        if 0.0 < pool < px_mm:
+            if pool_mm is not None:
+                raise ValueError(
+                    f"--pool-mm {pool_mm:g} is smaller than a pixel ({px_mm:.3g} mm at {mm:g} mm per row): it would "
+                    f"pool nothing; give at least {px_mm:.3g} mm, or 0 (per block)"
+                )
+            console.print(
+                f"note: the default pooling radius {pool:g} mm is smaller than a pixel ({px_mm:.3g} mm): no pooling",
+                highlight=False,
+                markup=False,
+            )
+            pool = 0.0
+        lib_rpc = lib.conditions.get("rows_per_camera_row")
+        if not lib.physical and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+            console.print(
+                f"note: the library's media were fitted at {lib_rpc:g} projector rows per camera row, this capture "
+                f"has {rpc:g}: a version-1 library's fits are bound to their resolution; a library of physical "
+                "parameters (planeray materials library-add from a stack) travels",
+                highlight=False,
+                markup=False,
+            )
+        if reg is not None:  # each region's pooled profile fitted once
+            with console.status("fitting each region's pooled profile"):
+                rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
+        else:
+            with progress_bar() as bar:
+                task = bar.add_task("fitting pixel blocks", total=-(-H // block) * -(-W // block))
+                maps = fit_image(transport, mm_per_row=mm, block_px=block, progress=lambda k: bar.advance(task, k))
+            rec = recognize_image(lib, maps, mm_per_pixel=mm * rpc, pool_mm=pool, p_unknown=p_unknown)
+        pooling = (
+            f"regions of {regions}: each region's pooled profile fitted"
+            if reg is not None
+            else (f"log-likelihoods over a disc of {pool:g} mm" if pool else "none: per pixel block")
+        )
+    mm_per_pixel = mm * rpc
     names = {e.class_id: e.name for e in lib.entries}
     counts = {names[c]: int((rec.class_ids == c).sum()) for c in lib.class_ids}
-    counts["unclassified"] = int((rec.class_ids == 0).sum())
+    counts["unclassified"] = int((rec.class_ids == 0).sum())  # none of these, or not fitted
     numbers = {
         "format": "planeray-materials-recognition",
         "format_version": 1,
         "capture": str(input_path),
         "library": str(library) if library is not None else "shipped (the five Fig. 10 media)",
+        "library_version": lib.version,
         "mm_per_row": mm,
         "mm_per_pixel": mm_per_pixel,
-        "block_px": block,
-        "pooling": (
-            f"regions of {regions}: each region's pooled profile fitted"
-            if reg is not None
-            else (f"log-likelihoods over a disc of {pool_mm:g} mm" if pool_mm else "none: per pixel block")
-        ),
+        "block_px": None if by_containers else block,
+        "pooling": pooling,
         "p_unknown": p_unknown,
         "pixels": counts,
         "flags": {text: int(((rec.flags & bit) > 0).sum()) for bit, text in FLAGS.items()},
-        "files": {"segmentation": "segmentation.png"},
+        "flag_bits": {str(bit): text for bit, text in FLAGS.items()},
+        "files": {"segmentation": "segmentation.png", "flags": "flags.tif"},
     }
+    if details is not None:
+        numbers["containers"] = details
     table = None
     if truth is not None:
         wall = _wall_distance_from_labels(truth, mm_per_pixel)
         scored = {c: n for c, n in names.items() if (truth == c).any()}
         table = accuracy_by_distance(rec.class_ids, truth, wall, classes=scored)
+        others = np.isin(truth, list(scored), invert=True) & (truth > 0)
+        table["none_of_these"] = {
+            "pixels": int(others.sum()),
+            "labelled_none": float((rec.class_ids[others] == 0).mean()) if others.any() else None,
+        }
         numbers["score"] = {**table, "wall_distance": "from --labels: distance to the edge of each labelled region"}
         numbers["files"]["figure"] = "recognition.png"
     with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition") as tmp:
         write_label_image(tmp / "segmentation.png", rec.class_ids.astype(np.uint8), kind="segmentation")
+        _write_map_tiff(tmp / "flags.tif", np.asarray(rec.flags, np.uint8), "recognition_flags")
         if table is not None:
             recognition_by_distance_figure({"parameters": table}, out=tmp / "recognition.png")
         (tmp / "planeray.json").write_text(json.dumps(jsonable(numbers), indent=1))
@@ -941,6 +1101,8 @@ def recognize_cmd(
     out.print(f"recognition: {out_dir}  ({numbers['pooling']}; library: {numbers['library']})")
     for name, n in counts.items():
         out.print(f"  {name}: {n} px")
+    for d in details or ():
+        out.print(f"  container {d['region']} ({d['pixels']} px): {d['decision']}", highlight=False, markup=False)
     for text, n in numbers["flags"].items():
         if n:
             out.print(f"  {n} px: {text}")
@@ -950,12 +1112,14 @@ def recognize_cmd(
         for name, row in table["classes"].items():
             bins = ", ".join(f"{span} {_acc(b['accuracy'])}" for span, b in zip(spans, row["bins"]))
             out.print(f"  accuracy {name}: {_acc(row['all'])}  (by distance to the wall: {bins})", highlight=False)
+        if table["none_of_these"]["labelled_none"] is not None:
+            out.print(f"  other pixels labelled none: {table['none_of_these']['labelled_none']:.3f}")
 
 
 @materials_app.command("library-add")
 @_friendly_errors
 def library_add(
-    input_path: Annotated[Path, typer.Argument(help="Stack (demultiplexed first) or transport store of the capture.")],
+    input_path: Annotated[Path, typer.Argument(help="Stack of the capture (a transport store: version-1 libraries).")],
     labels: Annotated[Path, typer.Option("--labels", help="Label image: the region(s) of the new medium.")],
     class_name: Annotated[
         list[str], typer.Option("--class-name", help="ID=NAME of a labelled region to add (repeatable), ID 1-255.")
@@ -967,16 +1131,34 @@ def library_add(
     replace: Annotated[bool, typer.Option(help="Replace an entry of the same name or id.")] = False,
     mm_per_row: Annotated[
         float | None,
-        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's metadata)."),
+        typer.Option(help="Size of one projector row on the surface, mm (default: the capture's acquisition.json)."),
     ] = None,
+    n: Annotated[
+        float, typer.Option("--n", help="Refractive index of the new medium (the fit's; stored with it).")
+    ] = 1.33,
+    depth_mm: Annotated[
+        float | None,
+        typer.Option(help="Depth of its layer, mm, on a support that returns no light (default: semi-infinite)."),
+    ] = None,
+    white_reference: Annotated[
+        Path | None,
+        typer.Option("--white-reference", help="A white target's stack, same sweep and camera: calibrates the fit."),
+    ] = None,
+    white_albedo: Annotated[float, typer.Option(help="Albedo of the white reference, in (0, 1].")] = 0.99,
     overwrite: Annotated[bool, typer.Option(help="Replace a library file planeray wrote.")] = False,
 ):
-    """Add media to a library from labelled regions of a capture (fitted as the library's media were)."""
+    """Add media to a library from labelled regions of a capture.
+
+    A library of physical parameters (version 2, the shipped one) gets each region's mu_s' and mu_a, measured
+    from the stack's images with its walls modelled, with their uncertainties, the index and the layer's depth:
+    values of the medium, which recognize it in captures of any resolution and row size.
+    """
     import numpy as np
 
     from ..errors import InputError
+    from ..io.atomic import planeray_output_kind
     from ..materials.library import save_library
-    from ..materials.recognize import entries_from_capture, fit_image
+    from ..materials.recognize import entries_from_capture, entries_from_stack, fit_image
 
     if out_json.suffix.lower() != ".json":
         raise ValueError(f"--out must end in .json (a media library), got {out_json}")
@@ -984,6 +1166,12 @@ def library_add(
     names = _parse_class_names(class_name)
     if not names:
         raise ValueError("--class-name is needed: ID=NAME of the labelled region to add")
+    if not 1.0 <= n <= 1.6:
+        raise ValueError(f"--n must be in 1.0-1.6 (a liquid or tissue against air), got {n:g}")
+    if depth_mm is not None and not (np.isfinite(depth_mm) and 0.0 < depth_mm <= 10_000.0):
+        raise ValueError(f"--depth-mm must be a depth in (0, 10000] mm, got {depth_mm:g}")
+    if not 0.0 < white_albedo <= 1.0:
+        raise ValueError(f"--white-albedo must be in (0, 1], got {white_albedo:g}")
     in_place = library is not None and _same_place(Path(out_json), Path(library))
     if in_place and not overwrite:  # updating the library itself: a planeray library, replaced atomically
         raise ValueError(
@@ -993,29 +1181,49 @@ def library_add(
     _check_outputs(
         (out_json, "media library"),
         overwrite=overwrite,
-        inputs=[("the capture", input_path), ("--labels", labels)] + ([] if in_place else [("--library", library)]),
+        inputs=[("the capture", input_path), ("--labels", labels), ("--white-reference", white_reference)]
+        + ([] if in_place else [("--library", library)]),
     )
+    lib = _library(library)
     H, W, rpc = _capture_geometry(input_path)  # the labels and the resolution before any demultiplexing
     lab = _read_labels(labels, "--labels", (H, W))
-    missing = [f"{c}={n}" for c, n in names.items() if not (lab == c).any()]
+    missing = [f"{c}={nm}" for c, nm in names.items() if not (lab == c).any()]
     if missing:
         raise ValueError(f"--class-name {', '.join(missing)}: --labels {labels} has no pixel of that id")
-    lib = _library(library)
-    lib_rpc = lib.conditions.get("rows_per_camera_row")
-    if lib.entries and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
-        raise ValueError(
-            f"--library {library or '(the shipped one)'}: its media were fitted at {lib_rpc:g} projector rows per "
-            f"camera row, {input_path} has {rpc:g}: the fit's biases differ with the resolution, so an entry from "
-            "this capture would not be comparable with the others; start a new library from captures at this "
-            "resolution (--library of a library made from them)"
-        )
-    lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row)
-    block = int(lib.conditions.get("block_px", 2))
-    regions = np.where(np.isin(lab, list(names)), lab, 0)
-    with console.status("fitting the labelled regions"):
-        maps = fit_image(transport, mm_per_row=mm, block_px=block, regions=regions)
+    if lib.physical:
+        from ..camera import CameraModel
+
+        if planeray_output_kind(input_path) == "transport":
+            raise ValueError(
+                f"{input_path} is a transport store: a library of physical parameters is measured from a stack's "
+                "images (give the stack)"
+            )
+        stack, meta, mm = _stack_and_row_size(input_path, mm_per_row)
+        white = _load_stack(white_reference) if white_reference is not None else None
+    else:
+        lib_rpc = lib.conditions.get("rows_per_camera_row")
+        if lib.entries and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+            raise ValueError(
+                f"--library {library or '(the shipped one)'}: a version-1 library's media were fitted at {lib_rpc:g} "
+                f"projector rows per camera row, {input_path} has {rpc:g}: its fits are bound to their resolution, "
+                "so an entry from this capture would not be comparable with the others; start a library of "
+                "physical parameters (version 2) instead"
+            )
+        lib, transport, meta, mm = _library_and_capture(library, input_path, mm_per_row, lib=lib)
     try:
-        entries = entries_from_capture(maps, regions, names, source=f"{input_path} ({labels})")
+        if lib.physical:
+            table = _forward_table(n)
+            with console.status("measuring the labelled regions (each fitted as a whole, walls modelled)"):
+                entries = entries_from_stack(
+                    stack, lab, names, mm_per_row=mm, n=n, depth_mm=depth_mm, camera=CameraModel.from_metadata(meta),
+                    white=white, white_albedo=white_albedo, table=table, source=f"{input_path} ({labels})",
+                )  # fmt: skip
+        else:
+            block = int(lib.conditions.get("block_px", 2))
+            regions = np.where(np.isin(lab, list(names)), lab, 0)
+            with console.status("fitting the labelled regions"):
+                maps = fit_image(transport, mm_per_row=mm, block_px=block, regions=regions)
+            entries = entries_from_capture(maps, regions, names, source=f"{input_path} ({labels})")
         for e in entries:
             lib = lib.add(e, replace=replace)
     except InputError as exc:
@@ -1024,6 +1232,15 @@ def library_add(
     out.print(f"library: {out_json}  ({len(lib.entries)} media)")
     for e in entries:
         f = lambda v: "n/a" if v is None else f"{v:.4g}"  # noqa: E731
+        if lib.physical:
+            sa = "" if e.mu_a_log_sd is None else f" (+- {100 * e.mu_a_log_sd:.0f} %)"
+            out.print(
+                f"  added {e.name} (class {e.class_id}): mu_s' {f(e.mu_s_prime_per_mm)} /mm (+- "
+                f"{100 * e.mu_s_prime_log_sd:.1f} %), mu_a {f(e.mu_a_per_mm)} /mm{sa}, n {e.n:g}"
+                + ("" if e.depth_mm is None else f", a {e.depth_mm:g} mm layer"),
+                highlight=False,
+            )
+            continue
         out.print(
             f"  added {e.name} (class {e.class_id}): mu_s' {f(e.mu_s_prime_per_mm)} /mm (log sd "
             f"{e.mu_s_prime_log_sd:.2f}), mu_a {f(e.mu_a_per_mm)} /mm, beyond the table: "

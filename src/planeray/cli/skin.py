@@ -286,14 +286,14 @@ def _metrics(image, truth, mm_per_px):
 def _scale(option: float | None, *records) -> tuple[float, str]:
     """``mm_per_row`` and where it came from: ``--mm-per-row``, a stack's or store's record, or the default."""
     from ..scenes.base import DEFAULT_MM_PER_ROW
-    from ..skin.imaging import recorded_mm_per_row
+    from ..stack import recorded_mm_per_row
 
     if option is not None:
         return _mm_per_row_option(option), "--mm-per-row"
     for what, meta in records:
-        value = recorded_mm_per_row(meta)
+        value, source = recorded_mm_per_row(meta)
         if value is not None:
-            return value, what
+            return value, ("acquisition.json" if source == "acquisition.json" else what)
     return float(DEFAULT_MM_PER_ROW), "assumed (the simulator's default; set --mm-per-row for a real capture)"
 
 
@@ -314,14 +314,14 @@ def _write_png(path: Path, image, valid=None) -> None:
         )
 
 
-def _write_tiff(path: Path, image) -> None:
+def _write_tiff(path: Path, image, dtype=np.float32) -> None:
     import tifffile
 
     from ..io import atomic_file
     from ..io.marks import mark_text
 
     with atomic_file(path) as tmp:
-        tifffile.imwrite(tmp, np.asarray(image, np.float32), photometric="minisblack", software=mark_text("image"))
+        tifffile.imwrite(tmp, np.asarray(image, dtype), photometric="minisblack", software=mark_text("image"))
 
 
 def _metrics_rows(name, m):
@@ -761,15 +761,49 @@ def depth(
         float | None,
         typer.Option(
             "--mm-per-row",
-            help="Size of a projector row on the skin (mm, > 0 and <= 10; other than 0.3 traces the vein tables); default: the "
-            "stack's record, else 0.3 (assumed).",
+            help="Size of a projector row on the skin (mm, > 0 and <= 10; other than 0.3 traces the vein tables); "
+            "default: the stack's record (an import folder's acquisition.json: mm_per_row); neither: refused.",
         ),
     ] = None,
+    epidermis_mm: Annotated[
+        float | None, typer.Option(help="Epidermis thickness, mm (default: the stack's record, else 0.1).")
+    ] = None,
+    dermis_mm: Annotated[
+        float | None, typer.Option(help="Dermis thickness, mm (default: the stack's record, else 1.5).")
+    ] = None,
+    fat_mm: Annotated[
+        float | None, typer.Option(help="Subcutaneous fat thickness, mm (default: the stack's record, else 8).")
+    ] = None,
+    n: Annotated[
+        float | None,
+        typer.Option(
+            "--n", help="Refractive index of the skin's layers (1 for an index-matched surface; default 1.4)."
+        ),
+    ] = None,
+    g: Annotated[
+        float | None, typer.Option("--g", help="Henyey-Greenstein anisotropy of the layers and blood (default 0.9).")
+    ] = None,
+    layer_optics: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--layer-optics",
+            help="A layer's own optics instead of the published ones: LAYER=MU_S_PRIME,MU_A in 1/mm "
+            "(epidermis, dermis or fat; repeatable).",
+        ),
+    ] = None,
+    blood_saturation: Annotated[
+        float | None, typer.Option(help="Oxygen saturation of the veins' blood, 0-1 (default 0.7).")
+    ] = None,
+    blood_mu_a: Annotated[float | None, typer.Option(help="The blood's absorption, 1/mm (default: published).")] = None,
+    blood_mu_s: Annotated[float | None, typer.Option(help="The blood's scattering, 1/mm (default: published).")] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an output folder planeray wrote.")] = False,
 ):
     """Depth (of the vessel's top and axis) and diameter of each vein, with standard errors, from the delay sweep.
 
-    Veins the delay images cannot resolve are reported with the reason, never with a number.
+    Veins the delay images cannot resolve are reported with the reason, never with a number.  Every fit says
+    whether the skin model fits the images (chi-square of the vein's contrast and of the images' backgrounds
+    against the camera's noise model and the model's own error): a fit that does not, or a parameter at the
+    tables' edge, is flagged on the console, in planeray.json and in the flag layer flags.tif.
     """
     from ..errors import InputError
     from ..experiments._report import jsonable
@@ -777,6 +811,7 @@ def depth(
     from ..io import atomic_directory
     from ..io.atomic import MARKER
     from ..skin.depth import fit_veins
+    from ..skin.model import parse_layer_optics, stated_skin_model, tables_to_trace, trace_seconds
 
     if tone is not None:
         _tone(tone)
@@ -784,6 +819,21 @@ def depth(
         _wavelength(wavelength)
     if mm_per_row is not None:
         _mm_per_row_option(mm_per_row)
+    for option, value, (lo, hi), closed in (
+        ("--epidermis-mm", epidermis_mm, (0.0, 10.0), False), ("--dermis-mm", dermis_mm, (0.0, 20.0), False),
+        ("--fat-mm", fat_mm, (0.0, 100.0), False), ("--n", n, (1.0, 2.0), True), ("--g", g, (-1.0, 1.0), False),
+        ("--blood-saturation", blood_saturation, (0.0, 1.0), True), ("--blood-mu-a", blood_mu_a, (0.0, 100.0), False),
+        ("--blood-mu-s", blood_mu_s, (0.0, 1000.0), False),
+    ):  # fmt: skip
+        if value is None:
+            continue
+        inside = math.isfinite(value) and (lo <= value if closed else lo < value) and value <= hi
+        if not inside or (option == "--g" and value >= hi):
+            raise ValueError(f"{option} must be in {'[' if closed else '('}{lo:g}, {hi:g}], got {value:g}")
+    try:
+        optics = parse_layer_optics(layer_optics)
+    except InputError as exc:
+        raise ValueError(f"--layer-optics: {exc}") from None
     _check_outputs((out_dir, "skin depth"), overwrite=overwrite, inputs=[("STACK", stack_path), ("--mask", mask)])
     if _source_kind(stack_path, "STACK") != "stack":
         raise InputError("a transport store has no delay sweep: give the stack (STACK)", stack_path)
@@ -793,7 +843,39 @@ def depth(
         wavelength, "--wavelength", stack.metadata, "wavelength_nm", lambda v: _wavelength(int(v))
     )
     mpr, mpr_source = _scale(mm_per_row, ("stack metadata", stack.metadata))
+    if mpr_source.startswith("assumed"):
+        raise ValueError(
+            f"{stack_path} does not record the size of a projector row on the skin: give --mm-per-row, or add "
+            '"mm_per_row" to the capture\'s acquisition.json'
+        )
     camera, camera_source = _stack_camera(stack.metadata)
+    skin, skin_sources = stated_skin_model(
+        stack.metadata, tone=tone_value, wavelength_nm=wl, epidermis_mm=epidermis_mm, dermis_mm=dermis_mm,
+        fat_mm=fat_mm, n=n, g=g, optics=optics, blood_saturation=blood_saturation, blood_mu_a=blood_mu_a,
+        blood_mu_s=blood_mu_s,
+    )  # fmt: skip
+    to_trace = tables_to_trace(skin, tone_value, mm_per_row=mpr)
+    if to_trace:
+        from ..mc.cache import cache_dir
+        from ..scenes.skin import TABLE_PHOTONS
+
+        with console.status("estimating the time to trace the skin model's vein tables"):
+            seconds = trace_seconds(to_trace, mm_per_row=mpr)
+        console.print(
+            f"note: the vein tables of this skin model ({len(to_trace)}) are neither shipped nor cached: tracing them "
+            f"by Monte Carlo first ({len(to_trace) * TABLE_PHOTONS:,} photons, about {seconds / 60:.0f} minutes on "
+            f"this machine, measured on a pilot run; once: cached in {cache_dir()})",
+            highlight=False,
+            markup=False,
+        )
+        from ..skin.depth import vein_model
+
+        with progress_bar() as bar:
+            task = bar.add_task("tracing the vein tables (photons)", total=len(to_trace) * TABLE_PHOTONS)
+            vein_model(
+                stack.bands(), stack.geometry, tone=tone_value, wavelength_nm=wl, mm_per_row=mpr, skin=skin,
+                progress=lambda k: bar.advance(task, k),
+            )  # fmt: skip
     truth = _truth_for(stack.shape, stack_path, mask)
     if truth is None:
         raise ValueError("--mask: give a vein mask (there is no ground truth beside the stack)")
@@ -818,6 +900,7 @@ def depth(
                 tone=tone_value,
                 wavelength_nm=wl,
                 mm_per_row=mpr,
+                skin=skin,
                 joint_rounds=JOINT_ROUNDS,
                 progress=lambda vid: bar.advance(task),
             )
@@ -841,21 +924,33 @@ def depth(
         "wavelength_source": wl_source,
         "mm_per_row": mpr,
         "mm_per_row_source": mpr_source,
+        "skin_model": skin.to_json(),
+        "skin_model_sources": skin_sources,
         "camera_source": camera_source,
+        "goodness_of_fit": (
+            "each vein's chi-square against the camera's noise model with the model's error (its contrast scaled "
+            "by 1 + s, s fitted with a prior of 0.15; 2 % of each sample's laser light), and the images' "
+            "backgrounds against the skin model's kernel (3 %): a fit less probable than p = 0.001 is flagged "
+            "'model does not fit' and its standard errors are scaled by sqrt(chi2 / dof); a depth or diameter at "
+            "the tables' edge is flagged and not reported"
+        ),
         "mask": truth["source"],
         "images_used": [int(i) for i in np.nonzero(use)[0]],
         "ambient": fits[0].curves.get("ambient") if fits else None,
         "veins": veins_json,
     }
     depth_map = np.full(vein_id.shape, np.nan, np.float32)
+    flag_map = np.full(vein_id.shape, 255, np.uint8)
     for f in fits:
         if f.resolved:
             depth_map[vein_id == f.id] = f.depth_mm
+        flag_map[vein_id == f.id] = f.flags
     with atomic_directory(out_dir, overwrite=overwrite, kind="skin depth") as tmp:
         from PIL import Image
 
         Image.fromarray(vein_id.astype(np.uint16)).save(tmp / "vein_ids.png", format="PNG")
         _write_tiff(tmp / "depth_mm.tif", depth_map)
+        _write_tiff(tmp / "flags.tif", flag_map, np.uint8)
         _write_csv(tmp / "veins.csv", veins_json)
         depth_fit_figure(
             [{**f.to_json(), "curves": f.curves} for f in fits],
@@ -878,6 +973,12 @@ def depth(
         if j.get("true_depth_mm") is not None:
             line += f" [true: top {j['true_depth_mm']:.2f}, diameter {j['true_diameter_mm']:.2f} mm]"
         out.print(line)
+        q, bq = j.get("fit_quality"), j.get("background_quality")
+        if q is not None:
+            extra = "" if bq is None else f"; backgrounds {bq['reduced_chi2']:.3g} (threshold {bq['threshold']:.3g})"
+            out.print(f"    reduced chi-square {q['reduced_chi2']:.3g} (threshold {q['threshold']:.3g}){extra}")
+        for text in j.get("flags", []):
+            out.print(f"    FLAGGED: {text}", highlight=False, markup=False)
 
 
 @skin_app.command("compare")

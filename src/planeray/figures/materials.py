@@ -396,16 +396,20 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
     ax = fig.add_subplot(gs[0, 2])
     mask = maps["mask"]
     state = np.where(mask == 255, 0, np.where(mask == 0, 1, np.where(np.isfinite(maps["mu_s_prime_per_mm"]), 2, 3)))
-    cmap = ListedColormap(["0.85", "#3b8f3b", "#e0a030", "#c03030"])
-    ax.imshow(state, cmap=cmap, vmin=-0.5, vmax=3.5, interpolation="nearest")
+    flags = maps.get("flags")
+    if flags is not None:  # the flag layer (issue 41): the model does not fit, or a parameter at the model's edge
+        state = np.where((flags != 255) & (flags & 11 > 0), 4, state)
+    cmap = ListedColormap(["0.85", "#3b8f3b", "#e0a030", "#c03030", "#7b3fa0"])
+    ax.imshow(state, cmap=cmap, vmin=-0.5, vmax=4.5, interpolation="nearest")
     ax.set_xticks([])
     ax.set_yticks([])
-    ax.set_title("identifiability", fontsize=9)
+    ax.set_title("identifiability and flags", fontsize=9)
     ax.legend(
         handles=[
             Patch(color="#3b8f3b", label="both measured"),
             Patch(color="#e0a030", label="mu_a not identifiable"),
             Patch(color="#c03030", label="neither"),
+            Patch(color="#7b3fa0", label="FLAGGED: no fit / at an edge / out of range"),
             Patch(color="0.85", label="not fitted"),
         ],
         fontsize=7,
@@ -426,6 +430,9 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
             f"{names.get(region, f'region {region}')}: mu_s' {fmt(info['mu_s_prime_per_mm'])} "
             f"+- {fmt(info['mu_s_prime_se_per_mm'])}, mu_a {fmt(info['mu_a_per_mm'])} +- {fmt(info['mu_a_se_per_mm'])} /mm"
         )
+        q = info.get("fit_quality")
+        if q is not None:
+            label += f"; chi2/dof {q['reduced_chi2']:.2g}" + ("" if info.get("model_fits") else " FLAGGED")
         ok = np.isfinite(y) & (y > 0)
         axp.plot(x[ok], y[ok], ".", ms=3, color=colour, alpha=0.6)
         top = max(top, float(np.nanmax(y[ok]))) if ok.any() else top

@@ -360,6 +360,8 @@ def depth_fit_figure(veins, *, truth=None, title=None, out=None):
             )
         else:
             head = f"vein {v['id']}: unresolved\n({_wrap(v['reason'])})"
+        if v.get("flags") and v["resolved"]:
+            head += "\nFLAGGED: the skin model does not fit"
         if truth and v["id"] in truth:
             head += f"\ntrue: top {truth[v['id']][0]:.2f} mm, D {truth[v['id']][1]:.1f} mm"
         ax.set_title(head, fontsize=7)

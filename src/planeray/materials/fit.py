@@ -95,6 +95,15 @@ from scipy.optimize import least_squares
 from scipy.special import k1e
 
 from ..errors import InputError
+from ..goodness import (
+    DEFAULT_P_MISFIT,
+    FLAG_EDGE,
+    FLAG_MISFIT,
+    FLAG_NOT_FITTED,
+    FLAG_RANGE,
+    describe_flags,
+    fit_quality,
+)
 from ..mc.cache import TABLES_DIR, cache_dir, save_table, write_or_warn
 from ..mc.diffusion import boundary_mismatch_A
 from ..mc.engine import mc_line_profile
@@ -113,10 +122,14 @@ __all__ = [
     "REASONS",
     "ForwardTable",
     "FitResult",
+    "TABLE_RUNS",
     "build_forward_table",
     "forward_table",
+    "forward_table_stored",
+    "forward_table_seconds",
     "line_kernel",
     "WALL_ANGLES_DEG",
+    "WALL_KINDS",
     "BOTTOM_ANGLE_DEG",
     "container_wall_distances",
     "fit_profiles",
@@ -145,6 +158,9 @@ TABLE_PHOTONS = 100_000
 DIPOLE_MU_S_PRIME_MAX_PER_ROW = 30.0
 #: A parameter whose relative standard error exceeds this is not identifiable (NaN).
 MAX_RELATIVE_SE = 0.5
+#: Walls or a bottom closer than this many transport mean free paths (1 / mu_s') lie outside the range where
+#: diffusion theory's method of images -- the walls' and the bottom's models -- is trusted: the fit is flagged.
+DIFFUSION_RANGE_MFP = 5.0
 #: Relative uncertainty of the forward model (table noise and interpolation; the forward-model
 #: test allows 3 % against direct Monte Carlo), added in quadrature to the data's noise.
 MODEL_RELATIVE_SD = 0.02
@@ -322,15 +338,57 @@ def _trace_point(s_per_row, a_per_row, *, reach_rows, g, n, n_photons, seed):
 _LOADED: dict = {}
 
 
+#: Monte Carlo runs of a forward table (one per grid point).
+TABLE_RUNS = TABLE_MU_S_PRIME_PER_MM.size * TABLE_MU_A_PER_MM.size
+
+
+def _default_table_name(g, n, n_photons, seed) -> str:
+    s = TABLE_MU_S_PRIME_PER_MM * TABLE_MM_PER_ROW
+    a = TABLE_MU_A_PER_MM * TABLE_MM_PER_ROW
+    return _table_name(s, a, TABLE_REACH_ROWS, g, n, n_photons, seed)
+
+
+def forward_table_stored(*, g=DEFAULT_G, n=DEFAULT_N, n_photons=TABLE_PHOTONS, seed=0) -> bool:
+    """Whether :func:`forward_table` of these media is shipped, cached or loaded (no tracing needed)."""
+    name = _default_table_name(g, n, n_photons, seed)
+    return name in _LOADED or (TABLES_DIR / name).exists() or (cache_dir() / name).exists()
+
+
+def forward_table_seconds(*, g=DEFAULT_G, n=DEFAULT_N, n_photons=TABLE_PHOTONS, fraction=0.1, sample=9) -> float:
+    """Estimated seconds to trace :func:`forward_table` on this machine, from a pilot run.
+
+    A run's fixed cost is measured on a run of a few photons (after one that compiles the kernels);
+    then ``sample`` grid points spread over the table (every ``TABLE_RUNS // sample``-th) are traced with
+    ``fraction`` of the photons, and their cost beyond the fixed one is scaled to every point and every
+    photon (the pilot takes about ``fraction * sample / TABLE_RUNS`` of the table's time).
+    """
+    import time
+
+    s = TABLE_MU_S_PRIME_PER_MM * TABLE_MM_PER_ROW
+    a = TABLE_MU_A_PER_MM * TABLE_MM_PER_ROW
+    points = [(si, aj) for si in s for aj in a][:: max(TABLE_RUNS // int(sample), 1)]
+    kw = dict(reach_rows=TABLE_REACH_ROWS, g=g, n=n, seed=1)
+    _trace_point(s[0], a[0], n_photons=64, **kw)  # compiles the kernels
+    t0 = time.perf_counter()
+    _trace_point(s[0], a[0], n_photons=64, **kw)
+    fixed = time.perf_counter() - t0
+    photons = max(int(n_photons * fraction), 64)
+    t0 = time.perf_counter()
+    for si, aj in points:
+        _trace_point(si, aj, n_photons=photons, **kw)
+    per_point = max((time.perf_counter() - t0) / len(points) - fixed, 0.0) * n_photons / photons
+    return TABLE_RUNS * (fixed + per_point)
+
+
 def forward_table(*, g=DEFAULT_G, n=DEFAULT_N, n_photons=TABLE_PHOTONS, seed=0, progress=None) -> ForwardTable:
     """The default forward table: shipped (:data:`planeray.mc.cache.TABLES_DIR`), cached, or traced once.
 
-    Other ``g`` or ``n`` than the shipped ones trace the table (90 Monte Carlo runs,
-    about 6 minutes on 2 cores) and cache it under :func:`planeray.mc.cache.cache_dir`.
+    Other ``g`` or ``n`` than the shipped ones trace the table (:data:`TABLE_RUNS` Monte Carlo
+    runs, minutes: :func:`forward_table_seconds` estimates it, :func:`forward_table_stored` says
+    whether it is needed) and cache it under :func:`planeray.mc.cache.cache_dir`; ``progress`` is
+    called with 1 after each run (never on a cache hit).
     """
-    s = TABLE_MU_S_PRIME_PER_MM * TABLE_MM_PER_ROW
-    a = TABLE_MU_A_PER_MM * TABLE_MM_PER_ROW
-    name = _table_name(s, a, TABLE_REACH_ROWS, g, n, n_photons, seed)
+    name = _default_table_name(g, n, n_photons, seed)
     if name in _LOADED:
         return _LOADED[name]
     for path in (TABLES_DIR / name, cache_dir() / name):
@@ -400,6 +458,10 @@ def _kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot):
 
 #: Wall angles the fit models: parallel to the projector's lines (0) and across them (90 degrees).
 WALL_ANGLES_DEG = (0.0, 90.0)
+#: Kinds of container wall: ``"clear"`` (air behind a thin clear wall: the medium's own index mismatch against air,
+#: the extrapolated boundary ``2 A(n) D`` behind it, Haskell et al. 1994) or ``"black"`` (nothing returns: ``A = 1``;
+#: also a clear wall of an index-matched medium).
+WALL_KINDS = ("clear", "black")
 #: The ``angle_deg`` of a ``walls`` row that is a layer's **bottom** (``distance_rows``: the layer's depth):
 #: light that reaches it is lost (a layer on a dark or clear support, e.g. the 30 mm of liquid soap).
 BOTTOM_ANGLE_DEG = 180.0
@@ -410,14 +472,20 @@ _WALL_PASSES = 12  # at most, of the fixed point of the walls' effect (fit_profi
 _L_STEP = 0.125  # rows: the dipole's line kernel is interpolated from this grid (parallel walls)
 
 
-def _dipole_per_row(s, a, n):
-    """Dipole constants of a medium of per-row coefficients ``s = mu_s' h``, ``a = mu_a h``."""
+def _dipole_per_row(s, a, n, wall_kind="clear"):
+    """Dipole constants of a medium of per-row coefficients ``s = mu_s' h``, ``a = mu_a h``.
+
+    ``z`` (the real and image sources under the top face) and ``z_b`` (the extrapolated boundary behind a container
+    wall, :data:`WALL_KINDS`: the top's mismatch ``A(n)`` for a clear wall, ``A = 1`` for a black one).
+    """
     st = s + a
     A = boundary_mismatch_A(n)
+    A_wall = A if wall_kind == "clear" else 1.0
     z_r = 1.0 / st
     return dict(
-        albedo=s / st, sigma_tr=math.sqrt(3.0 * a * st), z=(z_r, z_r * (1.0 + 4.0 * A / 3.0)), z_b=2.0 * A / (3.0 * st)
-    )
+        albedo=s / st, sigma_tr=math.sqrt(3.0 * a * st), z=(z_r, z_r * (1.0 + 4.0 * A / 3.0)),
+        z_b=2.0 * A_wall / (3.0 * st), z_b_top=2.0 * A / (3.0 * st),
+    )  # fmt: skip
 
 
 def _source_line(x, z, st):
@@ -456,7 +524,7 @@ def _layer_line(x, d, depth_rows, images=4):
     of a deep layer is the semi-infinite dipole.
     """
     x = np.asarray(x, np.float64)
-    z_r, z_b = d["z"][0], d["z_b"]
+    z_r, z_b = d["z"][0], d["z_b_top"]
     z_b2 = 2.0 * z_r / 3.0  # 2 / (3 sigma_t'), A = 1
     period = 2.0 * (float(depth_rows) + z_b + z_b2)
     out = np.zeros_like(x)
@@ -488,7 +556,14 @@ def _half_lines(x_abs, d, b_values):
     return tail[:, k] * (1.0 - w) + tail[:, k + 1] * w
 
 
-def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls):
+def _on_grid(t, values):
+    """Linear interpolation of ``values`` (on a uniform grid) at fractional indices ``t >= 0``: ``np.interp``
+    without its search (the grid is uniform), exact at the grid's points."""
+    i = np.minimum(t.astype(np.int64), values.size - 2)
+    return values[i] + (values[i + 1] - values[i]) * (t - i)
+
+
+def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls, wall_kind="clear"):
     """The walls' change of the footprint-averaged kernel (``(U,)``), to add to the wall-free kernel.
 
     ``walls``: array ``(M, 4)`` of ``[distance_rows, angle_deg (0 or 90; 180: a bottom), side (+1/-1), weight]``;
@@ -497,7 +572,7 @@ def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls):
     """
     reach = k_table.size - 1
     f, w = foot
-    d = _dipole_per_row(math.exp(log_s), math.exp(log_a), n)
+    d = _dipole_per_row(math.exp(log_s), math.exp(log_a), n, wall_kind)
     x = np.asarray(offsets, np.float64)[:, None] - f[None, :]  # line offset seen by the pencil at f: (U, F)
     kk = np.where(np.abs(x) <= reach, k_table[np.minimum(np.abs(x), reach).astype(np.int64)], 0.0)
     term = np.zeros(x.shape[0])
@@ -511,8 +586,8 @@ def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls):
         img = 2.0 * (aa + d["z_b"]) - xx
         grid = np.arange(0.0, max(float(np.abs(xx).max()), float(np.abs(img).max())) + 2 * _L_STEP, _L_STEP)
         Lg = _dipole_line(grid, d)  # smooth in x; |xx| lies on the grid, the images between its points
-        L = np.interp(np.abs(xx), grid, Lg)
-        Lw = np.where(xx < aa, L - np.interp(np.abs(img), grid, Lg), 0.0)
+        L = _on_grid(np.abs(xx) / _L_STEP, Lg)
+        Lw = np.where(xx < aa, L - _on_grid(np.abs(img) / _L_STEP, Lg), 0.0)
         ratio = Lw.sum(axis=0) / np.maximum(L.sum(axis=0), 1e-300)
         term += (wt[:, None] * ((ratio - 1.0) * kk[None] * w).sum(axis=-1)).sum(axis=0)
     per = walls[walls[:, 1] == 90.0]
@@ -535,13 +610,20 @@ def _wall_term(k_table, log_s, log_a, n, offsets, foot, walls):
     return term
 
 
-def _model_kernel(table: ForwardTable, log_s, log_a, offsets_rows, foot, walls=None):
+def _model_kernel(table: ForwardTable, log_s, log_a, offsets_rows, foot, walls=None, wall_kind="clear"):
     """The pixel's (or block's) kernel at per-row log-coefficients: the table's, changed by the walls."""
     base = _kernel_per_row(table, log_s, log_a, offsets_rows, foot)
     if walls is None or not len(walls):
         return base
     k = _table_kernel(table, log_s, log_a)
-    return np.maximum(base + _wall_term(k, log_s, log_a, table.n, offsets_rows, foot, np.asarray(walls, float)), 0.0)
+    term = _wall_term(k, log_s, log_a, table.n, offsets_rows, foot, np.asarray(walls, float), wall_kind)
+    return np.maximum(base + term, 0.0)
+
+
+def _check_wall_kind(wall_kind) -> str:
+    if wall_kind not in WALL_KINDS:
+        raise InputError(f"wall_kind must be one of {', '.join(WALL_KINDS)}, got {wall_kind!r}")
+    return wall_kind
 
 
 def line_kernel(
@@ -553,6 +635,7 @@ def line_kernel(
     rows_per_camera_row=1.0,
     table: ForwardTable | None = None,
     walls=None,
+    wall_kind: str = "clear",
 ) -> np.ndarray:
     """The forward model: line kernel of a semi-infinite medium at the capture's geometry.
 
@@ -575,6 +658,8 @@ def line_kernel(
         across the wall's extrapolated boundary, Haskell et al. 1994), ``K L_wall / L``.  A row
         of angle :data:`BOTTOM_ANGLE_DEG` is a layer's bottom ``distance_rows`` deep that loses
         the light (the slab's image series, Contini et al. 1997), its effect added likewise.
+    wall_kind : {"clear", "black"}
+        The walls' kind (:data:`WALL_KINDS`).
 
     Returns
     -------
@@ -596,7 +681,9 @@ def line_kernel(
     if w is not None and (w.shape[1] != 4 or not np.all(np.isin(w[:, 1], angles)) or np.any(w[:, 0] < 0)):
         raise InputError("walls must be rows of [distance_rows >= 0, angle_deg 0, 90 or 180 (a bottom), side, weight]")
     offsets = np.asarray(offsets_rows)
-    return _model_kernel(table, math.log(s), math.log(a), offsets, _footprint(rows_per_camera_row), w)
+    return _model_kernel(
+        table, math.log(s), math.log(a), offsets, _footprint(rows_per_camera_row), w, _check_wall_kind(wall_kind)
+    )
 
 
 def container_wall_distances(containers, *, rows_per_camera_row) -> np.ndarray:
@@ -694,6 +781,12 @@ class FitResult:
         ``ln mu_s'``, ``ln mu_a`` (mm^-1) at the optimum and their standard errors, *before*
         the identifiability NaNs (NaN only where no fit ran): for recognition, which weighs
         a poorly constrained estimate by its error (:mod:`planeray.materials.library`).
+    dof : ndarray (P,) of int or None
+        Degrees of freedom of each fit (samples minus parameters; 0 where no fit ran).
+    flags : ndarray (P,) uint8 or None
+        Bits of :data:`planeray.goodness.FLAGS`: the model does not fit (chi-square past the
+        threshold at ``dof``; the standard errors are then inflated by ``sqrt(chi2 / dof)``), a
+        parameter at the forward model's edge, not fitted.
     """
 
     mu_s_prime_per_mm: np.ndarray
@@ -707,6 +800,14 @@ class FitResult:
     calibrated: bool
     log_estimate_per_mm: np.ndarray | None = None
     log_se: np.ndarray | None = None
+    dof: np.ndarray | None = None
+    flags: np.ndarray | None = None
+
+    def quality(self, i: int = 0):
+        """:class:`planeray.goodness.FitQuality` of profile ``i`` (None where no fit ran)."""
+        if self.dof is None or not np.isfinite(self.chi2_per_dof[i]) or self.dof[i] <= 0:
+            return None
+        return fit_quality(self.chi2_per_dof[i] * self.dof[i], int(self.dof[i]))
 
 
 def _cell_rel(table_rel, gs, ga, log_s, log_a):
@@ -756,6 +857,35 @@ def _grid_starts(table: ForwardTable, offsets, foot):
     return starts, _kernel_per_row(table, starts[:, 0], starts[:, 1], offsets, foot)
 
 
+def _bottom_row(depth_mm, region, mm_per_row):
+    """A region's bottom as a ``walls`` row (``depth_mm``: one value or ``{region: depth}``), None: semi-infinite."""
+    v = depth_mm.get(region) if isinstance(depth_mm, dict) else depth_mm
+    if v is None or not np.isfinite(float(v)):
+        return None
+    if not float(v) > 0:
+        raise InputError(f"depth_mm must be positive, got {v!r}")
+    return np.array([[float(v) / float(mm_per_row), BOTTOM_ANGLE_DEG, 0.0, 1.0]])
+
+
+def _out_of_range(log_s_per_row, bottom, distances) -> bool:
+    """Whether a fit's walls or bottom lie within :data:`DIFFUSION_RANGE_MFP` transport mean free paths.
+
+    ``log_s_per_row``: the fitted ``log(mu_s' h)``; ``bottom``: :func:`_bottom_row` (rows) or None; ``distances``:
+    the region's pixels' wall distances (:func:`container_wall_distances`, rows) or None -- the median pixel's
+    nearest wall counts.
+    """
+    if not np.isfinite(log_s_per_row):
+        return False
+    reach = DIFFUSION_RANGE_MFP / math.exp(float(log_s_per_row))  # rows
+    if bottom is not None and bottom[0, 0] < reach:
+        return True
+    if distances is not None and len(distances):
+        d = np.asarray(distances, np.float64).reshape(-1, 4)
+        nearest = np.min(np.where(np.isfinite(d), d, np.inf), axis=1)
+        return bool(np.median(nearest) < reach)
+    return False
+
+
 def _regions_and_walls(labels, containers, shape, rows_per_camera_row, what):
     """The region labels (default one region) and each pixel's wall distances (None without ``containers``)."""
     lab = np.ones(shape, np.int64) if labels is None else np.asarray(labels, np.int64)
@@ -780,6 +910,8 @@ def fit_profiles(
     max_relative_se=MAX_RELATIVE_SE,
     model_relative_sd=MODEL_RELATIVE_SD,
     walls=None,
+    wall_kind: str = "clear",
+    p_misfit=DEFAULT_P_MISFIT,
 ) -> FitResult:
     """Fit ``mu_s'`` and ``mu_a`` to line-kernel profiles (weighted least squares in log-parameters).
 
@@ -819,12 +951,20 @@ def fit_profiles(
         images; :func:`line_kernel` with ``walls``); a row of angle :data:`BOTTOM_ANGLE_DEG` is
         the bottom of a layer ``distance_rows`` deep (weight 1).  None: a semi-infinite medium
         without walls.
+    wall_kind : {"clear", "black"}
+        The walls' kind (:data:`WALL_KINDS`).
+    p_misfit : float
+        A fit whose chi-square is less probable than this is flagged "model does not fit"
+        (:func:`planeray.goodness.fit_quality`).
 
     Returns
     -------
     FitResult
+        Standard errors from the Jacobian, scaled by ``sqrt(chi2 / dof)`` where that exceeds 1 (the
+        misfit inflates them; the model's own error is in ``sigma`` through ``model_relative_sd``).
     """
     table = table or forward_table()
+    _check_wall_kind(wall_kind)
     Y = np.atleast_2d(np.asarray(profiles, np.float64))
     if walls is not None and len(walls) != Y.shape[0]:
         raise InputError(f"walls has {len(walls)} entries, one per profile expected ({Y.shape[0]})")
@@ -849,6 +989,7 @@ def fit_profiles(
     mask = np.zeros(P, np.uint8)
     model = np.full(Y.shape, np.nan)
     raw, raw_se = np.full((P, 2), np.nan), np.full((P, 2), np.nan)
+    dofs = np.zeros(P, np.int64)
     # A coarse start: the grid point of least misfit (shape only, scale solved in closed form).
     gs, ga = np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row)
     starts, Kg = _grid_starts(table, offsets, foot)
@@ -875,7 +1016,7 @@ def fit_profiles(
                 break
             tried.add(g0)
             k_free = Kg[g0]
-            k_wall = _model_kernel(table, starts[g0, 0], starts[g0, 1], offsets, foot, wp)
+            k_wall = _model_kernel(table, starts[g0, 0], starts[g0, 1], offsets, foot, wp, wall_kind)
             rho_g = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
         sd0 = sd
         x0 = list(starts[g0])
@@ -902,7 +1043,7 @@ def fit_profiles(
                 rho = 1.0
                 if wp is not None:
                     k_free = _kernel_per_row(table, x0[0], x0[1], offsets, foot)
-                    k_wall = _model_kernel(table, x0[0], x0[1], offsets, foot, wp)
+                    k_wall = _model_kernel(table, x0[0], x0[1], offsets, foot, wp, wall_kind)
                     rho = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
 
                 def resid(x, y=y, sd=sd, ok=ok, rho=rho):
@@ -917,7 +1058,7 @@ def fit_profiles(
             if wp is not None:  # polish with the walls' effect evaluated at every trial (the exact Jacobian)
 
                 def resid(x, y=y, sd=sd, ok=ok, wp=wp):
-                    k = _model_kernel(table, x[0], x[1], offsets, foot, wp)
+                    k = _model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind)
                     c = math.exp(x[2]) if len(x) > 2 else 1.0
                     return np.where(ok, (c * k - y) / sd, 0.0)
 
@@ -928,14 +1069,16 @@ def fit_profiles(
         if not res.success:
             mask[p] |= 64
         n_dof = max(int(ok.sum()) - len(x0), 1)
+        dofs[p] = n_dof
         chi2 = float(2.0 * res.cost / n_dof)
         J = res.jac
         try:
             cov = np.linalg.pinv(J.T @ J)
         except np.linalg.LinAlgError:
             cov = np.full((len(x0), len(x0)), np.inf)
-        if sigma is None:
-            cov = cov * chi2
+        # without sigma the residual variance is the noise; with it, a misfit beyond the noise (and the model's
+        # error in it) widens the errors by sqrt(chi2 / dof) (planeray.goodness, the Birge ratio)
+        cov = cov * (chi2 if sigma is None else max(chi2, 1.0))
         se_log = np.sqrt(np.maximum(np.diag(cov), 0.0))
         x = res.x
         s_est, a_est = math.exp(x[0]) / h, math.exp(x[1]) / h
@@ -944,7 +1087,7 @@ def fit_profiles(
         out["chi2"][p] = chi2
         raw[p], raw_se[p] = x[:2] - math.log(h), se_log[:2]
         scale[p] = math.exp(x[2]) if len(x) > 2 else 1.0
-        model[p] = scale[p] * _model_kernel(table, x[0], x[1], offsets, foot, wp)
+        model[p] = scale[p] * _model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind)
         if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:
             mask[p] |= 2
         if min(x[1] - lo[1], hi[1] - x[1]) < edge_tol:
@@ -962,6 +1105,15 @@ def fit_profiles(
         out[k][bad_s] = np.nan
     for k in ("a", "se_a"):
         out[k][bad_a] = np.nan
+    flags = np.zeros(P, np.uint8)
+    for p in range(P):
+        if dofs[p] == 0:
+            flags[p] = FLAG_NOT_FITTED
+            continue
+        if sigma is not None and not fit_quality(out["chi2"][p] * dofs[p], dofs[p], p_misfit=p_misfit).fits:
+            flags[p] |= FLAG_MISFIT
+        if mask[p] & (2 | 4):
+            flags[p] |= FLAG_EDGE
     return FitResult(
         mu_s_prime_per_mm=out["s"],
         mu_a_per_mm=out["a"],
@@ -974,6 +1126,8 @@ def fit_profiles(
         calibrated=bool(calibrated),
         log_estimate_per_mm=raw,
         log_se=raw_se,
+        dof=dofs,
+        flags=flags,
     )
 
 
@@ -1044,6 +1198,8 @@ def fit_transport(
     table: ForwardTable | None = None,
     depth_mm=None,
     regions_only: bool = False,
+    wall_kind: str = "clear",
+    p_misfit=DEFAULT_P_MISFIT,
     progress=None,
 ) -> TransportFit:
     """Fit ``mu_s'`` and ``mu_a`` over a transport: maps (per pixel block) and per-region results.
@@ -1077,12 +1233,18 @@ def fit_transport(
     regions_only : bool
         Fit the regions only (the maps stay NaN, mask 255): the blocks still give each
         region's noise, but are not fitted themselves (with walls, most of the time).
+    wall_kind : {"clear", "black"}
+        The containers' walls (:data:`WALL_KINDS`).
+    p_misfit : float
+        Chi-square probability below which a fit is flagged "model does not fit" (:mod:`planeray.goodness`).
     progress : callable, optional
         Called with the number of fits just done.
 
     Returns
     -------
     TransportFit
+        ``maps["flags"]`` is the flag layer (bits of :data:`planeray.goodness.FLAGS`, 255 outside every
+        region); each region's summary carries its ``fit_quality``, ``flags`` and ``model_fits``.
 
     Notes
     -----
@@ -1105,12 +1267,7 @@ def fit_transport(
         raise InputError(f"block_px must be >= 1, got {block_px!r}")
 
     def depth_of(region):
-        v = depth_mm.get(region) if isinstance(depth_mm, dict) else depth_mm
-        if v is None or not np.isfinite(float(v)):
-            return None
-        if not float(v) > 0:
-            raise InputError(f"depth_mm must be positive, got {v!r}")
-        return np.array([[float(v) / float(mm_per_row), BOTTOM_ANGLE_DEG, 0.0, 1.0]])
+        return _bottom_row(depth_mm, region, mm_per_row)
 
     def with_bottom(walls, bottom):
         if bottom is None:
@@ -1119,6 +1276,9 @@ def fit_transport(
 
     maps = {k: np.full((H, W), np.nan, np.float32) for k in _MAP_NAMES}
     maps["mask"] = np.full((H, W), 255, np.uint8)
+    maps["flags"] = np.full((H, W), 255, np.uint8)
+    _check_wall_kind(wall_kind)
+    fit_kw = dict(wall_kind=wall_kind, p_misfit=p_misfit)
     regions, profiles = {}, {}
     for region in sorted(int(v) for v in np.unique(lab) if v != 0):
         inside = lab == region
@@ -1147,7 +1307,7 @@ def fit_transport(
         if not regions_only:
             res = fit_profiles(
                 Y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=S, calibrated=calibrated,
-                rows_per_camera_row=rpc, table=table, walls=walls or None,
+                rows_per_camera_row=rpc, table=table, walls=walls or None, **fit_kw,
             )  # fmt: skip
             if progress is not None:
                 progress(len(blocks))
@@ -1159,6 +1319,7 @@ def fit_transport(
             ):
                 maps[name][sl][m] = val[i]
             maps["mask"][sl][m] = res.mask[i]
+            maps["flags"][sl][m] = res.flags[i]
         # The region: its mean profile, noise from the spread of its blocks.
         fin = np.isfinite(Y)
         cnt = fin.sum(axis=0)
@@ -1179,8 +1340,15 @@ def fit_transport(
             rw = [with_bottom(None if rw is None else rw[0], bottom)]
         rr = fit_profiles(
             y, offsets_rows=offsets, mm_per_row=mm_per_row, sigma=s, calibrated=calibrated,
-            rows_per_camera_row=rpc, table=table, walls=rw,
+            rows_per_camera_row=rpc, table=table, walls=rw, **fit_kw,
         )  # fmt: skip
+        flag0 = int(rr.flags[0])
+        log_s_row = rr.log_estimate_per_mm[0, 0] + math.log(float(mm_per_row))
+        if _out_of_range(log_s_row, bottom, None if dist is None else dist[inside]):
+            flag0 |= FLAG_RANGE
+        if res is None:
+            maps["flags"][inside] = flag0
+        q = rr.quality(0)
         regions[region] = {
             "pixels": int(inside.sum()),
             "blocks": len(blocks),
@@ -1190,6 +1358,11 @@ def fit_transport(
             "mu_a_se_per_mm": _num(rr.mu_a_se_per_mm[0]),
             "not_identifiable": describe_reasons(int(rr.mask[0])),
             "chi2_per_dof": _num(rr.chi2_per_dof[0]),
+            "fit_quality": None if q is None else q.to_json(),
+            "model_fits": None if q is None else q.fits,
+            "flags": describe_flags(flag0),
+            "flag_bits": flag0,
+            "blocks_flagged": None if res is None else float(((res.flags & (FLAG_MISFIT | FLAG_EDGE)) > 0).mean()),
             "blocks_median_mu_s_prime_per_mm": None if res is None else _nanmedian(res.mu_s_prime_per_mm),
             "blocks_median_mu_a_per_mm": None if res is None else _nanmedian(res.mu_a_per_mm),
             "blocks_identified": None

@@ -90,7 +90,12 @@ __all__ = [
 ]
 
 LIBRARY_FORMAT = "planeray-media-library"
-LIBRARY_VERSION = 1
+#: Version 2 (issue 41): entries are **physical** parameters -- ``mu_s'``, ``mu_a`` with their uncertainties,
+#: the index ``n`` (and a layer's depth) the fit assumed -- valid at any resolution and row size.  Version 1
+#: (entries: the distribution of block fits of one capture, bound to its ``conditions``) is still read.
+LIBRARY_VERSION = 2
+#: Versions this planeray reads.
+LIBRARY_VERSIONS = (1, 2)
 #: A pixel is unknown when its best entry's typicality p-value is below this.
 DEFAULT_P_UNKNOWN = 1e-3
 #: Floor of an entry's beyond-table shares and of its in-table share (no entry is ruled out by one pixel).
@@ -137,6 +142,11 @@ class MediumEntry:
         How it was obtained (capture, region, conditions), free text.
     published : dict or None
         Published constants for the reader (``mu_s_prime_per_mm``, ``mu_a_per_mm``, ``reference``).
+    n : float or None
+        Refractive index the medium was fitted with (a version-2 entry: the capture is fitted with it to be
+        compared with the entry); None in a version-1 library.
+    depth_mm : float or None
+        Depth of the layer the medium was fitted as (a bottom that returns no light), None: semi-infinite.
     """
 
     name: str
@@ -150,6 +160,8 @@ class MediumEntry:
     blocks: int = 0
     source: str = ""
     published: dict | None = None
+    n: float | None = None
+    depth_mm: float | None = None
 
     def shares(self):
         """``(q_above, q_below, q_in)`` with the floors of :data:`MIN_SHARE`, summing to 1."""
@@ -173,6 +185,8 @@ class MediumEntry:
             "blocks": int(self.blocks),
             "source": self.source,
             "published": self.published,
+            "n": _num(self.n),
+            "depth_mm": _num(self.depth_mm),
         }
 
 
@@ -185,16 +199,38 @@ class MediaLibrary:
     entries : tuple of MediumEntry
     conditions : dict
         ``mm_per_row`` (mm), ``n``, ``calibrated`` (bool), and free keys (``channel``,
-        ``block_px``, ``noise`` ...): a capture classified against the library should be
-        fitted the same way (:meth:`check_conditions`).
+        ``block_px``, ``noise`` ...): a capture classified against a version-1 library should be
+        fitted the same way (:meth:`check_conditions`); in version 2, where the reference was
+        captured (for the reader).
+    version : int
+        1: entries are distributions of one capture's block fits (bound to ``conditions``); 2: physical
+        parameters with their uncertainties and the ``n`` (depth) they were fitted with
+        (:func:`planeray.materials.recognize.entries_from_stack`).
     """
 
     entries: tuple
     conditions: dict
+    version: int = 1
 
     @property
     def class_ids(self) -> list[int]:
         return [e.class_id for e in self.entries]
+
+    @property
+    def physical(self) -> bool:
+        """Whether the entries are physical parameters (version 2: valid at any resolution and row size)."""
+        return self.version >= 2
+
+    def hypotheses(self) -> list[tuple]:
+        """The distinct ``(n, depth_mm)`` the entries were fitted with (a capture is fitted under each)."""
+        from .fit import DEFAULT_N
+
+        seen = []
+        for e in self.entries:
+            h = (DEFAULT_N if e.n is None else float(e.n), e.depth_mm)
+            if h not in seen:
+                seen.append(h)
+        return seen
 
     def entry(self, name_or_id) -> MediumEntry:
         for e in self.entries:
@@ -211,10 +247,13 @@ class MediaLibrary:
                 f"the library already has {c.name!r} (class {c.class_id}); replace it with --replace (replace=True)"
             )
         keep = tuple(e for e in self.entries if e not in clash)
-        return MediaLibrary(keep + (entry,), dict(self.conditions))
+        return MediaLibrary(keep + (entry,), dict(self.conditions), self.version)
 
     def check_conditions(self, *, mm_per_row, calibrated) -> None:
-        """Refuse (one line) a fit made at another row size or calibration than the library's."""
+        """Refuse (one line) a fit made at another row size or calibration than a version-1 library's
+        (a version-2 library holds physical parameters: any capture may be compared with it)."""
+        if self.physical:
+            return
         lib_mm = self.conditions.get("mm_per_row")
         if lib_mm is not None and not math.isclose(float(lib_mm), float(mm_per_row), rel_tol=1e-3):
             raise InputError(
@@ -229,7 +268,7 @@ class MediaLibrary:
     def to_json(self) -> dict:
         return {
             "format": LIBRARY_FORMAT,
-            "version": LIBRARY_VERSION,
+            "version": int(self.version),
             "conditions": dict(self.conditions),
             "media": [e.to_json() for e in self.entries],
         }
@@ -423,8 +462,9 @@ def load_library(path) -> MediaLibrary:
         raise _bad(path, "not JSON") from None
     if not isinstance(doc, dict) or doc.get("format") != LIBRARY_FORMAT:
         raise _bad(path, f"format is not {LIBRARY_FORMAT!r}")
-    if doc.get("version") != LIBRARY_VERSION:
-        raise _bad(path, f"version {doc.get('version')!r}, this planeray reads {LIBRARY_VERSION}")
+    version = doc.get("version")
+    if isinstance(version, bool) or version not in LIBRARY_VERSIONS:
+        raise _bad(path, f"version {version!r}, this planeray reads {' and '.join(map(str, LIBRARY_VERSIONS))}")
     cond = doc.get("conditions", {})
     if not isinstance(cond, dict):
         raise _bad(path, "conditions must be an object")
@@ -470,6 +510,10 @@ def load_library(path) -> MediaLibrary:
         blocks = m.get("blocks", 0)
         if isinstance(blocks, bool) or not isinstance(blocks, int) or blocks < 0:
             raise _bad(path, f"{where}.blocks must be an integer >= 0")
+        n = _pos(m.get("n"), path, f"{where}.n", allow_none=version == 1)
+        if n is not None and not 1.0 <= n <= 2.0:
+            raise _bad(path, f"{where}.n must be a refractive index in [1, 2], got {n!r}")
+        depth = _pos(m.get("depth_mm"), path, f"{where}.depth_mm", allow_none=True)
         entries.append(
             MediumEntry(
                 name=name.strip(),
@@ -483,6 +527,8 @@ def load_library(path) -> MediaLibrary:
                 blocks=blocks,
                 source=str(m.get("source", "")),
                 published=pub,
+                n=n,
+                depth_mm=depth,
             )
         )
     names = [e.name for e in entries]
@@ -491,7 +537,7 @@ def load_library(path) -> MediaLibrary:
         raise _bad(path, "two media have the same name")
     if len(set(ids)) != len(ids):
         raise _bad(path, "two media have the same class_id")
-    return MediaLibrary(tuple(entries), cond)
+    return MediaLibrary(tuple(entries), cond, int(version))
 
 
 #: The shipped library (the five Fig. 10 media as fitted on the reference capture).

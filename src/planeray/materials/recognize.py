@@ -381,3 +381,390 @@ def accuracy_by_distance(pred, truth, wall_distance_mm, *, classes, bins_mm=WALL
     vals = [v["all"] for v in out["classes"].values() if v["all"] is not None]
     out["min_class_accuracy"] = min(vals) if vals else None
     return out
+
+
+# ---------------------------------------------------------------- recognition that travels (issue 41)
+#: Chi-square gain that makes a pixel "a scattering medium": the best medium kernel (one more coefficient than
+#: a surface's direct light) must improve the chi-square by this much -- chi2.isf(1e-6, 1) = 24 for one kernel,
+#: rounded up for the choice among :data:`_GENERIC_MEDIA` and the library's (a look-elsewhere margin).
+SUBSURFACE_DCHI2 = 30.0
+#: Smallest container the automatic segmentation keeps, mm^2 (smaller components are noise, or a wall).
+MIN_CONTAINER_MM2 = 25.0
+#: Generic media whose kernels make a pixel "a scattering medium" besides the library's: (mu_s', mu_a) in 1/mm.
+_GENERIC_MEDIA = tuple((s, a) for s in (0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0) for a in (0.003, 0.03))
+#: Relative model error of the per-pixel test (of each image's light), as the stack fit's.
+_PIXEL_MODEL_SD = 0.02
+#: Evidence is also pooled over a disc of this radius (pixels) among neighbours that look alike: of the same
+#: brightness within this relative difference, their own evidence within a factor of 10 (in 1 + evidence: a
+#: table pixel beside a tray of soap, as dim as the soap, does not borrow the soap's evidence) ...
+POOL_RADIUS_PX = 3
+POOL_BRIGHTNESS_TOLERANCE = 0.2
+POOL_EVIDENCE_FACTOR_LOG = math.log(10.0)
+#: ... and the pool must pass this gain: a surface's pixels gain ~0.5 each (the best of the kernels, positive
+#: coefficient), 29 pixels ~15 +- 6; 60 lies 7 standard deviations above.
+POOLED_DCHI2 = 60.0
+#: A container takes up to this many pixels of its border whose brightness lies within this share of its median
+#: (and nearer to it than to the brightness outside the containers) and whose own evidence reaches this (a
+#: surface's pixel gains less than 0.5 in 70 % of cases) ...
+GROW_PX = 2
+GROW_BRIGHTNESS_TOLERANCE = 0.5
+GROW_EVIDENCE = 0.5
+#: ... and a pooled pixel must show at least this much of its own (a surface's: in 80 % of cases less).
+POOL_OWN_EVIDENCE = 1.0
+
+
+def _kernel_or_none(s, a, *, mm_per_row, offsets, rpc, table):
+    try:
+        return _fit.line_kernel(s, a, offsets_rows=offsets, mm_per_row=mm_per_row, rows_per_camera_row=rpc, table=table)
+    except InputError:  # outside the forward model at this row size
+        return None
+
+
+def subsurface_evidence(stack, *, mm_per_row, library=None, camera=None, table=None) -> np.ndarray:
+    """Per pixel, how strongly its images show light from below the surface (chi-square gain).
+
+    Each pixel's used images (:func:`planeray.materials.stackfit.stack_design`) are fitted twice, linearly:
+    as a **surface** (its direct light: the camera row's footprint through the illumination matrix, plus
+    ambient light) and as a surface **and a scattering medium** (plus one medium's kernel: generic media
+    over ``mu_s'`` 0.2-30 /mm and the library's entries), weighted by the camera's noise model and a 2 %
+    model error.  The gain in chi-square of the best medium (its coefficient positive) is the evidence: a
+    matte table or a container's rim shows none, a milk or a paste thousands.
+
+    Parameters
+    ----------
+    stack : Stack
+    mm_per_row : float
+    library : MediaLibrary, optional
+        Its (version 2) entries' kernels join the generic ones.
+    camera : CameraModel, optional
+        The camera's noise model (default: planeray's default camera).
+    table : ForwardTable, optional
+
+    Returns
+    -------
+    ndarray (H, W)
+        The chi-square gain (0 where a pixel has too few usable images).
+    """
+    from ..camera import CameraModel
+    from .stackfit import _footprint, _images, stack_design
+
+    design = stack_design(stack)
+    imgs, ok = _images(stack, design)
+    camera = camera or CameraModel()
+    var = camera.pixel_variance(imgs) + (_PIXEL_MODEL_SD * np.maximum(imgs, 0.0)) ** 2
+    wts = np.where(ok, 1.0 / var, 0.0)  # (N, H, W)
+    offsets, rpc = design.offsets_rows, design.rows_per_camera_row
+    f_off, f_w = _footprint(rpc)
+    direct = np.zeros(offsets.size)
+    for o, w in zip(f_off, f_w):
+        direct[offsets == o] += w
+    media = list(_GENERIC_MEDIA)
+    if library is not None and library.physical:
+        media += [(e.mu_s_prime_per_mm, e.mu_a_per_mm or 0.003) for e in library.entries if e.mu_s_prime_per_mm]
+    kernels = []
+    for s, a in media:
+        k = _kernel_or_none(s, a, mm_per_row=mm_per_row, offsets=offsets, rpc=rpc, table=table or _fit.forward_table())
+        if k is not None:
+            kernels.append(k)
+    H, W = stack.shape
+    out = np.zeros((H, W))
+    I = design.exposure_rows
+    for g in range(design.A.shape[0]):
+        rows = np.flatnonzero(design.row_group == g)
+        if rows.size == 0:
+            continue
+        A = design.A[g]  # (N, U)
+        y = imgs[:, rows, :].reshape(imgs.shape[0], -1)  # (N, P)
+        w = wts[:, rows, :].reshape(imgs.shape[0], -1)
+
+        def chi2_of(X, y=y, w=w):
+            """Weighted least squares of every pixel on the columns X (N, q): chi-square and coefficients."""
+            XtWX = np.einsum("ni,np,nj->pij", X, w, X)
+            XtWy = np.einsum("ni,np,np->pi", X, w, y)
+            coef = np.linalg.solve(XtWX + 1e-30 * np.eye(X.shape[1]), XtWy[..., None])[..., 0]
+            r = y - X @ coef.T
+            return (w * r * r).sum(axis=0), coef
+
+        chi_s, _ = chi2_of(np.stack([A @ direct, I], axis=1))
+        best = np.zeros(y.shape[1])
+        for k in kernels:
+            chi_m, coef = chi2_of(np.stack([A @ direct, A @ k, I], axis=1))
+            gain = np.where(coef[:, 1] > 0, chi_s - chi_m, 0.0)
+            best = np.maximum(best, gain)
+        enough = ok[:, rows, :].reshape(imgs.shape[0], -1).sum(axis=0) >= 6
+        out[rows] = np.where(enough, best, 0.0).reshape(rows.size, W)
+    return out
+
+
+def stack_brightness(stack) -> np.ndarray:
+    """Each pixel's brightness: the sum of its used images (saturated ones counted as they read)."""
+    from .stackfit import _images, stack_design
+
+    imgs, _ = _images(stack, stack_design(stack))
+    return np.where(np.isfinite(imgs), imgs, 0.0).sum(axis=0)
+
+
+def pooled_evidence(evidence, brightness, *, radius_px=POOL_RADIUS_PX, tolerance=POOL_BRIGHTNESS_TOLERANCE):
+    """The evidence of light from below the surface summed over a pixel's neighbours of its own brightness.
+
+    A medium whose kernel is barely wider than a camera row's footprint (a paste of ``mu_s'`` ~ 16 /mm at
+    1.7 mm pixels) shows a few units of chi-square per pixel, a surface a fraction of one: summed over the
+    disc of ``radius_px`` -- independent pixels' evidence adds -- among the neighbours whose brightness
+    (the sum of the pixel's images) lies within ``tolerance`` of the pixel's (relative), so that a table
+    pixel beside a tray of milk does not borrow the milk's evidence.
+
+    Returns
+    -------
+    ndarray (H, W)
+    """
+    E = np.maximum(np.asarray(evidence, np.float64), 0.0)
+    lb = np.log(np.maximum(np.asarray(brightness, np.float64), 1e-12))
+    le = np.log1p(E)
+    r = int(radius_px)
+    H, W = E.shape
+    pad_e = np.pad(E, r)
+    pad_le = np.pad(le, r, constant_values=np.inf)
+    pad_b = np.pad(lb, r, constant_values=np.inf)
+    out = np.zeros_like(E)
+    tol = math.log1p(float(tolerance))
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            if dy * dy + dx * dx > r * r:
+                continue
+            sl = (slice(r + dy, r + dy + H), slice(r + dx, r + dx + W))
+            alike = (np.abs(pad_b[sl] - lb) <= tol) & (np.abs(pad_le[sl] - le) <= POOL_EVIDENCE_FACTOR_LOG)
+            out += np.where(alike, pad_e[sl], 0.0)
+    return out
+
+
+def find_containers(
+    evidence, *, mm_per_pixel, brightness=None, threshold=SUBSURFACE_DCHI2, pooled_threshold=POOLED_DCHI2,
+    min_area_mm2=MIN_CONTAINER_MM2,
+):  # fmt: skip
+    """Containers of scattering media: the connected regions of pixels that show light from below the surface.
+
+    A pixel is a medium's when its own evidence (:func:`subsurface_evidence`) passes ``threshold`` or, given
+    its ``brightness``, the evidence pooled over its neighbours of its brightness (:func:`pooled_evidence`)
+    passes ``pooled_threshold``; isolated pixels are removed (a 3 x 3 majority), and each 4-connected region
+    of at least ``min_area_mm2`` is a container (labels 1, 2, ...; 0 elsewhere: a table, a wall, a surface).
+    Containers that touch one another form one region: outline them (``regions`` of :func:`recognize_stack`).
+
+    Returns
+    -------
+    ndarray (H, W) of int
+    """
+    mask = np.asarray(evidence) > float(threshold)
+    if brightness is not None:  # a pixel that shows a little of its own and whose alike neighbours show much
+        mask |= (pooled_evidence(evidence, brightness) > float(pooled_threshold)) & (
+            np.asarray(evidence) >= POOL_OWN_EVIDENCE
+        )
+    votes = ndimage.uniform_filter(mask.astype(np.float64), size=3, mode="nearest")
+    mask = np.where(votes >= 5.0 / 9.0 - 1e-9, True, np.where(votes <= 4.0 / 9.0 + 1e-9, False, mask))
+    lab, n = ndimage.label(mask)
+    if n == 0:
+        return lab
+    sizes = np.bincount(lab.ravel())[1:] * float(mm_per_pixel) ** 2
+    keep = np.flatnonzero(sizes >= float(min_area_mm2)) + 1
+    out = np.zeros_like(lab)
+    for i, k in enumerate(keep, start=1):
+        out[lab == k] = i
+    if brightness is not None and out.max() > 0:
+        # the pixels next to a container's wall, where its kernel is cut and the pool straddles the wall: a
+        # container takes (up to GROW_PX deep) its neighbours of its own brightness that show some evidence
+        lb = np.log(np.maximum(np.asarray(brightness, np.float64), 1e-12))
+        E = np.asarray(evidence, np.float64)
+        median = np.array([np.median(lb[out == k]) for k in range(1, out.max() + 1)])
+        outside = float(np.median(lb[out == 0])) if (out == 0).any() else -np.inf
+        cross = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
+        for _ in range(GROW_PX):
+            grown = ndimage.grey_dilation(out, footprint=cross)
+            new = (out == 0) & (grown > 0) & (E >= GROW_EVIDENCE)
+            near = np.abs(lb - median[np.maximum(grown, 1) - 1])
+            # of the container's brightness, and nearer to it than to what lies outside the containers (a table)
+            new &= (near <= math.log1p(GROW_BRIGHTNESS_TOLERANCE)) & (near < np.abs(lb - outside))
+            if not new.any():
+                break
+            out = np.where(new, grown, out)
+    for k in range(1, out.max() + 1):  # a container has no holes (a pixel it surrounds is its medium)
+        out[ndimage.binary_fill_holes(out == k) & (out == 0)] = k
+    return out
+
+
+def entries_from_stack(
+    stack, labels, names: dict, *, mm_per_row, n=_fit.DEFAULT_N, depth_mm=None, camera=None, white=None,
+    white_albedo=0.99, wall_kind="clear", source="", published=None, table=None,
+) -> list:  # fmt: skip
+    """Version-2 library entries -- physical parameters -- from labelled regions of a stack.
+
+    Each region named in ``names`` is one container: fitted as a whole from the stack's images
+    (:func:`planeray.materials.stackfit.fit_stack`, its walls modelled from ``labels``, the medium's index
+    ``n`` and layer depth), and its entry holds the fitted ``mu_s'``, ``mu_a``, their uncertainties (the fit's
+    standard errors of their logs, with the model's error and the misfit in them) and correlation, ``n`` and
+    ``depth_mm`` -- values of the medium, so the entry recognizes it at any resolution and row size.
+
+    Returns
+    -------
+    list of MediumEntry
+    """
+    from .library import MIN_LOG_SD, MediumEntry
+    from .stackfit import fit_stack
+
+    lab = np.asarray(labels)
+    regions = np.where(np.isin(lab, list(names)), lab, 0)
+    res = fit_stack(
+        stack, mm_per_row=mm_per_row, labels=regions, containers=regions, white=white, white_albedo=white_albedo,
+        table=table or _fit.forward_table(n=n), camera=camera, depth_mm=depth_mm, wall_kind=wall_kind,
+    )  # fmt: skip
+    out = []
+    for cid, name in names.items():
+        r = res.regions.get(int(cid))
+        if r is None or r["log_estimate_per_mm"] is None or r["mu_s_prime_per_mm"] is None:
+            why = "; ".join(r["not_identifiable"] + r["flags"]) if r else "no pixels"
+            raise InputError(f"{name!r} (class {cid}): its mu_s' is not measured in this capture ({why})")
+        ls, la = r["log_estimate_per_mm"]
+        ses, sea = r["log_se"]
+        has_a = r["mu_a_per_mm"] is not None
+        out.append(
+            MediumEntry(
+                name=str(name).strip(), class_id=int(cid), mu_s_prime_per_mm=float(math.exp(ls)),
+                mu_s_prime_log_sd=max(float(ses), MIN_LOG_SD),
+                mu_a_per_mm=float(math.exp(la)) if has_a else None,
+                mu_a_log_sd=max(float(sea), MIN_LOG_SD) if has_a else None,
+                correlation=float(np.clip(r.get("log_correlation") or 0.0, -0.95, 0.95)) if has_a else 0.0,
+                blocks=int(r["pixels"]), source=source, published=(published or {}).get(int(cid)),
+                n=float(n), depth_mm=None if depth_mm is None else float(depth_mm),
+            )
+        )  # fmt: skip
+    return out
+
+
+def recognize_stack(
+    library: MediaLibrary, stack, *, mm_per_row, regions=None, camera=None, white=None, white_albedo=0.99,
+    wall_kind="clear", p_unknown=DEFAULT_P_UNKNOWN, evidence=None, progress=None,
+):  # fmt: skip
+    """Name each container's medium from the stack's images, against a version-2 (physical) library.
+
+    1. **Containers**: ``regions`` (a user's outline), else found (:func:`subsurface_evidence`,
+       :func:`find_containers`): pixels without light from below the surface -- a table, a wall -- are no
+       medium and stay 0 ("none").
+    2. **Fits**: each container as a whole from its images (:func:`planeray.materials.stackfit.fit_stack`, its
+       walls modelled), once per ``(n, depth)`` the library's entries were fitted with.
+    3. **Decision**: an entry is compared with the fit under its own ``(n, depth)``: the squared Mahalanobis
+       distance ``d^2`` of the fitted log parameters from the entry's, under the sum of both covariances (a
+       ``mu_s'`` at the forward model's edge is censored: "at most" the edge's value).  An entry whose model
+       does not fit the container (its chi-square past the threshold) is not it.  The container is the entry
+       of least ``d^2`` plus the fit's chi-square, unless no entry is within the chi-square quantile of
+       ``1 - p_unknown`` (at the parameters compared): then "none of these" (0).
+
+    Returns
+    -------
+    (Recognition, list of dict)
+        Per pixel (each container's pixels get its class, 0 elsewhere) and per container: its pixels, each
+        hypothesis' fit, each entry's ``d^2``, the decision and why.
+    """
+    from .library import NOT_FITTED, UNKNOWN, Recognition
+    from .stackfit import fit_stack
+
+    if not library.physical:
+        raise InputError("recognizing a stack's containers needs a version-2 library (physical parameters)")
+    H, W = stack.shape
+    rpc = float(stack.geometry.rows_per_camera_row)
+    if regions is None:
+        if evidence is None:
+            evidence = subsurface_evidence(stack, mm_per_row=mm_per_row, library=library, camera=camera)
+        regions = find_containers(evidence, mm_per_pixel=mm_per_row * rpc, brightness=stack_brightness(stack))
+    reg = np.asarray(regions, np.int64)
+    if reg.shape != (H, W):
+        raise InputError(f"regions have shape {reg.shape}, the stack {(H, W)}")
+    fits = {}
+    for n, depth in library.hypotheses():
+        fits[(n, depth)] = fit_stack(
+            stack, mm_per_row=mm_per_row, labels=reg, containers=reg, white=white, white_albedo=white_albedo,
+            table=_fit.forward_table(n=n), camera=camera, depth_mm=depth, wall_kind=wall_kind,
+        ).regions  # fmt: skip
+        if progress is not None:
+            progress(1)
+    class_ids = np.zeros((H, W), np.int64)
+    flags = np.zeros((H, W), np.uint8)
+    ids = library.class_ids
+    K = len(ids)
+    ll = np.full((H, W, K), np.nan)
+    d2_map = np.full((H, W, K), np.nan)
+    details = []
+    for region in sorted(int(v) for v in np.unique(reg) if v > 0):
+        inside = reg == region
+        rows = []
+        for e in library.entries:
+            h = (_fit.DEFAULT_N if e.n is None else float(e.n), e.depth_mm)
+            r = fits[h].get(region)
+            rows.append(_compare(e, r, p_unknown))
+        scores = [x["score"] for x in rows]
+        best = int(np.nanargmin(scores)) if np.isfinite(scores).any() else None
+        decision = 0
+        why = "no entry's fit measures mu_s'" if best is None else ""
+        if best is not None:
+            b = rows[best]
+            if b["d2"] > b["limit"]:
+                why = (
+                    f"none of these: the nearest, {library.entries[best].name}, is at d^2 = {b['d2']:.1f} > "
+                    f"{b['limit']:.1f} (p = {p_unknown:g})"
+                )
+            else:
+                decision = ids[best]
+                why = f"{library.entries[best].name}: d^2 = {b['d2']:.2f} (limit {b['limit']:.1f})"
+        class_ids[inside] = decision
+        if decision == 0:
+            flags[inside] |= UNKNOWN if best is not None else NOT_FITTED
+        ll[inside] = [-0.5 * x["score"] for x in rows]
+        d2_map[inside] = [x["d2"] for x in rows]
+        details.append(
+            {"region": region, "pixels": int(inside.sum()), "class_id": int(decision), "decision": why,
+             "entries": {e.name: {k: v for k, v in x.items() if k != "score"} for e, x in zip(library.entries, rows)}}
+        )  # fmt: skip
+    rec = Recognition(class_ids, ll, d2_map, flags, list(ids))
+    return rec, details
+
+
+def _compare(entry, r, p_unknown=DEFAULT_P_UNKNOWN) -> dict:
+    """An entry against a region's fit (under the entry's hypothesis): ``d^2``, its limit, the score."""
+    from scipy.stats import chi2
+
+    out = {"d2": math.inf, "limit": math.nan, "score": math.inf, "fit": None, "model_fits": None}
+    if r is None or r.get("log_estimate_per_mm") is None:
+        return out
+    q = r.get("fit_quality") or {}
+    out["fit"] = {k: r.get(k) for k in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")}
+    out["model_fits"] = q.get("model_fits")
+    out["flags"] = r.get("flags", [])
+    if q.get("model_fits") is False:  # the entry's model (its index, its depth) does not fit this container
+        return out
+    if r.get("mask", 0) & 2 and r.get("mu_s_prime_edge") in ("lower", "upper"):
+        # mu_s' at the forward model's edge is a censored measurement: "at most" (or "at least") the edge's value;
+        # an entry beyond the edge agrees with it, one inside it by its distance from the edge in its own sd
+        edge = float(r["log_estimate_per_mm"][0])
+        m = math.log(entry.mu_s_prime_per_mm)
+        beyond = m <= edge if r["mu_s_prime_edge"] == "lower" else m >= edge
+        d2 = 0.0 if beyond else ((m - edge) / entry.mu_s_prime_log_sd) ** 2
+        chi_data = (q.get("reduced_chi2") or 0.0) * (q.get("dof") or 0)
+        out.update(d2=d2, limit=float(chi2.isf(p_unknown, 1)), score=d2 + chi_data, parameters=1, censored=True)
+        return out
+    if r.get("mask", 0) & 2 or r.get("mu_s_prime_per_mm") is None:  # mu_s' not measured: not this entry
+        return out
+    x = np.array(r["log_estimate_per_mm"], float)
+    se = np.array(r["log_se"], float)
+    rho = float(r.get("log_correlation") or 0.0)
+    m = [math.log(entry.mu_s_prime_per_mm)]
+    S_e = [[entry.mu_s_prime_log_sd**2]]
+    use_a = entry.mu_a_per_mm is not None and r.get("mu_a_per_mm") is not None
+    if use_a:
+        m.append(math.log(entry.mu_a_per_mm))
+        c = entry.correlation * entry.mu_s_prime_log_sd * entry.mu_a_log_sd
+        S_e = [[entry.mu_s_prime_log_sd**2, c], [c, entry.mu_a_log_sd**2]]
+    k = len(m)
+    S_x = np.array([[se[0] ** 2, rho * se[0] * se[1]], [rho * se[0] * se[1], se[1] ** 2]])[:k, :k]
+    S = np.array(S_e) + S_x
+    dx = x[:k] - np.array(m)
+    d2 = float(dx @ np.linalg.solve(S, dx))
+    chi_data = (q.get("reduced_chi2") or 0.0) * (q.get("dof") or 0)
+    out.update(d2=d2, limit=float(chi2.isf(p_unknown, k)), score=d2 + chi_data, parameters=k)
+    return out

@@ -61,17 +61,30 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..camera import CameraModel
 from ..demux.problem import DemuxProblem
 from ..errors import InputError
+from ..goodness import (
+    DEFAULT_P_MISFIT,
+    FLAG_EDGE,
+    FLAG_MISFIT,
+    FLAG_NOT_FITTED,
+    FLAG_RANGE,
+    describe_flags,
+    fit_quality,
+)
 from ..stack import Stack
 from .fit import (
     _MAP_NAMES,
     _MU_A_BAD,
     _MU_S_BAD,
+    BOTTOM_ANGLE_DEG,
     MAX_RELATIVE_SE,
     MODEL_RELATIVE_SD,
     ForwardTable,
     TransportFit,
+    _bottom_row,
+    _check_wall_kind,
     _footprint,
     _grid_starts,
     _group_walls,
@@ -79,6 +92,7 @@ from .fit import (
     _log_bounds,
     _model_kernel,
     _num,
+    _out_of_range,
     _regions_and_walls,
     describe_reasons,
     forward_table,
@@ -93,6 +107,18 @@ STACK_MODEL_RELATIVE_SD = MODEL_RELATIVE_SD
 #: The forward model's correlated relative error: the kernel off by this much in each of a few smooth bumps
 #: over the offsets (table interpolation: 2-6 % against direct Monte Carlo, tests and tools/validate_stack_fit.py).
 STACK_MODEL_CORRELATED_SD = 0.03
+#: The walls' effect on the kernel (diffusion theory's method of images) is off by this share of itself: against
+#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect (issue 27;
+#: docs/user_guide/materials.md, "Container walls").
+WALL_EFFECT_SD = 0.2
+#: (and, both, their distances by a transport mean free path: ``_fit_region``'s ``effect_columns``)
+#: Diffusion theory's walls and bottom are trusted DIFFUSION_RANGE_MFP transport mean free paths (1 / mu_s') away
+#: and beyond (planeray.materials.fit): a region whose bottom, or whose median pixel's nearest wall, lies closer
+#: is flagged (FLAG_RANGE).  The soap's 30 mm layer (6 mean free paths) already showed the bottom's model 80 % off.
+#: A layer's bottom's effect (the slab's image series) is off by this share of itself: against planeray's Monte
+#: Carlo of the soap's 30 mm layer (6 transport mean free paths) it removes 3.8 % of the kernel where the Monte
+#: Carlo removes 2.1 % (issue 27): 80 % too much, and diffusion theory errs more in thinner layers.
+BOTTOM_EFFECT_SD = 1.0
 
 
 @dataclass(frozen=True)
@@ -265,16 +291,21 @@ def white_stack_scale(white: Stack, *, albedo=0.99, design: StackDesign | None =
     return np.where(out > 0, out, np.nan)
 
 
-def _region_data(imgs, ok, rows, cols):
+def _region_data(imgs, ok, rows, cols, variance=None):
     """Mean image values of a pixel set ``(N,)``, their standard errors and the pixels' rows per image.
 
-    The standard error is the within-row spread (pixels of one camera row share an illumination):
-    ``sqrt(sum_r n_r s_r^2) / n``, rows with a single pixel taking the pooled variance.
+    With ``variance`` (each pixel's noise variance under the camera's model, ``(N, H, W)``) the standard
+    error is that of the mean, ``sqrt(sum var) / n``; otherwise the within-row spread (pixels of one camera
+    row share an illumination): ``sqrt(sum_r n_r s_r^2) / n``, rows with a single pixel taking the pooled
+    variance.
     """
     v = imgs[:, rows, cols]  # (N, P)
     m = ok[:, rows, cols]
     n = m.sum(axis=1)
     y = np.where(n > 0, np.where(m, v, 0.0).sum(axis=1) / np.maximum(n, 1), np.nan)
+    if variance is not None:
+        var = np.where(m, variance[:, rows, cols], 0.0).sum(axis=1) / np.maximum(n, 1) ** 2
+        return y, np.sqrt(var), m
     urows, inv = np.unique(rows, return_inverse=True)
     R = urows.size
     N = v.shape[0]
@@ -329,32 +360,89 @@ def _fit_region(
     starts,
     Kg,
     basis,
+    wall_kind="clear",
+    jitter=None,
+    p_misfit=DEFAULT_P_MISFIT,
+    wall_effect_sd=0.0,
+    bottom_effect_sd=0.0,
 ):
     """One region's fit: ``dict`` of per-row estimates (log), standard errors, mask bits, scale, ambient, model.
 
-    The data's covariance is the images' standard errors (diagonal) plus the forward model's error:
-    ``model_relative_sd`` of the modelled laser light per image (independent) and a correlated part --
-    the kernel off by ``model_correlated_sd`` (relative) in each smooth bump of ``basis`` over the
-    offsets, independently, seen through the illumination matrix.  Residuals are whitened by it (held
-    at the current estimate during a least-squares pass; three passes).
+    The data's covariance is the images' standard errors (diagonal; the camera's noise model of the mean,
+    or the pixels' spread), the camera's row jitter (``jitter``: ``(A_g (N, N_img, U), weights (N,),
+    variance in rows^2)``: each camera row's band moved as a whole, ``(c A_g K')^2`` per row, the rows'
+    weights squared) plus the forward model's error: ``model_relative_sd`` of the modelled laser light per
+    image (independent), a correlated part -- the kernel off by ``model_correlated_sd`` (relative) in
+    each smooth bump of ``basis`` over the offsets, independently, seen through the illumination matrix --
+    and the walls' and the bottom's effects off by ``wall_effect_sd`` and ``bottom_effect_sd`` of themselves.
+    Residuals are whitened by it (held at the current estimate during a least-squares pass; three passes).
+    The chi-square of the whitened residuals at ``images - 4`` (shape only; 3 calibrated) degrees of
+    freedom is the fit's :class:`planeray.goodness.FitQuality`.
     """
-    out = dict(mask=0, x=None, se_log=np.full(2, np.nan), c=np.nan, b=np.nan, chi2=np.nan, model=None, kernel=None)
+    out = dict(
+        mask=0, x=None, se_log=np.full(2, np.nan), c=np.nan, b=np.nan, chi2=np.nan, dof=0, model=None, kernel=None,
+        quality=None,
+    )  # fmt: skip
     ok = np.isfinite(y) & np.isfinite(se)
     if ok.sum() < MIN_IMAGES:
         out["mask"] |= 1
         return out
     Y, A, I = y[ok], Abar[ok], Iw[ok]
     se0 = np.maximum(se[ok], 1e-6 * max(float(np.abs(Y).max()), 1e-30))
+    if jitter is not None:
+        A_g, w_g, var_rows = jitter
+        A_g = A_g[:, ok]
 
     def kernel(x):
-        return _model_kernel(table, x[0], x[1], offsets, foot, walls)
+        return _model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind)
 
-    def whitener(m, c, k):
+    # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
+    # :data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`), a correlated error of the model along their shapes
+    parts = []
+    foot_rows = float(np.ptp(foot[0]) + 1) if foot[0].size > 1 else 1.0  # a camera row's extent, projector rows
+    if walls is not None and len(walls):
+        w = np.asarray(walls, np.float64)
+        is_bottom = w[:, 1] == BOTTOM_ANGLE_DEG
+        parts = [(w[~is_bottom], wall_effect_sd), (w[is_bottom], bottom_effect_sd)]
+        parts = [(ww, sd) for ww, sd in parts if len(ww) and sd > 0]
+
+    def effect_columns(x, c):
+        """``(N, 2 P)``: the images' change when each part's effect (walls, bottom) is off by its sd, and when its
+        distances are off by a transport mean free path (diffusion theory's boundaries are uncertain by about
+        one, Haskell et al. 1994) -- for walls also by the pixel's half (their positions come from the labels)."""
+        if not parts or x is None:
+            return None
+        free = _model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
+        mfp_rows = 1.0 / math.exp(x[0])  # 1 / mu_s' in rows (x[0] = log of the per-row mu_s')
+        cols = []
+        for ww, sd in parts:
+            cols.append(sd * c * (A @ (_model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free)))
+            bottom = bool(np.all(ww[:, 1] == BOTTOM_ANGLE_DEG))
+            shift = mfp_rows if bottom else math.hypot(mfp_rows, 0.5 * foot_rows)
+            hi, lo = ww.copy(), ww.copy()
+            hi[:, 0] += shift
+            lo[:, 0] = np.maximum(lo[:, 0] - shift, 0.0)
+            k_hi = _model_kernel(table, x[0], x[1], offsets, foot, hi, wall_kind)
+            k_lo = _model_kernel(table, x[0], x[1], offsets, foot, lo, wall_kind)
+            cols.append(0.5 * c * (A @ (k_hi - k_lo)))
+        return np.stack(cols, axis=1)
+
+    def jitter_var(c, k):
+        """Variance of each image of the mean from the row jitter: ``sum_g w_g (c A_g K')^2 var_rows``."""
+        if jitter is None:
+            return 0.0
+        dk = np.gradient(np.concatenate([[0.0], k, [0.0]]))[1:-1]
+        return var_rows * (w_g[:, None] * (c * (A_g @ dk)) ** 2).sum(axis=0)
+
+    def whitener(m, c, k, x=None):
         """Inverse Cholesky factor of the covariance at modelled laser images ``c m`` and kernel ``c k``."""
-        cov = np.diag(se0**2 + (model_relative_sd * c * m) ** 2)
+        cov = np.diag(se0**2 + (model_relative_sd * c * m) ** 2 + (jitter_var(c, k) if k is not None else 0.0))
         if model_correlated_sd > 0 and k is not None:
             B = A @ (c * k[:, None] * basis)  # (N, J): the images' change per bump of relative kernel error
             cov = cov + model_correlated_sd**2 * (B @ B.T)
+        E = effect_columns(x, c)
+        if E is not None:
+            cov = cov + E @ E.T
         return np.linalg.inv(np.linalg.cholesky(cov))
 
     def linear(m, L):
@@ -388,7 +476,7 @@ def _fit_region(
             k = kernel(x0)
             m = A @ k
             c, _, _ = linear(m, L)
-            L = whitener(m, abs(c), k)
+            L = whitener(m, abs(c), k, x0)
         res = least_squares(resid, x0, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
     except (ValueError, np.linalg.LinAlgError):
         out["mask"] |= 64
@@ -411,10 +499,16 @@ def _fit_region(
     cols.append(L @ I)
     J = np.stack(cols, axis=1)
     n_dof = max(int(ok.sum()) - J.shape[1], 1)
-    chi2 = float(r @ r) / n_dof
-    cov = np.linalg.pinv(J.T @ J) * max(chi2, 1.0)
+    quality = fit_quality(float(r @ r), n_dof, p_misfit=p_misfit)
+    chi2 = quality.reduced_chi2
+    cov = np.linalg.pinv(J.T @ J) * quality.inflation**2
     se_log = np.sqrt(np.maximum(np.diag(cov)[:2], 0.0))
-    out.update(x=x, se_log=se_log, c=c, b=b, chi2=chi2, model=c * (Abar @ k) + b * Iw, kernel=c * k)
+    corr = float(cov[0, 1] / (se_log[0] * se_log[1])) if se_log[0] > 0 and se_log[1] > 0 else 0.0
+    out.update(
+        log_correlation=corr,
+        x=x, se_log=se_log, c=c, b=b, chi2=chi2, dof=n_dof, quality=quality, model=c * (Abar @ k) + b * Iw,
+        kernel=c * k,
+    )  # fmt: skip
     edge_tol = 0.02
     if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:
         out["mask"] |= 2
@@ -445,6 +539,12 @@ def fit_stack(
     max_relative_se=MAX_RELATIVE_SE,
     model_relative_sd=STACK_MODEL_RELATIVE_SD,
     model_correlated_sd=STACK_MODEL_CORRELATED_SD,
+    camera: CameraModel | None = None,
+    depth_mm=None,
+    wall_kind: str = "clear",
+    p_misfit=DEFAULT_P_MISFIT,
+    wall_effect_sd=WALL_EFFECT_SD,
+    bottom_effect_sd=BOTTOM_EFFECT_SD,
     progress=None,
 ) -> TransportFit:
     """Fit ``mu_s'`` and ``mu_a`` (1/mm) of each region from a stack's images directly (see the module).
@@ -476,15 +576,30 @@ def fit_stack(
         The forward model's relative error: independent per image (of its modelled laser light), and
         correlated -- the kernel off by this much in each of a few smooth bumps over the offsets
         (:data:`STACK_MODEL_CORRELATED_SD`; 0: none).
+    camera : CameraModel, optional
+        The camera's noise model (the stack's record): the images' noise is its shot, read and
+        quantization noise of the mean, and its row jitter (each camera row's band moved as a whole).
+        None: the pixels' spread within each camera row (no row jitter).
+    depth_mm : float or dict, optional
+        Depth (mm) of a layer whose bottom loses the light (one value, or ``{region: depth_mm}``; the
+        slab's image series, :func:`planeray.materials.fit.line_kernel`); default semi-infinite media.
+    wall_kind : {"clear", "black"}
+        The containers' walls (:data:`planeray.materials.fit.WALL_KINDS`).
+    p_misfit : float
+        Chi-square probability below which a fit is flagged "model does not fit" (:mod:`planeray.goodness`).
+    wall_effect_sd, bottom_effect_sd : float
+        The model's error in the walls' and the bottom's effects, shares of them (:data:`WALL_EFFECT_SD`,
+        :data:`BOTTOM_EFFECT_SD`; 0: taken as exact): in the data's covariance along their shapes.
     progress : callable, optional
         Called with the number of fits just done.
 
     Returns
     -------
     TransportFit
-        ``regions`` per label (estimates, standard errors, reasons, ``scale``, ``ambient``,
-        chi-square); ``profiles[region]`` = (mean images, their standard errors, fitted images)
-        over ``offsets_rows`` = the used images' indices; ``maps``.
+        ``regions`` per label (estimates, standard errors, reasons, ``scale``, ``ambient``, chi-square,
+        ``fit_quality``, ``flags``); ``profiles[region]`` = (mean images, their standard errors, fitted
+        images) over ``offsets_rows`` = the used images' indices; ``maps`` (with the flag layer ``flags``:
+        bits of :data:`planeray.goodness.FLAGS`, 255 outside every region).
     """
     if not isinstance(stack, Stack):
         raise InputError("fit_stack needs a Stack")
@@ -492,9 +607,11 @@ def fit_stack(
     if not h > 0:
         raise InputError(f"mm_per_row must be positive, got {mm_per_row!r}")
     table = table or forward_table()
+    _check_wall_kind(wall_kind)
     design = stack_design(stack)
     H, W = stack.shape
     imgs, ok = _images(stack, design)
+    variance = None if camera is None else camera.pixel_variance(imgs)
     calibrated = white is not None
     if calibrated:
         if isinstance(white, Stack):
@@ -509,6 +626,8 @@ def fit_stack(
                 raise InputError(f"white scale has shape {scale.shape}, the stack {(H, W)}")
         good = np.isfinite(scale) & (scale > 0)
         imgs = imgs / np.where(good, scale, 1.0)[None]
+        if variance is not None:
+            variance = variance / np.where(good, scale, 1.0)[None] ** 2
         ok &= good[None]
     lab, dist = _regions_and_walls(labels, containers, (H, W), design.rows_per_camera_row, "stack")
     b = None if block_px is None else int(block_px)
@@ -521,17 +640,31 @@ def fit_stack(
     kw = dict(
         table=table, calibrated=calibrated, h=h, max_relative_se=max_relative_se,
         model_relative_sd=model_relative_sd, model_correlated_sd=model_correlated_sd, lo=lo, hi=hi,
-        starts=starts, Kg=Kg, basis=_model_error_basis(offsets),
+        starts=starts, Kg=Kg, basis=_model_error_basis(offsets), wall_kind=wall_kind, p_misfit=p_misfit,
+        wall_effect_sd=wall_effect_sd, bottom_effect_sd=bottom_effect_sd,
     )  # fmt: skip
+    var_rows = None if camera is None else camera.row_jitter_rows(stack.lines_per_second) ** 2
 
-    def fit_pixels(rows, cols):
-        y, se, m = _region_data(imgs, ok, rows, cols)
+    def bottom_of(region):
+        return _bottom_row(depth_mm, region, h)
+
+    def fit_pixels(rows, cols, region):
+        y, se, m = _region_data(imgs, ok, rows, cols, variance)
         # the mean illumination of the pixels that count in each image (saturated ones drop out)
         Abar = np.empty((y.size, offsets.size))
         for k in range(y.size):
             Abar[k] = design.mean_matrix(rows[m[k]])[k] if m[k].any() else 0.0
         walls = None if dist is None else _group_walls(dist[rows, cols])
-        r = _fit_region(y, se, Abar, design.exposure_rows, offsets, foot, walls, **kw)
+        bottom = bottom_of(region)
+        if bottom is not None:
+            walls = bottom if walls is None else np.concatenate([walls, bottom])
+        jitter = None
+        if var_rows is not None and var_rows > 0:
+            # each camera row's pixels share its jitter: the mean's variance weighs a row by (its pixels / n)^2
+            n_r = np.bincount(rows, minlength=H).astype(np.float64) / rows.size
+            w_g = np.bincount(design.row_group, weights=n_r**2, minlength=design.A.shape[0])
+            jitter = (design.A, w_g, var_rows)
+        r = _fit_region(y, se, Abar, design.exposure_rows, offsets, foot, walls, jitter=jitter, **kw)
         return r, y, se
 
     def estimates(r):
@@ -542,19 +675,35 @@ def fit_stack(
         a = np.nan if bad_a else math.exp(x[1]) / h
         return s, a, s * se_log[0], a * se_log[1]
 
+    def flags_of(r):
+        if r["quality"] is None:
+            return FLAG_NOT_FITTED
+        f = 0 if r["quality"].fits else FLAG_MISFIT
+        f |= FLAG_RANGE if r.get("out_of_range") else 0
+        return f | (FLAG_EDGE if r["mask"] & (2 | 4) else 0)
+
+    def out_of_range(r, rows, cols, region):
+        """Walls or a bottom closer than the range of diffusion theory at the fitted mu_s' (fit._out_of_range)."""
+        return r["x"] is not None and _out_of_range(
+            r["x"][0], bottom_of(region), None if dist is None else dist[rows, cols]
+        )
+
     maps = {k: np.full((H, W), np.nan, np.float32) for k in _MAP_NAMES}
     maps["mask"] = np.full((H, W), 255, np.uint8)
+    maps["flags"] = np.full((H, W), 255, np.uint8)
     regions, profiles = {}, {}
     for region in sorted(int(v) for v in np.unique(lab) if v != 0):
         inside = lab == region
         rows, cols = np.nonzero(inside)
-        r, y, se = fit_pixels(rows, cols)
+        r, y, se = fit_pixels(rows, cols, region)
+        r["out_of_range"] = out_of_range(r, rows, cols, region)
         s, a, se_s, se_a = estimates(r)
-        blocks_s, blocks_a = [], []
+        blocks_s, blocks_a, blocks_flagged = [], [], []
         if b is None:
             for name, val in zip(_MAP_NAMES, (s, a, se_s, se_a)):
                 maps[name][inside] = val
             maps["mask"][inside] = r["mask"]
+            maps["flags"][inside] = flags_of(r)
         else:
             for r0 in range(0, H, b):
                 for c0 in range(0, W, b):
@@ -562,18 +711,22 @@ def fit_stack(
                     sub[r0 : r0 + b, c0 : c0 + b] = inside[r0 : r0 + b, c0 : c0 + b]
                     if not sub.any():
                         continue
-                    rb = fit_pixels(*np.nonzero(sub))[0]
+                    rb = fit_pixels(*np.nonzero(sub), region)[0]
+                    rb["out_of_range"] = out_of_range(rb, *np.nonzero(sub), region)
                     vals = estimates(rb)
                     for name, val in zip(_MAP_NAMES, vals):
                         maps[name][sub] = val
                     maps["mask"][sub] = rb["mask"]
+                    maps["flags"][sub] = flags_of(rb)
                     blocks_s.append(vals[0])
                     blocks_a.append(vals[1])
+                    blocks_flagged.append(bool(flags_of(rb) & (FLAG_MISFIT | FLAG_EDGE | FLAG_RANGE)))
                     if progress is not None:
                         progress(1)
         if progress is not None:
             progress(1)
         x = r["x"]
+        q = r["quality"]
         regions[region] = {
             "pixels": int(inside.sum()),
             "mu_s_prime_per_mm": _num(s),
@@ -583,17 +736,31 @@ def fit_stack(
             "not_identifiable": describe_reasons(int(r["mask"])),
             "mask": int(r["mask"]),
             "chi2_per_dof": _num(r["chi2"]),
+            "fit_quality": None if q is None else q.to_json(),
+            "model_fits": None if q is None else q.fits,
+            "flags": describe_flags(flags_of(r)),
+            "flag_bits": int(flags_of(r)),
+            "noise_model": "camera" if camera is not None else "spread of the pixels within each camera row",
+            "depth_mm": None if bottom_of(region) is None else float(bottom_of(region)[0, 0] * h),
             "scale": _num(r["c"]),
             "ambient_per_row_exposure": _num(r["b"]),
             "log_estimate_per_mm": None if x is None else [float(v - math.log(h)) for v in x],
             "log_se": None if x is None else [float(v) for v in r["se_log"]],
+            "log_correlation": r.get("log_correlation"),
+            "mu_s_prime_edge": _edge_side(x, lo, hi) if x is not None and r["mask"] & 2 else None,
             "blocks": len(blocks_s),
+            "blocks_flagged": float(np.mean(blocks_flagged)) if blocks_flagged else None,
             "blocks_median_mu_s_prime_per_mm": _median(blocks_s),
             "blocks_median_mu_a_per_mm": _median(blocks_a),
         }
         model = r["model"] if r["model"] is not None else np.full(y.shape, np.nan)
         profiles[region] = (y, se, model)
     return TransportFit(maps, regions, profiles, design.image_index, calibrated, source="stack")
+
+
+def _edge_side(x, lo, hi) -> str:
+    """Which edge of the forward model a ``mu_s'`` flagged "at the edge" sits on."""
+    return "lower" if x[0] - lo[0] < hi[0] - x[0] else "upper"
 
 
 def _median(v):

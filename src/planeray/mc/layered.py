@@ -82,6 +82,8 @@ __all__ = [
     "mc_layered_vein_brute",
     "mc_vein_kernel_brute",
     "mc_vein_table",
+    "vein_table_stored",
+    "vein_table_seconds",
 ]
 
 #: Bumped whenever the layered runs' results change (part of every cache key).
@@ -854,6 +856,53 @@ def _rho_grid(rho_rows):
     return rho
 
 
+def _vein_table_key(layers, blood, depths_mm, diameters_mm, angles_deg, rho_rows, offsets_rows, mm, n_photons, seed):
+    """``(params, rho grid, offsets, file name)`` of a vein table: its cache entry is named by every input."""
+    rho = _rho_grid(np.arange(-48, 49, 2) if rho_rows is None else rho_rows)
+    off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
+    params = {
+        "kind": "skin-vein-table",
+        "version": LAYERED_VERSION,
+        "layers": [_medium_json(as_medium(m)) for m in layers],
+        "blood": _medium_json(as_medium(blood)),
+        "depths_mm": np.asarray(depths_mm, dtype=np.float64).tolist(),
+        "diameters_mm": np.asarray(diameters_mm, dtype=np.float64).tolist(),
+        "angles_deg": np.asarray(angles_deg, dtype=np.float64).tolist(),
+        "rho_rows": rho.tolist(),
+        "mm_per_row": float(mm),
+        "n_photons": int(n_photons),
+        "seed": int(seed),
+    }
+    return params, rho, off, f"skin-{cache_key(params, off)}.npz"
+
+
+def vein_table_stored(layers, blood, *, mm_per_row=0.3, n_photons=400_000, seed=0) -> bool:
+    """Whether :func:`mc_vein_table` of these layers (default grids) is shipped or cached: no tracing needed."""
+    name = _vein_table_key(
+        layers, blood, TABLE_DEPTHS_MM, TABLE_DIAMETERS_MM, TABLE_ANGLES_DEG, None, None, mm_per_row, n_photons, seed
+    )[3]
+    return (TABLES_DIR / name).exists() or (cache_dir() / name).exists()
+
+
+def vein_table_seconds(layers, blood, *, mm_per_row=0.3, n_photons=400_000, fraction=0.02) -> float:
+    """Estimated seconds to trace :func:`mc_vein_table` of these layers on this machine, from a pilot run.
+
+    A run of a few photons (after one that compiles the kernels) measures the fixed cost; a run of
+    ``fraction`` of the photons (not cached) the cost per photon, scaled to ``n_photons``.
+    """
+    import time
+
+    kw = dict(mm_per_row=mm_per_row, seed=12345, cache=False)
+    mc_vein_table(layers, blood, n_photons=64, **kw)
+    t0 = time.perf_counter()
+    mc_vein_table(layers, blood, n_photons=64, **kw)
+    fixed = time.perf_counter() - t0
+    photons = max(int(n_photons * fraction), 2_000)
+    t0 = time.perf_counter()
+    mc_vein_table(layers, blood, n_photons=photons, **kw)
+    return fixed + max(time.perf_counter() - t0 - fixed, 0.0) * n_photons / photons
+
+
 def mc_vein_table(
     layers,
     blood: Medium,
@@ -886,28 +935,15 @@ def mc_vein_table(
     _, zb, _, mua, _, _ = _layer_arrays(layers)
     blood = as_medium(blood)
     mm = float(mm_per_row)
-    rho = _rho_grid(np.arange(-48, 49, 2) if rho_rows is None else rho_rows)
-    off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
+    params, rho, off, name = _vein_table_key(
+        layers, blood, depths_mm, diameters_mm, angles_deg, rho_rows, offsets_rows, mm, n_photons, seed
+    )
     depths = np.asarray(depths_mm, dtype=np.float64)
     diams = np.asarray(diameters_mm, dtype=np.float64)
     angles = np.asarray(angles_deg, dtype=np.float64)
     combos = [(d, D) for d in depths for D in diams]
     for d, D in combos:
         _check_vein(layers, d, D)
-    params = {
-        "kind": "skin-vein-table",
-        "version": LAYERED_VERSION,
-        "layers": [_medium_json(as_medium(m)) for m in layers],
-        "blood": _medium_json(blood),
-        "depths_mm": depths.tolist(),
-        "diameters_mm": diams.tolist(),
-        "angles_deg": angles.tolist(),
-        "rho_rows": rho.tolist(),
-        "mm_per_row": mm,
-        "n_photons": int(n_photons),
-        "seed": int(seed),
-    }
-    name = f"skin-{cache_key(params, off)}.npz"
     path = cache_dir() / name
     if cache:
         for hit in (TABLES_DIR / name, path):

@@ -116,6 +116,7 @@ __all__ = [
     "build",
     "skin_veins",
     "skin_tables",
+    "skin_tables_to_trace",
     "random_veins",
     "SkinVein",
     "SKIN_BAND_ROWS",
@@ -147,6 +148,7 @@ def skin_tables(
     fat_mm=8.0,
     mm_per_row=DEFAULT_MM_PER_ROW,
     progress=None,
+    skin=None,
 ):
     """The vein perturbation table and the background kernel of a skin.
 
@@ -155,8 +157,16 @@ def skin_tables(
     thicknesses); for a tone in between, the log of the kernel ratio is interpolated
     linearly in the melanosome fraction (clamped outside), and the background line kernel
     ``K0`` and total diffuse reflectance are traced for the tone itself (shipped for the
-    named tones).
+    named tones).  ``skin`` (:class:`planeray.optical_data_skin.SkinLayers`, e.g. a user's
+    :func:`~planeray.optical_data_skin.skin_model`): the table of exactly those layers and
+    blood (traced once and cached; ``wavelength_nm``, ``tone`` and the thicknesses are then
+    not used).
     """
+    if skin is not None:
+        table = mc_vein_table(
+            skin.layers, skin.blood, mm_per_row=mm_per_row, n_photons=TABLE_PHOTONS, progress=progress
+        )
+        return table, table.kernel, table.total_reflectance
     kw = dict(epidermis_mm=epidermis_mm, dermis_mm=dermis_mm, fat_mm=fat_mm)
 
     def table_of(name):
@@ -185,6 +195,23 @@ def skin_tables(
         params={**lo.params, "interpolated_melanin_fraction": m, "between": list(TABLE_TONES)},
     )
     return table, prof.values, prof.total_reflectance
+
+
+def skin_tables_to_trace(wavelength_nm=638, tone="fair", *, mm_per_row=DEFAULT_MM_PER_ROW, skin=None, **thicknesses):
+    """The layer stacks (:class:`~planeray.optical_data_skin.SkinLayers`) whose vein tables :func:`skin_tables`
+    would trace with these arguments: neither shipped nor cached (empty: it reads them)."""
+    from ..mc.layered import vein_table_stored
+
+    if skin is not None:
+        stacks = [skin]
+    else:
+        m = tone_fraction(tone)
+        named = [t for t in TABLE_TONES if math.isclose(m, tone_fraction(t))]
+        stacks = [skin_layers(wavelength_nm, t, **thicknesses) for t in (named or TABLE_TONES)]
+    return [
+        s for s in stacks
+        if not vein_table_stored(s.layers, s.blood, mm_per_row=mm_per_row, n_photons=TABLE_PHOTONS)
+    ]  # fmt: skip
 
 
 # ---------------------------------------------------------------- veins

@@ -376,15 +376,11 @@ def epipolar_record(geometry, *, mm_per_row: float = DEFAULT_MM_PER_ROW, source:
 
 
 def recorded_mm_per_row(metadata) -> float | None:
-    """``mm_per_row`` a stack's metadata or a transport store's attributes record (``scene``), or None."""
-    if not isinstance(metadata, dict):
-        return None
-    for where in (metadata.get("scene"), metadata):
-        if isinstance(where, dict) and isinstance(where.get("mm_per_row"), (int, float)):
-            value = float(where["mm_per_row"])
-            if np.isfinite(value) and value > 0:
-                return value
-    return None
+    """``mm_per_row`` a stack's metadata or a transport store's attributes record, or None
+    (:func:`planeray.stack.recorded_mm_per_row`: the import folder's ``acquisition.json`` first)."""
+    from ..stack import recorded_mm_per_row as _recorded
+
+    return _recorded(metadata)[0]
 
 
 def pixel_mm(geometry, mm_per_row: float = DEFAULT_MM_PER_ROW) -> float:
