@@ -35,9 +35,25 @@ def env(tmp_path_factory):
     simulate_capture(root / "quick", size=SIZE, seed=1, sweep="quick")
     model = train_model([cap.stack], [cap.labels], param_grid=GRID, ignore_classes=(6,), max_per_class=60)
     good = model.save(root / "model.zip")
-    paths = {"c": root / "cap", "q": root / "quick", "m": good}
+    paths = {"c": root / "cap", "q": root / "quick", "m": good, "v1": _version_1_library(root / "v1.json")}
     paths.update(bad_models(good, root))
     return paths
+
+
+def _version_1_library(path):
+    """A version-1 media library (fits bound to their capture's resolution: 5.625 rows per camera row)."""
+    entry = {
+        "name": "fat-free milk", "class_id": 1, "mu_s_prime_per_mm": 0.8, "mu_s_prime_log_sd": 0.2,
+        "mu_a_per_mm": 0.009, "mu_a_log_sd": 0.86, "correlation": -0.6, "beyond_table": {"above": 0.0, "below": 0.0},
+        "blocks": 1764, "source": "written by the test",
+    }  # fmt: skip
+    conditions = {"mm_per_row": 0.3, "n": 1.33, "calibrated": False, "block_px": 2, "rows_per_camera_row": 5.625}
+    record = {
+        "planeray_mark": "planeray:media library:0.1.0", "format": "planeray-media-library", "version": 1,
+        "conditions": conditions, "media": [entry],
+    }  # fmt: skip
+    path.write_text(json.dumps(record))
+    return path
 
 
 def _members(path):
@@ -408,8 +424,8 @@ DEGENERATE = [
     # a number that is no number
     (("materials", "library-add", "{c}/stack.zarr", "--labels", "{c}/labels.png", "--class-name", "1=a", "--mm-per-row", "nan", "--out", "{d}/l.json"), "--mm-per-row", ("finite",)),
     (("materials", "recognize", "{c}/stack.zarr", "--mm-per-row", "-1", "--out", "{d}/rec"), "--mm-per-row", ("> 0",)),
-    # an entry from a capture of another resolution than the library's (the shipped one: 128-row captures)
-    (("materials", "library-add", "{c}/stack.zarr", "--labels", "{c}/labels.png", "--class-name", "3=mine", "--out", "{d}/l.json"), "--library", ("5.625 projector rows per camera row", "has 18")),
+    # an entry from a capture of another resolution than a version-1 library's (fits bound to 128-row captures)
+    (("materials", "library-add", "{c}/stack.zarr", "--labels", "{c}/labels.png", "--class-name", "3=mine", "--library", "{v1}", "--out", "{d}/l.json"), "--library", ("5.625 projector rows per camera row", "has 18")),
 ]  # fmt: skip
 
 

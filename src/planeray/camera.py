@@ -214,7 +214,7 @@ class CameraModel:
         deviation of 0.3 % of full scale.
 
         >>> round(float(np.sqrt(CameraModel().image_variance(1.0, 600.0))), 5)
-        0.00274
+        0.00275
         """
         e = self.laser_electrons * np.asarray(signal, dtype=np.float64)
         if ambient_albedo is not None and self.ambient_e_per_us > 0:

@@ -142,7 +142,7 @@ class Stack:
         >>> st = Stack(np.zeros((len(q), 4, 4), np.float32), q.delay_us, q.exposure_us, 54_000.0)
         >>> sub = Sweep(q.delay_us[:6], q.exposure_us[:6], q.excluded[:6])
         >>> int((~st.restricted_to(sub).excluded).sum())
-        6
+        4
         """
         index = np.full(len(sweep), -1)
         for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):

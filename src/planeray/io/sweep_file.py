@@ -166,7 +166,7 @@ def write_sweep(sweep: Sweep, path, *, overwrite: bool = False) -> Path:
     >>> p = write_sweep(quick_sweep(), pathlib.Path(tempfile.mkdtemp()) / "quick.json")
     >>> back = read_sweep(p)
     >>> len(back), back.name, int(back.excluded.sum())
-    (27, 'quick', 2)
+    (27, 'quick', 4)
     """
     from .atomic import atomic_file, check_replaceable
     from .marks import MARK_KEY, mark_text
