@@ -276,8 +276,8 @@ def predict(
     overwrite: Annotated[bool, typer.Option(help="Replace an existing segmentation planeray wrote.")] = False,
 ):
     """Segment a capture pixel by pixel with a trained model (refused if the sweep differs)."""
-    from ..experiments._report import jsonable
     from ..experiments.materials import score
+    from ..io import jsonable
     from ..materials import load_model
     from ..materials.labels import LABEL_SUFFIXES, write_label_image
     from ..materials.model import check_unclassified_below
@@ -599,10 +599,9 @@ def fit_cmd(
 
     import numpy as np
 
-    from ..experiments._report import jsonable
     from ..figures.materials import fit_figure
     from ..goodness import DEFAULT_P_MISFIT, FLAGS
-    from ..io import atomic_directory
+    from ..io import atomic_directory, jsonable
     from ..materials import fit as mfit
 
     if block is not None and not 1 <= block <= 64:
@@ -960,9 +959,8 @@ def recognize_cmd(
 
     import numpy as np
 
-    from ..experiments._report import jsonable
     from ..figures.materials import recognition_by_distance_figure
-    from ..io import atomic_directory
+    from ..io import atomic_directory, jsonable
     from ..io.atomic import planeray_output_kind
     from ..materials.labels import write_label_image
     from ..materials.library import FLAGS

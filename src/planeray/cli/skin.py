@@ -463,9 +463,8 @@ def veins(
     Every image is named for its band (``td562.5us_te600us``, ``td0us_te600us``, ``epipolar``);
     with a vein mask (or the ground truth beside a simulated stack), CNR per vein.
     """
-    from ..experiments._report import jsonable
     from ..figures.skin import headline_figure
-    from ..io import atomic_directory
+    from ..io import atomic_directory, jsonable
     from ..io.atomic import MARKER
     from ..skin.imaging import pixel_mm, stack_images, transport_images
     from ..timing import PAPER_LINES_PER_SECOND
@@ -588,9 +587,8 @@ def enhance(
 ):
     """Contrast enhancement from the stack's delay images (Eq. 7, Fig. 14), never from images the stack excludes."""
     from .._validate import check_integer
-    from ..experiments._report import jsonable
     from ..figures.skin import delay_map_figure
-    from ..io import atomic_directory
+    from ..io import atomic_directory, jsonable
     from ..io.atomic import MARKER
     from ..skin.enhance import enhance_contrast, enhance_steps
     from ..skin.imaging import band_name, delay_sweep_images, delay_sweep_selection, pixel_mm
@@ -806,9 +804,8 @@ def depth(
     tables' edge, is flagged on the console, in planeray.json and in the flag layer flags.tif.
     """
     from ..errors import InputError
-    from ..experiments._report import jsonable
     from ..figures.skin import depth_fit_figure
-    from ..io import atomic_directory
+    from ..io import atomic_directory, jsonable
     from ..io.atomic import MARKER
     from ..skin.depth import fit_veins
     from ..skin.model import parse_layer_optics, stated_skin_model, tables_to_trace, trace_seconds

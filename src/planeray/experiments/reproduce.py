@@ -32,10 +32,9 @@ from pathlib import Path
 
 from .._validate import check_integer
 from ..errors import InputError
-from ..io import atomic_directory, atomic_file
+from ..io import atomic_directory, atomic_file, jsonable
 from ..io.atomic import MARKER, check_replaceable, planeray_output_kind, storage_error
 from ..io.lock import writes_output
-from ._report import jsonable
 
 __all__ = [
     "FORMAT",
