@@ -193,3 +193,20 @@ def test_the_checker_sees_imports_inside_functions(module, dep, tmp_path):
     src = tmp_path / "m.py"
     src.write_text(f"def f():\n    from {dep} import x\n")
     assert _resolve(dep) in _imports(module, src)
+
+
+#: Units that analyse captures: they may not import the scenes (the ground truth a simulation knows and a
+#: capture never has). What they compare against is passed in (``device.scene``, ``Scene.effect_masks``)
+#: or the comparison lives above them (``experiments``).
+GROUND_TRUTH_FREE = {"demux", "synthesis", "profiles", "classify", "materials", "baselines"}
+
+
+def test_analysis_does_not_reach_for_the_scenes_ground_truth(graph):
+    bad = sorted(
+        f"{mod} -> {dep}"
+        for mod, deps in graph.items()
+        if _unit(mod) in GROUND_TRUTH_FREE
+        for dep in deps
+        if _unit(dep) == "scenes"
+    )
+    assert not bad, "analysis importing the scenes (pass the ground truth in):\n" + "\n".join(bad)

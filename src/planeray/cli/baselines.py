@@ -59,7 +59,7 @@ def _sim_device(
     noise: bool,
     lines_per_second: float = PAPER_LINES_PER_SECOND,
 ):
-    from ..baselines import simulated_device
+    from ..devices import simulated_device
 
     return simulated_device(
         scene,

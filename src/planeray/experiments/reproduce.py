@@ -141,7 +141,8 @@ def _rel(folder: Path, path) -> str:
 
 
 def _fig4(folder: Path, s: dict, advance) -> dict:
-    from ..baselines import compare_emulation, simulated_device
+    from ..baselines import compare_emulation
+    from ..devices import simulated_device
     from ..figures.baselines import emulation_figure
 
     n = s["size"]
