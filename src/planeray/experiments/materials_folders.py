@@ -1,0 +1,860 @@
+"""The documented output folders of ``planeray materials fit``, ``recognize`` and ``library-add``, as functions.
+
+Each function does one command's whole work -- checks before any work, reading the capture,
+fitting, writing the folder (or library file) atomically -- so a notebook produces the same
+files, bytes and ``planeray.json`` as the command line:
+
+* :func:`fit_materials`: maps of mu_s' and mu_a with standard errors, the identifiability mask,
+  the flag layer, the figure and ``planeray.json`` (``planeray materials fit``);
+* :func:`recognize_materials`: the segmentation, the flag layer, the figure and
+  ``planeray.json`` (``planeray materials recognize``);
+* :func:`add_to_library`: a media library with the labelled regions of a capture added
+  (``planeray materials library-add``).
+
+The capture's settings (row size, refractive index, depth, white reference, camera) are one
+:class:`~planeray.materials.settings.CaptureSettings`.  Options are keyword-only; ``progress``
+and ``note`` are as in :mod:`planeray.experiments._workflow`.
+"""
+
+from __future__ import annotations
+
+import json
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, parameter_name
+from ..io import atomic_directory, jsonable
+from ..io.atomic import planeray_output_kind, same_place
+from ..io.lock import writes_output
+from ..materials.settings import CaptureSettings
+from ._workflow import Stages, check_folder_output
+
+__all__ = [
+    "fit_materials",
+    "recognize_materials",
+    "add_to_library",
+    "check_fit_options",
+    "check_recognition_options",
+    "check_library_add",
+    "read_labels",
+    "write_map_tiff",
+    "wall_distance_from_labels",
+    "MAP_UNITS",
+]
+
+#: A capture given as its own white reference would "calibrate" it to an albedo of one.
+_WHITE_IS_CAPTURE = (
+    "{option} {white} is the capture itself: a white reference is a separate capture of a white "
+    "Lambertian target, with the same sweep and camera"
+)
+
+#: The quantity and unit each map's TIFF records in its description.
+MAP_UNITS = {
+    "mu_s_prime_per_mm": ("reduced scattering coefficient mu_s'", "1/mm"),
+    "mu_a_per_mm": ("absorption coefficient mu_a", "1/mm"),
+    "mu_s_prime_se_per_mm": ("standard error of mu_s'", "1/mm"),
+    "mu_a_se_per_mm": ("standard error of mu_a", "1/mm"),
+    "mask": ("identifiability mask: bits of the reasons in planeray.json (0: both measured)", "bits"),
+    "flags": ("flag layer: bits of flag_bits in planeray.json (0: the model fits, nothing at an edge)", "bits"),
+    "recognition_flags": ("recognition flags: bits of flag_bits in planeray.json (8: none of these)", "bits"),
+}
+
+
+def write_map_tiff(path: Path, image, key: str) -> None:
+    """A float32 (mask, flags: uint8) TIFF with planeray's mark, and its quantity and unit in the description."""
+    import tifffile
+
+    from ..io import atomic_file
+    from ..io.marks import mark_text
+
+    what, unit = MAP_UNITS[key]
+    arr = np.asarray(image, np.uint8 if key in ("mask", "flags", "recognition_flags") else np.float32)
+    with atomic_file(path) as tmp:
+        tifffile.imwrite(
+            tmp,
+            arr,
+            photometric="minisblack",
+            software=mark_text("image"),
+            description=json.dumps({"quantity": what, "unit": unit, "name": key}),
+            metadata=None,
+        )
+
+
+def read_labels(path, option: str, shape, *, labelled: bool = True):
+    """A label image of the capture's size, errors naming ``option``; ``labelled``: refuse one with no labelled pixel."""
+    from ..materials import read_label_image
+
+    try:
+        lab = read_label_image(path, shape=shape)
+    except InputError as exc:
+        raise InputError(f"{option} {exc}") from None
+    if labelled and not np.any(lab > 0):
+        raise InputError(
+            f"{option} {path}: no labelled pixel (every pixel is 0, 'unlabelled'); mark the regions with class ids "
+            "1-255"
+        )
+    return lab
+
+
+def _labels(path, shape, name: str = "labels", *, labelled: bool = True):
+    return read_labels(path, parameter_name(name), shape, labelled=labelled)
+
+
+def _exists(path) -> None:
+    if not Path(path).exists():
+        raise InputError(f"the capture {path}: no such file or folder")
+
+
+def _recorded_mm(meta: dict):
+    from ..stack import recorded_mm_per_row
+
+    return recorded_mm_per_row(meta)[0]
+
+
+def _load_stack(path):
+    from ..io import read_stack
+
+    return read_stack(path)
+
+
+def _stack_and_row_size(path, mm_per_row):
+    """``(stack, metadata, mm per row)``: ``mm_per_row``, else the capture's (its acquisition.json); neither:
+    one line naming both (no default stands in)."""
+    stack = _load_stack(path)
+    meta = dict(stack.metadata or {})
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm(meta)
+    if mm is None:
+        raise InputError(
+            f"{path} does not record its row size: pass {parameter_name('mm_per_row')} (mm per projector row) or add "
+            '"mm_per_row" to its acquisition.json'
+        )
+    return stack, meta, mm
+
+
+def _read_fit_input(path, option: str, stages: Stages):
+    """``(transport, metadata)`` of a transport store, or of a stack demultiplexed (floor removed) first."""
+    from ..io.transport_store import read_transport
+    from ..materials.model import capture_transport
+
+    if not Path(path).exists():
+        raise InputError(f"{option} {path}: no such file or folder")
+    if planeray_output_kind(path) == "transport":
+        transport, attrs = read_transport(path)
+        return transport, dict(attrs)
+    st = _load_stack(path)
+    advance = stages.stage(f"demultiplexing {Path(path).name} (rows)", st.shape[0])
+    return capture_transport(st, progress=advance), dict(st.metadata or {})
+
+
+def _capture_and_row_size(path, mm_per_row, stages: Stages):
+    """The capture's transport (a stack demultiplexed), its record, and its row size (mm per projector row)."""
+    transport, meta = _read_fit_input(path, "the capture", stages)
+    mm = mm_per_row if mm_per_row is not None else _recorded_mm(meta)
+    if mm is None:
+        raise InputError(
+            f"{path} does not record its row size: pass {parameter_name('mm_per_row')} (mm per projector row)"
+        )
+    return transport, meta, mm
+
+
+def _capture_geometry(path) -> tuple[int, int, float]:
+    """``(H, W, rows_per_camera_row)`` of a capture (stack or transport store), read without demultiplexing it."""
+    from ..io import read_transport
+
+    _exists(path)
+    if planeray_output_kind(path) == "transport":
+        import zarr
+
+        try:
+            group = zarr.open_group(str(path), mode="r")
+            H, W = (int(n) for n in group["T"].shape[:2])
+            return H, W, float(group.attrs["projector_rows"]) / H
+        except Exception:  # a damaged store: read it properly, for the reader's one-line message
+            transport = read_transport(path)[0]
+            return (*transport.shape, float(transport.geometry.rows_per_camera_row))
+    st = _load_stack(path)
+    return (*st.shape, float(st.geometry.rows_per_camera_row))
+
+
+def _library(library):
+    """``library`` (else the shipped one), errors naming the parameter."""
+    from ..materials.library import default_library, load_library
+
+    try:
+        return load_library(library) if library is not None else default_library()
+    except InputError as exc:
+        raise InputError(f"{parameter_name('library')} {exc}") from None
+
+
+def _library_and_capture(lib, path, mm_per_row, stages: Stages):
+    """The capture's transport, record and row size, the row size checked against the library ``lib``."""
+    transport, meta, mm = _capture_and_row_size(path, mm_per_row, stages)
+    try:
+        lib.check_conditions(mm_per_row=mm, calibrated=False)
+    except InputError as exc:
+        raise InputError(f"{parameter_name('library')} {exc}") from None
+    return transport, meta, mm
+
+
+def forward_table(n: float, stages: Stages):
+    """The forward table of index ``n``: loaded when shipped or cached, else traced -- noted with a time
+    estimate measured on a pilot run, and counted as a stage."""
+    from ..materials import fit as mfit
+    from ..mc.cache import cache_dir
+
+    if mfit.forward_table_stored(n=n):
+        return mfit.forward_table(n=n)
+    stages.stage(f"estimating the time to trace the forward table of n = {n:g}")
+    seconds = mfit.forward_table_seconds(n=n)
+    stages.note(
+        f"no forward table for n = {n:g} is shipped or cached: tracing it by Monte Carlo first "
+        f"({mfit.TABLE_RUNS} runs, about {seconds / 60:.0f} minutes on this machine, measured on a pilot run; "
+        f"once: cached in {cache_dir()})"
+    )
+    advance = stages.stage(f"tracing the forward table of n = {n:g} (Monte Carlo runs)", mfit.TABLE_RUNS)
+    return mfit.forward_table(n=n, progress=advance)
+
+
+def _white_stack(white_reference, stack):
+    """The white reference's stack (its kind checked before the capture was read), checked against the capture's
+    sweep, size and images."""
+    option = parameter_name("white_reference")
+    white = _load_stack(white_reference)
+    if white.shape != stack.shape or not (
+        np.array_equal(white.delay_us, stack.delay_us) and np.array_equal(white.exposure_us, stack.exposure_us)
+    ):
+        raise InputError(
+            f"{option} {white_reference} is {white.shape[0]}x{white.shape[1]} over "
+            f"{len(white)} images, the capture {stack.shape[0]}x{stack.shape[1]} over {len(stack)}: "
+            "capture it with the same sweep and camera"
+        )
+    if white.content_digest() == stack.content_digest():
+        raise InputError(_WHITE_IS_CAPTURE.format(option=option, white=white_reference) + " (the same images)")
+    return white
+
+
+def _white_scale(white_reference, transport, albedo: float, stages: Stages):
+    """The white reference's calibration of a transport fit (its transport checked against the capture's)."""
+    from ..materials import fit as mfit
+
+    option = parameter_name("white_reference")
+    white, _ = _read_fit_input(white_reference, option, stages)
+    if white.shape != transport.shape or not np.array_equal(white.offsets_rows, transport.offsets_rows):
+        raise InputError(
+            f"{option} {white_reference} is {white.shape[0]}x{white.shape[1]} over "
+            f"{white.offsets_rows.size} offsets, the capture {transport.shape[0]}x{transport.shape[1]} over "
+            f"{transport.offsets_rows.size}: capture it with the same sweep and camera"
+        )
+    if np.array_equal(white.dense, transport.dense):
+        raise InputError(_WHITE_IS_CAPTURE.format(option=option, white=white_reference) + " (the same transport)")
+    return mfit.white_reference_scale(white.dense, albedo=albedo)
+
+
+def check_fit_options(block_px, method, wall_kind) -> None:
+    """The options of :func:`fit_materials` that need no file, checked (one line naming the bad one)."""
+    from ..materials import fit as mfit
+
+    if block_px is not None and not 1 <= block_px <= 64:
+        raise InputError(f"{parameter_name('block_px')} must be an integer in 1-64, got {block_px}")
+    if method is not None and method not in ("stack", "transport"):
+        raise InputError(f"{parameter_name('method')} must be stack or transport, got {method!r}")
+    if wall_kind not in mfit.WALL_KINDS:
+        raise InputError(
+            f"{parameter_name('wall_kind')} must be one of {', '.join(mfit.WALL_KINDS)}, got {wall_kind!r}"
+        )
+
+
+def _fit_inputs(capture, settings: CaptureSettings, labels, method, block_px, stages: Stages) -> dict:
+    """What the fit reads: the capture (a stack, or its transport), its labels, record, row size and white."""
+    _exists(capture)
+    white_reference = settings.white_reference
+    if white_reference is not None and same_place(Path(white_reference), Path(capture)):
+        raise InputError(_WHITE_IS_CAPTURE.format(option=parameter_name("white_reference"), white=white_reference))
+    is_transport = planeray_output_kind(capture) == "transport"
+    if method == "stack" and is_transport:
+        raise InputError(f"{parameter_name('method')} stack needs a stack: {capture} is a transport store")
+    method = method or ("transport" if is_transport else "stack")
+    got = {"method": method, "block_px": block_px, "stack": None, "transport": None, "white": None, "scale": None}
+    if method == "stack":
+        if white_reference is not None:  # its kind checked before the capture is read
+            option = parameter_name("white_reference")
+            if not Path(white_reference).exists():
+                raise InputError(f"{option} {white_reference}: no such file or folder")
+            if planeray_output_kind(white_reference) == "transport":
+                raise InputError(
+                    f"{option} {white_reference} is a transport store: the stack fit needs the white "
+                    f"target's stack (or {parameter_name('method')} transport)"
+                )
+        stack, meta, mm = _stack_and_row_size(capture, settings.mm_per_row)
+        got["labels"] = _labels(labels, stack.shape) if labels is not None else None
+        if white_reference is not None:
+            got["white"] = _white_stack(white_reference, stack)
+        got["stack"], shape = stack, stack.shape
+    else:
+        transport, meta, mm = _capture_and_row_size(capture, settings.mm_per_row, stages)
+        got["labels"] = _labels(labels, transport.shape) if labels is not None else None
+        got["block_px"] = 4 if block_px is None else block_px
+        if white_reference is not None:
+            got["scale"] = _white_scale(white_reference, transport, settings.white_albedo, stages)
+        got["transport"], shape = transport, transport.shape
+    from ..camera import CameraModel
+    from ..stack import recorded_mm_per_row
+
+    got["meta"], got["mm"], got["shape"] = meta, mm, tuple(shape)
+    got["mm_source"] = parameter_name("mm_per_row") if settings.mm_per_row is not None else recorded_mm_per_row(meta)[1]
+    got["camera"] = None if method != "stack" else settings.camera or CameraModel.from_metadata(meta)
+    return got
+
+
+def _fit_units(regions, block_px) -> tuple[int, int]:
+    """``(regions, blocks)`` the fit works through (for its progress)."""
+    H, W = regions.shape
+    n_regions = sum(1 for r in np.unique(regions) if r != 0)
+    if block_px is None:
+        return n_regions, 0
+    n_blocks = sum(
+        1
+        for r in np.unique(regions)
+        if r != 0
+        for r0 in range(0, H, block_px)
+        for c0 in range(0, W, block_px)
+        if (regions[r0 : r0 + block_px, c0 : c0 + block_px] == r).any()
+    )
+    return n_regions, n_blocks
+
+
+def _run_fit(got: dict, settings: CaptureSettings, table, walls: bool, wall_kind: str, stages: Stages):
+    """The fit itself: the stack's images (:func:`~planeray.materials.stackfit.fit_stack`) or the transport's."""
+    from ..materials import fit as mfit
+
+    lab, block = got["labels"], got["block_px"]
+    regions = lab if lab is not None else np.ones(got["shape"], np.int64)
+    n_regions, n_blocks = _fit_units(regions, block)
+    if got["method"] == "stack":
+        from ..materials.stackfit import fit_stack
+
+        advance = stages.stage("fitting the stack's images (regions, blocks)", n_regions + n_blocks)
+        return fit_stack(
+            got["stack"], mm_per_row=got["mm"], labels=lab, containers=lab if walls else None, white=got["white"],
+            white_albedo=settings.white_albedo, block_px=block, table=table, camera=got["camera"],
+            depth_mm=settings.depth_mm, wall_kind=wall_kind, progress=advance,
+        )  # fmt: skip
+    advance = stages.stage("fitting pixel blocks", n_blocks)
+    return mfit.fit_transport(
+        got["transport"], mm_per_row=got["mm"], labels=lab, white_scale=got["scale"], block_px=block,
+        containers=lab if walls else None, table=table, depth_mm=settings.depth_mm, wall_kind=wall_kind,
+        progress=advance,
+    )  # fmt: skip
+
+
+def _fit_summary(capture, got: dict, settings: CaptureSettings, result, walls: bool, wall_kind: str) -> dict:
+    """The fit's ``planeray.json`` (before :func:`~planeray.io.jsonable`)."""
+    from ..goodness import DEFAULT_P_MISFIT, FLAGS
+    from ..materials import fit as mfit
+
+    method, block, n = got["method"], got["block_px"], settings.refractive_index
+    depth_mm, white_reference = settings.depth_mm, settings.white_reference
+    return {
+        "format": "planeray-materials-fit",
+        "format_version": 1,
+        "capture": str(capture),
+        "method": (
+            "stack: the stack's images fitted directly (illumination matrix x line kernel + ambient per region)"
+            if method == "stack"
+            else "transport: the demultiplexed (or given) transport's profiles fitted"
+        ),
+        "mm_per_row": got["mm"],
+        "mm_per_row_source": got["mm_source"],
+        "refractive_index": n,
+        "refractive_index_source": (
+            parameter_name("n") if settings.n_stated else f"assumed (water-based media; state {parameter_name('n')})"
+        ),
+        "anisotropy_g": mfit.DEFAULT_G,
+        "depth_mm": depth_mm,
+        "bottom": "none: semi-infinite" if depth_mm is None else f"at {depth_mm:g} mm: returns no light",
+        "noise_model": (
+            "the camera's (its record: shot, read, quantization and row jitter) and the forward model's error"
+            if got["camera"] is not None
+            else "the pixels' spread (the capture records no camera) and the forward model's error"
+        ),
+        "goodness_of_fit": (
+            "reduced chi-square against the noise model; a fit less probable than p = "
+            f"{DEFAULT_P_MISFIT:g} is flagged 'model does not fit' and its standard errors are scaled by "
+            "sqrt(chi2 / dof); parameters at the forward model's edge are flagged and not reported"
+        ),
+        "calibration": (
+            f"white reference {white_reference} (albedo {settings.white_albedo:g}): absolute reflectance"
+            if white_reference is not None
+            else f"none: shape only (a free scale per {'region' if method == 'stack' and block is None else 'block'}); mu_a is less identifiable"
+        ),
+        "block_px": block,
+        "walls": (
+            f"modelled: each {parameter_name('labels')} region is a container with a {wall_kind} wall at its boundary"
+            if walls and got["labels"] is not None
+            else "none: unbounded media"
+        ),
+        "regions": {str(k): v for k, v in result.regions.items()},
+        "mask_bits": {str(k): v for k, v in mfit.REASONS.items()} | {"255": "not fitted (outside every region)"},
+        "flag_bits": {str(k): v for k, v in FLAGS.items()} | {"255": "outside every region"},
+        "files": {
+            **{k: f"{k}.tif" for k in ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")},
+            "mask": "identifiability_mask.tif",
+            "flags": "flags.tif",
+            "figure": "fit.png",
+        },
+    }
+
+
+@writes_output("out_dir")
+def fit_materials(
+    capture,
+    out_dir,
+    *,
+    settings: CaptureSettings | None = None,
+    labels=None,
+    block_px: int | None = None,
+    method: str | None = None,
+    walls: bool = True,
+    wall_kind: str = "clear",
+    overwrite: bool = False,
+    progress=None,
+    note=None,
+) -> dict:
+    """Measure a medium: maps of mu_s' and mu_a (1/mm) with standard errors, per region and pixel block.
+
+    Writes the folder of ``planeray materials fit``: ``mu_s_prime_per_mm.tif``, ``mu_a_per_mm.tif``
+    and their standard errors ``*_se_per_mm.tif`` (float32, 1/mm), ``identifiability_mask.tif``
+    (uint8 bits of the reasons a parameter is not measured), ``flags.tif`` (uint8 bits: the model
+    does not fit, a parameter at the forward model's edge), ``fit.png`` and ``planeray.json``.
+    Every fit says whether its forward model fits the data (reduced chi-square against the
+    camera's noise model and the model's own error).
+
+    Parameters
+    ----------
+    capture : str or os.PathLike
+        Stack (fitted directly, or demultiplexed first with ``method="transport"``) or transport store.
+    out_dir : str or os.PathLike
+        Folder to write (refused if it exists, unless ``overwrite`` and planeray wrote it).
+    settings : CaptureSettings, optional
+        Row size, refractive index, depth, white reference and camera (default: all from the capture,
+        the index assumed 1.33 and noted).
+    labels : str or os.PathLike, optional
+        Label image of regions (0: left out); default: one region.
+    block_px : int, optional
+        Fit blocks of ``block_px`` x ``block_px`` pixels (1-64) for the maps; default: 4 for a
+        transport, none for a stack (the maps hold each region's estimate).
+    method : {"stack", "transport"}, optional
+        Default: ``"stack"`` for a stack, ``"transport"`` for a transport store.
+    walls : bool
+        With ``labels``: each region is a container with a wall at its boundary.
+    wall_kind : {"clear", "black"}
+        The containers' walls.
+    overwrite : bool
+        Replace a fit folder planeray wrote.
+    progress, note : callable, optional
+        ``progress(stage, done, total)`` and ``note(text)`` (:mod:`planeray.experiments._workflow`).
+
+    Returns
+    -------
+    dict
+        The summary written to ``planeray.json`` (its ``regions``: each region's estimates, standard
+        errors, fit quality and flags), before non-finite numbers become ``null``.
+    """
+    settings = CaptureSettings() if settings is None else settings
+    stages = Stages(progress, note)
+    check_fit_options(block_px, method, wall_kind)
+    out_dir = check_folder_output(
+        out_dir,
+        [("the capture", capture), (parameter_name("labels"), labels),
+         (parameter_name("white_reference"), settings.white_reference)],
+        overwrite=overwrite, kind="materials fit",
+    )  # fmt: skip
+    got = _fit_inputs(capture, settings, labels, method, block_px, stages)
+    n = settings.refractive_index
+    if not settings.n_stated:
+        stages.note(
+            f"the medium's refractive index is assumed {n:g} (water-based media): a wrong index biases mu_s' "
+            f"by tens of percent without showing in the fit's chi-square; state it with {parameter_name('n')} (1 for "
+            "an index-matched surface)"
+        )
+    result = _run_fit(got, settings, forward_table(n, stages), walls, wall_kind, stages)
+    summary = _fit_summary(capture, got, settings, result, walls, wall_kind)
+    from ..figures.materials import fit_figure
+
+    with atomic_directory(out_dir, overwrite=overwrite, kind="materials fit") as tmp:
+        for key, name in summary["files"].items():
+            if key != "figure":
+                write_map_tiff(tmp / name, result.maps[key], key)
+        fit_figure(result, mm_per_row=got["mm"], out=tmp / "fit.png")
+        (tmp / "planeray.json").write_text(json.dumps(jsonable(summary), indent=1))
+    return summary
+
+
+def wall_distance_from_labels(labels, mm_per_pixel):
+    """Distance (mm) of each pixel's centre to the edge of its labelled region (the container's wall)."""
+    from scipy import ndimage
+
+    lab = np.asarray(labels)
+    out = np.full(lab.shape, np.inf)
+    for c in np.unique(lab[lab > 0]):
+        m = lab == c
+        d = ndimage.distance_transform_edt(np.pad(m, 1, constant_values=False))[1:-1, 1:-1]
+        out[m] = (d[m] - 0.5) * mm_per_pixel
+    return out
+
+
+def check_recognition_options(block_px, regions, pool_mm, p_unknown) -> None:
+    """The options of :func:`recognize_materials` that need no file, checked."""
+    if not 1 <= block_px <= 16:
+        raise InputError(f"{parameter_name('block_px')} must be an integer in 1-16, got {block_px}")
+    if regions is not None and pool_mm is not None:
+        raise InputError(
+            f"{parameter_name('regions')} and {parameter_name('pool_mm')}: fit the regions or pool over a disc, "
+            "not both"
+        )
+    if pool_mm is not None and not (np.isfinite(pool_mm) and 0.0 <= pool_mm <= 100.0):
+        raise InputError(f"{parameter_name('pool_mm')} must be in 0-100 mm, got {pool_mm:g}")
+    if not 0.0 <= p_unknown < 1.0:
+        raise InputError(f"{parameter_name('p_unknown')} must be in [0, 1), got {p_unknown:g}")
+
+
+def _recognize_by_containers(lib, capture, settings, reg, regions, p_unknown, stages) -> dict:
+    """Each container (``reg``, else found in the images) fitted from the stack's images (issue 41)."""
+    from ..camera import CameraModel
+    from ..materials.recognize import recognize_stack
+
+    stack, meta, mm = _stack_and_row_size(capture, settings.mm_per_row)
+    for n, _ in lib.hypotheses():
+        forward_table(n, stages)  # noted and traced once where not shipped or cached
+    advance = stages.stage("fitting the containers (one pass per index and depth)", len(lib.hypotheses()))
+    rec, details = recognize_stack(
+        lib, stack, mm_per_row=mm, regions=reg, camera=settings.camera or CameraModel.from_metadata(meta),
+        p_unknown=p_unknown, progress=advance,
+    )  # fmt: skip
+    pooling = (
+        f"each region of {regions} fitted as a whole" if reg is not None
+        else "each container found in the images (light from below the surface) fitted as a whole"
+    )  # fmt: skip
+    return {"rec": rec, "details": details, "mm": mm, "rpc": float(stack.geometry.rows_per_camera_row),
+            "pooling": pooling, "by_containers": True}  # fmt: skip
+
+
+def _pool_radius(pool_mm, px_mm: float, mm: float, stages: Stages) -> float:
+    """The pooling radius (mm): ``pool_mm``, else the default; one smaller than a pixel is refused (or, the
+    default, dropped with a note)."""
+    from ..materials.recognize import DEFAULT_POOL_MM
+
+    pool = DEFAULT_POOL_MM if pool_mm is None else pool_mm
+    if 0.0 < pool < px_mm:
+        if pool_mm is not None:
+            raise InputError(
+                f"{parameter_name('pool_mm')} {pool_mm:g} is smaller than a pixel ({px_mm:.3g} mm at {mm:g} mm per "
+                f"row): it would pool nothing; give at least {px_mm:.3g} mm, or 0 (per block)"
+            )
+        stages.note(f"the default pooling radius {pool:g} mm is smaller than a pixel ({px_mm:.3g} mm): no pooling")
+        pool = 0.0
+    return pool
+
+
+def _recognize_by_fits(lib, capture, settings, reg, regions, pool_mm, block_px, p_unknown, stages) -> dict:
+    """The capture's transport fitted (each region's pooled profile, or pixel blocks pooled over a disc)."""
+    from ..materials.recognize import fit_image, recognize_image, recognize_regions
+
+    transport, meta, mm = _library_and_capture(lib, capture, settings.mm_per_row, stages)
+    H, W = transport.shape
+    rpc = float(transport.geometry.rows_per_camera_row)
+    pool = _pool_radius(pool_mm, mm * rpc, mm, stages)
+    lib_rpc = lib.conditions.get("rows_per_camera_row")
+    if not lib.physical and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+        stages.note(
+            f"the library's media were fitted at {lib_rpc:g} projector rows per camera row, this capture "
+            f"has {rpc:g}: a version-1 library's fits are bound to their resolution; a library of physical "
+            "parameters (planeray materials library-add from a stack) travels"
+        )
+    if reg is not None:  # each region's pooled profile fitted once
+        stages.stage("fitting each region's pooled profile")
+        rec, _ = recognize_regions(lib, transport, reg, mm_per_row=mm, p_unknown=p_unknown)
+    else:
+        advance = stages.stage("fitting pixel blocks", -(-H // block_px) * -(-W // block_px))
+        maps = fit_image(transport, mm_per_row=mm, block_px=block_px, progress=advance)
+        rec = recognize_image(lib, maps, mm_per_pixel=mm * rpc, pool_mm=pool, p_unknown=p_unknown)
+    pooling = (
+        f"regions of {regions}: each region's pooled profile fitted"
+        if reg is not None
+        else (f"log-likelihoods over a disc of {pool:g} mm" if pool else "none: per pixel block")
+    )
+    return {"rec": rec, "details": None, "mm": mm, "rpc": rpc, "pooling": pooling, "by_containers": False}
+
+
+def _recognition_score(rec, truth, names: dict, mm_per_pixel: float) -> dict:
+    """Accuracy per class by distance to the walls of ``truth``'s regions, and the share of other pixels named none."""
+    from ..materials.recognize import accuracy_by_distance
+
+    wall = wall_distance_from_labels(truth, mm_per_pixel)
+    scored = {c: n for c, n in names.items() if (truth == c).any()}
+    table = accuracy_by_distance(rec.class_ids, truth, wall, classes=scored)
+    others = np.isin(truth, list(scored), invert=True) & (truth > 0)
+    table["none_of_these"] = {
+        "pixels": int(others.sum()),
+        "labelled_none": float((rec.class_ids[others] == 0).mean()) if others.any() else None,
+    }
+    return table
+
+
+@writes_output("out_dir")
+def recognize_materials(
+    capture,
+    out_dir,
+    *,
+    library=None,
+    regions=None,
+    pool_mm: float | None = None,
+    block_px: int = 2,
+    p_unknown: float = 1e-3,
+    labels=None,
+    settings: CaptureSettings | None = None,
+    overwrite: bool = False,
+    progress=None,
+    note=None,
+) -> dict:
+    """Name each container's medium by its measured mu_s' and mu_a against a library of known media.
+
+    Writes the folder of ``planeray materials recognize``: ``segmentation.png`` (class ids of the
+    library; 0: none of these, or not fitted), ``flags.tif`` (uint8 bits of ``flag_bits``),
+    ``planeray.json`` and, with ``labels``, ``recognition.png`` (accuracy by distance to the walls).
+    With a stack and a library of physical parameters (the shipped one), the containers are found in
+    the images and each is fitted as a whole with its walls; otherwise the demultiplexed capture's
+    pixel blocks (or ``regions``) are fitted and pooled.
+
+    Parameters
+    ----------
+    capture : str or os.PathLike
+        Stack or transport store.
+    out_dir : str or os.PathLike
+        Folder to write.
+    library : str or os.PathLike, optional
+        Media library (JSON); default: the five Fig. 10 media shipped.
+    regions : str or os.PathLike, optional
+        Label image of the containers (0: none); default: found in the images.
+    pool_mm : float, optional
+        Fit pixel blocks and pool their evidence over a disc of this radius (mm; 0: per block); the
+        default for a transport store or a version-1 library (2.5 mm).
+    block_px : int
+        With ``pool_mm``: blocks of ``block_px`` x ``block_px`` pixels, 1-16.
+    p_unknown : float
+        A fit less typical of every medium than this p-value is none of these, in [0, 1).
+    labels : str or os.PathLike, optional
+        Ground-truth class ids: score per class and by distance to the walls.
+    settings : CaptureSettings, optional
+        The capture's row size (``mm_per_row``) and camera (default: its record).
+    overwrite : bool
+        Replace a recognition folder planeray wrote.
+    progress, note : callable, optional
+        As in :mod:`planeray.experiments._workflow`.
+
+    Returns
+    -------
+    dict
+        The numbers written to ``planeray.json`` (before non-finite numbers become ``null``).
+    """
+    from ..figures.materials import recognition_by_distance_figure
+    from ..materials.labels import write_label_image
+    from ..materials.library import FLAGS
+
+    settings = CaptureSettings() if settings is None else settings
+    stages = Stages(progress, note)
+    check_recognition_options(block_px, regions, pool_mm, p_unknown)
+    out_dir = check_folder_output(
+        out_dir,
+        [("the capture", capture), (parameter_name("library"), library), (parameter_name("regions"), regions),
+         (parameter_name("labels"), labels)],
+        overwrite=overwrite, kind="materials recognition",
+    )  # fmt: skip
+    lib = _library(library)
+    _exists(capture)
+    shape = _capture_geometry(capture)[:2] if regions is not None or labels is not None else None
+    reg = _labels(regions, shape, "regions") if regions is not None else None  # before any demultiplexing
+    truth = _labels(labels, shape) if labels is not None else None
+    if lib.physical and pool_mm is None and planeray_output_kind(capture) != "transport":
+        got = _recognize_by_containers(lib, capture, settings, reg, regions, p_unknown, stages)
+    else:
+        got = _recognize_by_fits(lib, capture, settings, reg, regions, pool_mm, block_px, p_unknown, stages)
+    rec, mm = got["rec"], got["mm"]
+    names = {e.class_id: e.name for e in lib.entries}
+    counts = {names[c]: int((rec.class_ids == c).sum()) for c in lib.class_ids}
+    counts["unclassified"] = int((rec.class_ids == 0).sum())  # none of these, or not fitted
+    numbers = {
+        "format": "planeray-materials-recognition",
+        "format_version": 1,
+        "capture": str(capture),
+        "library": str(library) if library is not None else "shipped (the five Fig. 10 media)",
+        "library_version": lib.version,
+        "mm_per_row": mm,
+        "mm_per_pixel": mm * got["rpc"],
+        "block_px": None if got["by_containers"] else block_px,
+        "pooling": got["pooling"],
+        "p_unknown": p_unknown,
+        "pixels": counts,
+        "flags": {text: int(((rec.flags & bit) > 0).sum()) for bit, text in FLAGS.items()},
+        "flag_bits": {str(bit): text for bit, text in FLAGS.items()},
+        "files": {"segmentation": "segmentation.png", "flags": "flags.tif"},
+    }
+    if got["by_containers"]:
+        numbers["containers"] = got["details"]
+    table = None if truth is None else _recognition_score(rec, truth, names, mm * got["rpc"])
+    if table is not None:
+        wall_note = f"from {parameter_name('labels')}: distance to the edge of each labelled region"
+        numbers["score"] = {**table, "wall_distance": wall_note}
+        numbers["files"]["figure"] = "recognition.png"
+    with atomic_directory(out_dir, overwrite=overwrite, kind="materials recognition") as tmp:
+        write_label_image(tmp / "segmentation.png", rec.class_ids.astype(np.uint8), kind="segmentation")
+        write_map_tiff(tmp / "flags.tif", np.asarray(rec.flags, np.uint8), "recognition_flags")
+        if table is not None:
+            recognition_by_distance_figure({"parameters": table}, out=tmp / "recognition.png")
+        (tmp / "planeray.json").write_text(json.dumps(jsonable(numbers), indent=1))
+    return numbers
+
+
+def check_library_add(out_json, library, class_names: dict, *, overwrite: bool) -> bool:
+    """The options of :func:`add_to_library`, checked; returns whether the library is updated in place."""
+    if Path(out_json).suffix.lower() != ".json":
+        raise InputError(f"{parameter_name('out_json')} must end in .json (a media library), got {out_json}")
+    if not class_names:
+        raise InputError(f"{parameter_name('class_names')} is needed: ID=NAME of the labelled region to add")
+    in_place = library is not None and same_place(Path(out_json), Path(library))
+    if in_place and not overwrite:  # updating the library itself: a planeray library, replaced atomically
+        raise InputError(
+            f"{parameter_name('out_json')} {out_json} is the {parameter_name('library')} to add to: pass "
+            f"{parameter_name('overwrite')} to update it in place (planeray replaces only a library it wrote), or "
+            f"name a new {parameter_name('out_json')}"
+        )
+    return in_place
+
+
+@contextmanager
+def _as_class_name_error():
+    """A measured entry that cannot be added (a region too small, a name taken): named by ``class_names``."""
+    try:
+        yield
+    except InputError as exc:
+        raise InputError(f"{parameter_name('class_names')} {exc}") from None
+
+
+def _new_entries(lib, capture, lab, class_names, labels, settings, rpc, library, stages) -> list:
+    """The library's new entries measured on the capture: physical parameters from the stack's images
+    (a version-2 library), else the transport's block fits (version 1)."""
+    from ..camera import CameraModel
+    from ..materials.recognize import entries_from_capture, entries_from_stack, fit_image
+
+    source = f"{capture} ({labels})"
+    if lib.physical:
+        if planeray_output_kind(capture) == "transport":
+            raise InputError(
+                f"{capture} is a transport store: a library of physical parameters is measured from a stack's "
+                "images (give the stack)"
+            )
+        stack, meta, mm = _stack_and_row_size(capture, settings.mm_per_row)
+        white = _load_stack(settings.white_reference) if settings.white_reference is not None else None
+        n = settings.refractive_index
+        with _as_class_name_error():
+            table = forward_table(n, stages)
+            stages.stage("measuring the labelled regions (each fitted as a whole, walls modelled)")
+            return entries_from_stack(
+                stack, lab, class_names, mm_per_row=mm, n=n, depth_mm=settings.depth_mm,
+                camera=settings.camera or CameraModel.from_metadata(meta), white=white,
+                white_albedo=settings.white_albedo, table=table, source=source,
+            )  # fmt: skip
+    lib_rpc = lib.conditions.get("rows_per_camera_row")
+    if lib.entries and isinstance(lib_rpc, (int, float)) and abs(rpc / lib_rpc - 1.0) > 0.1:
+        raise InputError(
+            f"{parameter_name('library')} {library or '(the shipped one)'}: a version-1 library's media were fitted "
+            f"at {lib_rpc:g} projector rows per camera row, {capture} has {rpc:g}: its fits are bound to their "
+            "resolution, so an entry from this capture would not be comparable with the others; start a library "
+            "of physical parameters (version 2) instead"
+        )
+    transport, meta, mm = _library_and_capture(lib, capture, settings.mm_per_row, stages)
+    block = int(lib.conditions.get("block_px", 2))
+    regions = np.where(np.isin(lab, list(class_names)), lab, 0)
+    with _as_class_name_error():
+        stages.stage("fitting the labelled regions")
+        maps = fit_image(transport, mm_per_row=mm, block_px=block, regions=regions)
+        return entries_from_capture(maps, regions, class_names, source=source)
+
+
+@writes_output("out_json")
+def add_to_library(
+    capture,
+    out_json,
+    *,
+    labels,
+    class_names: dict,
+    library=None,
+    replace: bool = False,
+    settings: CaptureSettings | None = None,
+    overwrite: bool = False,
+    progress=None,
+    note=None,
+):
+    """Add media to a library from labelled regions of a capture (``planeray materials library-add``).
+
+    A library of physical parameters (version 2, the shipped one) gets each region's mu_s' and mu_a,
+    measured from the stack's images with its walls modelled, with their uncertainties, the index and
+    the layer's depth: values of the medium, which recognize it in captures of any resolution and row
+    size.  A version-1 library gets the transport's block fits.
+
+    Parameters
+    ----------
+    capture : str or os.PathLike
+        Stack of the capture (a transport store: version-1 libraries).
+    out_json : str or os.PathLike
+        The new library (``.json``); the ``library`` itself only with ``overwrite``.
+    labels : str or os.PathLike
+        Label image: the region(s) of the new media.
+    class_names : dict of int to str
+        ``{class id: name}`` of the labelled regions to add (ids 1-255).
+    library : str or os.PathLike, optional
+        Library to add to; default: the shipped one.
+    replace : bool
+        Replace an entry of the same name or id.
+    settings : CaptureSettings, optional
+        Row size, the medium's index (stored with it; default 1.33) and layer depth, white reference
+        and camera.
+    overwrite : bool
+        Replace a library file planeray wrote.
+    progress, note : callable, optional
+        As in :mod:`planeray.experiments._workflow`.
+
+    Returns
+    -------
+    (MediaLibrary, list of MediaEntry)
+        The library written and the entries added.
+    """
+    from ..materials.library import save_library
+
+    settings = CaptureSettings() if settings is None else settings
+    stages = Stages(progress, note)
+    in_place = check_library_add(out_json, library, class_names, overwrite=overwrite)
+    check_folder_output(
+        out_json,
+        [("the capture", capture), (parameter_name("labels"), labels),
+         (parameter_name("white_reference"), settings.white_reference)]
+        + ([] if in_place else [(parameter_name("library"), library)]),
+        overwrite=overwrite, kind="media library",
+    )  # fmt: skip
+    lib = _library(library)
+    H, W, rpc = _capture_geometry(capture)  # the labels and the resolution before any demultiplexing
+    lab = _labels(labels, (H, W))
+    missing = [f"{c}={nm}" for c, nm in class_names.items() if not (lab == c).any()]
+    if missing:
+        raise InputError(
+            f"{parameter_name('class_names')} {', '.join(missing)}: {parameter_name('labels')} {labels} has no "
+            "pixel of that id"
+        )
+    entries = _new_entries(lib, capture, lab, class_names, labels, settings, rpc, library, stages)
+    with _as_class_name_error():
+        for e in entries:
+            lib = lib.add(e, replace=replace)
+    save_library(lib, out_json)
+    return lib, entries
