@@ -62,6 +62,7 @@ from ..linesweep import PAPER_CALIBRATION_EXPOSURE_US, LineSweep
 from .delay_zero import (
     DelayZeroCalibration,
     calibrate_delay_zero,
+    calibrate_delay_zero_from_stack,
     delay_zero_sweep,
     device_capture,
 )
@@ -84,6 +85,7 @@ __all__ = [
     "count_lines",
     "calibrate_lines_per_second",
     "calibrate_delay_zero",
+    "calibrate_delay_zero_from_stack",
     "delay_zero_sweep",
     "device_capture",
     "PROJECTOR_FRAME_PERIOD_US",

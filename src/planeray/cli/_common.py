@@ -194,21 +194,34 @@ def note(text: str) -> None:
 
 @contextlib.contextmanager
 def stage_bars():
-    """``progress(stage, done, total)`` for a library workflow: one progress bar per stage (total None: a spinner).
+    """``progress(stage, done, total)`` for a library workflow: one progress bar per stage (total None: a status
+    line, shown while the stage runs).
 
     The bars stop when the block ends: print results after it (while a bar is live, stdout goes to its console).
     """
     from .._console import progress_bar
 
     with progress_bar() as bar:
-        tasks = {}
+        tasks, spinners = {}, []
+
+        def stop_spinners() -> None:  # an uncounted stage shows while it runs, like a status line, then goes
+            for task in spinners:
+                bar.remove_task(task)
+            spinners.clear()
 
         def progress(stage: str, done: int, total: int | None = None) -> None:
             if stage not in tasks:
+                stop_spinners()
                 tasks[stage] = bar.add_task(stage, total=total)
-            bar.update(tasks[stage], completed=done, total=total)
+                if total is None:
+                    spinners.append(tasks[stage])
+            if tasks[stage] in bar.task_ids:
+                bar.update(tasks[stage], completed=done, total=total)
 
-        yield progress
+        try:
+            yield progress
+        finally:
+            stop_spinners()
 
 
 #: Refuse an output that is or holds an input (:func:`planeray.io.atomic.check_not_an_input`), named ``--out``.

@@ -239,7 +239,7 @@ def _acc(value) -> str:
 
 
 @materials_app.command("predict")
-@_friendly_errors
+@_friendly_errors(options={"out_png": "--out"})
 def predict(
     model_path: Annotated[Path, typer.Argument(help="Model file (planeray materials train).")],
     stack_path: Annotated[Path, typer.Argument(help="Stack (Zarr or import folder) of the same sweep.")],
@@ -272,108 +272,42 @@ def predict(
     overwrite: Annotated[bool, typer.Option(help="Replace an existing segmentation planeray wrote.")] = False,
 ):
     """Segment a capture pixel by pixel with a trained model (refused if the sweep differs)."""
-    from ..experiments.materials import score
+    from ..experiments.materials_folders import check_predict_options, segment_materials
     from ..io import jsonable
-    from ..materials import load_model
-    from ..materials.labels import LABEL_SUFFIXES, write_label_image
-    from ..materials.model import check_unclassified_below
 
-    threshold = check_unclassified_below(unclassified_below)
-    if not 0.0 <= majority_px <= 50.0:
-        raise ValueError(f"--majority-px must be in 0-50 pixels, got {majority_px:g}")
-    if out_png.suffix.lower() not in LABEL_SUFFIXES:
-        raise ValueError(f"--out must end in .png, .tif or .tiff (a label image of class ids), got {out_png}")
-    if near_wall is not None and labels is None:
-        raise ValueError("--near-wall needs --labels: it splits the accuracies into near walls and away from them")
+    options = dict(labels=labels, near_wall=near_wall, unclassified_below=unclassified_below, majority_px=majority_px)
+    check_predict_options(out_png, **options)
     _check_outputs(
         (out_png, "segmentation"),
         overwrite=overwrite,
         inputs=[("MODEL", model_path), ("STACK", stack_path), ("--labels", labels), ("--near-wall", near_wall)],
     )
-    model = load_model(model_path)
-    st = _load_stack(stack_path)
-    model.check_stack(st, source=str(stack_path))
-    truth = _read_labels(labels, "--labels", st.shape) if labels is not None else None
-    near = _read_labels(near_wall, "--near-wall", st.shape, labelled=False) > 0 if near_wall is not None else None
-    blind = {c: p for c, p in model.smallest_typicality().items() if 0 < threshold <= p}
-    if blind:
-        console.print(
-            "note: --unclassified-below "
-            f"{threshold:g} cannot unclassify any pixel of "
-            + ", ".join(f"{model.classes[c]} (smallest typicality {p:.3g})" for c, p in blind.items())
-            + ": too few held-out training pixels; train with more (--max-per-class, more captures) or raise it",
-            highlight=False,
-            markup=False,
+    with stage_bars() as progress:
+        numbers = segment_materials(
+            model_path, stack_path, out_png, **options, overwrite=overwrite, progress=progress, note=note
         )
-    if model.definition.kind == "transport":  # demultiplexing first: minutes, counted in camera rows
-        with progress_bar() as bar:
-            task = bar.add_task("demultiplexing the stack (rows)", total=st.shape[0])
-            seg = model.segment(
-                st, unclassified_below=threshold, source=str(stack_path), progress=lambda n: bar.advance(task, n)
-            )
-    else:
-        with console.status("classifying pixels"):
-            seg = model.segment(st, unclassified_below=threshold, source=str(stack_path))
-    if majority_px > 0:
-        import numpy as np
-
-        from ..materials.recognize import mode_filter
-
-        voted = mode_filter(seg.labels, radius_px=majority_px, classes=sorted(model.classes))
-        keep = (seg.labels > 0) & ~seg.no_profile & ~seg.unclassified
-        seg.labels[...] = np.where(keep & (voted > 0), voted, seg.labels)
-    write_label_image(out_png, seg.labels, kind="segmentation")
-    counts = {}
-    for c in sorted(set(seg.labels[~seg.no_profile & ~seg.unclassified].ravel().tolist())):
-        counts[model.classes.get(int(c), f"class {int(c)}")] = int(((seg.labels == c) & ~seg.no_profile).sum())
-    counts["unclassified"] = int(seg.unclassified.sum())
-    counts["no profile"] = int(seg.no_profile.sum())
-    numbers = {
-        "segmentation": str(out_png),
-        "pixels": counts,
-        "unclassified_below": threshold,
-        "majority_px": majority_px,
-        "model": str(model_path),
-        "features": model.definition.describe(),
-    }
-    if truth is not None:
-        numbers["score"] = score(
-            seg.labels,
-            truth,
-            near_wall=near,
-            classes=sorted(set(model.classes) | {int(c) for c in set(truth.ravel().tolist()) if c}),
-            model_classes=sorted(model.classes),
-        )
-        numbers["score"]["unclassified"] = _unclassified_by_class(seg, truth, numbers["score"]["confusion"])
     if json_out:
         print_json(jsonable(numbers))
         return
-    out.print(f"segmentation: {out_png}  (unclassified below typicality {threshold:g})")
-    for name, n in counts.items():
+    out.print(f"segmentation: {out_png}  (unclassified below typicality {numbers['unclassified_below']:g})")
+    for name, n in numbers["pixels"].items():
         out.print(f"  {name}: {n} px")
     if "score" in numbers:
-        sc = numbers["score"]
-        for name, acc in sc["accuracy"].items():
-            lost = sc["unclassified"].get(name)
-            share = f"; {lost:.0%} of its pixels unclassified" if lost is not None else ""
-            if name in sc["not_scored"]:
-                out.print(f"  accuracy {name}: not scored ({sc['not_scored'][name]}){share}")
-                continue
-            extra = ""
-            if "accuracy_near_wall" in sc:
-                extra = (
-                    f"  (near walls {_acc(sc['accuracy_near_wall'][name])}, away {_acc(sc['accuracy_interior'][name])})"
-                )
-            out.print(f"  accuracy {name}: {_acc(acc)}{extra}{share}")
+        _print_score(numbers["score"])
 
 
-def _unclassified_by_class(seg, truth, confusion) -> dict:
-    """Share of each true class's pixels (with a profile) left unclassified (None: no such pixels)."""
-    out = {}
-    for cid, name in zip(confusion["classes"], confusion["names"]):
-        m = (truth == cid) & ~seg.no_profile
-        out[name] = float(seg.unclassified[m].mean()) if m.any() else None
-    return out
+def _print_score(sc: dict) -> None:
+    """A segmentation's accuracy per class on the terminal (near walls and away, the share unclassified)."""
+    for name, acc in sc["accuracy"].items():
+        lost = sc["unclassified"].get(name)
+        share = f"; {lost:.0%} of its pixels unclassified" if lost is not None else ""
+        if name in sc["not_scored"]:
+            out.print(f"  accuracy {name}: not scored ({sc['not_scored'][name]}){share}")
+            continue
+        extra = ""
+        if "accuracy_near_wall" in sc:
+            extra = f"  (near walls {_acc(sc['accuracy_near_wall'][name])}, away {_acc(sc['accuracy_interior'][name])})"
+        out.print(f"  accuracy {name}: {_acc(acc)}{extra}{share}")
 
 
 def _settings(mm_per_row, *, n=None, depth_mm=None, white_reference=None, white_albedo: float = 0.99):

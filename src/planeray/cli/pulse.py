@@ -148,10 +148,58 @@ def pulse(
     The video is read frame by frame, in bounded memory: what must be kept of a long or large video
     (the magnified video for the automatic region search) goes to temporary files beside --out.
     """
+    from ..experiments.pulse import write_pulse_analysis
+
+    video, opts = _pulse_inputs(
+        video_path, out_dir, fps=fps, band=band, rate_band=rate_band, alpha=alpha, levels=levels, pyramid=pyramid,
+        method=method, channel=channel, magnified=magnified, mask=mask, region=region, overwrite=overwrite,
+    )  # fmt: skip
+    passes = 2 if region is not None else 3
+    with progress_bar() as bar:
+        task = bar.add_task(
+            f"{video.n_frames} frames of {video.shape[0]}x{video.shape[1]}", total=passes * video.n_frames
+        )
+        done_before = {"stage": None, "frames": 0, "last": 0}
+
+        def progress(stage, done, total):
+            if stage != done_before["stage"]:
+                done_before["frames"] += done_before["last"]
+                done_before["stage"] = stage
+            done_before["last"] = done
+            bar.update(task, completed=done_before["frames"] + done, description=stage)
+
+        res = write_pulse_analysis(
+            video,
+            out_dir,
+            overwrite=overwrite,
+            magnified=magnified,
+            progress=progress,
+            **opts,
+        )
+    if json_out:
+        print_json(res.to_dict())
+        return
+    est = res.estimate
+    if est.detected:
+        out.print(
+            f"heart rate {est.rate_bpm:.2f} bpm  (SNR {est.snr_db:.1f} dB, peak SNR {est.band_snr_db:.1f} dB; "
+            f"{video.n_frames} frames at {video.fps:g} fps; {out_dir})",
+            highlight=False,
+        )
+    else:
+        out.print(
+            f"no pulse found  (highest peak {est.peak_bpm:.1f} bpm at peak SNR {est.band_snr_db:.1f} dB < "
+            f"{est.settings['min_band_snr_db']:g} dB; {out_dir})",
+            highlight=False,
+        )
+
+
+def _pulse_inputs(video_path, out_dir, *, fps, band, rate_band, alpha, levels, pyramid, method, channel, magnified,
+                  mask, region, overwrite):  # fmt: skip
+    """Every option and output of ``pulse`` checked before any work, the video opened: ``(video, options)``."""
     import numpy as np
 
     from .._validate import check_number, check_positive
-    from ..experiments.pulse import write_pulse_analysis
     from ..pulse.rate import parse_region
     from ..pulse.video_io import VIDEO_KIND, check_video_path, open_video
 
@@ -206,44 +254,7 @@ def pulse(
         except InputError as exc:
             raise InputError(f"--mask {str(exc).replace('vein mask', 'mask')}") from None
     _check_pulse_resources(video, out_dir, opts)
-    passes = 2 if region is not None else 3
-    with progress_bar() as bar:
-        task = bar.add_task(
-            f"{video.n_frames} frames of {video.shape[0]}x{video.shape[1]}", total=passes * video.n_frames
-        )
-        done_before = {"stage": None, "frames": 0, "last": 0}
-
-        def progress(stage, done, total):
-            if stage != done_before["stage"]:
-                done_before["frames"] += done_before["last"]
-                done_before["stage"] = stage
-            done_before["last"] = done
-            bar.update(task, completed=done_before["frames"] + done, description=stage)
-
-        res = write_pulse_analysis(
-            video,
-            out_dir,
-            overwrite=overwrite,
-            magnified=magnified,
-            progress=progress,
-            **opts,
-        )
-    if json_out:
-        print_json(res.to_dict())
-        return
-    est = res.estimate
-    if est.detected:
-        out.print(
-            f"heart rate {est.rate_bpm:.2f} bpm  (SNR {est.snr_db:.1f} dB, peak SNR {est.band_snr_db:.1f} dB; "
-            f"{video.n_frames} frames at {video.fps:g} fps; {out_dir})",
-            highlight=False,
-        )
-    else:
-        out.print(
-            f"no pulse found  (highest peak {est.peak_bpm:.1f} bpm at peak SNR {est.band_snr_db:.1f} dB < "
-            f"{est.settings['min_band_snr_db']:g} dB; {out_dir})",
-            highlight=False,
-        )
+    return video, opts
 
 
 def video_outputs(out_path: Path, method: str, methods) -> tuple[dict, Path]:

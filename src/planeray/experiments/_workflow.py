@@ -43,16 +43,17 @@ class Stages:
             warnings.warn(text, UserWarning, stacklevel=3)
 
 
-def check_folder_output(out_dir, inputs, *, overwrite: bool, kind: str) -> Path:
-    """Before any work: ``out_dir`` may be written (planeray's own, or new) and is none of ``inputs``.
+def check_folder_output(out_dir, inputs, *, overwrite: bool, kind: str, name: str = "out_dir") -> Path:
+    """Before any work: the output ``out_dir`` may be written (planeray's own, or new) and is none of ``inputs``.
 
-    ``inputs``: ``(name, path)`` pairs as messages name them (None paths skipped).
+    ``inputs``: ``(name, path)`` pairs as messages name them (None paths skipped); ``name``: the
+    output's parameter.
     """
     from ..errors import parameter_name
     from ..io.atomic import check_not_an_input, check_replaceable, check_writable
 
     out_dir = Path(out_dir)
-    check_not_an_input(out_dir, inputs, option=parameter_name("out_dir"))
+    check_not_an_input(out_dir, inputs, option=parameter_name(name))
     check_replaceable(out_dir, overwrite=overwrite, kind=kind)
     check_writable(out_dir)
     return out_dir

@@ -38,6 +38,8 @@ __all__ = [
     "check_fit_options",
     "check_recognition_options",
     "check_library_add",
+    "segment_materials",
+    "check_predict_options",
     "read_labels",
     "write_map_tiff",
     "wall_distance_from_labels",
@@ -841,7 +843,7 @@ def add_to_library(
         [("the capture", capture), (parameter_name("labels"), labels),
          (parameter_name("white_reference"), settings.white_reference)]
         + ([] if in_place else [(parameter_name("library"), library)]),
-        overwrite=overwrite, kind="media library",
+        overwrite=overwrite, kind="media library", name="out_json",
     )  # fmt: skip
     lib = _library(library)
     H, W, rpc = _capture_geometry(capture)  # the labels and the resolution before any demultiplexing
@@ -858,3 +860,134 @@ def add_to_library(
             lib = lib.add(e, replace=replace)
     save_library(lib, out_json)
     return lib, entries
+
+
+def check_predict_options(out_png, *, labels, near_wall, unclassified_below: float, majority_px: float) -> float:
+    """The options of :func:`segment_materials` that need no file, checked; returns the typicality threshold."""
+    from ..materials.labels import LABEL_SUFFIXES
+    from ..materials.model import check_unclassified_below
+
+    threshold = check_unclassified_below(unclassified_below)
+    if not 0.0 <= majority_px <= 50.0:
+        raise InputError(f"{parameter_name('majority_px')} must be in 0-50 pixels, got {majority_px:g}")
+    if Path(out_png).suffix.lower() not in LABEL_SUFFIXES:
+        raise InputError(
+            f"{parameter_name('out_png')} must end in .png, .tif or .tiff (a label image of class ids), got {out_png}"
+        )
+    if near_wall is not None and labels is None:
+        raise InputError(
+            f"{parameter_name('near_wall')} needs {parameter_name('labels')}: it splits the accuracies into near "
+            "walls and away from them"
+        )
+    return threshold
+
+
+def _unclassified_by_class(seg, truth, confusion) -> dict:
+    """Share of each true class's pixels (with a profile) left unclassified (None: no such pixels)."""
+    out = {}
+    for cid, name in zip(confusion["classes"], confusion["names"]):
+        m = (truth == cid) & ~seg.no_profile
+        out[name] = float(seg.unclassified[m].mean()) if m.any() else None
+    return out
+
+
+def _segment(model, st, source: str, threshold: float, majority_px: float, stages: Stages):
+    """The model's segmentation of the stack (demultiplexed first for a transport model), majority-voted."""
+    if model.definition.kind == "transport":  # demultiplexing first: minutes, counted in camera rows
+        advance = stages.stage("demultiplexing the stack (rows)", st.shape[0])
+        seg = model.segment(st, unclassified_below=threshold, source=source, progress=advance)
+    else:
+        stages.stage("classifying pixels")
+        seg = model.segment(st, unclassified_below=threshold, source=source)
+    if majority_px > 0:
+        from ..materials.recognize import mode_filter
+
+        voted = mode_filter(seg.labels, radius_px=majority_px, classes=sorted(model.classes))
+        keep = (seg.labels > 0) & ~seg.no_profile & ~seg.unclassified
+        seg.labels[...] = np.where(keep & (voted > 0), voted, seg.labels)
+    return seg
+
+
+@writes_output("out_png")
+def segment_materials(
+    model,
+    stack,
+    out_png,
+    *,
+    labels=None,
+    near_wall=None,
+    unclassified_below: float = 0.01,
+    majority_px: float = 0.0,
+    overwrite: bool = False,
+    progress=None,
+    note=None,
+) -> dict:
+    """Segment a capture pixel by pixel with a trained model (``planeray materials predict``).
+
+    Writes the segmentation ``out_png``: a palette PNG (or TIFF) of class ids, 0 where no class
+    (unclassified, or no profile).  Refused if the stack's sweep differs from the model's.
+
+    Parameters
+    ----------
+    model : str or os.PathLike
+        Model file (``planeray materials train``).
+    stack : str or os.PathLike
+        Stack (Zarr or import folder) of the same sweep.
+    out_png : str or os.PathLike
+        Segmentation to write (``.png``, ``.tif`` or ``.tiff``).
+    labels : str or os.PathLike, optional
+        Ground-truth label image: score the prediction.
+    near_wall : str or os.PathLike, optional
+        Mask of pixels near walls (non-zero), scored apart (with ``labels``).
+    unclassified_below : float
+        A pixel less typical of the SVM's pick than this share of the class's held-out training pixels
+        is unclassified; 0 keeps every pick.
+    majority_px : float
+        Radius (pixels, 0-50; 0: off) of the majority vote over the picks.
+    overwrite : bool
+        Replace a segmentation planeray wrote.
+    progress, note : callable, optional
+        As in :mod:`planeray.experiments._workflow`.
+
+    Returns
+    -------
+    dict
+        The numbers: pixels per class, the settings and, with ``labels``, the score.
+    """
+    from ..materials import load_model
+    from ..materials.labels import write_label_image
+    from .materials import score
+
+    stages = Stages(progress, note)
+    threshold = check_predict_options(
+        out_png, labels=labels, near_wall=near_wall, unclassified_below=unclassified_below, majority_px=majority_px
+    )
+    inputs = [("MODEL", model), ("STACK", stack), (parameter_name("labels"), labels),
+              (parameter_name("near_wall"), near_wall)]  # fmt: skip
+    check_folder_output(out_png, inputs, overwrite=overwrite, kind="segmentation", name="out_png")
+    svm = load_model(model)
+    st = _load_stack(stack)
+    svm.check_stack(st, source=str(stack))
+    truth = _labels(labels, st.shape) if labels is not None else None
+    near = _labels(near_wall, st.shape, "near_wall", labelled=False) > 0 if near_wall is not None else None
+    blind = {c: p for c, p in svm.smallest_typicality().items() if 0 < threshold <= p}
+    if blind:
+        stages.note(
+            f"{parameter_name('unclassified_below')} {threshold:g} cannot unclassify any pixel of "
+            + ", ".join(f"{svm.classes[c]} (smallest typicality {p:.3g})" for c, p in blind.items())
+            + ": too few held-out training pixels; train with more (--max-per-class, more captures) or raise it"
+        )
+    seg = _segment(svm, st, str(stack), threshold, majority_px, stages)
+    write_label_image(out_png, seg.labels, kind="segmentation")
+    counts = {}
+    for c in sorted(set(seg.labels[~seg.no_profile & ~seg.unclassified].ravel().tolist())):
+        counts[svm.classes.get(int(c), f"class {int(c)}")] = int(((seg.labels == c) & ~seg.no_profile).sum())
+    counts["unclassified"] = int(seg.unclassified.sum())
+    counts["no profile"] = int(seg.no_profile.sum())
+    numbers = {"segmentation": str(out_png), "pixels": counts, "unclassified_below": threshold,
+               "majority_px": majority_px, "model": str(model), "features": svm.definition.describe()}  # fmt: skip
+    if truth is not None:
+        classes = sorted(set(svm.classes) | {int(c) for c in set(truth.ravel().tolist()) if c})
+        numbers["score"] = score(seg.labels, truth, near_wall=near, classes=classes, model_classes=sorted(svm.classes))
+        numbers["score"]["unclassified"] = _unclassified_by_class(seg, truth, numbers["score"]["confusion"])
+    return numbers
