@@ -62,7 +62,6 @@ from ..linesweep import PAPER_CALIBRATION_EXPOSURE_US, LineSweep
 from .delay_zero import (
     DelayZeroCalibration,
     calibrate_delay_zero,
-    calibrate_delay_zero_from_stack,
     delay_zero_sweep,
     device_capture,
 )
@@ -71,6 +70,7 @@ from .lines import LineCalibration, LineCount, calibrate_lines_per_second, count
 from .trigger import (
     PROJECTOR_FRAME_PERIOD_US,
     calibrate_base_trigger_delay,
+    calibrate_delay_zero_from_stack,
     required_base_trigger_delay_us,
     search_delay_zero,
     with_base_trigger_delay,

@@ -323,11 +323,8 @@ def video(
 
     Also writes STEM_video_vein_mask.png, the scene's vein mask (for ``planeray skin pulse --mask``).
     """
-    from .._validate import check_memory
-    from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes, simulate_live, skin_builder
+    from ..pulse.simulate import METHODS, LiveSettings, simulate_live, skin_builder
     from ..pulse.video_io import VIDEO_KIND, check_video_path
-    from ..scenes.skin import SKIN_BAND_ROWS
-    from ..timing import PAPER_LINES_PER_SECOND
 
     # every option and output before any work
     methods = METHODS if method == "all" else (method,)
@@ -351,24 +348,7 @@ def video(
         noise=noise,
         **({} if motion else {"breathing_px": 0.0, "breathing_gain": 0.0, "motion_px": 0.0}),
     )
-    reach_us = SKIN_BAND_ROWS / PAPER_LINES_PER_SECOND * 1e6 + exposure_us / 2.0
-    if abs(delay_us) >= reach_us:
-        raise ValueError(
-            f"--delay-us must put the band on the skin's kernel (|delay| < {reach_us:.0f} us at --exposure-us "
-            f"{exposure_us:g}: 64 rows + half the band), got {delay_us:g}"
-        )
-    _bounds.scene_memory(shape, copies=4)
-    fr = settings.frame_rate()
-    n = int(round(seconds * fr))
-    if n < 8:
-        raise ValueError(f"--seconds {seconds:g} at {fr:g} fps is {n} frames; a pulse video needs at least 8")
-    check_memory(
-        _bounds.BASE_BYTES
-        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
-        + live_capture_bytes(settings, shape, methods),
-        f"--seconds {seconds:g} at {fr:g} fps ({n:,} frames of {shape[0]}x{shape[1]}, {len(methods)} method(s))",
-        advice="shorten --seconds, lower --fps or --size",
-    )
+    _check_live_settings(settings, shape, methods, seconds=seconds, delay_us=delay_us, exposure_us=exposure_us)
     paths, mask_path = video_outputs(out_path, method, methods)
     _check_outputs(*((p, VIDEO_KIND) for p in paths.values()), (mask_path, VIDEO_MASK_KIND), overwrite=overwrite)
     with progress_bar() as bar:
@@ -391,6 +371,33 @@ def video(
         )
     if mask_path.exists():
         out.print(f"{mask_path}  (vein mask)", highlight=False)
+
+
+def _check_live_settings(settings, shape, methods, *, seconds, delay_us, exposure_us) -> None:
+    """The simulated capture's band, memory and length checked before any work (one line naming the option)."""
+    from .._validate import check_memory
+    from ..pulse.simulate import live_capture_bytes
+    from ..scenes.skin import SKIN_BAND_ROWS
+    from ..timing import PAPER_LINES_PER_SECOND
+
+    reach_us = SKIN_BAND_ROWS / PAPER_LINES_PER_SECOND * 1e6 + exposure_us / 2.0
+    if abs(delay_us) >= reach_us:
+        raise ValueError(
+            f"--delay-us must put the band on the skin's kernel (|delay| < {reach_us:.0f} us at --exposure-us "
+            f"{exposure_us:g}: 64 rows + half the band), got {delay_us:g}"
+        )
+    _bounds.scene_memory(shape, copies=4)
+    fr = settings.frame_rate()
+    n = int(round(seconds * fr))
+    if n < 8:
+        raise ValueError(f"--seconds {seconds:g} at {fr:g} fps is {n} frames; a pulse video needs at least 8")
+    check_memory(
+        _bounds.BASE_BYTES
+        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
+        + live_capture_bytes(settings, shape, methods),
+        f"--seconds {seconds:g} at {fr:g} fps ({n:,} frames of {shape[0]}x{shape[1]}, {len(methods)} method(s))",
+        advice="shorten --seconds, lower --fps or --size",
+    )
 
 
 def _write_videos(cap, paths: dict, mask_path: Path, *, overwrite: bool, progress) -> None:
