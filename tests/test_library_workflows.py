@@ -16,9 +16,10 @@ from planeray.errors import InputError
 from planeray.experiments import materials_folders as mf
 from planeray.experiments import skin_folders as sf
 from planeray.io import jsonable, read_stack, read_transport
-from planeray.materials import fit, read_label_image, write_label_image
-from planeray.materials.library import MediaLibrary, MediumEntry, load_library, save_library
+from planeray.materials import fit, read_label_image
+from planeray.materials.library import load_library
 from planeray.materials.settings import CaptureSettings
+from test_materials_recognition import capture  # noqa: F401 - the fixture: two media, labels, a library
 
 MM = 0.3
 MAPS = ("mu_s_prime_per_mm", "mu_a_per_mm", "mu_s_prime_se_per_mm", "mu_a_se_per_mm")
@@ -33,28 +34,10 @@ def _json(path):
 
 
 @pytest.fixture(scope="module")
-def materials(tmp_path_factory):
-    """An 8 x 8 transport store of two media side by side (known coefficients), its labels and a version-1 library."""
-    from planeray.io import write_transport
-    from planeray.transport import Transport
-
-    root = tmp_path_factory.mktemp("workflows")
-    table = fit.forward_table()
-    off = np.arange(-60, 61)
-    dense = np.empty((8, 8, off.size), np.float32)
-    dense[:, :4] = 50.0 * fit.line_kernel(0.8, 0.005, offsets_rows=off, mm_per_row=MM, table=table)
-    dense[:, 4:] = 50.0 * fit.line_kernel(2.5, 0.04, offsets_rows=off, mm_per_row=MM, table=table)
-    dense *= 1.0 + 0.01 * np.random.default_rng(3).standard_normal(dense.shape)
-    write_transport(Transport(dense, off), root / "cap.zarr", attrs={"mm_per_row": MM})
-    labels = np.zeros((8, 8), np.uint8)
-    labels[:, :4], labels[:, 4:] = 1, 2
-    write_label_image(root / "labels.png", labels, kind="labels")
-    lib = MediaLibrary(
-        (MediumEntry("thin", 1, 0.8, 0.1, 0.005, 0.3), MediumEntry("thick", 2, 2.5, 0.1, 0.04, 0.3)),
-        {"mm_per_row": MM, "calibrated": False, "block_px": 2},
-    )
-    save_library(lib, root / "lib.json")
-    return root, table
+def materials(capture):  # noqa: F811 - the imported fixture
+    """An 8 x 8 transport store of two media side by side (known coefficients), its labels and a version-1
+    library (``test_materials_recognition``'s), and the forward table."""
+    return capture[0], fit.forward_table()
 
 
 def _same(a, b):

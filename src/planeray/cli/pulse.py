@@ -375,8 +375,6 @@ def video(
 
 def _check_live_settings(settings, shape, methods, *, seconds, delay_us, exposure_us) -> None:
     """The simulated capture's band, memory and length checked before any work (one line naming the option)."""
-    from .._validate import check_memory
-    from ..pulse.simulate import live_capture_bytes
     from ..scenes.skin import SKIN_BAND_ROWS
     from ..timing import PAPER_LINES_PER_SECOND
 
@@ -391,11 +389,22 @@ def _check_live_settings(settings, shape, methods, *, seconds, delay_us, exposur
     n = int(round(seconds * fr))
     if n < 8:
         raise ValueError(f"--seconds {seconds:g} at {fr:g} fps is {n} frames; a pulse video needs at least 8")
+    _check_live_memory(
+        settings, shape, methods, f"--seconds {seconds:g} at {fr:g} fps ({n:,} frames of {shape[0]}x{shape[1]}, "
+        f"{len(methods)} method(s))",
+    )  # fmt: skip
+
+
+def _check_live_memory(settings, shape, methods, what: str) -> None:
+    """A simulated live capture of ``methods`` at ``shape`` fits in memory (else one line: ``what`` needs more)."""
+    from .._validate import check_memory
+    from ..pulse.simulate import live_capture_bytes
+
     check_memory(
         _bounds.BASE_BYTES
         + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
         + live_capture_bytes(settings, shape, methods),
-        f"--seconds {seconds:g} at {fr:g} fps ({n:,} frames of {shape[0]}x{shape[1]}, {len(methods)} method(s))",
+        what,
         advice="shorten --seconds, lower --fps or --size",
     )
 
@@ -450,11 +459,10 @@ def pulse_report(
     overwrite: Annotated[bool, typer.Option(help="Replace a report folder planeray wrote.")] = False,
 ):
     """The simulated pulse study: Fig. 15a/b, rate accuracy over rates and seeds, SNR per method, false alarms."""
-    from .._validate import check_memory
     from ..experiments.pulse import QUICK_REPORT, REPORT_RATES_BPM, pulse_report_steps, run_pulse_report
     from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
     from ..pulse.rate import RATE_BAND_HZ
-    from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes
+    from ..pulse.simulate import METHODS, LiveSettings
 
     shape = _bounds.image_size(size)
     try:  # the report magnifies with the paper's pyramid levels
@@ -476,12 +484,11 @@ def pulse_report(
         )
     _bounds.scene_memory(shape, copies=4)
     n = int(round(seconds * fps))
-    check_memory(
-        _bounds.BASE_BYTES
-        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
-        + live_capture_bytes(settings, shape, METHODS),
+    _check_live_memory(
+        settings,
+        shape,
+        METHODS,
         f"--seconds {seconds:g} at --fps {fps:g} ({n:,} frames of {shape[0]}x{shape[1]}, 4 methods)",
-        advice="shorten --seconds, lower --fps or --size",
     )
     _check_outputs((out_dir, "pulse report"), overwrite=overwrite)
     with progress_bar() as bar:
