@@ -1,5 +1,5 @@
 """Every documented output folder of the command line, produced from a notebook: the library functions
-``planeray.experiments.materials_folders`` and ``skin_folders`` write the folder, and what they write is
+(``planeray.experiments.materials_folders``, ``materials_recognize``, ``skin_folders``, ``skin_depth_folder``) write it, and what they write is
 checked against the underlying computation run here independently (its arrays, its numbers)."""
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from PIL import Image
 
 from planeray.errors import InputError
 from planeray.experiments import materials_folders as mf
+from planeray.experiments import materials_recognize as mr
+from planeray.experiments import skin_depth_folder as sd
 from planeray.experiments import skin_folders as sf
 from planeray.io import jsonable, read_stack, read_transport
 from planeray.materials import fit, read_label_image
@@ -83,7 +85,7 @@ def test_recognize_materials_writes_the_segmentation_of_the_underlying_recogniti
 
     root, _ = materials
     out = tmp_path / "rec"
-    numbers = mf.recognize_materials(
+    numbers = mr.recognize_materials(
         root / "cap.zarr", out, library=root / "lib.json", labels=root / "labels.png", progress=lambda *e: None
     )
     transport, _ = read_transport(root / "cap.zarr")
@@ -106,7 +108,7 @@ def test_add_to_library_adds_the_entry_of_the_underlying_fit(materials, tmp_path
 
     root, _ = materials
     out = tmp_path / "lib2.json"
-    lib, entries = mf.add_to_library(
+    lib, entries = mr.add_to_library(
         root / "cap.zarr", out, labels=root / "labels.png", class_names={2: "paste"}, library=root / "lib.json",
         replace=True,
     )  # fmt: skip
@@ -121,7 +123,7 @@ def test_add_to_library_adds_the_entry_of_the_underlying_fit(materials, tmp_path
     assert [e.name for e in written.entries] == ["thin", "paste"] and written.entry("paste") == expected
     assert entries == [expected] and lib.entries == written.entries
     with pytest.raises(InputError, match="^class_names 9=x: labels .* has no pixel of that id$"):
-        mf.add_to_library(root / "cap.zarr", tmp_path / "lib3.json", labels=root / "labels.png", class_names={9: "x"})
+        mr.add_to_library(root / "cap.zarr", tmp_path / "lib3.json", labels=root / "labels.png", class_names={9: "x"})
 
 
 @pytest.fixture(scope="module")
@@ -187,15 +189,15 @@ def test_enhance_veins_writes_eq7s_image_and_delay_map(skin, tmp_path):
 
 @pytest.mark.usefixtures("figures_not_drawn")
 def test_vein_depths_writes_each_veins_fit(skin, tmp_path, monkeypatch):
-    import planeray.skin.depth as sd
+    import planeray.skin.depth as skin_depth
 
     def fit_vein(model, images, variance, pix, *, vein_id=1, **kw):  # a stand-in answering at once: the folder
-        return sd.VeinFit(vein_id, vein_id != 3, "" if vein_id != 3 else "too deep", 1.0 + vein_id, 2.5, 0.1, 0.3,
+        return skin_depth.VeinFit(vein_id, vein_id != 3, "" if vein_id != 3 else "too deep", 1.0 + vein_id, 2.5, 0.1, 0.3,
                           0.2, 100.0, 1.1, pix.rows.size, len(images))  # fmt: skip
 
-    monkeypatch.setattr(sd, "fit_vein", fit_vein)
+    monkeypatch.setattr(skin_depth, "fit_vein", fit_vein)
     out = tmp_path / "depth"
-    result = sf.vein_depths(skin / "toy.zarr", out, mask=skin / "mask.png", tone="fair")
+    result = sd.vein_depths(skin / "toy.zarr", out, mask=skin / "mask.png", tone="fair")
     vein_id = np.asarray(Image.open(skin / "mask.png")).astype(np.uint16)
     _same(np.asarray(Image.open(out / "vein_ids.png")), vein_id)
     depth = _tif(out / "depth_mm.tif")
@@ -208,4 +210,4 @@ def test_vein_depths_writes_each_veins_fit(skin, tmp_path, monkeypatch):
     with open(out / "veins.csv", newline="") as f:
         assert [int(r["id"]) for r in csv.DictReader(f)] == [1, 2, 3]
     with pytest.raises(InputError, match="^g must be in"):
-        sf.vein_depths(skin / "toy.zarr", tmp_path / "d2", g=1.0)
+        sd.vein_depths(skin / "toy.zarr", tmp_path / "d2", g=1.0)

@@ -272,7 +272,7 @@ def predict(
     overwrite: Annotated[bool, typer.Option(help="Replace an existing segmentation planeray wrote.")] = False,
 ):
     """Segment a capture pixel by pixel with a trained model (refused if the sweep differs)."""
-    from ..experiments.materials_folders import check_predict_options, segment_materials
+    from ..experiments.materials_recognize import check_predict_options, segment_materials
     from ..io import jsonable
 
     options = dict(labels=labels, near_wall=near_wall, unclassified_below=unclassified_below, majority_px=majority_px)
@@ -530,7 +530,7 @@ def recognize_cmd(
     each is fitted as a whole with its walls, and named by the library's entry its parameters match -- or
     "none of these".  A library of parameters travels: one built at one resolution recognizes another.
     """
-    from ..experiments.materials_folders import check_recognition_options, recognize_materials
+    from ..experiments.materials_recognize import check_recognition_options, recognize_materials
     from ..io import jsonable
 
     check_recognition_options(block, regions, pool_mm, p_unknown)
@@ -605,7 +605,7 @@ def library_add(
     from the stack's images with its walls modelled, with their uncertainties, the index and the layer's depth:
     values of the medium, which recognize it in captures of any resolution and row size.
     """
-    from ..experiments.materials_folders import add_to_library, check_library_add
+    from ..experiments.materials_recognize import add_to_library, check_library_add
 
     settings = _settings(mm_per_row, n=n, depth_mm=depth_mm, white_reference=white_reference, white_albedo=white_albedo)
     names = _parse_class_names(class_name)

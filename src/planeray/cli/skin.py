@@ -424,7 +424,7 @@ def depth(
     against the camera's noise model and the model's own error): a fit that does not, or a parameter at the
     tables' edge, is flagged on the console, in planeray.json and in the flag layer flags.tif.
     """
-    from ..experiments.skin_folders import check_skin_options, vein_depths
+    from ..experiments.skin_depth_folder import check_skin_options, vein_depths
 
     options = dict(
         tone=tone, wavelength_nm=wavelength, mm_per_row=mm_per_row, epidermis_mm=epidermis_mm, dermis_mm=dermis_mm,
