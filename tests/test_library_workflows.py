@@ -211,3 +211,24 @@ def test_vein_depths_writes_each_veins_fit(skin, tmp_path, monkeypatch):
         assert [int(r["id"]) for r in csv.DictReader(f)] == [1, 2, 3]
     with pytest.raises(InputError, match="^g must be in"):
         sd.vein_depths(skin / "toy.zarr", tmp_path / "d2", g=1.0)
+
+
+@pytest.mark.usefixtures("figures_not_drawn")
+def test_emulation_folder_writes_the_comparisons_images_and_numbers(tmp_path):
+    from planeray.baselines import compare_emulation
+    from planeray.devices import simulated_device
+    from planeray.experiments.baselines import emulation_folder
+
+    def device():
+        return simulated_device("diffuse_plane", (16, 16), projector_rows=32, seed=0)
+
+    numbers = emulation_folder(device(), tmp_path / "emu", delay_us=0.0, exposure_us=600.0, spacing_rows=None)
+    res = compare_emulation(device(), delay_us=0.0, exposure_us=600.0, spacing_rows=None)  # the same, run here
+    for key, image in (("emulated", res["emulated"].image), ("synchronized", res["synchronized"]),
+                       ("truth", res["truth"])):  # fmt: skip
+        codes = np.round(np.clip(np.nan_to_num(image), 0, 1) * 65535)  # write_image's codes, within its rounding
+        assert np.abs(_tif(tmp_path / "emu" / f"{key}.tif").astype(np.float64) - codes).max() <= 1.0, key
+        assert (tmp_path / "emu" / f"{key}.png").is_file()
+    meta = _json(tmp_path / "emu" / "emulation.json")
+    assert meta["n_captures"] == res["numbers"]["n_captures"] == numbers["n_captures"]
+    assert meta["errors"] == json.loads(json.dumps(res["numbers"]["errors"]))

@@ -13,7 +13,6 @@ import os
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.text import Text
 
@@ -262,22 +261,7 @@ def _join_pixel_args(argv: list[str]) -> list[str]:
 
 
 def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
-    """PNG: display-scaled 8-bit preview; TIFF: the values as 16-bit codes (0..1 -> 0..65535)."""
-    from ..io import write_image
+    """PNG: display-scaled 8-bit preview; TIFF: the values as 16-bit codes (:func:`planeray.figures.save_image`)."""
+    from ..figures._common import save_image
 
-    if path.suffix.lower() == ".png":
-        from PIL import Image
-
-        from ..figures._common import display_scale
-        from ..io import atomic_file
-        from ..io.marks import png_mark_info
-
-        shown = np.clip(image * (scale_to or display_scale([image], percentile=99.5)), 0, 1)
-        with atomic_file(path) as tmp:
-            Image.fromarray((shown * 255 + 0.5).astype(np.uint8)).save(
-                tmp, format="PNG", pnginfo=png_mark_info("image")
-            )
-        return path
-    if path.suffix.lower() in (".tif", ".tiff"):
-        return write_image(path, image, bit_depth=16)
-    raise ValueError(f"--out must end in .png, .tif or .tiff, got {path.name}")
+    return save_image(image, path, scale_to=scale_to)

@@ -12,8 +12,9 @@
   :mod:`planeray.experiments.materials_folders` (``materials fit``),
   :mod:`planeray.experiments.materials_recognize` (``materials recognize``, ``library-add``,
   ``predict``), :mod:`planeray.experiments.skin_folders` (``skin veins``, ``enhance``),
-  :mod:`planeray.experiments.skin_depth_folder` (``skin depth``) and
-  :mod:`planeray.experiments.simulate` (``simulate``).  They live here, not in the domain
+  :mod:`planeray.experiments.skin_depth_folder` (``skin depth``),
+  :mod:`planeray.experiments.simulate` (``simulate``) and :mod:`planeray.experiments.baselines`
+  (``separate direct-global``, ``emulate``).  They live here, not in the domain
   packages, because their folders hold figures: ``experiments`` is the lowest layer that may
   draw them.
 

@@ -24,6 +24,7 @@ from ..errors import InputError
 from ._storage import storage_error
 
 __all__ = [
+    "written_together",
     "check_not_an_input",
     "same_place",
     "ALREADY_EXISTS",
@@ -201,6 +202,27 @@ def check_not_an_input(out, inputs, *, option: str = "out") -> None:
         raise InputError(
             f"{option} {out} {problem} ({which}): planeray never writes over its inputs; choose another output"
         )
+
+
+@contextlib.contextmanager
+def written_together(*paths):
+    """Files a command writes as one result: if the block fails (an error, Ctrl-C), the ones it created go.
+
+    Each file is written atomically by itself; this removes those of the set that did not
+    exist before the block, so a failed run leaves no partial set behind (a file it
+    replaced with ``--overwrite`` stays replaced, whole).
+    """
+    paths = [Path(p) for p in paths if p is not None]
+    existed = {p: p.exists() for p in paths}
+    try:
+        yield
+    except BaseException:
+        for p in paths:
+            if not existed[p]:
+                with contextlib.suppress(OSError):
+                    if p.is_file() and not p.is_symlink():
+                        p.unlink()
+        raise
 
 
 def check_writable(path) -> None:
