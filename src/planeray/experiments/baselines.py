@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._workflow import Stages
+from .workflow import Stages
 
 __all__ = ["direct_global_folder", "emulation_folder", "write_comparison", "DIRECT_GLOBAL_IMAGES", "EMULATION_IMAGES"]
 

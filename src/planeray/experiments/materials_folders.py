@@ -9,7 +9,7 @@ commands' outputs (``recognize``, ``library-add``, ``predict``) are in
 
 The capture's settings (row size, refractive index, depth, white reference, camera) are one
 :class:`~planeray.materials.settings.CaptureSettings`.  Options are keyword-only; ``progress``
-and ``note`` are as in :mod:`planeray.experiments._workflow`.
+and ``note`` are as in :mod:`planeray.experiments.workflow`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from ..io import atomic_directory, jsonable
 from ..io.atomic import planeray_output_kind, same_place
 from ..io.lock import writes_output
 from ..materials.settings import CaptureSettings
-from ._workflow import Stages, check_folder_output
+from .workflow import Stages, check_folder_output
 
 __all__ = [
     "fit_materials",
@@ -445,7 +445,7 @@ def fit_materials(
     overwrite : bool
         Replace a fit folder planeray wrote.
     progress, note : callable, optional
-        ``progress(stage, done, total)`` and ``note(text)`` (:mod:`planeray.experiments._workflow`).
+        ``progress(stage, done, total)`` and ``note(text)`` (:mod:`planeray.experiments.workflow`).
 
     Returns
     -------

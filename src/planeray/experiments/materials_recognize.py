@@ -10,7 +10,7 @@ fitting or classifying, writing atomically -- so a notebook produces the same fi
   (``planeray materials library-add``);
 * :func:`segment_materials`: a trained model's segmentation (``planeray materials predict``).
 
-Options are keyword-only; ``progress`` and ``note`` are as in :mod:`planeray.experiments._workflow`.
+Options are keyword-only; ``progress`` and ``note`` are as in :mod:`planeray.experiments.workflow`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ from ..io import atomic_directory, jsonable
 from ..io.atomic import planeray_output_kind, same_place
 from ..io.lock import writes_output
 from ..materials.settings import CaptureSettings
-from ._workflow import Stages, check_folder_output
 from .materials_folders import (
     _capture_geometry,
     _exists,
@@ -38,6 +37,7 @@ from .materials_folders import (
     forward_table,
     write_map_tiff,
 )
+from .workflow import Stages, check_folder_output
 
 __all__ = [
     "recognize_materials",
@@ -210,7 +210,7 @@ def recognize_materials(
     overwrite : bool
         Replace a recognition folder planeray wrote.
     progress, note : callable, optional
-        As in :mod:`planeray.experiments._workflow`.
+        As in :mod:`planeray.experiments.workflow`.
 
     Returns
     -------
@@ -382,7 +382,7 @@ def add_to_library(
     overwrite : bool
         Replace a library file planeray wrote.
     progress, note : callable, optional
-        As in :mod:`planeray.experiments._workflow`.
+        As in :mod:`planeray.experiments.workflow`.
 
     Returns
     -------
@@ -503,7 +503,7 @@ def segment_materials(
     overwrite : bool
         Replace a segmentation planeray wrote.
     progress, note : callable, optional
-        As in :mod:`planeray.experiments._workflow`.
+        As in :mod:`planeray.experiments.workflow`.
 
     Returns
     -------

@@ -12,7 +12,7 @@ from pathlib import Path
 from ..camera import CameraModel
 from ..io.lock import writes_output
 from ..timing import PAPER_LINES_PER_SECOND, Sweep
-from ._workflow import Stages
+from .workflow import Stages
 
 __all__ = ["simulate_to_store"]
 
@@ -63,7 +63,7 @@ def simulate_to_store(
     overwrite : bool
         Replace existing outputs planeray wrote.
     progress : callable, optional
-        ``progress(stage, done, total)`` (:mod:`planeray.experiments._workflow`).
+        ``progress(stage, done, total)`` (:mod:`planeray.experiments.workflow`).
 
     Returns
     -------

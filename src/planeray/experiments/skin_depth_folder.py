@@ -4,7 +4,7 @@
 stated (the stack's record, the options), its vein tables traced where not shipped, each vein
 fitted, the folder written atomically -- so a notebook produces the same files, bytes and
 ``planeray.json`` as the command line.  Options are keyword-only; ``progress`` and ``note`` are
-as in :mod:`planeray.experiments._workflow`.
+as in :mod:`planeray.experiments.workflow`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,6 @@ from ..errors import InputError, parameter_name
 from ..io import atomic_directory, jsonable
 from ..io.atomic import MARKER
 from ..io.lock import writes_output
-from ._workflow import Stages, check_folder_output
 from .skin_folders import (
     _load_stack,
     _scale,
@@ -31,6 +30,7 @@ from .skin_folders import (
     check_wavelength,
     source_kind,
 )
+from .workflow import Stages, check_folder_output
 
 __all__ = ["vein_depths", "check_skin_options", "JOINT_ROUNDS"]
 
@@ -251,7 +251,7 @@ def vein_depths(
     overwrite : bool
         Replace an output folder planeray wrote.
     progress, note : callable, optional
-        As in :mod:`planeray.experiments._workflow`.
+        As in :mod:`planeray.experiments.workflow`.
 
     Returns
     -------

@@ -11,7 +11,7 @@ computing, writing the folder atomically -- so a notebook produces the same file
   map (``planeray skin enhance``).
 
 Each vein's depth (``planeray skin depth``) is :func:`planeray.experiments.skin_depth_folder.vein_depths`.
-Options are keyword-only; ``progress`` is as in :mod:`planeray.experiments._workflow`.
+Options are keyword-only; ``progress`` is as in :mod:`planeray.experiments.workflow`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from ..io import atomic_directory, jsonable
 from ..io.atomic import MARKER
 from ..io.lock import writes_output
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
-from ._workflow import Stages, check_folder_output
+from .workflow import Stages, check_folder_output
 
 __all__ = [
     "vein_images",

@@ -1,6 +1,7 @@
 """What the folder-writing workflows share: progress by stage, notes, and the checks before any work.
 
-A workflow (:func:`planeray.experiments.fit_materials`, :func:`~planeray.experiments.skin_depth_folder`, ...)
+A workflow (:func:`~planeray.experiments.materials_folders.fit_materials`,
+:func:`~planeray.experiments.skin_depth_folder.vein_depths`, ...)
 reports its progress as ``progress(stage, done, total)``: ``stage`` a short description (a new
 one starts a new stage), ``done`` the units finished in it, ``total`` its units (None: not
 counted).  Its notes -- an assumption made, a table traced first -- go to ``note(text)``, by
