@@ -72,7 +72,7 @@ def copy_mathjax(app, exception):
             shutil.copy2(src, dst)
 
 
-# The groups of the front door, in the order of ``planeray.__init__._EXPORTS``.
+# The groups of the front door, in the order of ``planeray/__init__.pyi`` (read into ``planeray._EXPORTS``).
 _GROUPS = {
     "timing": "The imaging model (Eqs. 1-3)",
     "transport": "Light transport (Eqs. 4-6)",
@@ -124,7 +124,7 @@ def write_api_index(app, config=None):
         "==========",
         "",
         "Generated from the numpydoc docstrings. The front door, ``import planeray as pr``, holds the",
-        "names a notebook needs (``planeray.__init__._EXPORTS``: each name and the module that defines",
+        "names a notebook needs (``planeray/__init__.pyi``: each name and the module that defines",
         "it); every module of the package follows, with a page per function and class.",
         "",
         ".. currentmodule:: planeray",
@@ -136,6 +136,16 @@ def write_api_index(app, config=None):
     for title, names in groups.items():
         lines += [title, "~" * len(title), "", ".. autosummary::", "   :toctree: generated/", "   :nosignatures:", ""]
         lines += [f"   {n}" for n in names] + [""]
+    lines += [
+        "Subpackages: ``pr.materials``, ``pr.skin``, ...",
+        "~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~",
+        "",
+        "Every public module and subpackage is an attribute of the front door too, loaded when first used",
+        "(``planeray/__init__.pyi`` is the one list: lazy loading, ``__all__`` and type checkers):",
+        "",
+        ", ".join(f":mod:`pr.{m} <planeray.{m}>`" for m in planeray._SUBMODULES if m != "cli") + ".",
+        "",
+    ]
     lines += [
         "Modules",
         "-------",

@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..figures._common import display_scale, new_figure, save_png
 from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
-from ..io import atomic_file
+from ..io import atomic_file, jsonable
 from ..io.marks import MARK_KEY, mark_text
 from ..profiles import measured_delay_profiles
 from ..scenes import EFFECTS, list_scenes, make_scene, representative_pixels
@@ -38,7 +38,6 @@ from ..synthesis import (
     single_line_pattern,
 )
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS, paper_sweep, sweep_support_rows
-from ._report import jsonable
 
 __all__ = [
     "FIGURES",

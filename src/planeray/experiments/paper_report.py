@@ -15,9 +15,8 @@ import html
 import json
 from pathlib import Path
 
-from ..io import atomic_file
+from ..io import atomic_file, jsonable
 from ..io.marks import MARK_KEY, mark_text
-from ._report import jsonable
 
 __all__ = [
     "PAPER",

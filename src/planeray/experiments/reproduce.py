@@ -32,10 +32,9 @@ from pathlib import Path
 
 from .._validate import check_integer
 from ..errors import InputError
-from ..io import atomic_directory, atomic_file
+from ..io import atomic_directory, atomic_file, jsonable
 from ..io.atomic import MARKER, check_replaceable, planeray_output_kind, storage_error
 from ..io.lock import writes_output
-from ._report import jsonable
 
 __all__ = [
     "FORMAT",
@@ -142,7 +141,8 @@ def _rel(folder: Path, path) -> str:
 
 
 def _fig4(folder: Path, s: dict, advance) -> dict:
-    from ..baselines import compare_emulation, simulated_device
+    from ..baselines import compare_emulation
+    from ..devices import simulated_device
     from ..figures.baselines import emulation_figure
 
     n = s["size"]

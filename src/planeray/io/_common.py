@@ -26,6 +26,7 @@ wrong numbers; every decoding failure becomes one :class:`StackError` or
 
 from __future__ import annotations
 
+import math
 import os
 from importlib import metadata as _importlib_metadata
 from pathlib import Path
@@ -92,32 +93,62 @@ def planeray_version() -> str:
 
 
 # ----------------------------------------------------------------------------
-def jsonable(value, where: str = "metadata", error=StackError):
-    """Convert numpy scalars/arrays, tuples and paths to plain JSON types (recursively)."""
-    if value is None or isinstance(value, (bool, str)):
+def jsonable(value, *, finite: bool = True, default=None, where: str = "metadata", error=None):
+    """``value`` as plain JSON types, for :func:`json.dumps`: the one conversion of every file planeray writes.
+
+    Dicts (keys as ``str``), lists and tuples (as lists) are converted element by element; NumPy
+    arrays and scalars become Python lists and numbers; paths become text.
+
+    Parameters
+    ----------
+    value : object
+        What to convert.
+    finite : bool
+        ``True`` (records and reports): a non-finite float (NaN, +-inf) becomes ``None`` (JSON
+        ``null``), so the text is strict JSON. ``False``: kept (written ``NaN`` / ``Infinity``).
+    default : callable, optional
+        Applied to any other object (e.g. ``str``).
+    where, error : str, exception class, optional
+        With ``error`` (e.g. :class:`~planeray.errors.StackError`), any other object, or a dict key
+        that is not text or a number, raises ``error`` naming ``where`` (``"metadata['a'][2]"``);
+        without ``error`` or ``default`` such an object is returned as it is (and
+        :func:`json.dumps` refuses it).
+
+    Examples
+    --------
+    >>> jsonable({"a": np.float32(0.5), 1: [np.int64(2), float("nan")], "m": np.eye(2, dtype=bool)})
+    {'a': 0.5, '1': [2, None], 'm': [[True, False], [False, True]]}
+    >>> jsonable([np.inf], finite=False)
+    [inf]
+    """
+
+    def convert(value, where):
+        if isinstance(value, dict):
+            out = {}
+            for key, item in value.items():
+                if error is not None and not isinstance(key, (str, int, float, bool, np.integer)):
+                    raise error(f"{where} key {key!r} is not a string")
+                out[str(key)] = convert(item, f"{where}[{str(key)!r}]")
+            return out
+        if isinstance(value, (list, tuple)):
+            return [convert(item, f"{where}[{i}]") for i, item in enumerate(value)]
+        if isinstance(value, np.ndarray):
+            return convert(value.tolist(), where)
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, float):
+            return None if finite and not math.isfinite(value) else value
+        if value is None or isinstance(value, (str, int)):
+            return value
+        if isinstance(value, os.PathLike):
+            return os.fspath(value)
+        if default is not None:
+            return default(value)
+        if error is not None:
+            raise error(f"{where} is not JSON-serializable (type {type(value).__name__})")
         return value
-    if isinstance(value, (int, float)):
-        return value
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating):
-        return float(value)
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist(), where, error)
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    if isinstance(value, dict):
-        out = {}
-        for key, item in value.items():
-            if not isinstance(key, (str, int, float, bool, np.integer)):
-                raise error(f"{where} key {key!r} is not a string")
-            out[str(key)] = jsonable(item, f"{where}[{str(key)!r}]", error)
-        return out
-    if isinstance(value, (list, tuple)):
-        return [jsonable(item, f"{where}[{i}]", error) for i, item in enumerate(value)]
-    raise error(f"{where} is not JSON-serializable (type {type(value).__name__})")
+
+    return convert(value, where)
 
 
 def open_group(path: Path, error):

@@ -41,7 +41,7 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
     with :func:`planeray.io.create_array`, write through
     :func:`planeray.io.writable`), or :func:`read_transport` refuses the store.
     """
-    out = jsonable(dict(attrs or {}), "attrs", TransportError)
+    out = jsonable(dict(attrs or {}), finite=False, where="attrs", error=TransportError)
     out.update(
         {
             "format": TRANSPORT_FORMAT,
