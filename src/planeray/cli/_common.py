@@ -248,11 +248,28 @@ def _parse_pixel(text: str) -> tuple[int, int]:
     return int(parts[0]), int(parts[1])
 
 
+#: Commands whose ``--size H W`` also takes one number for a square image (``view``, ``video``: a scene).
+SQUARE_SIZE_COMMANDS = ("view", "video")
+
+
+def _is_int(word: str) -> bool:
+    return word.lstrip("-").isdigit()
+
+
 def _join_pixel_args(argv: list[str]) -> list[str]:
-    """Let ``--pixel ROW COL`` (two words) through typer, which takes one value per option."""
+    """Let ``--pixel ROW COL`` (two words) through typer, which takes one value per option; and
+    ``view``/``video --size N`` (one number) mean the square ``--size N N``."""
     joined, i = [], 0
+    square = bool(argv) and argv[0] in SQUARE_SIZE_COMMANDS
     while i < len(argv):
-        if (
+        if square and argv[i] == "--size" and i + 1 < len(argv) and _is_int(argv[i + 1]):
+            if i + 2 < len(argv) and _is_int(argv[i + 2]):
+                joined += argv[i : i + 3]
+                i += 3
+            else:
+                joined += ["--size", argv[i + 1], argv[i + 1]]
+                i += 2
+        elif (
             argv[i] == "--pixel"
             and i + 2 < len(argv)
             and argv[i + 1].lstrip("-").isdigit()
