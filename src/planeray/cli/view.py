@@ -277,6 +277,7 @@ def video(
     overwrite: Annotated[bool, typer.Option(help="Replace a video planeray wrote.")] = False,
 ):
     """Write a delay (or exposure) sweep as a video: the paper's "sweeping the band"."""
+    from .._extras import import_extra
     from .._validate import check_integer, check_number, check_positive
     from ..viewer.display import check_display
     from ..viewer.session import ViewSettings
@@ -291,6 +292,7 @@ def video(
     )
 
     # every option and the output before anything is built or rendered
+    import_extra("imageio_ffmpeg", "planeray video")
     if out_path.suffix.lower() not in CODECS:
         raise ValueError(f"--out must end in {', '.join(CODECS)}, got {out_path.name!r}")
     if sweep not in ("delay", "exposure"):

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .._validate import check_integer
+from .._extras import import_extra
 from ..errors import InputError
 from ..io import atomic_directory, atomic_file
 from ..io.atomic import MARKER, check_replaceable, planeray_output_kind, storage_error
@@ -599,6 +600,7 @@ def plan_paper_run(out_dir, *, quick: bool = False, size: int | None = None, see
     check_integer(seed, "seed", minimum=0, maximum=2**32 - 1)
     if size is not None:
         check_integer(size, "size", minimum=MIN_SIZE, maximum=MAX_SIZE)
+    import_extra("cv2", "planeray paper (Figs. 13-16: Eq. 7's bilateral filter, Eulerian magnification)")
     out = Path(out_dir)
     header = _header(quick=quick, size=size, seed=seed)
     fresh = {**header, "steps": {}}
