@@ -30,8 +30,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .._validate import check_integer
 from .._extras import import_extra
+from .._validate import check_integer
 from ..errors import InputError
 from ..io import atomic_directory, atomic_file
 from ..io.atomic import MARKER, check_replaceable, planeray_output_kind, storage_error
