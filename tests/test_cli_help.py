@@ -13,7 +13,7 @@ import typer
 from typer.testing import CliRunner
 
 from planeray.cli import app
-from planeray.cli._common import _join_pixel_args
+from planeray.cli._common import _square_size_args
 
 runner = CliRunner()
 
@@ -81,10 +81,11 @@ def test_python_dash_m_planeray_is_the_command():
         (["view", "wax", "--size", "32", "48", "--seed", "1"], ["view", "wax", "--size", "32", "48", "--seed", "1"]),
         (["video", "wax", "--size", "16", "--out", "a.mp4"], ["video", "wax", "--size", "16", "16", "--out", "a.mp4"]),
         (["simulate", "wax", "--size", "32", "32"], ["simulate", "wax", "--size", "32", "32"]),
+        (["--debug", "view", "wax", "--size", "8"], ["--debug", "view", "wax", "--size", "8", "8"]),
     ],
 )
 def test_view_size_takes_h_w_or_one_number(argv, expected):
-    assert _join_pixel_args(argv) == expected
+    assert _square_size_args(argv) == expected
 
 
 def test_view_size_is_h_w_in_its_help():

@@ -55,12 +55,13 @@ from . import (
     sweep,
     view,
 )
-from ._common import DEBUG, _friendly_errors, _join_pixel_args
+from ._common import DEBUG, PlanerayGroup, _friendly_errors, _join_pixel_args
 
 __all__ = ["app", "main"]
 
 app = typer.Typer(
     help="planeray: programmable plane-to-ray light transport (simulate, capture, analyse delay-exposure stacks).",
+    cls=PlanerayGroup,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
