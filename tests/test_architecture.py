@@ -23,6 +23,7 @@ LAYERS = [
     "errors",
     "_extras",
     "_validate",
+    "_progress",
     "goodness",
     "timing",
     "medium",
