@@ -107,6 +107,7 @@ SPHINXOPTS ?= -j 2
 docs: venv browser $(MATHJAX)
 	$(VENV)/bin/sphinx-build -W --keep-going -q $(SPHINXOPTS) -b html docs docs/_build/html
 	PLANERAY_DOCS_SITE=docs/_build/html $(PY) -m pytest -q -p no:cacheprovider tests/test_docs_site.py
+	@$(PY) tools/gallery_times.py docs/_build/html
 
 $(MATHJAX):
 	@if ! command -v npm >/dev/null 2>&1 && [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
