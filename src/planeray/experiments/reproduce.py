@@ -274,6 +274,15 @@ def _figure_measured(name: str, numbers: dict) -> dict:
             "michelson_sharpened_resolution": narrow["michelson_scan_line"],
             "michelson_sharpened_1_row": one_row["michelson_scan_line"],
             "michelson_truth_direct": imgs["ground-truth direct"]["michelson_scan_line"],
+            "michelson_seeds": {
+                short: next(v for k, v in numbers.get("michelson_noise_seeds", {}).items() if match(k))
+                for short, match in (
+                    ("captured_600us", lambda k: k.startswith("captured")),
+                    ("sharpened_resolution", lambda k: k.startswith("sharpened") and k != "sharpened, 1 row"),
+                    ("sharpened_1_row", lambda k: k == "sharpened, 1 row"),
+                )
+                if numbers.get("michelson_noise_seeds")
+            },
         }
     if name == "fig12":
         imgs = numbers["images"]
@@ -428,6 +437,10 @@ def _fig15(folder: Path, s: dict, advance) -> dict:
         "snr_db_without_magnification": {m: v["snr_db_without_magnification"] for m, v in r["methods"].items()},
         "rate_bpm": {m: v["rate_bpm"] for m, v in r["methods"].items()},
         "accuracy": {k: r["accuracy"][k] for k in ("detected", "total", "mean_abs_error_bpm", "max_abs_error_bpm")},
+        # one video's error each, over rates and seeds: the spread the paper's one error is set against
+        "abs_errors_bpm": [
+            abs(x["rate_bpm"] - x["true_bpm"]) for x in r["accuracy"]["runs"] if x["rate_bpm"] is not None
+        ],
         "false_alarms": r["pulse_free"]["false_alarms"],
         "pulse_free_videos": len(r["pulse_free"]["runs"]),
     }
