@@ -123,6 +123,14 @@ def _check_files(run):
     # offline: nothing fetched from elsewhere, every image relative and inside the folder
     assert not re.search(r"(src|href)=\"(https?:)?//", page)
     assert "<script" not in page
+    # the summary first: every comparison of the page, in its order, each linked to its row; no raw TeX
+    summary = page[page.index('<table class="summary">') : page.index("</table>")]
+    assert page.index('<table class="summary">') < page.index("<p>") < page.index("<h2")
+    linked = re.findall(r'<td><a href="#(\w+-\d+)">', summary)
+    rows = re.findall(r'<tr id="(\w+-\d+)">', page)
+    assert linked == rows and len(rows) >= 30
+    assert [r.split("-")[0] for r in rows][:1] == ["fig4"]
+    assert not re.search(r"\$[^$]*\\", page) and "\\mu" not in page and "\\alpha" not in page
 
 
 def _rerun(command: str, out: Path):
