@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from planeray.cli import app
 from planeray.experiments import paper, reproduce
-from planeray.experiments.paper_report import FIGURE_ORDER, PAPER, WHERE
+from planeray.experiments.paper_report import FIGURE_ORDER, PAPER, WHERE, math_html
 from planeray.io.marks import mark_text
 
 runner = CliRunner()
@@ -210,7 +210,7 @@ def _check_report_quotes(run):
     for key, entry in PAPER.items():
         assert entry["section"] in md
         for name, q in entry["quotes"].items():
-            cell = q.replace("|", "\\|")  # a pipe in a Markdown table cell is escaped
+            cell = math_html(q).replace("|", "\\|")  # its TeX as text; a pipe in a Markdown table cell is escaped
             assert f'"{cell}" ({WHERE[key][name]})' in md, (key, q)
 
 

@@ -521,7 +521,7 @@ def _write_chunk(group, res: ChunkResult, index: int) -> None:
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 
-@resumable.killable
+@resumable._killable
 @writes_output("out")
 def demultiplex_to_store(
     stack: Stack,
@@ -620,7 +620,7 @@ def demultiplex_to_store(
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():
         progress(sum(chunks[i].stop - chunks[i].start for i in range(len(chunks)) if done[i]))
-    _stop_after = resumable.stop_after()  # the tests' hook: a run killed after k chunks
+    _stop_after = resumable._stop_after_units()  # the tests' hook: a run killed after k chunks
     try:
         if _stop_after is not None:
             todo = todo[:_stop_after]

@@ -810,7 +810,9 @@ def _tex(tex: str) -> str:
     """One TeX formula (no dollars) as HTML: Unicode symbols, ``<sub>``/``<sup>``, TeX's spacing rules."""
     t = html.escape(tex, quote=False)
     t = re.sub(r"\\[ ,;:]", "\u2009", t)  # \  \, \; \: : a thin space
-    t = re.sub(r"\\([A-Za-z]+) ?", lambda m: _TEX_SYMBOLS.get(m.group(1), m.group(1)), t)  # eats its space
+    t = re.sub(
+        r"\\([A-Za-z]+)(?: (?=[A-Za-z]))?", lambda m: _TEX_SYMBOLS.get(m.group(1), m.group(1)), t
+    )  # a space before a letter ends the command (\mu s)
     t = re.sub(
         r"([_^])(?:\{([^}]*)\}|(\w))",
         lambda m: (
