@@ -145,3 +145,29 @@ def test_fig15_agrees_only_when_the_paper_s_error_lies_within_planeray_s(errors,
     row = comparisons("fig15", _fig15(errors))[0]
     assert row["interval"] == [min(errors), max(errors)]
     assert row["verdict"] == verdict
+
+
+def _fig12(syn, short, long):
+    return {
+        "relative_rmse_synthesized": syn[0],
+        "relative_rmse_16ms": short[0],
+        "relative_rmse_800ms": long[0],
+        "relative_rmse_seeds": {"synthesized": syn, "16ms": short, "800ms": long},
+    }
+
+
+@pytest.mark.parametrize(
+    ("short", "verdict"),
+    [
+        ([1.9, 1.95, 2.1, 1.97, 1.91], "agrees"),
+        ([0.75, 0.5, 0.7, 0.65, 0.55], "partly"),  # the 16 ms capture within the synthesized image's spread
+    ],
+)
+def test_fig12_verdicts_rest_on_intervals_over_noise_seeds(short, verdict):
+    syn, long = [0.69, 0.55, 0.67, 0.69, 0.60], [0.24, 0.22, 0.25, 0.22, 0.23]
+    first, second = comparisons("fig12", _fig12(syn, short, long))
+    assert first["verdict"] == verdict and len(first["interval"]) == 2
+    ratio = np.divide(syn, long)
+    assert second["interval"][0] < ratio.mean() < second["interval"][1]
+    assert second["verdict"] == "partly"  # ~2.8x the 800 ms capture's error: not "similar"
+    assert comparisons("fig12", _fig12(syn, short, [0.6, 0.5, 0.6, 0.62, 0.58]))[1]["verdict"] == "agrees"

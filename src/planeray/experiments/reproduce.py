@@ -291,6 +291,15 @@ def _figure_measured(name: str, numbers: dict) -> dict:
             "relative_rmse_synthesized": imgs["synthesized from the stack"]["relative_rmse"],
             "relative_rmse_16ms": imgs["single line, 16 ms"]["relative_rmse"],
             "relative_rmse_800ms": imgs["single line, 800 ms"]["relative_rmse"],
+            "relative_rmse_seeds": {
+                short: numbers["relative_rmse_noise_seeds"][name]
+                for short, name in (
+                    ("synthesized", "synthesized from the stack"),
+                    ("16ms", "single line, 16 ms"),
+                    ("800ms", "single line, 800 ms"),
+                )
+                if name in numbers.get("relative_rmse_noise_seeds", {})
+            },
         }
     if name == "effects":
         return {
