@@ -171,3 +171,23 @@ def test_fig12_verdicts_rest_on_intervals_over_noise_seeds(short, verdict):
     assert second["interval"][0] < ratio.mean() < second["interval"][1]
     assert second["verdict"] == "partly"  # ~2.8x the 800 ms capture's error: not "similar"
     assert comparisons("fig12", _fig12(syn, short, [0.6, 0.5, 0.6, 0.62, 0.58]))[1]["verdict"] == "agrees"
+
+
+@pytest.mark.parametrize(
+    ("accuracy", "pixels", "verdict"),
+    [
+        ({"a": 0.97, "b": 0.95}, {"a": 2000, "b": 2000}, "agrees"),  # every interval above 90 %
+        ({"a": 0.97, "b": 0.92}, {"a": 100, "b": 100}, "partly"),  # 92 of 100: the interval spans 90 %
+        ({"a": 0.97, "b": 0.80}, {"a": 100, "b": 99}, "differs"),  # the quick run's 2% milk: below 90 %
+    ],
+)
+def test_fig10_accuracy_verdict_rests_on_binomial_intervals(accuracy, pixels, verdict):
+    from scipy.stats import binomtest
+
+    m = {"accuracy": accuracy, "pixels": pixels, "min_material_accuracy": min(accuracy.values())}
+    m |= {"misclassified": 1, "share_of_errors_near_wall": 1.0, "near_wall_pixel_share": 0.4}
+    row = comparisons("fig10", m)[0]
+    b = min(accuracy, key=accuracy.get)
+    ci = binomtest(round(accuracy[b] * pixels[b]), pixels[b]).proportion_ci(method="wilson")
+    assert row["interval"][1] == pytest.approx(ci.high)
+    assert row["verdict"] == verdict

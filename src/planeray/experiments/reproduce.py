@@ -336,6 +336,7 @@ def _fig10(folder: Path, s: dict, advance) -> dict:
     test = r["stack_profiles"]["floor_edge"]["test"]
     measured = {
         "accuracy": test["accuracy"],
+        "pixels": test["pixels"],  # per material: its test pixels, behind the accuracy's interval
         "overall": test["overall"],
         "min_material_accuracy": test["min_material_accuracy"],
         "misclassified": test["errors"]["misclassified"],
