@@ -191,3 +191,13 @@ def test_fig10_accuracy_verdict_rests_on_binomial_intervals(accuracy, pixels, ve
     ci = binomtest(round(accuracy[b] * pixels[b]), pixels[b]).proportion_ci(method="wilson")
     assert row["interval"][1] == pytest.approx(ci.high)
     assert row["verdict"] == verdict
+
+
+@pytest.mark.parametrize(("wrong", "share", "verdict"), [(28, 1.0, "agrees"), (214, 0.55, "partly")])
+def test_fig10_errors_near_walls_judged_on_their_interval(wrong, share, verdict):
+    m = {"accuracy": {"a": 0.95}, "min_material_accuracy": 0.95, "misclassified": wrong}
+    m |= {"share_of_errors_near_wall": share, "near_wall_pixel_share": 0.4}
+    row = comparisons("fig10", m)[1]
+    assert row["verdict"] == verdict
+    lo, hi = row["interval"]
+    assert lo < share <= hi  # the Wilson interval around the share measured

@@ -531,17 +531,22 @@ def comparisons(key: str, m: dict) -> list[dict]:
                     "" if (m["min_material_accuracy"] or 0) >= 0.9 else small,
                 )
             )
-        share, pixels = m["share_of_errors_near_wall"], m["near_wall_pixel_share"]
+        share, pixels, wrong = m["share_of_errors_near_wall"], m["near_wall_pixel_share"], m["misclassified"]
+        ci = None if share is None or not wrong else _wilson(share, wrong)
+        # the paper: every error near a wall (a share of 1); agrees when 1 lies within the share's interval
+        ok = None if share is None else (share >= 0.99 if ci is None else ci[1] >= 0.99)
         rows.append(
             _row(
                 q["edges"],
-                f"{m['misclassified']} misclassified pixels, {_f(share, '.0%')} of them near a wall "
-                f"(near-wall pixels are {_f(pixels, '.0%')} of all)",
-                "not measured" if share is None else ("agrees" if share >= 0.99 else "partly"),
+                f"{wrong} misclassified pixels, {_f(share, '.0%')} of them near a wall"
+                + ("" if ci is None else f" [{ci[0]:.0%}, {ci[1]:.0%}], 95 % Wilson interval")
+                + f" (near-wall pixels are {_f(pixels, '.0%')} of all)",
+                "not measured" if ok is None else ("agrees" if ok else "partly"),
                 ""
-                if share is None or share >= 0.99
+                if ok is None or ok
                 else "the errors lean toward the walls, where the wall changes a medium's kernel, but the simulated "
                 "camera's noise also confuses pixels away from them",
+                interval=ci,
             )
         )
         rows.append(_media_fit_row(q["inverse"], m.get("media_fit")))
