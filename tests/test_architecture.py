@@ -21,7 +21,9 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "planeray"
 #: Top-level units, lowest first.  A unit may import only units before it.
 LAYERS = [
     "errors",
+    "_extras",
     "_validate",
+    "_progress",
     "goodness",
     "timing",
     "medium",
@@ -60,6 +62,7 @@ LAYERS = [
     "_console",
     "demo",
     "cli",
+    "__main__",  # python -m planeray: the command line
     "_jit",  # compiles the kernels of every engine (make kernels): above them all, imported by none
 ]
 

@@ -15,6 +15,7 @@ from typing import Annotated
 
 import typer
 from rich.text import Text
+from typer.core import TyperGroup
 
 from .._console import console
 from ..errors import InputError, PlanerayError, parameter_names
@@ -242,22 +243,49 @@ def _parse_pixel(text: str) -> tuple[int, int]:
     return int(parts[0]), int(parts[1])
 
 
+#: Commands whose ``--size H W`` also takes one number for a square image (``view``, ``video``: a scene).
+SQUARE_SIZE_COMMANDS = ("view", "video")
+
+
+def _is_int(word: str) -> bool:
+    return word.lstrip("-").isdigit()
+
+
 def _join_pixel_args(argv: list[str]) -> list[str]:
     """Let ``--pixel ROW COL`` (two words) through typer, which takes one value per option."""
     joined, i = [], 0
     while i < len(argv):
-        if (
-            argv[i] == "--pixel"
-            and i + 2 < len(argv)
-            and argv[i + 1].lstrip("-").isdigit()
-            and argv[i + 2].lstrip("-").isdigit()
-        ):
+        if argv[i] == "--pixel" and i + 2 < len(argv) and _is_int(argv[i + 1]) and _is_int(argv[i + 2]):
             joined += ["--pixel", f"{argv[i + 1]},{argv[i + 2]}"]
             i += 3
         else:
             joined.append(argv[i])
             i += 1
     return joined
+
+
+def _square_size_args(argv: list[str]) -> list[str]:
+    """``view``/``video --size N`` (one number) is the square ``--size N N``."""
+    words = [a for a in argv if not a.startswith("-")]
+    if not words or words[0] not in SQUARE_SIZE_COMMANDS:
+        return list(argv)
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--size" and i + 1 < len(argv) and _is_int(argv[i + 1]):
+            two = i + 2 < len(argv) and _is_int(argv[i + 2])
+            out += argv[i : i + 3] if two else ["--size", argv[i + 1], argv[i + 1]]
+            i += 3 if two else 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
+class PlanerayGroup(TyperGroup):
+    """The root command: reads ``view``/``video --size N`` as ``--size N N`` (:func:`_square_size_args`)."""
+
+    def parse_args(self, ctx, args):
+        return super().parse_args(ctx, _square_size_args([str(a) for a in args]))
 
 
 def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
