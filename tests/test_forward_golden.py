@@ -177,9 +177,9 @@ def _layered():
 
 
 def _tables():
+    from planeray.kernels.vein import mc_vein_table
+    from planeray.kernels.wall import mc_wall_table
     from planeray.materials.fit import build_forward_table
-    from planeray.mc.layered import mc_vein_table
-    from planeray.mc.wall import mc_wall_table
 
     wall = mc_wall_table(
         MED, distances_rows=(0.0, 3.0, 50.0), angles_deg=(0.0, 90.0), offsets_rows=OFF, mm_per_row=0.5,

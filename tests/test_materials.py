@@ -738,7 +738,7 @@ def test_simulate_says_it_traces_tables_and_counts_the_runs(tmp_path, monkeypatc
 
     import planeray.scenes.materials as sm
     from planeray.cli import app
-    from planeray.mc.wall import TABLE_RUNS
+    from planeray.kernels.wall import TABLE_RUNS
 
     real = sm.material_tables
     runs = []

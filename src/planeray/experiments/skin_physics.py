@@ -1,7 +1,7 @@
 """Is the skin scene's fast vein model right?  Brute-force Monte Carlo and adding-doubling checks.
 
 * :func:`vein_validation`: the fast model (background kernel times the perturbation
-  table of :func:`planeray.mc.layered.mc_vein_table`) against brute-force Monte Carlo
+  table of :func:`planeray.kernels.vein.mc_vein_table`) against brute-force Monte Carlo
   with the blood cylinder actually in the medium
   (:func:`planeray.mc.layered.mc_vein_kernel_brute`), vein parallel (0 deg), oblique
   (45 deg) and across (90 deg) the projector rows, over depths and diameters: the vein's

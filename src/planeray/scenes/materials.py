@@ -20,7 +20,7 @@ Model
   set and the projector's laser colour, red by default).
 * **Kernels.**  A container pixel's transport is the Monte Carlo line kernel of its
   medium (Henyey-Greenstein phase function, Fresnel top face) **with the container's
-  walls present**: :func:`planeray.mc.wall.mc_wall_table` traces, for pixels at 15
+  walls present**: :func:`planeray.kernels.wall.mc_wall_table` traces, for pixels at 15
   distances from a vertical wall at 0, 45 and 90 degrees to the projector's lines, the
   light each lit line sends to the pixel (by reciprocity, a pencil beam at the pixel),
   so pixels near a wall see light lost through it (a clear wall with air behind:
@@ -69,7 +69,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..mc.wall import WALL_MODELS, mc_wall_table
+from ..kernels.wall import mc_wall_table
+from ..mc.wall import WALL_MODELS
 from ..medium import Medium
 from ..optical_data import BACKGROUND_CLASS, MATERIAL_CLASSES, OPTICAL_SOURCES, material_medium
 from ..timing import RowGeometry
@@ -142,7 +143,7 @@ def container_layout(shape, projector_rows, *, placement=0, container="tray", mm
 def material_tables(
     *, source="narasimhan", channel="red", wall="fresnel", mm_per_row=DEFAULT_MM_PER_ROW, progress=None
 ):
-    """The wall-kernel tables of the five media (:func:`planeray.mc.wall.mc_wall_table`), by class id.
+    """The wall-kernel tables of the five media (:func:`planeray.kernels.wall.mc_wall_table`), by class id.
 
     The defaults ship with planeray; other choices are traced once (minutes) and cached.
     """
@@ -172,7 +173,7 @@ _TRACED: dict = {}
 
 def tables_to_trace(*, source="narasimhan", channel="red", wall="fresnel", mm_per_row=DEFAULT_MM_PER_ROW) -> list:
     """Class ids whose wall-kernel tables :func:`material_tables` would trace (neither shipped nor cached)."""
-    from ..mc.wall import wall_table_stored
+    from ..kernels.wall import wall_table_stored
 
     if (source, channel, wall, float(mm_per_row)) in _TRACED:
         return []

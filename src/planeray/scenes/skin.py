@@ -16,7 +16,7 @@ venous blood, locally straight, at any orientation in the image plane.  A skin p
       T_ss[t, s, u] = rho(s, t) (K0 * F)(u) prod_veins R_vein(rho_pix, u)
 
   ``K0`` is the plane-to-ray kernel of the vein-free layers: Monte Carlo
-  (:func:`planeray.mc.layered.mc_vein_table`; a pencil beam at the pixel, exits binned
+  (:func:`planeray.kernels.vein.mc_vein_table`; a pencil beam at the pixel, exits binned
   by the offset ``u`` of the row they leave through: the pixel's line kernel by
   reciprocity).  ``F`` is the camera row's footprint.  ``R_vein`` is the vein's
   multiplicative change of the kernel, a Monte Carlo **perturbation table** over the
@@ -104,7 +104,8 @@ from scipy.ndimage import convolve1d
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
-from ..mc.layered import TABLE_DEPTHS_MM, TABLE_DIAMETERS_MM, VeinTable, mc_layered_profile, mc_vein_table
+from ..kernels.vein import TABLE_DEPTHS_MM, TABLE_DIAMETERS_MM, VeinTable, mc_vein_table
+from ..mc.layered import mc_layered_profile
 from ..mc.physics import fresnel_unpolarized
 from ..optical_data_skin import SKIN_N, skin_layers, tone_fraction
 from ..timing import RowGeometry
@@ -200,7 +201,7 @@ def skin_tables(
 def skin_tables_to_trace(wavelength_nm=638, tone="fair", *, mm_per_row=DEFAULT_MM_PER_ROW, skin=None, **thicknesses):
     """The layer stacks (:class:`~planeray.optical_data_skin.SkinLayers`) whose vein tables :func:`skin_tables`
     would trace with these arguments: neither shipped nor cached (empty: it reads them)."""
-    from ..mc.layered import vein_table_stored
+    from ..kernels.vein import vein_table_stored
 
     if skin is not None:
         stacks = [skin]

@@ -9,7 +9,7 @@ projector rows, receives in the image of band ``k``::
     S_k(rho) = sum_u w_k(t, u) c(t, u) [(K0 R(rho, . ; a, depth, diameter)) * F](u)
 
 ``K0`` the background line kernel of the skin's layers (tone, wavelength), ``R`` the
-vein's perturbation table (:class:`planeray.mc.layered.VeinTable`, bilinear in depth and
+vein's perturbation table (:class:`planeray.kernels.vein.VeinTable`, bilinear in depth and
 diameter, the same interpolation the simulator uses), ``F`` the camera row's footprint,
 ``w_k`` the band's weights (Eq. 3 with the recorded jitter) and ``c`` the projector's
 edge rule.  The vein's **contrast** in image ``k`` is ``C_k(rho) = 1 - S_k(rho) /
@@ -65,7 +65,7 @@ from threadpoolctl import threadpool_limits
 from ..camera import CameraModel
 from ..errors import InputError
 from ..goodness import DEFAULT_P_MISFIT, FLAG_EDGE, FLAG_MISFIT, FitQuality, describe_flags, fit_quality
-from ..mc.layered import VeinTable
+from ..kernels.vein import VeinTable
 from ..scenes.base import DEFAULT_MM_PER_ROW, footprint_kernel
 from ..scenes.skin import SKIN_BAND_ROWS, _table_slice, _vein_ratio, skin_tables
 from ..timing import Band, RowGeometry, band_weights_at_row

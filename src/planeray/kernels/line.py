@@ -25,14 +25,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mc import mc_line_profile
-from .mc.diffusion import (
+from ..mc import mc_line_profile
+from ..mc.diffusion import (
     boundary_mismatch_A,
     dipole_line_kernel,
     dipole_reflectance,
     dipole_total_reflectance,
 )
-from .medium import Medium, as_medium
+from ..medium import Medium, as_medium
 
 __all__ = [
     "boundary_mismatch_A",
