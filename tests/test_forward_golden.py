@@ -206,9 +206,9 @@ def _fit_kernels():
 
     off = np.arange(-30, 31)
     return dict(
-        plain=fit.line_kernel(1.0, 0.01, offsets_rows=off, mm_per_row=0.3, rows_per_camera_row=5.625),
-        dipole_side=fit.line_kernel(20.0, 0.01, offsets_rows=off, mm_per_row=0.3, rows_per_camera_row=1.0),
-        walls=fit.line_kernel(
+        plain=fit.forward_kernel(1.0, 0.01, offsets_rows=off, mm_per_row=0.3, rows_per_camera_row=5.625),
+        dipole_side=fit.forward_kernel(20.0, 0.01, offsets_rows=off, mm_per_row=0.3, rows_per_camera_row=1.0),
+        walls=fit.forward_kernel(
             1.0,
             0.01,
             offsets_rows=off,
@@ -216,7 +216,7 @@ def _fit_kernels():
             rows_per_camera_row=5.625,
             walls=[(4.0, 0.0, 1.0, 1.0), (10.0, 90.0, -1.0, 1.0)],
         ),  # fmt: skip
-        black=fit.line_kernel(
+        black=fit.forward_kernel(
             0.5,
             0.02,
             offsets_rows=off,
@@ -225,7 +225,7 @@ def _fit_kernels():
             walls=[(3.0, 0.0, -1.0, 1.0)],
             wall_kind="black",
         ),  # fmt: skip
-        bottom=fit.line_kernel(
+        bottom=fit.forward_kernel(
             1.0, 0.01, offsets_rows=off, mm_per_row=0.3, rows_per_camera_row=2.0, walls=[(6.0, 180.0, 1.0, 1.0)]
         ),
     )
@@ -287,7 +287,7 @@ def _stack_fit():
             np.full((H, W), albedo, np.float32), np.full((H, W), 2, np.uint8), params={"mm_per_row": mm},
         )  # fmt: skip
 
-    k = fit.line_kernel(1.0, 0.01, offsets_rows=off, mm_per_row=mm, rows_per_camera_row=rpc)
+    k = fit.forward_kernel(1.0, 0.01, offsets_rows=off, mm_per_row=mm, rows_per_camera_row=rpc)
     sweep = paper_sweep()
     stack = simulate_stack(homogeneous(k, float(k.sum())), sweep, seed=3)
     white = simulate_stack(homogeneous(0.99 * footprint_kernel(off, rpc), 0.99), sweep, seed=4)
