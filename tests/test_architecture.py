@@ -6,7 +6,9 @@ functions, where cycles used to hide), resolved to a planeray module, and checke
 * no import cycle between modules;
 * no *upward* import between the package's top-level units: a unit may import only
   units listed before it in :data:`LAYERS` (capture -> storage -> models -> scenes ->
-  devices -> demultiplexing -> analysis -> figures -> experiments -> front ends).
+  devices -> demultiplexing -> analysis -> figures -> experiments -> front ends);
+* no *private* import across units: a name ``_x`` (or a module ``_x``) inside a unit is
+  imported only by that unit's own modules; other units use its public names.
 """
 
 from __future__ import annotations
@@ -193,3 +195,69 @@ def test_the_checker_sees_imports_inside_functions(module, dep, tmp_path):
     src = tmp_path / "m.py"
     src.write_text(f"def f():\n    from {dep} import x\n")
     assert _resolve(dep) in _imports(module, src)
+
+
+def _private_imports(module: str, path: Path) -> list[str]:
+    """``from X import _name`` (or a private module ``_m`` inside another unit) in ``module``: ``"module -> X._name"``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    is_pkg = path.name == "__init__.py"
+    package = module if is_pkg else module.rpartition(".")[0]
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                prefix = ".".join(base + ([node.module] if node.module else []))
+            else:
+                prefix = node.module or ""
+            targets = [f"{prefix}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        else:
+            continue
+        for target in targets:
+            parts = target.split(".")
+            if parts[0] != "planeray" or len(parts) < 3:
+                continue
+            # ``_x`` below a unit is private to that unit (a top-level private module such as
+            # ``planeray._validate`` is a unit of its own, LAYERS: importable, its private names not).
+            if any(p.startswith("_") and not p.startswith("__") for p in parts[2:]) and _unit(module) != parts[1]:
+                bad.append(f"{module} -> {target}")
+    return bad
+
+
+#: Private imports waiting for their fix elsewhere: the command line's JSON helper is replaced by the one JSON
+#: helper of issue 43's second part (branch thin-cli, which moves these workflows out of ``cli/``).  Shrinks only:
+#: an entry that no longer occurs fails :func:`test_the_pending_private_imports_still_occur`.
+PENDING_PRIVATE = {
+    "planeray.cli.materials -> planeray.experiments._report.jsonable",
+    "planeray.cli.skin -> planeray.experiments._report.jsonable",
+}
+
+
+def test_no_private_import_across_units():
+    bad = {b for mod, path in MODULES.items() for b in _private_imports(mod, path)} - PENDING_PRIVATE
+    assert not bad, "private names imported from another unit (make them public):\n" + "\n".join(sorted(bad))
+
+
+def test_the_pending_private_imports_still_occur():
+    found = {b for mod, path in MODULES.items() for b in _private_imports(mod, path)}
+    assert PENDING_PRIVATE <= found, f"fixed: remove {sorted(PENDING_PRIVATE - found)} from PENDING_PRIVATE"
+
+
+@pytest.mark.parametrize(
+    ("module", "line", "flagged"),
+    [
+        ("planeray.skin.depth", "from ..scenes.skin import _vein_ratio", True),
+        ("planeray.skin.depth", "def f():\n    from planeray.mc.engine import _run", True),
+        ("planeray.mc.wall", "from .engine import _run", False),  # the same unit
+        ("planeray.mc.engine", "from .._validate import check_memory", False),  # a private unit, a public name
+        ("planeray.cli.pulse", "from .._validate import _bytes_text", True),
+        ("planeray.kernels.vein", "from ..mc._batches import trace_batches", True),
+    ],
+)
+def test_the_checker_sees_private_imports(module, line, flagged, tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text(line + "\n")
+    assert bool(_private_imports(module, src)) == flagged

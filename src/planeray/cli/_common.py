@@ -171,9 +171,9 @@ def _claim(*paths) -> None:
 
 def _not_a_home(path, option: str = "--out") -> None:
     """Refuse, with or without ``--overwrite``, the current folder, one of its parents, the home folder or a root."""
-    from ..io.atomic import _is_protected
+    from ..io.atomic import is_protected
 
-    if _is_protected(Path(path)):
+    if is_protected(Path(path)):
         raise InputError(
             f"{option} {path}: is the current folder, one of its parents or the home folder; name a new output "
             "inside it (e.g. {option} out/)".replace("{option}", option)
@@ -273,7 +273,7 @@ def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
     if path.suffix.lower() == ".png":
         from PIL import Image
 
-        from ..figures._common import display_scale
+        from ..figures import display_scale
         from ..io import atomic_file
         from ..io.marks import png_mark_info
 

@@ -73,7 +73,7 @@ def _sim_device(
 
 
 def _write_results(out_dir: Path, images: dict, numbers: dict, name: str):
-    from ..figures._common import display_scale
+    from ..figures import display_scale
     from ..io import atomic_file
     from ..io.marks import MARK_KEY, mark_text
 

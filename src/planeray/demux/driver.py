@@ -35,7 +35,7 @@ from ..timing import RowGeometry
 from ..transport import Transport
 from ._kernels import warm_up
 from .auto import WeightChoice, choose_weights, is_auto, resolve_ambient
-from .fast import _threads, blas_one_thread
+from .fast import blas_one_thread, solver_threads
 from .problem import DemuxProblem, RowGroup, read_observations
 from .solvers import SOLVERS, get_solver, options
 
@@ -162,7 +162,7 @@ def solve_chunk(
         A key of :data:`planeray.demux.SOLVERS`.
     """
     tasks = _plan(problem, observations, saturated, rows)
-    threads = _threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1
+    threads = solver_threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1
     run = lambda t: _run_task(problem, t, method, tol)  # noqa: E731
     with blas_one_thread():
         if threads > 1:
@@ -296,7 +296,7 @@ def _solve_in_order(problem: DemuxProblem, read, chunks, method, tol, done):
     if not chunks:
         return
     release = _cache_release(problem, [c for _, c in chunks])
-    threads = _threads() if "threads" in options(get_solver(method)) else 1
+    threads = solver_threads() if "threads" in options(get_solver(method)) else 1
     with blas_one_thread(), ThreadPoolExecutor(threads, thread_name_prefix="planeray-demux") as pool:
         if method == "fast":
             pool.submit(warm_up)  # Numba's start, while the first rows are read

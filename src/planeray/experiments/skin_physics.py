@@ -24,9 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from ..figures.skin_physics import vein_validation_figure
+from ..kernels.vein import vein_ratio, vein_table_slice
 from ..mc.layered import mc_layered_profile, mc_vein_kernel_brute
 from ..optical_data_skin import skin_layers
-from ..scenes.skin import _table_slice, _vein_ratio, skin_tables
+from ..scenes.skin import skin_tables
 from ..timing import PAPER_LINES_PER_SECOND, band_bin_weights, band_centre_rows, band_width_rows
 from ._report import jsonable
 
@@ -115,8 +116,8 @@ def vein_validation(*, wavelength_nm=638, tone="fair", cases=VALIDATION_CASES, n
             n_photons=n_photons,
             seed=0,
         )
-        sl = _table_slice(table, depth, diam)
-        ratio_fast = _vein_ratio(sl, table, np.array([rho]), np.array([angle]), off[None, :].astype(float))[0]
+        sl = vein_table_slice(table, depth, diam)
+        ratio_fast = vein_ratio(sl, table, np.array([rho]), np.array([angle]), off[None, :].astype(float))[0]
         fast = k0 * ratio_fast
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio_brute = np.where(bg.values > 0, vein.values / bg.values, np.nan)

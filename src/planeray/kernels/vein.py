@@ -28,6 +28,8 @@ __all__ = [
     "mc_vein_table",
     "vein_table_stored",
     "vein_table_seconds",
+    "vein_table_slice",
+    "vein_ratio",
     "TABLE_ANGLES_DEG",
     "TABLE_DEPTHS_MM",
     "TABLE_DIAMETERS_MM",
@@ -247,3 +249,60 @@ def mc_vein_table(
         cache=cache,
         on_hit=None if progress is None else (lambda: progress(int(n_photons))),
     )
+
+
+# ---------------------------------------------------------------- reading a vein off the table
+# ---------------------------------------------------------------- the vein ratio
+def vein_table_slice(table: VeinTable, depth_mm, diameter_mm):
+    """``ratio[angle, rho, u]`` of one vein (``depth_mm`` to its top, ``diameter_mm`` wide): bilinear in
+    (depth, diameter) over the table's grid (clamped at its edges)."""
+
+    def weights(grid, v):
+        i = int(np.clip(np.searchsorted(grid, v) - 1, 0, len(grid) - 2))
+        w = float(np.clip((v - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0))
+        return i, w
+
+    i, wi = weights(table.depths_mm, depth_mm)
+    j, wj = weights(table.diameters_mm, diameter_mm)
+    r = table.ratio
+    return (
+        (1 - wi) * (1 - wj) * r[:, i, j]
+        + wi * (1 - wj) * r[:, i + 1, j]
+        + (1 - wi) * wj * r[:, i, j + 1]
+        + wi * wj * r[:, i + 1, j + 1]
+    )
+
+
+def vein_ratio(sl, table: VeinTable, rho_rows, angle_deg, u_table):
+    """Kernel ratio ``(n, U)`` of pixels at ``rho_rows`` from a vein at ``angle_deg``; ``u_table`` (n, U) offsets,
+    or (U,): the same offsets for every pixel (one gather of the table's columns instead of one per pixel).
+
+    ``sl`` is the vein's :func:`vein_table_slice`; bilinear in (angle, rho), linear along the offsets; 1 (no
+    change) beyond the table's offsets or distances.  Angles in (90, 180) mirror onto ``180 - angle``.
+    """
+    # Angles in (90, 180) mirror (y -> -y) onto 180 - a with rho -> -rho.
+    flip = angle_deg > 90.0
+    a = np.where(flip, 180.0 - angle_deg, angle_deg)
+    rho = np.where(flip, -rho_rows, rho_rows)
+    ga = table.angles_deg
+    ia = np.clip(np.searchsorted(ga, a) - 1, 0, ga.size - 2)
+    wa = np.clip((a - ga[ia]) / (ga[ia + 1] - ga[ia]), 0.0, 1.0)
+    gr = table.rho_rows
+    fr = (rho - gr[0]) / (gr[1] - gr[0])
+    ir = np.clip(np.floor(fr).astype(np.int64), 0, gr.size - 2)
+    wr = np.clip(fr - ir, 0.0, 1.0)
+    fk = u_table - table.offsets_rows[0]
+    ik = np.clip(np.floor(fk).astype(np.int64), 0, table.offsets_rows.size - 2)
+    wk = np.clip(fk - ik, 0.0, 1.0)
+    # bilinear in (angle, rho): each pixel's own table row (n, K), then linear along the offsets
+    rows = np.zeros((rho.size, sl.shape[-1]))
+    for da, wa_ in ((0, 1 - wa), (1, wa)):
+        for dr, wr_ in ((0, 1 - wr), (1, wr)):
+            rows += (wa_ * wr_)[:, None] * sl[ia + da, ir + dr]
+    if ik.ndim == 1:
+        lo, hi = rows[:, ik], rows[:, ik + 1]
+    else:
+        lo, hi = np.take_along_axis(rows, ik, axis=1), np.take_along_axis(rows, ik + 1, axis=1)
+    out = (1 - wk) * lo + wk * hi
+    far = (np.abs(u_table) > table.offsets_rows[-1]) | (np.abs(rho) > gr[-1])[:, None]
+    return np.where(far, 1.0, out)

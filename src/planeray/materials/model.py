@@ -311,7 +311,7 @@ class MaterialModel:
         import sklearn
         import skops
 
-        from ..io._common import planeray_version
+        from ..io import planeray_version
 
         return {
             "format": MODEL_FORMAT,

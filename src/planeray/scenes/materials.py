@@ -85,7 +85,7 @@ CONTAINERS = ("tray", "cup")
 #: A container pixel is "near a wall" when the walls change its kernel by more than this (L1, relative).
 NEAR_WALL_CHANGE = 0.05
 #: Offsets of the shipped kernel tables (projector rows).
-_TABLE_REACH_ROWS = 192
+TABLE_REACH_ROWS = 192
 
 # Slot centres (fractions of the field's height and width): three above, two below.
 _SLOTS = ((0.27, 0.18), (0.27, 0.50), (0.27, 0.82), (0.73, 0.34), (0.73, 0.66))
@@ -151,7 +151,7 @@ def material_tables(
         raise InputError(f"unknown wall model {wall!r}; choose one of {', '.join(WALL_MODELS)}")
     if source not in OPTICAL_SOURCES:
         raise InputError(f"unknown optical data source {source!r}; choose one of {', '.join(OPTICAL_SOURCES)}")
-    offsets = np.arange(-_TABLE_REACH_ROWS, _TABLE_REACH_ROWS + 1)
+    offsets = np.arange(-TABLE_REACH_ROWS, TABLE_REACH_ROWS + 1)
     key = (source, channel, wall, float(mm_per_row))
     if key not in _TRACED:  # kept for the process: a read-only cache must not cost a second tracing
         _TRACED[key] = {
@@ -177,7 +177,7 @@ def tables_to_trace(*, source="narasimhan", channel="red", wall="fresnel", mm_pe
 
     if (source, channel, wall, float(mm_per_row)) in _TRACED:
         return []
-    offsets = np.arange(-_TABLE_REACH_ROWS, _TABLE_REACH_ROWS + 1)
+    offsets = np.arange(-TABLE_REACH_ROWS, TABLE_REACH_ROWS + 1)
     return [
         cid
         for cid in MATERIAL_CLASSES
@@ -266,9 +266,9 @@ def build(
     layout = container_layout(shape, projector_rows, placement=placement, container=container, mm_per_row=mm)
     half_foot = int(np.ceil(0.5 * rpc + 0.5))
     band = max(int(band_rows), int(np.ceil(rpc)) + 1)
-    if band + half_foot > _TABLE_REACH_ROWS:
+    if band + half_foot > TABLE_REACH_ROWS:
         raise InputError(
-            f"band_rows {band_rows} too wide for the kernel tables (at most {_TABLE_REACH_ROWS - half_foot})"
+            f"band_rows {band_rows} too wide for the kernel tables (at most {TABLE_REACH_ROWS - half_foot})"
         )
     offsets = scene_offsets(band)
     U = offsets.size

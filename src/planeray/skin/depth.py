@@ -65,9 +65,9 @@ from threadpoolctl import threadpool_limits
 from ..camera import CameraModel
 from ..errors import InputError
 from ..goodness import DEFAULT_P_MISFIT, FLAG_EDGE, FLAG_MISFIT, FitQuality, describe_flags, fit_quality
-from ..kernels.vein import VeinTable
+from ..kernels.vein import VeinTable, vein_ratio, vein_table_slice
 from ..scenes.base import DEFAULT_MM_PER_ROW, footprint_kernel
-from ..scenes.skin import SKIN_BAND_ROWS, _table_slice, _vein_ratio, skin_tables
+from ..scenes.skin import SKIN_BAND_ROWS, skin_tables
 from ..timing import Band, RowGeometry, band_weights_at_row
 
 __all__ = [
@@ -253,8 +253,8 @@ def vein_signals(model: VeinModel, rows, rho_mm, angle_deg, depth_mm, diameter_m
         base = convolve1d(k_row[None, :], foot[::-1], axis=1, mode="constant")[:, half:-half][0]
         cache["base"] = base
         cache["S0"] = np.einsum("rku,u->rk", cache["W"], base)  # (n_rows, K)
-    sl = _table_slice(model.table, float(depth_mm), float(diameter_mm))
-    r = _vein_ratio(sl, model.table, rho, ang, wide.astype(float))  # the same offsets for every pixel
+    sl = vein_table_slice(model.table, float(depth_mm), float(diameter_mm))
+    r = vein_ratio(sl, model.table, rho, ang, wide.astype(float))  # the same offsets for every pixel
     sub = convolve1d(cache["k_row"][None, :] * r, foot[::-1], axis=1, mode="constant")[:, half:-half]
     W = cache["W"][cache["inv"]]  # (n, K, U)
     S = np.einsum("nku,nu->kn", W, sub)
