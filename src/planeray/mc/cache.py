@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import warnings
 from collections.abc import Callable
@@ -69,6 +70,8 @@ _SCALARS = (
     "absorbed",
     "truncated",
 )
+#: Fields the layered entries written before their results were profiles lack (read as NaN).
+_LAYERED_ABSENT = ("radiance", "radiance_stderr", "transmittance_stderr")
 #: Scalars written since the wall runs (absent from older entries: read as 0).
 _OPTIONAL_SCALARS = ("wall_loss", "wall_loss_stderr")
 
@@ -173,12 +176,24 @@ def save_profile(path: Path, prof: MCProfile) -> None:
 
 
 def load_profile(path: Path) -> MCProfile:
+    """Read a profile written by :func:`save_profile`.
+
+    The layered runs' entries written before their results were profiles (the shipped
+    ``layered-*.npz``) lack the radiance, the transmittance's error, the collision count and
+    the parameters: read as NaN, NaN, 0 and ``{}``.
+    """
     with np.load(path, allow_pickle=False) as z:
+        files = set(z.files)
+        values = z["values"]
+        arrays = {
+            k: (z[k] if k in files or k not in _LAYERED_ABSENT else np.full(values.shape, np.nan)) for k in _ARRAYS
+        }
+        scalars = {k: (float(z[k]) if k in files or k not in _LAYERED_ABSENT else math.nan) for k in _SCALARS}
         return MCProfile(
-            **{k: z[k] for k in _ARRAYS},
+            **arrays,
             n_photons=int(z["n_photons"]),
-            n_interactions=int(z["n_interactions"]),
-            params=json.loads(str(z["params"])),
-            **{k: float(z[k]) for k in _SCALARS},
-            **{k: float(z[k]) for k in _OPTIONAL_SCALARS if k in z.files},
+            n_interactions=int(z["n_interactions"]) if "n_interactions" in files else 0,
+            params=json.loads(str(z["params"])) if "params" in files else {},
+            **scalars,
+            **{k: float(z[k]) for k in _OPTIONAL_SCALARS if k in files},
         )

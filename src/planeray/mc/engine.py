@@ -98,7 +98,6 @@ from .events import (
     ROULETTE_THRESHOLD,
     batch_counts,
     batch_states,
-    batch_stats,
     check_offsets,
     check_photons,
     collide,
@@ -109,7 +108,7 @@ from .events import (
     uniform,
 )
 from .physics import fresnel_jit, hg_pdf_jit
-from .result import MCProfile
+from .result import MCProfile, profile_from_tallies
 
 __all__ = [
     "mc_line_profile",
@@ -563,26 +562,18 @@ def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_m
         rad_bins += exit_bins * (diffusion_normal_radiance_ratio(n) / mm_per_row)
         refl += w_cont * exit_total
         absorbed += w_cont * (1.0 - exit_total)
-    cols = offsets - kmin
-    values, stderr = batch_stats(refl_bins[:, cols], counts)
-    radiance, rad_err = batch_stats(rad_bins[:, cols], counts)
-    R_tot, r_err = batch_stats(refl, counts)
-    T_tot, t_err = batch_stats(trans, counts)
-    return MCProfile(
-        offsets_rows=offsets.copy(),
+    return profile_from_tallies(
+        offsets_rows=offsets,
+        first_bin=kmin,
         mm_per_row=mm_per_row,
-        values=values,
-        stderr=stderr,
-        radiance=radiance,
-        radiance_stderr=rad_err,
-        total_reflectance=float(R_tot),
-        total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(r_sp),
-        transmittance=float(T_tot),
-        transmittance_stderr=float(t_err),
-        absorbed=float(absorbed.sum() / n_photons),
-        truncated=float(truncated.sum() / n_photons),
-        n_photons=n_photons,
-        n_interactions=int(events.sum()),
+        counts=counts,
+        refl_bins=refl_bins,
+        rad_bins=rad_bins,
+        refl=refl,
+        trans=trans,
+        absorbed=absorbed,
+        truncated=truncated,
+        events=events,
+        specular_reflectance=r_sp,
         params=params,
     )

@@ -58,7 +58,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numba
 import numpy as np
@@ -66,12 +66,11 @@ import numpy as np
 from ..errors import InputError
 from ..medium import Medium, as_medium
 from ._batches import trace_batches
-from .cache import cache_key, save_npz, stored
+from .cache import cache_key, load_profile, save_profile, stored
 from .events import (
     N_BATCHES,
     batch_counts,
     batch_states,
-    batch_stats,
     check_offsets,
     check_photons,
     collide,
@@ -82,6 +81,7 @@ from .events import (
     uniform,
 )
 from .physics import fresnel_jit
+from .result import MCProfile, profile_from_tallies
 
 __all__ = [
     "LAYERED_VERSION",
@@ -453,67 +453,22 @@ def _run(
 
 
 # ---------------------------------------------------------------- the background kernel
-@dataclass(frozen=True)
-class LayeredResult:
-    """Line kernel of a layered medium (pencil beam at the pixel, exits binned by ``x``: reciprocity).
-
-    ``values[k]``: power leaving the top face through offset bin ``k`` (``[k - 1/2, k + 1/2)
-    * mm_per_row``) per unit incident power; the sum over all bins is the total diffuse
-    reflectance ``total_reflectance``.  Energy: ``specular + diffuse + transmitted +
-    absorbed + truncated == 1``.
-    """
-
-    offsets_rows: np.ndarray
-    mm_per_row: float
-    values: np.ndarray
-    stderr: np.ndarray
-    total_reflectance: float
-    total_reflectance_stderr: float
-    specular_reflectance: float
-    transmittance: float
-    absorbed: float
-    truncated: float
-    n_photons: int
-
-    @property
-    def energy_balance(self) -> float:
-        return self.specular_reflectance + self.total_reflectance + self.transmittance + self.absorbed + self.truncated
-
-
-_LAYERED_SCALARS = (
-    "mm_per_row",
-    "total_reflectance",
-    "total_reflectance_stderr",
-    "specular_reflectance",
-    "transmittance",
-    "absorbed",
-    "truncated",
-)
+#: The result of a layered run: the one result type of the photon kernels, :class:`~planeray.mc.result.MCProfile`
+#: (a pencil beam at the pixel, exits binned by ``x``: the pixel's line kernel by reciprocity).  ``values[k]``
+#: is the power leaving the top face through offset bin ``k`` per unit incident power; ``radiance`` is not
+#: estimated (NaN); ``params`` holds the layers.
+LayeredResult = MCProfile
 
 
 def _check_offsets(offsets_rows):
     return check_offsets(offsets_rows, consecutive=True)
 
 
-def _save_layered(path, res: LayeredResult) -> None:
-    """Write a layered kernel to the cache, atomically."""
-    save_npz(
-        path,
-        offsets_rows=res.offsets_rows,
-        values=res.values,
-        stderr=res.stderr,
-        n_photons=np.int64(res.n_photons),
-        **{k: np.float64(getattr(res, k)) for k in _LAYERED_SCALARS},
-    )
-
-
-def _load_layered(path) -> LayeredResult:
-    with np.load(path, allow_pickle=False) as z:
-        return LayeredResult(
-            **{k: z[k] for k in ("offsets_rows", "values", "stderr")},
-            **{k: float(z[k]) for k in _LAYERED_SCALARS},
-            n_photons=int(z["n_photons"]),
-        )
+def _load_layered(path, params) -> MCProfile:
+    """A layered cache entry (written by :func:`~planeray.mc.cache.save_profile`, or an older entry without the
+    radiance, the transmittance's error, the collisions and the parameters: NaN, NaN, 0 and ``params``)."""
+    prof = load_profile(path)
+    return prof if prof.params else replace(prof, params=params)
 
 
 def mc_layered_profile(
@@ -575,37 +530,35 @@ def mc_layered_profile(
             nk=off.size,
             progress=progress,
         )
-        return _pencil_result(layers, off, mm, counts, out)
+        return _pencil_result(layers, off, mm, counts, out, params)
 
     return stored(
         f"layered-{cache_key(params, off)}.npz",
-        load=_load_layered,
+        load=lambda path: _load_layered(path, params),
         build=build,
-        save=_save_layered,
+        save=save_profile,
         cache=cache,
         on_hit=None if progress is None else (lambda: progress(int(n_photons))),
     )
 
 
-def _pencil_result(layers, off, mm, counts, out) -> LayeredResult:
+def _pencil_result(layers, off, mm, counts, out, params) -> MCProfile:
     """The result of a pencil-beam run from its per-batch tallies."""
-    refl_bins, _, _, refl, trans, absorbed, truncated, _ = out
-    values, err = batch_stats(refl_bins, counts)
-    r, r_err = batch_stats(refl, counts)
+    refl_bins, _, _, refl, trans, absorbed, truncated, events = out
     n0 = as_medium(layers[0]).n
-    n = counts.sum()
-    return LayeredResult(
+    return profile_from_tallies(
         offsets_rows=off,
+        first_bin=None,
         mm_per_row=mm,
-        values=values,
-        stderr=err,
-        total_reflectance=float(r),
-        total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(((n0 - 1.0) / (n0 + 1.0)) ** 2),
-        transmittance=float(trans.sum() / n),
-        absorbed=float(absorbed.sum() / n),
-        truncated=float(truncated.sum() / n),
-        n_photons=int(n),
+        counts=counts,
+        refl_bins=refl_bins,
+        refl=refl,
+        trans=trans,
+        absorbed=absorbed,
+        truncated=truncated,
+        events=events,
+        specular_reflectance=((n0 - 1.0) / (n0 + 1.0)) ** 2,
+        params=params,
     )
 
 
@@ -750,7 +703,20 @@ def mc_vein_kernel_brute(
         blood=blood,
         progress=progress,
     )
-    return _pencil_result(layers, off, mm, counts, out)
+    params = {
+        "kind": "layered-vein-brute",
+        "version": LAYERED_VERSION,
+        "layers": [layer_params(as_medium(m)) for m in layers],
+        "blood": layer_params(as_medium(blood)),
+        "depth_mm": float(depth_mm),
+        "diameter_mm": float(diameter_mm),
+        "angle_deg": float(angle_deg),
+        "rho_rows": float(rho_rows),
+        "mm_per_row": mm,
+        "n_photons": int(n_photons),
+        "seed": int(seed),
+    }
+    return _pencil_result(layers, off, mm, counts, out, params)
 
 
 # ---------------------------------------------------------------- virtual veins (the perturbation run)

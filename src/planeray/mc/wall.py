@@ -94,7 +94,6 @@ from .engine import check_cutoff, check_depth_mfp, check_mm_per_row, default_cut
 from .events import (
     N_BATCHES,
     batch_counts,
-    batch_stats,
     check_offsets,
     check_photons,
     collide,
@@ -104,7 +103,7 @@ from .events import (
     roulette,
 )
 from .physics import fresnel_jit, hg_pdf_jit
-from .result import MCProfile
+from .result import MCProfile, profile_from_tallies
 
 __all__ = [
     "WALL_MODELS",
@@ -527,32 +526,23 @@ def trace_wall_run(medium, offsets, params):
         refl += e_w + far * q.e0
         wall += w_w
         absorbed += cont.sum(axis=(1, 2)) - e_w - w_w + far * (1.0 - q.e0)
-    cols = offsets - kmin
-    values, stderr = batch_stats(refl_bins[:, cols], counts)
-    radiance, rad_err = batch_stats(rad_bins[:, cols], counts)
-    R_tot, r_err = batch_stats(refl, counts)
-    T_tot, t_err = batch_stats(trans, counts)
-    W_tot, w_err = batch_stats(wall, counts)
-    prof = MCProfile(
-        offsets_rows=offsets.copy(),
+    prof = profile_from_tallies(
+        offsets_rows=offsets,
+        first_bin=kmin,
         mm_per_row=mm,
-        values=values,
-        stderr=stderr,
-        radiance=radiance,
-        radiance_stderr=rad_err,
-        total_reflectance=float(R_tot),
-        total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(r_sp),
-        transmittance=float(T_tot),
-        transmittance_stderr=float(t_err),
-        absorbed=float(absorbed.sum() / n_photons),
-        truncated=float(truncated.sum() / n_photons),
-        n_photons=n_photons,
-        n_interactions=int(events.sum()),
+        counts=counts,
+        refl_bins=refl_bins,
+        rad_bins=rad_bins,
+        refl=refl,
+        trans=trans,
+        absorbed=absorbed,
+        truncated=truncated,
+        events=events,
+        wall=wall,
+        specular_reflectance=r_sp,
         params=params,
-        wall_loss=float(W_tot),
-        wall_loss_stderr=float(w_err),
     )
+    cols = offsets - kmin
     per_photon = rad_bins[:, cols] / counts[:, None]
     return prof, per_photon
 
