@@ -104,6 +104,7 @@ from .events import (
     free_path,
     fresnel_escape,
     launch,
+    new_tallies,
     roulette,
     uniform,
 )
@@ -161,13 +162,7 @@ def _trace(
     B = counts.size
     cont_hist = np.zeros((B, nh))
     cont_far = np.zeros(B)
-    refl_bins = np.zeros((B, nk))
-    rad_bins = np.zeros((B, nk))
-    refl = np.zeros(B)
-    trans = np.zeros(B)
-    absorbed = np.zeros(B)
-    truncated = np.zeros(B)
-    events = np.zeros(B, dtype=np.int64)
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events = new_tallies(B, nk)
     sigma_t = sigma_s + sigma_a
     albedo = sigma_s / sigma_t
     finite = d < np.inf
@@ -446,14 +441,7 @@ def _profile(
     # The cache key (and MCProfile.params): these keys, values and order are what the
     # shipped tables were hashed with -- keep them as they are.
     params = dict(
-        sigma_s=medium.sigma_s,
-        sigma_a=medium.sigma_a,
-        g=medium.g,
-        n=medium.n,
-        thickness=None if medium.semi_infinite else medium.thickness_mm,
-        n_photons=n_photons,
-        mm_per_row=mm_per_row,
-        seed=int(seed),
+        **run_params(medium, n_photons, mm_per_row, seed),
         source_width_mm=source_width_mm,
         cutoff_mm=cutoff_mm,
         diffusion_depth_mfp=depth_mfp,
@@ -482,6 +470,20 @@ def _profile(
         save=save_profile,
         cache=cache,
         on_hit=None if progress is None else (lambda: progress(n_photons)),
+    )
+
+
+def run_params(medium, n_photons, mm_per_row, seed) -> dict:
+    """The parameters every slab and wall run's cache key starts with: the medium, photons, bins and seed."""
+    return dict(
+        sigma_s=medium.sigma_s,
+        sigma_a=medium.sigma_a,
+        g=medium.g,
+        n=medium.n,
+        thickness=None if medium.semi_infinite else medium.thickness_mm,
+        n_photons=n_photons,
+        mm_per_row=mm_per_row,
+        seed=int(seed),
     )
 
 

@@ -43,6 +43,7 @@ __all__ = [
     "fresnel_escape",
     "collide",
     "roulette",
+    "new_tallies",
     "batch_counts",
     "batch_states",
     "batch_stats",
@@ -140,6 +141,23 @@ def roulette(s, w):
             return w * ROULETTE_CHANCE, -w * (ROULETTE_CHANCE - 1.0), True
         return w, w, False
     return w, 0.0, True
+
+
+@numba.njit(cache=True, inline="always")
+def new_tallies(B, nk):
+    """Zeroed per-batch tallies of a kernel: ``(refl_bins, rad_bins, refl, trans, absorbed, truncated, events)``.
+
+    ``(B, nk)`` exiting power and normal-view radiance per offset bin, ``(B,)`` totals and collision counts.
+    """
+    return (
+        np.zeros((B, nk)),
+        np.zeros((B, nk)),
+        np.zeros(B),
+        np.zeros(B),
+        np.zeros(B),
+        np.zeros(B),
+        np.zeros(B, dtype=np.int64),
+    )
 
 
 # ---------------------------------------------------------------- batches

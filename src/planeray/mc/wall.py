@@ -90,7 +90,7 @@ from .diffusion import (
     exits_parallel,
     quarter_space,
 )
-from .engine import check_cutoff, check_depth_mfp, check_mm_per_row, default_cutoff_mm
+from .engine import check_cutoff, check_depth_mfp, check_mm_per_row, default_cutoff_mm, run_params
 from .events import (
     N_BATCHES,
     batch_counts,
@@ -100,6 +100,7 @@ from .events import (
     free_path,
     fresnel_escape,
     launch,
+    new_tallies,
     roulette,
 )
 from .physics import fresnel_jit, hg_pdf_jit
@@ -184,14 +185,8 @@ def _trace_wall(
     B = counts.size
     cont_hist = np.zeros((B, nh, nd))
     cont_far = np.zeros(B)
-    refl_bins = np.zeros((B, nk))
-    rad_bins = np.zeros((B, nk))
-    refl = np.zeros(B)
-    trans = np.zeros(B)
-    absorbed = np.zeros(B)
-    truncated = np.zeros(B)
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events = new_tallies(B, nk)
     wall = np.zeros(B)
-    events = np.zeros(B, dtype=np.int64)
     sigma_t = sigma_s + sigma_a
     albedo = sigma_s / sigma_t
     finite = d < np.inf
@@ -333,14 +328,7 @@ def wall_run_params(
     cutoff_mm = check_cutoff(medium, offsets, mm_per_row, cutoff_mm)
     depth_mfp = check_depth_mfp(diffusion_depth_mfp)
     return dict(
-        sigma_s=medium.sigma_s,
-        sigma_a=medium.sigma_a,
-        g=medium.g,
-        n=medium.n,
-        thickness=None if medium.semi_infinite else medium.thickness_mm,
-        n_photons=n_photons,
-        mm_per_row=mm_per_row,
-        seed=int(seed),
+        **run_params(medium, n_photons, mm_per_row, seed),
         cutoff_mm=cutoff_mm,
         diffusion_depth_mfp=depth_mfp,
         source="pencil-wall",
