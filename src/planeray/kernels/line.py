@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..mc import mc_line_profile
 from ..mc.diffusion import (
     boundary_mismatch_A,
@@ -121,4 +122,4 @@ def line_kernel(medium: Medium, offsets_rows, *, mm_per_row, model):
         )
     if model == "mc":
         return mc_line_kernel(medium, offsets_rows, mm_per_row=mm_per_row)
-    raise ValueError(f"unknown kernel model {model!r}; expected one of {KERNEL_MODELS}")
+    raise InputError(f"unknown kernel model {model!r}; expected one of {KERNEL_MODELS}")

@@ -68,12 +68,12 @@ from ..timing import Band
 from .vein_geometry import VeinPixels, centre_line, other_vein_ratio, vein_geometry
 from .vein_model import (
     VeinModel,
-    _offsets,
-    _row_weights,
     background_signals,
     far_bands,
     image_variance,
+    model_offsets,
     row_jitter_sigma,
+    row_weights,
     usable_bands,
     vein_contrast,
     vein_model,
@@ -627,8 +627,8 @@ def _background_quality(model: VeinModel, B, var_B, relative_sd, p_misfit):
     mid = model.geometry.camera_rows // 2
     s0 = background_signals(model, [mid])[:, 0]
     # the kernel's Monte Carlo error through the band weights (independent bins), relative to each image's signal
-    offsets, wide, half, foot = _offsets(model)
-    w = _row_weights(model, [mid], offsets)[0]  # (K, U)
+    offsets, wide, half, foot = model_offsets(model)
+    w = row_weights(model, [mid], offsets)[0]  # (K, U)
     err = np.interp(offsets.astype(float), model.table.offsets_rows, model.table.kernel_stderr, left=0.0, right=0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         rel_mc = np.sqrt((w**2 * err[None, :] ** 2).sum(axis=1)) / s0

@@ -35,6 +35,8 @@ __all__ = [
     "usable_bands",
     "far_bands",
     "row_jitter_sigma",
+    "model_offsets",
+    "row_weights",
 ]
 
 
@@ -125,7 +127,9 @@ def vein_model(
     )
 
 
-def _offsets(model: VeinModel):
+def model_offsets(model: VeinModel):
+    """``(offsets, wide, half, foot)`` of a vein model: the band's offsets (rows), the offsets a camera row's
+    footprint reaches, the footprint's half width and its weights (:func:`planeray.kernels.footprint.footprint_kernel`)."""
     rpc = model.geometry.rows_per_camera_row
     band = max(int(model.band_rows), int(np.ceil(rpc)) + 1)
     offsets = np.arange(-band, band + 1)
@@ -135,8 +139,11 @@ def _offsets(model: VeinModel):
     return offsets, wide, half, foot
 
 
-def _row_weights(model: VeinModel, rows, offsets):
-    """``(n_rows, K, U)``: band weights times the edge rule's coverage, per distinct camera row."""
+def row_weights(model: VeinModel, rows, offsets):
+    """``(n_rows, K, U)``: band weights times the edge rule's coverage, per distinct camera row.
+
+    ``rows`` are camera rows, ``offsets`` projector-row offsets (:func:`model_offsets`).
+    """
     out = []
     for t in rows:
         w = band_weights_at_row(model.bands, model.geometry, int(t), offsets)
@@ -174,11 +181,11 @@ def vein_signals(model: VeinModel, rows, rho_mm, angle_deg, depth_mm, diameter_m
     rows = np.asarray(rows, dtype=np.int64)
     rho = np.asarray(rho_mm, float) / model.mm_per_row
     ang = np.broadcast_to(np.asarray(angle_deg, float), rho.shape)
-    offsets, wide, half, foot = _offsets(model)
+    offsets, wide, half, foot = model_offsets(model)
     cache = _cache if _cache is not None else {}
     if "W" not in cache:
         urows, inv = np.unique(rows, return_inverse=True)
-        cache["W"] = _row_weights(model, urows, offsets)
+        cache["W"] = row_weights(model, urows, offsets)
         cache["inv"] = inv
         k_row = np.interp(wide.astype(float), model.table.offsets_rows, model.kernel, left=0.0, right=0.0)
         cache["k_row"] = k_row
@@ -204,9 +211,9 @@ def background_signals(model: VeinModel, rows) -> np.ndarray:
     projector's line power; multiply by the camera's ``signal_scale`` for a normalized image).
     """
     rows = np.asarray(rows, dtype=np.int64)
-    offsets, wide, half, foot = _offsets(model)
+    offsets, wide, half, foot = model_offsets(model)
     urows, inv = np.unique(rows, return_inverse=True)
-    W = _row_weights(model, urows, offsets)
+    W = row_weights(model, urows, offsets)
     k_row = np.interp(wide.astype(float), model.table.offsets_rows, model.kernel, left=0.0, right=0.0)
     base = convolve1d(k_row[None, :], foot[::-1], axis=1, mode="constant")[:, half:-half][0]
     return np.einsum("rku,u->kr", W, base)[:, inv]
