@@ -98,6 +98,7 @@ from .events import (
     ROULETTE_THRESHOLD,
     batch_counts,
     batch_states,
+    beyond_cutoff,
     check_offsets,
     check_photons,
     collide,
@@ -169,6 +170,7 @@ def _trace(
     # Straight-up radiance: normal transmission and the n^2 radiance law at the face.
     up_gain = (1.0 - fresnel_jit(1.0, n)) / (n * n)
     inv_bin = 1.0 / mm_per_row
+    cutoff_y = cutoff_mm if radial else np.inf  # a line source is infinitely long along y
     for b in range(B):
         s = states[b].copy()
         # Scalar accumulators per batch: writing neighbouring array slots from
@@ -227,7 +229,7 @@ def _trace(
                 abs_b += dabs
                 if not alive:
                     break
-                if z > cutoff_mm or abs(x) > cutoff_mm or (radial and abs(y) > cutoff_mm):
+                if beyond_cutoff(x, y, z, cutoff_mm, cutoff_y, cutoff_mm):
                     trunc_b += w
                     break
         refl[b] = refl_b

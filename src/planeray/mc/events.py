@@ -43,6 +43,7 @@ __all__ = [
     "fresnel_escape",
     "collide",
     "roulette",
+    "beyond_cutoff",
     "new_tallies",
     "batch_counts",
     "batch_states",
@@ -141,6 +142,13 @@ def roulette(s, w):
             return w * ROULETTE_CHANCE, -w * (ROULETTE_CHANCE - 1.0), True
         return w, w, False
     return w, 0.0, True
+
+
+@numba.njit(cache=True, inline="always")
+def beyond_cutoff(dx, dy, z, cutoff_x, cutoff_y, cutoff_z):
+    """Whether a photon has gone past the cutoff: ``|dx| > cutoff_x``, ``|dy| > cutoff_y`` or ``z > cutoff_z``
+    (mm; ``inf`` for no limit).  Its weight is then booked as truncated."""
+    return z > cutoff_z or abs(dx) > cutoff_x or abs(dy) > cutoff_y
 
 
 @numba.njit(cache=True, inline="always")

@@ -71,6 +71,7 @@ from .events import (
     N_BATCHES,
     batch_counts,
     batch_states,
+    beyond_cutoff,
     check_offsets,
     check_photons,
     collide,
@@ -339,7 +340,7 @@ def _trace(
                 abs_b += dabs
                 if not alive:
                     break
-                if abs(x - x0) > cutoff_mm or abs(y) > cutoff_mm + src_y:
+                if beyond_cutoff(x - x0, y, z, cutoff_mm, cutoff_mm + src_y, math.inf):
                     trunc_b += w
                     break
         refl[b] = refl_b

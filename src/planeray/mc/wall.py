@@ -94,6 +94,7 @@ from .engine import check_cutoff, check_depth_mfp, check_mm_per_row, default_cut
 from .events import (
     N_BATCHES,
     batch_counts,
+    beyond_cutoff,
     check_offsets,
     check_photons,
     collide,
@@ -278,7 +279,7 @@ def _trace_wall(
                 abs_b += dabs
                 if not alive:
                     break
-                if z > cutoff_mm or abs(x) > cutoff_mm or abs(y) > cutoff_mm:
+                if beyond_cutoff(x, y, z, cutoff_mm, cutoff_mm, cutoff_mm):
                     trunc_b += w
                     break
         refl[b] = refl_b
