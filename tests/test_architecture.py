@@ -94,6 +94,15 @@ def _resolve(name: str) -> str | None:
     return None
 
 
+def _from_prefix(node: ast.ImportFrom, package: str) -> str:
+    """The absolute module of ``from X import ...`` (relative imports resolved against ``package``)."""
+    if not node.level:
+        return node.module or ""
+    base = package.split(".")
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def _imports(module: str, path: Path) -> set[str]:
     tree = ast.parse(path.read_text(encoding="utf-8"))
     is_pkg = path.name == "__init__.py"
@@ -105,12 +114,7 @@ def _imports(module: str, path: Path) -> set[str]:
                 if alias.name.split(".")[0] == "planeray":
                     found.add(alias.name)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[: len(base) - (node.level - 1)]
-                prefix = ".".join(base + ([node.module] if node.module else []))
-            else:
-                prefix = node.module or ""
+            prefix = _from_prefix(node, package)
             if prefix.split(".")[0] != "planeray":
                 continue
             subs = {f"{prefix}.{a.name}" for a in node.names} & MODULES.keys()
@@ -205,12 +209,7 @@ def _private_imports(module: str, path: Path) -> list[str]:
     bad = []
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[: len(base) - (node.level - 1)]
-                prefix = ".".join(base + ([node.module] if node.module else []))
-            else:
-                prefix = node.module or ""
+            prefix = _from_prefix(node, package)
             targets = [f"{prefix}.{a.name}" for a in node.names]
         elif isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
