@@ -759,3 +759,13 @@ def test_a_cached_forward_table_is_reused_silently_and_a_missing_one_announced(m
     text = cap.get()
     assert "no forward table for n = 1.45" in text and "about 2 minutes" in text and "pilot" in text
     assert calls[-1]["n"] == 1.45 and callable(calls[-1]["progress"])
+
+
+def test_the_old_name_of_the_forward_kernel_warns_and_is_the_forward_kernel(table):
+    """``materials.fit.line_kernel`` was renamed ``kernels.forward.forward_kernel`` (``pr.line_kernel`` is the
+    scene kernel of a Medium, another function): the old name still answers, with a DeprecationWarning."""
+    with pytest.warns(DeprecationWarning, match="forward_kernel"):
+        old = fit.line_kernel(1.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    np.testing.assert_array_equal(
+        old, forward.forward_kernel(1.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    )

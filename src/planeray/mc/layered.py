@@ -67,6 +67,7 @@ from ..errors import InputError
 from ..medium import Medium, as_medium
 from ._batches import trace_batches
 from .cache import cache_key, load_profile, save_profile, stored
+from .engine import check_mm_per_row
 from .events import (
     N_BATCHES,
     batch_counts,
@@ -510,7 +511,7 @@ def mc_layered_profile(
     True
     """
     off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
-    mm = float(mm_per_row)
+    mm = check_mm_per_row(mm_per_row)
     params = {
         "kind": "layered-profile",
         "version": LAYERED_VERSION,
@@ -615,7 +616,7 @@ def mc_layered_vein_brute(
         background is 0), ``n_photons``.
     """
     zc, r = check_vein(layers, depth_mm, diameter_mm)
-    mm = float(mm_per_row)
+    mm = check_mm_per_row(mm_per_row)
     rho = _check_offsets(np.arange(-24, 25) if rho_rows is None else rho_rows)
     off = _check_offsets(np.arange(-48, 49) if offsets_rows is None else offsets_rows)
     nx, ny = vein_normal(angle_deg)
@@ -689,7 +690,7 @@ def mc_vein_kernel_brute(
     """
     zc, r = check_vein(layers, depth_mm, diameter_mm)
     off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
-    mm = float(mm_per_row)
+    mm = check_mm_per_row(mm_per_row)
     nx, ny = vein_normal(angle_deg)
     counts, out = _run(
         layers,
@@ -744,7 +745,7 @@ def trace_virtual_veins(
     blood = as_medium(blood)
     rho = np.asarray(rho_rows, dtype=np.float64)
     off = np.asarray(offsets_rows, dtype=np.int64)
-    mm = float(mm_per_row)
+    mm = check_mm_per_row(mm_per_row)
     combos = [(d, D) for d in depths_mm for D in diameters_mm]
     v_zc = np.array([d + 0.5 * D for d, D in combos])
     v_r = np.array([0.5 * D for _, D in combos])
