@@ -375,3 +375,4 @@ def test_every_photon_kernel_refuses_the_same_bad_input_the_same_way(bad):
     for name, run in runs.items():
         with pytest.raises(InputError):
             run(**bad)
+            pytest.fail(f"the {name} run took {bad}")
