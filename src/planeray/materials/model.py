@@ -40,7 +40,7 @@ pass ``unclassified_below=0``.
 
 from __future__ import annotations
 
-from .capture import capture_features, capture_transport
+from .capture import DEFAULT_DEMUX, capture_features, capture_transport
 from .model_format import (
     ALLOWED_TYPES,
     DEFAULT_UNCLASSIFIED_BELOW,
@@ -49,12 +49,18 @@ from .model_format import (
     MAX_RECORD_BYTES,
     MODEL_FORMAT,
     MODEL_FORMAT_VERSION,
+    TYPICALITY_COMPONENTS,
     MaterialModel,
     Segmentation,
+    check_model_output,
+    check_unclassified_below,
     load_model,
+    record_digest,
 )
-from .training import DEFAULT_PARAM_GRID, train_model
+from .training import DEFAULT_PARAM_GRID, MAX_PER_CLASS, check_training_options, fit_typicality, train_model
 
+#: The public names of the model, its file and its training (defined in the modules above; re-exported here,
+#: where the command line and the experiments import them).
 __all__ = [
     "MODEL_FORMAT",
     "MODEL_FORMAT_VERSION",
@@ -63,6 +69,7 @@ __all__ = [
     "MAX_ESTIMATOR_BYTES",
     "MAX_JSON_DEPTH",
     "MAX_RECORD_BYTES",
+    "TYPICALITY_COMPONENTS",
     "MaterialModel",
     "Segmentation",
     "train_model",
@@ -70,4 +77,11 @@ __all__ = [
     "capture_features",
     "capture_transport",
     "DEFAULT_PARAM_GRID",
+    "DEFAULT_DEMUX",
+    "MAX_PER_CLASS",
+    "check_model_output",
+    "check_training_options",
+    "check_unclassified_below",
+    "fit_typicality",
+    "record_digest",
 ]

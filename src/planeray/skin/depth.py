@@ -65,7 +65,7 @@ from ..errors import InputError
 from ..goodness import DEFAULT_P_MISFIT, FLAG_EDGE, FLAG_MISFIT, FitQuality, describe_flags, fit_quality
 from ..scenes.base import DEFAULT_MM_PER_ROW
 from ..timing import Band
-from .vein_geometry import VeinPixels, centre_line, other_vein_ratio, vein_geometry
+from .vein_geometry import CentreLine, VeinPixels, centre_line, other_vein_ratio, vein_geometry
 from .vein_model import (
     VeinModel,
     background_signals,
@@ -93,6 +93,8 @@ __all__ = [
     "row_jitter_sigma",
     "vein_geometry",
     "centre_line",
+    "CentreLine",
+    "VeinPixels",
     "other_vein_ratio",
     "fit_vein",
     "fit_veins",
