@@ -6,7 +6,9 @@ functions, where cycles used to hide), resolved to a planeray module, and checke
 * no import cycle between modules;
 * no *upward* import between the package's top-level units: a unit may import only
   units listed before it in :data:`LAYERS` (capture -> storage -> models -> scenes ->
-  devices -> demultiplexing -> analysis -> figures -> experiments -> front ends).
+  devices -> demultiplexing -> analysis -> figures -> experiments -> front ends);
+* no *private* import across units: a name ``_x`` (or a module ``_x``) inside a unit is
+  imported only by that unit's own modules; other units use its public names.
 """
 
 from __future__ import annotations
@@ -95,6 +97,15 @@ def _resolve(name: str) -> str | None:
     return None
 
 
+def _from_prefix(node: ast.ImportFrom, package: str) -> str:
+    """The absolute module of ``from X import ...`` (relative imports resolved against ``package``)."""
+    if not node.level:
+        return node.module or ""
+    base = package.split(".")
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def _imports(module: str, path: Path) -> set[str]:
     tree = ast.parse(path.read_text(encoding="utf-8"))
     is_pkg = path.name == "__init__.py"
@@ -106,12 +117,7 @@ def _imports(module: str, path: Path) -> set[str]:
                 if alias.name.split(".")[0] == "planeray":
                     found.add(alias.name)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[: len(base) - (node.level - 1)]
-                prefix = ".".join(base + ([node.module] if node.module else []))
-            else:
-                prefix = node.module or ""
+            prefix = _from_prefix(node, package)
             if prefix.split(".")[0] != "planeray":
                 continue
             subs = {f"{prefix}.{a.name}" for a in node.names} & MODULES.keys()
@@ -237,3 +243,50 @@ def test_the_command_line_is_thin():
     assert not long, "command-line functions doing a library's work (move it to the library):\n" + "\n".join(
         f"{n} lines: {where}" for n, where in long
     )
+
+
+def _private_imports(module: str, path: Path) -> list[str]:
+    """``from X import _name`` (or a private module ``_m`` inside another unit) in ``module``: ``"module -> X._name"``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    is_pkg = path.name == "__init__.py"
+    package = module if is_pkg else module.rpartition(".")[0]
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            prefix = _from_prefix(node, package)
+            targets = [f"{prefix}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        else:
+            continue
+        for target in targets:
+            parts = target.split(".")
+            if parts[0] != "planeray" or len(parts) < 3:
+                continue
+            # ``_x`` below a unit is private to that unit (a top-level private module such as
+            # ``planeray._validate`` is a unit of its own, LAYERS: importable, its private names not).
+            if any(p.startswith("_") and not p.startswith("__") for p in parts[2:]) and _unit(module) != parts[1]:
+                bad.append(f"{module} -> {target}")
+    return bad
+
+
+def test_no_private_import_across_units():
+    bad = {b for mod, path in MODULES.items() for b in _private_imports(mod, path)}
+    assert not bad, "private names imported from another unit (make them public):\n" + "\n".join(sorted(bad))
+
+
+@pytest.mark.parametrize(
+    ("module", "line", "flagged"),
+    [
+        ("planeray.skin.depth", "from ..scenes.skin import _vein_ratio", True),
+        ("planeray.skin.depth", "def f():\n    from planeray.mc.engine import _run", True),
+        ("planeray.mc.wall", "from .engine import _run", False),  # the same unit
+        ("planeray.mc.engine", "from .._validate import check_memory", False),  # a private unit, a public name
+        ("planeray.cli.pulse", "from .._validate import _bytes_text", True),
+        ("planeray.kernels.vein", "from ..mc._batches import trace_batches", True),
+    ],
+)
+def test_the_checker_sees_private_imports(module, line, flagged, tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text(line + "\n")
+    assert bool(_private_imports(module, src)) == flagged

@@ -263,12 +263,12 @@ def test_solver_threads_follow_numbas_count_and_do_not_change_the_bytes(saturate
             if n > numba.config.NUMBA_NUM_THREADS:  # pragma: no cover - a one-core machine
                 continue
             numba.set_num_threads(n)
-            assert fast._threads() == n
+            assert fast.solver_threads() == n
             with threadpool_limits(2, user_api="blas"):
                 stores[n] = demultiplex_to_store(saturated_stack, tmp_path / f"T{n}.zarr", chunk_rows=8)
         if numba.config.NUMBA_NUM_THREADS >= 3:  # pragma: no cover - more cores: still two solver threads
             numba.set_num_threads(3)
-            assert fast._threads() == 2
+            assert fast.solver_threads() == 2
     finally:
         numba.set_num_threads(before)
     T = {n: zarr.open_group(str(p), mode="r")["T"][...] for n, p in stores.items()}

@@ -66,7 +66,7 @@ def leftovers(folder: Path) -> list[str]:
 @pytest.fixture(autouse=True)
 def tiny_grid(monkeypatch):
     """One SVM fit per fold: train and report run in seconds."""
-    monkeypatch.setattr("planeray.materials.model.DEFAULT_PARAM_GRID", TINY_GRID)
+    monkeypatch.setattr("planeray.materials.training.DEFAULT_PARAM_GRID", TINY_GRID)
 
 
 @pytest.fixture(scope="module")

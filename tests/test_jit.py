@@ -17,7 +17,8 @@ def test_every_cached_kernel_is_compiled_by_a_warm_up_group():
     # the engines' kernels are found (and helpers inlined into them are not: no cache entry of their own)
     assert {"planeray.mc.engine._trace", "planeray.mc.layered._trace", "planeray.mc.wall._trace_wall"} <= set(kernels)
     assert {"planeray.demux._kernels.relaxed_step", "planeray._bandsum.band_rows"} <= set(kernels)
-    assert "planeray.mc.engine._uniform" not in kernels  # inline="always"
+    assert "planeray.mc.events.uniform" not in kernels  # inline="always"
+    assert "planeray.mc.events.roulette" not in kernels
     for group in _jit.GROUPS:
         _jit.compile_group(group)
     assert _jit.uncompiled() == []

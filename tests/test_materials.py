@@ -315,7 +315,7 @@ def test_members_and_nesting_are_bounded_before_reading(model, tmp_path, monkeyp
     """A huge member is refused from the zip's directory (never read); deep JSON before it is parsed."""
     import tracemalloc
 
-    import planeray.materials.model as mm
+    import planeray.materials.model_format as mm  # the model file format (issue 43: out of materials.model)
 
     good = model.save(tmp_path / "good.zip")
     with zipfile.ZipFile(good) as z:
@@ -738,7 +738,7 @@ def test_simulate_says_it_traces_tables_and_counts_the_runs(tmp_path, monkeypatc
 
     import planeray.scenes.materials as sm
     from planeray.cli import app
-    from planeray.mc.wall import TABLE_RUNS
+    from planeray.kernels.wall import TABLE_RUNS
 
     real = sm.material_tables
     runs = []

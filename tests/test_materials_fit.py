@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from planeray.errors import InputError
+from planeray.kernels import forward
+from planeray.kernels.walls import dipole_per_row, layer_line
 from planeray.materials import fit
 from planeray.mc import mc_line_profile
 from planeray.medium import Medium
@@ -34,12 +36,12 @@ def _direct(mu_s_prime, mu_a, *, mm=MM, n_photons=100_000, seed=11, offsets=OFFS
 
 
 def test_the_shipped_table_is_found_without_tracing(monkeypatch):
-    fit._LOADED.clear()
+    forward._LOADED.clear()
 
     def no_tracing(**kwargs):
         raise AssertionError("the shipped forward table was not found")
 
-    monkeypatch.setattr(fit, "build_forward_table", no_tracing)
+    monkeypatch.setattr(forward, "build_forward_table", no_tracing)
     t = fit.forward_table()
     assert t.kernel.shape == (fit.TABLE_MU_S_PRIME_PER_MM.size, fit.TABLE_MU_A_PER_MM.size, fit.TABLE_REACH_ROWS + 1)
 
@@ -61,7 +63,7 @@ def test_the_forward_model_matches_direct_monte_carlo(table, case):
     else:  # another row size: the per-row scaling (a small run: 10 000 photons)
         mu_s_prime, mu_a, mm = 0.8, 0.004, 0.5
         k_dir, e_dir = _direct(mu_s_prime, mu_a, mm=mm, n_photons=10_000)
-    k_fit = fit.line_kernel(mu_s_prime, mu_a, offsets_rows=OFFSETS, mm_per_row=mm, table=table)
+    k_fit = fit.forward_kernel(mu_s_prime, mu_a, offsets_rows=OFFSETS, mm_per_row=mm, table=table)
     # Groups of 9 rows (noise averages out), where the kernel carries light.
     groups = OFFSETS.reshape(-1, 1)[:198].reshape(22, 9)
     idx = groups - OFFSETS[0]
@@ -77,13 +79,13 @@ def test_the_forward_model_matches_direct_monte_carlo(table, case):
 
 def test_a_kernel_outside_the_table_is_refused(table):
     with pytest.raises(ValueError, match="outside the forward model"):
-        fit.line_kernel(500.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+        fit.forward_kernel(500.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
 
 
 @pytest.mark.parametrize("calibrated", [True, False])
 def test_the_fit_recovers_the_parameters_of_noiseless_profiles(table, calibrated):
     truth = [(0.5, 0.002), (1.5, 0.02), (4.0, 0.08)]
-    Y = np.stack([fit.line_kernel(s, a, offsets_rows=OFFSETS, mm_per_row=MM, table=table) for s, a in truth])
+    Y = np.stack([fit.forward_kernel(s, a, offsets_rows=OFFSETS, mm_per_row=MM, table=table) for s, a in truth])
     if not calibrated:
         Y = Y * 37.0  # camera units: only the shape is used
     r = fit.fit_profiles(Y, offsets_rows=OFFSETS, mm_per_row=MM, calibrated=calibrated, table=table)
@@ -106,7 +108,7 @@ def test_the_fit_recovers_media_traced_by_direct_monte_carlo(table):
 
 
 def test_the_standard_errors_match_the_spread_over_noise_seeds(table):
-    clean = fit.line_kernel(1.2, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    clean = fit.forward_kernel(1.2, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
     sigma = 0.003 * clean.max() * np.ones_like(clean)  # small noise: the linearized errors hold
     rng = np.random.default_rng(0)
     Y = clean[None, :] + sigma[None, :] * rng.standard_normal((120, clean.size))
@@ -132,7 +134,7 @@ def test_a_parameter_the_data_do_not_constrain_is_nan_with_its_reason(table):
     # Weak absorption seen only near the line (|u| <= 8 rows = 2.4 mm, diffusion length ~ 40 mm), shape only:
     # the profile hardly depends on mu_a -- a flat likelihood.
     near = np.arange(-8, 9)
-    clean = fit.line_kernel(1.0, 0.0008, offsets_rows=near, mm_per_row=MM, table=table)
+    clean = fit.forward_kernel(1.0, 0.0008, offsets_rows=near, mm_per_row=MM, table=table)
     sigma = 0.05 * clean.max() * np.ones_like(clean)
     y = clean + sigma * np.random.default_rng(1).standard_normal(clean.size)
     r = fit.fit_profiles(y, offsets_rows=near, mm_per_row=MM, sigma=sigma, table=table, model_relative_sd=0)
@@ -153,7 +155,7 @@ def test_a_profile_narrower_than_a_bin_gives_no_mu_s_prime(table):
     # Coarse rows (3 mm) of a strongly scattering medium (per-row mu_s' 28.5, far beyond the table's 2.4: the
     # dipole): 98 % of the light returns within the line's own bin, whose shape says nothing of mu_s'.
     coarse = np.arange(-20, 21)
-    y = fit.line_kernel(9.5, 0.019, offsets_rows=coarse, mm_per_row=3.0, table=table)
+    y = fit.forward_kernel(9.5, 0.019, offsets_rows=coarse, mm_per_row=3.0, table=table)
     assert y[21] < 0.03 * y[20]
     y = y * (1 + 0.01 * np.random.default_rng(4).standard_normal(y.size))
     r = fit.fit_profiles(y, offsets_rows=coarse, mm_per_row=3.0, sigma=0.01 * y + 1e-6, table=table)
@@ -161,13 +163,13 @@ def test_a_profile_narrower_than_a_bin_gives_no_mu_s_prime(table):
     assert r.mask[0] & 32
     assert any("mu_s'" in why for why in fit.describe_reasons(int(r.mask[0])))
     # a third of that (per-row 9, 11 % of the light in the next bin) is measured, by the dipole beyond the table
-    y = fit.line_kernel(3.0, 0.015, offsets_rows=coarse, mm_per_row=3.0, table=table)
+    y = fit.forward_kernel(3.0, 0.015, offsets_rows=coarse, mm_per_row=3.0, table=table)
     r = fit.fit_profiles(y, offsets_rows=coarse, mm_per_row=3.0, sigma=0.01 * y + 1e-6, table=table)
     assert r.mu_s_prime_per_mm[0] == pytest.approx(3.0, rel=0.02) and r.mask[0] == 0
 
 
 def test_the_calibrated_fit_constrains_mu_a_better_than_the_shape_alone(table):
-    clean = fit.line_kernel(1.0, 0.003, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    clean = fit.forward_kernel(1.0, 0.003, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
     sigma = 0.03 * clean.max() * np.ones_like(clean)
     y = clean + sigma * np.random.default_rng(2).standard_normal(clean.size)
     opts = dict(offsets_rows=OFFSETS, mm_per_row=MM, sigma=sigma, table=table, model_relative_sd=0)
@@ -195,8 +197,8 @@ def capture(tmp_path_factory, table):
 
     root = tmp_path_factory.mktemp("fitcli")
     off = np.arange(-60, 61)
-    k1 = fit.line_kernel(0.8, 0.005, offsets_rows=off, mm_per_row=MM, table=table)
-    k2 = fit.line_kernel(2.5, 0.04, offsets_rows=off, mm_per_row=MM, table=table)
+    k1 = fit.forward_kernel(0.8, 0.005, offsets_rows=off, mm_per_row=MM, table=table)
+    k2 = fit.forward_kernel(2.5, 0.04, offsets_rows=off, mm_per_row=MM, table=table)
     rng = np.random.default_rng(3)
     dense = np.empty((8, 8, off.size), np.float32)
     dense[:, :4] = k1 * 50.0
@@ -352,8 +354,8 @@ def test_the_wall_model_carries_the_monte_carlo_walls_effect(table, angle):
     mc_effect = wt.kernels(12.0, angle)[sel] - wt.slab[sel]
     walls = np.array([[12.0, angle, 1.0, 1.0]])
     kw = dict(offsets_rows=u, mm_per_row=wt.mm_per_row, table=table)
-    free = fit.line_kernel(med.sigma_s_prime, med.sigma_a, **kw)
-    effect = fit.line_kernel(med.sigma_s_prime, med.sigma_a, walls=walls, **kw) - free
+    free = fit.forward_kernel(med.sigma_s_prime, med.sigma_a, **kw)
+    effect = fit.forward_kernel(med.sigma_s_prime, med.sigma_a, walls=walls, **kw) - free
     size = np.abs(mc_effect).sum()
     assert size > 0.05 * wt.slab[sel].sum()  # the wall matters: 8 % of the kernel
     assert np.abs(effect - mc_effect).sum() < 0.2 * size  # the model carries >= 80 % of it (measured 91-96 %)
@@ -394,10 +396,10 @@ def test_beyond_the_table_toothpaste_is_measured_by_the_dipole(table):
 def test_beyond_the_table_the_dipole_takes_over_continuously(table):
     s1 = table.mu_s_prime_per_row[-1] / MM  # the table's largest mu_s', 1/mm
     kw = dict(offsets_rows=np.arange(-30, 31), mm_per_row=MM, table=table)
-    at, beyond = fit.line_kernel(s1, 0.02, **kw), fit.line_kernel(s1 * 1.001, 0.02, **kw)
+    at, beyond = fit.forward_kernel(s1, 0.02, **kw), fit.forward_kernel(s1 * 1.001, 0.02, **kw)
     np.testing.assert_allclose(beyond, at, rtol=5e-3)
     # and it narrows as mu_s' grows (more light near the line)
-    far = fit.line_kernel(4 * s1, 0.02, **kw)
+    far = fit.forward_kernel(4 * s1, 0.02, **kw)
     assert far[30] / far.sum() > at[30] / at.sum()
 
 
@@ -407,7 +409,7 @@ def test_a_layers_bottom_is_the_slab_image_series_integrated_along_the_line(tabl
     from scipy.integrate import quad
 
     s, a, n = 0.06, 0.0012, 1.33  # per row: soap-like (0.2 /mm, 0.004 /mm at 0.3 mm per row)
-    d = fit._dipole_per_row(s, a, n)
+    d = dipole_per_row(s, a, n)
     st, z_r, z_b = d["sigma_tr"], d["z"][0], d["z_b"]
     depth = 100.0
     period = 2.0 * (depth + z_b + 2.0 / (3.0 * (s + a)))
@@ -422,11 +424,11 @@ def test_a_layers_bottom_is_the_slab_image_series_integrated_along_the_line(tabl
 
     for x in (0.5, 10.0, 60.0):
         line = 2.0 * quad(lambda y, x=x: reflectance(np.hypot(x, y)), 0.0, np.inf, limit=200)[0]
-        assert fit._layer_line(np.array([x]), d, depth)[0] == pytest.approx(line, rel=1e-6)
+        assert layer_line(np.array([x]), d, depth)[0] == pytest.approx(line, rel=1e-6)
     off = np.arange(0, 101)
-    free = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table)
-    deep = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table, walls=[[1e5, 180.0, 0, 1]])
-    layer = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table, walls=[[depth, 180.0, 0, 1]])
+    free = fit.forward_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table)
+    deep = fit.forward_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table, walls=[[1e5, 180.0, 0, 1]])
+    layer = fit.forward_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=0.3, table=table, walls=[[depth, 180.0, 0, 1]])
     np.testing.assert_allclose(deep, free, rtol=1e-9)  # a bottom far below changes nothing
     ratio = layer / free
     assert 0.98 < ratio[0] < 1.0 and ratio[100] < 0.9 and np.all(np.diff(ratio[::10]) < 0)  # the far light is lost
@@ -437,7 +439,7 @@ def test_a_layer_fitted_with_its_depth_is_recovered_and_biased_without(table):
 
     off = np.arange(-60, 61)
     bottom = [[10.0 / MM, fit.BOTTOM_ANGLE_DEG, 0.0, 1.0]]  # a 10 mm layer of a medium 2 transport paths deep
-    k = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table, walls=bottom)
+    k = fit.forward_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table, walls=bottom)
     rng = np.random.default_rng(5)
     dense = (k * 50.0 * (1.0 + 0.002 * rng.standard_normal((4, 4, off.size)))).astype(np.float32)
     transport = Transport(dense, off)
@@ -460,7 +462,7 @@ def test_a_mismatched_model_is_flagged_and_a_consistent_one_is_not(table):
     from planeray.transport import Transport
 
     off = np.arange(-60, 61)
-    k = fit.line_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table,
+    k = fit.forward_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table,
                         walls=[[3.0 / MM, fit.BOTTOM_ANGLE_DEG, 0.0, 1.0]])  # fmt: skip
     rng = np.random.default_rng(5)
     transport = Transport((k * 50.0 * (1.0 + 0.002 * rng.standard_normal((4, 4, off.size)))).astype(np.float32), off)
@@ -572,7 +574,7 @@ def stacks(table):
 
     off = scene_offsets()
     rpc = STACK_PROJECTOR_ROWS / STACK_SHAPE[0]
-    k = fit.line_kernel(*STACK_MEDIUM, offsets_rows=off, mm_per_row=MM, rows_per_camera_row=rpc, table=table)
+    k = fit.forward_kernel(*STACK_MEDIUM, offsets_rows=off, mm_per_row=MM, rows_per_camera_row=rpc, table=table)
     medium = _homogeneous_scene(k, float(k.sum()))
     white = _homogeneous_scene(0.99 * footprint_kernel(off, rpc), 0.99)
     sweep = paper_sweep()
@@ -757,3 +759,13 @@ def test_a_cached_forward_table_is_reused_silently_and_a_missing_one_announced(m
     text = cap.get()
     assert "no forward table for n = 1.45" in text and "about 2 minutes" in text and "pilot" in text
     assert calls[-1]["n"] == 1.45 and callable(calls[-1]["progress"])
+
+
+def test_the_old_name_of_the_forward_kernel_warns_and_is_the_forward_kernel(table):
+    """``materials.fit.line_kernel`` was renamed ``kernels.forward.forward_kernel`` (``pr.line_kernel`` is the
+    scene kernel of a Medium, another function): the old name still answers, with a DeprecationWarning."""
+    with pytest.warns(DeprecationWarning, match="forward_kernel"):
+        old = fit.line_kernel(1.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    np.testing.assert_array_equal(
+        old, forward.forward_kernel(1.0, 0.01, offsets_rows=OFFSETS, mm_per_row=MM, table=table)
+    )

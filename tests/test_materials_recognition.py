@@ -193,6 +193,7 @@ def test_the_shipped_library_has_the_five_fig10_media_with_their_published_const
     index (and the soap's depth) it was fitted with -- the milks and the toothpaste within 3 of their
     uncertainties (+ 2 %) of the published constants; the soap's walls and 30 mm bottom bias its mu_s' (the
     entry holds what the fit measures, documented)."""
+    from planeray.kernels import forward
     from planeray.materials import fit
     from planeray.mc.cache import TABLES_DIR
 
@@ -209,7 +210,7 @@ def test_the_shipped_library_has_the_five_fig10_media_with_their_published_const
     assert lib.entry(5).depth_mm == 30.0 and lib.entry(1).depth_mm is None
     # their forward tables ship with it: recognizing with the shipped library traces nothing
     for n, _ in lib.hypotheses():
-        assert (TABLES_DIR / fit._default_table_name(fit.DEFAULT_G, n, fit.TABLE_PHOTONS, 0)).exists(), n
+        assert (TABLES_DIR / forward.forward_table_name(fit.DEFAULT_G, n, fit.TABLE_PHOTONS, 0)).exists(), n
 
 
 def test_library_conditions_refuse_another_row_size():
@@ -245,9 +246,9 @@ def test_the_beyond_table_side_is_read_from_the_fitted_kernel():
     from planeray.materials import fit
 
     u = np.arange(-60, 61)
-    hi = fit.line_kernel(7.9, 0.01, offsets_rows=u, mm_per_row=0.3)
-    lo = fit.line_kernel(0.21, 0.01, offsets_rows=u, mm_per_row=0.3)
-    mid = fit.line_kernel(1.2, 0.01, offsets_rows=u, mm_per_row=0.3)
+    hi = fit.forward_kernel(7.9, 0.01, offsets_rows=u, mm_per_row=0.3)
+    lo = fit.forward_kernel(0.21, 0.01, offsets_rows=u, mm_per_row=0.3)
+    mid = fit.forward_kernel(1.2, 0.01, offsets_rows=u, mm_per_row=0.3)
     side = beyond_table_side(np.array([2, 2, 0], np.uint8), np.stack([hi, lo, mid]), offsets_rows=u, mm_per_row=0.3)
     assert side.tolist() == [1, -1, 0]
 
@@ -265,8 +266,8 @@ def capture(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("recogcli")
     off = np.arange(-60, 61)
-    k1 = fit.line_kernel(0.8, 0.005, offsets_rows=off, mm_per_row=MM)
-    k2 = fit.line_kernel(2.5, 0.04, offsets_rows=off, mm_per_row=MM)
+    k1 = fit.forward_kernel(0.8, 0.005, offsets_rows=off, mm_per_row=MM)
+    k2 = fit.forward_kernel(2.5, 0.04, offsets_rows=off, mm_per_row=MM)
     rng = np.random.default_rng(3)
     dense = np.empty((8, 8, off.size), np.float32)
     dense[:, :4] = k1 * 50.0

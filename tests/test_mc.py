@@ -353,3 +353,26 @@ def test_point_source_radial_profile():
     assert np.all(np.diff(rd) < 0)  # monotone away from the entry point
     with pytest.raises(ValueError):
         mc_point_profile(Medium(1.0, 0.1, 0.0), n_photons=10, radius_bins=[-1, 0])
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [dict(n_photons=0), dict(mm_per_row=0.0), dict(offsets_rows=[0.5, 1.5]), dict(offsets_rows=[])],
+    ids=["no photons", "no row size", "fractional offsets", "no offsets"],
+)
+def test_every_photon_kernel_refuses_the_same_bad_input_the_same_way(bad):
+    """The slab, wall and layered runs share their checks (issue 43): one error type, InputError, for each."""
+    from planeray.errors import InputError
+    from planeray.mc.layered import mc_layered_profile
+    from planeray.mc.wall import mc_wall_profile
+
+    med = Medium(sigma_s=2.0, sigma_a=0.1, g=0.5, n=1.33)
+    runs = {
+        "slab": lambda **kw: mc_line_profile(med, **{"n_photons": 64, **kw}),
+        "wall": lambda **kw: mc_wall_profile(med, wall_distance_mm=1.0, **{"n_photons": 64, **kw}),
+        "layered": lambda **kw: mc_layered_profile([med], **{"n_photons": 64, **kw}),
+    }
+    for name, run in runs.items():
+        with pytest.raises(InputError):
+            run(**bad)
+            pytest.fail(f"the {name} run took {bad}")

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from planeray.errors import InputError
+from planeray.kernels.vein import mc_vein_table
 from planeray.mc import mc_line_profile
-from planeray.mc.layered import mc_layered_profile, mc_vein_kernel_brute, mc_vein_table
+from planeray.mc.layered import mc_layered_profile, mc_vein_kernel_brute
 from planeray.medium import Medium
 
 STACK = [

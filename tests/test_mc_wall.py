@@ -7,14 +7,10 @@ import numpy as np
 import pytest
 
 from planeray.errors import InputError
+from planeray.kernels.wall import WallKernelTable, mc_wall_table
 from planeray.mc import mc_line_profile
 from planeray.mc.diffusion import diffusion_exit
-from planeray.mc.wall import (
-    WallKernelTable,
-    mc_wall_profile,
-    mc_wall_table,
-    wall_exit_fractions,
-)
+from planeray.mc.wall import mc_wall_profile, wall_exit_fractions
 from planeray.medium import Medium
 
 # A cheap medium: transport mfp ~1 mm, diffusion length ~4 mm, Fresnel boundary of water.
@@ -186,8 +182,8 @@ def test_materials_scene_uses_the_shipped_tables(tmp_path, monkeypatch):
     # The default media at the three laser lines (and the Jensen et al. milks of the report) ship precomputed
     # (src/planeray/mc/tables, tools/build_mc_tables.py); a stale table would make every
     # fresh machine trace ~10^7 photons per medium when it builds the scene.
+    import planeray.kernels.wall as wall
     import planeray.mc.engine as engine
-    import planeray.mc.wall as wall
     import planeray.scenes.materials as sm
     from planeray.scenes import make_scene
 
@@ -198,7 +194,7 @@ def test_materials_scene_uses_the_shipped_tables(tmp_path, monkeypatch):
         raise AssertionError("a wall-kernel table of the materials scene was not found in the shipped tables")
 
     monkeypatch.setattr(engine, "_run", no_tracing)
-    monkeypatch.setattr(wall, "_run_wall", no_tracing)
+    monkeypatch.setattr(wall, "trace_wall_run", no_tracing)
     for kw in (
         {},
         {"source": "jensen"},

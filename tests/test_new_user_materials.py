@@ -441,6 +441,7 @@ def test_a_degenerate_input_is_refused_in_one_line_naming_the_option_and_the_fil
         raise AssertionError("the capture was demultiplexed or fitted before the input was checked")
 
     monkeypatch.setattr("planeray.materials.model.capture_transport", never)  # refused before any demultiplexing
+    monkeypatch.setattr("planeray.materials.capture.capture_transport", never)
     monkeypatch.setattr(cli, "progress_bar", never)
     _label_image(folder / "zero.png", (40, 40))
     _label_image(folder / "big.tif", (40, 40), fill=1, pixels=[(3, 3, 300)], dtype="uint16")

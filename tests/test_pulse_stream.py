@@ -276,9 +276,9 @@ def test_what_the_disk_cannot_hold_is_refused_before_any_work(videos, tmp_path, 
     assert need >= 300 * 32 * 40 * 4
     res = runner.invoke(app, ["skin", "pulse", str(videos["tif"]), "--out", str(tmp_path / "r")])
     line = one_line_error(res)
-    from planeray._validate import _bytes_text
+    from planeray._validate import bytes_text
 
-    assert f"300 frames of 32x40 need about {_bytes_text(need)} of temporary disk space" in " ".join(line.split())
+    assert f"300 frames of 32x40 need about {bytes_text(need)} of temporary disk space" in " ".join(line.split())
     assert "--region" in line and "1000 bytes free" in line
     assert not (tmp_path / "r").exists() and list(tmp_path.iterdir()) == []
     assert scratch_bytes(300, (32, 40), memory_bytes=SMALL, search=False)["disk"] == 0
@@ -329,7 +329,7 @@ def test_frames_too_large_for_the_memory_are_refused_before_any_work(videos, tmp
     against the memory available: refused in one line with the estimate, before a frame is decoded."""
     import planeray._validate as pv
     import planeray.experiments.pulse as ep
-    from planeray._validate import _bytes_text
+    from planeray._validate import bytes_text
     from planeray.cli._bounds import BASE_BYTES
 
     need = BASE_BYTES + scratch_bytes(300, (32, 40))["memory"]  # the interpreter, the video's arrays, 12 frames
@@ -341,5 +341,5 @@ def test_frames_too_large_for_the_memory_are_refused_before_any_work(videos, tmp
 
     monkeypatch.setattr(ep, "analyze_pulse", work)
     line = one_line_error(runner.invoke(app, ["skin", "pulse", str(videos["tif"]), "--out", str(tmp_path / "r")]))
-    assert f"magnifying frames of 32x40 needs about {_bytes_text(need)} of memory" in line
+    assert f"magnifying frames of 32x40 needs about {bytes_text(need)} of memory" in line
     assert list(tmp_path.iterdir()) == []

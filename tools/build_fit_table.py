@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 
+from planeray.kernels.forward import forward_table_name
 from planeray.materials import fit
 from planeray.mc.cache import TABLES_DIR
 
@@ -24,9 +25,7 @@ def main() -> None:
         print(f"\r{done[0]} / 90 grid points, {time.time() - t0:.0f} s", end="", flush=True)
 
     table = fit.build_forward_table(progress=tick)
-    s = fit.TABLE_MU_S_PRIME_PER_MM * fit.TABLE_MM_PER_ROW
-    a = fit.TABLE_MU_A_PER_MM * fit.TABLE_MM_PER_ROW
-    name = fit._table_name(s, a, fit.TABLE_REACH_ROWS, fit.DEFAULT_G, fit.DEFAULT_N, fit.TABLE_PHOTONS, 0)
+    name = forward_table_name(fit.DEFAULT_G, fit.DEFAULT_N, fit.TABLE_PHOTONS, 0)
     path = table.save(TABLES_DIR / name)
     print(f"\nwrote {path} in {time.time() - t0:.0f} s")
 

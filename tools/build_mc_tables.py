@@ -7,11 +7,11 @@ never waits for Monte Carlo:
 * the wax medium's line kernel (10^6 photons);
 * the ``materials`` scene's wall-kernel tables (``wall-*.npz``: per medium, the slab
   kernel with 10^6 photons and the kernels beside a wall at 15 distances and 3 angles
-  with 10^5 photons each; :func:`planeray.mc.wall.mc_wall_table`), for the default
+  with 10^5 photons each; :func:`planeray.kernels.wall.mc_wall_table`), for the default
   (Narasimhan et al.) media at the red, green and blue laser lines and for the Jensen et
   al. milks of the report's robustness check (red).  The slab profiles they trace on the way are not shipped (the tables hold them);
 * the ``skin`` scene's vein perturbation tables (``skin-*.npz``: fair and dark skin at 638
-  and 850 nm, 400,000 photons each; :func:`planeray.mc.layered.mc_vein_table`) and the
+  and 850 nm, 400,000 photons each; :func:`planeray.kernels.vein.mc_vein_table`) and the
   background kernels of the tones in between (``layered-*.npz``, 100,000 photons each;
   tests/test_skin.py checks they are all shipped).
 

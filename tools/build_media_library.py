@@ -19,6 +19,7 @@ import shutil
 
 from planeray.camera import CameraModel
 from planeray.experiments.materials import simulate_capture
+from planeray.kernels.forward import forward_table_name
 from planeray.materials import fit
 from planeray.materials.library import DEFAULT_LIBRARY_PATH, MediaLibrary, save_library
 from planeray.materials.recognize import entries_from_stack
@@ -55,7 +56,7 @@ def main() -> None:
         print(f"{name}: mu_s' {e.mu_s_prime_per_mm:.4g} /mm (+- {100 * e.mu_s_prime_log_sd:.1f} %), mu_a "
               f"{e.mu_a_per_mm} (+- {e.mu_a_log_sd}), published {published[cid]}")  # fmt: skip
         if args.ship_tables and n != fit.DEFAULT_N:
-            name_ = fit._default_table_name(fit.DEFAULT_G, n, fit.TABLE_PHOTONS, 0)
+            name_ = forward_table_name(fit.DEFAULT_G, n, fit.TABLE_PHOTONS, 0)
             if not (TABLES_DIR / name_).exists():
                 shutil.copy(cache_dir() / name_, TABLES_DIR / name_)
                 print(f"  shipped the forward table of n = {n:g}: {TABLES_DIR / name_}")

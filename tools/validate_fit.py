@@ -128,10 +128,10 @@ def fig10_materials(size=(96, 96), variants=("none", "walls", "exclude"), near_m
                         rows_per_camera_row=tr.geometry.rows_per_camera_row,
                     )
                     regions[cid] = dict(
-                        mu_s_prime_per_mm=fit._num(rr.mu_s_prime_per_mm[0]),
-                        mu_a_per_mm=fit._num(rr.mu_a_per_mm[0]),
-                        mu_s_prime_se_per_mm=fit._num(rr.mu_s_prime_se_per_mm[0]),
-                        mu_a_se_per_mm=fit._num(rr.mu_a_se_per_mm[0]),
+                        mu_s_prime_per_mm=fit.num_or_none(rr.mu_s_prime_per_mm[0]),
+                        mu_a_per_mm=fit.num_or_none(rr.mu_a_per_mm[0]),
+                        mu_s_prime_se_per_mm=fit.num_or_none(rr.mu_s_prime_se_per_mm[0]),
+                        mu_a_se_per_mm=fit.num_or_none(rr.mu_a_se_per_mm[0]),
                         pixels=int(m.sum()),
                     )
                 r = SimpleNamespace(regions=regions)

@@ -116,7 +116,7 @@ def main(argv=None):
             # the render against the forward model at the true parameters (calibrated, rows inside the margin)
             u = np.asarray(T.offsets_rows)
             prof = (np.asarray(T.dense, np.float64) / scale[..., None])[labels == 1].mean(axis=0)
-            model = fit.line_kernel(s, a, offsets_rows=u, mm_per_row=h, table=table)
+            model = fit.forward_kernel(s, a, offsets_rows=u, mm_per_row=h, table=table)
             row["render_over_model"] = {
                 int(k): float(prof[u == k][0] / model[u == k][0]) for k in DIAG_OFFSETS if np.any(u == k)
             }

@@ -145,7 +145,7 @@ def available_memory_bytes() -> int | None:
         return None
 
 
-def _bytes_text(n: float) -> str:
+def bytes_text(n: float) -> str:
     for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n < 1024 or unit == "PiB":
             return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
@@ -179,5 +179,5 @@ def check_memory(nbytes: float, what: str, *, advice: str = "", available: int |
     avail = available_memory_bytes() if available is None else available
     if avail is None or not nbytes > avail:
         return
-    text = f"{what} needs about {_bytes_text(float(nbytes))} of memory, more than the {_bytes_text(avail)} available"
+    text = f"{what} needs about {bytes_text(float(nbytes))} of memory, more than the {bytes_text(avail)} available"
     raise error(text + (f"; {advice}" if advice else ""))

@@ -18,7 +18,7 @@ import numpy as np
 
 from .devices.base import Device, apply_timing
 from .io.lock import writes_output
-from .resumable import _killable, _stop_after_units
+from .resumable import killable, stop_after_units
 from .stack import Stack
 from .timing import Sweep
 
@@ -94,7 +94,7 @@ def _capture_metadata(device: Device, sweep: Sweep) -> dict:
     return meta
 
 
-@_killable
+@killable
 @writes_output("out")
 def acquire_to_store(
     device: Device,
@@ -172,7 +172,7 @@ def acquire_to_store(
     done = resumable.done_units(group)
     if on_resume is not None and done.any():
         on_resume(int(done.sum()), len(sweep))
-    _stop_after = _stop_after_units()  # the tests' hook: a capture killed midway
+    _stop_after = stop_after_units()  # the tests' hook: a capture killed midway
     try:
         taken = 0
         for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):

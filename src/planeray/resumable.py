@@ -28,10 +28,10 @@ __all__ = ["partial_path", "open_partial", "mark_done", "done_units", "discard_i
 _STOP_AFTER: contextvars.ContextVar[int | None] = contextvars.ContextVar("planeray_stop_after", default=None)
 
 
-def _killable(fn):
+def killable(fn):
     """Give a resumable run the tests' hook ``_stop_after=k`` (end as if killed after ``k`` units) without
     showing it in ``fn``'s public signature (:func:`inspect.signature` follows ``__wrapped__``); ``fn`` reads
-    it with :func:`_stop_after_units`."""
+    it with :func:`stop_after_units`."""
 
     @functools.wraps(fn)
     def wrapper(*args, _stop_after: int | None = None, **kwargs):
@@ -44,8 +44,8 @@ def _killable(fn):
     return wrapper
 
 
-def _stop_after_units() -> int | None:
-    """The ``_stop_after`` of the running :func:`_killable` call (None: run to the end)."""
+def stop_after_units() -> int | None:
+    """The ``_stop_after`` of the running :func:`killable` call (None: run to the end)."""
     return _STOP_AFTER.get()
 
 

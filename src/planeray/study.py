@@ -280,8 +280,8 @@ def auto_weights(setup: StudySetup, B, *, criterion: str | None = None) -> tuple
         DEFAULT_ALPHAS,
         DEFAULT_BETAS,
         DEFAULT_CRITERION,
-        _folds,
         cv_score,
+        fold_indices,
         risk_score,
         search,
         summarize,
@@ -293,7 +293,7 @@ def auto_weights(setup: StudySetup, B, *, criterion: str | None = None) -> tuple
     B = np.atleast_2d(np.asarray(B, np.float64))
     ones = np.ones_like(B)
     if criterion == CV_CRITERION:
-        split = _folds(B.shape[1], 5, 0)
+        split = fold_indices(B.shape[1], 5, 0)
         score = lambda a, b: cv_score([setup.group], [B], [None], [ones], split, a, b, threads=1)  # noqa: E731
     else:
         warm: dict = {}

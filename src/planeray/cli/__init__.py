@@ -72,7 +72,7 @@ app = typer.Typer(
 
 def _print_version(value: bool) -> None:
     if value:
-        from ..io._common import planeray_version
+        from ..io import planeray_version
 
         typer.echo(f"planeray {planeray_version()}")
         raise typer.Exit()

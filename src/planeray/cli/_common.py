@@ -174,9 +174,9 @@ def _claim(*paths) -> None:
 
 def _not_a_home(path, option: str = "--out") -> None:
     """Refuse, with or without ``--overwrite``, the current folder, one of its parents, the home folder or a root."""
-    from ..io.atomic import _is_protected
+    from ..io.atomic import is_protected
 
-    if _is_protected(Path(path)):
+    if is_protected(Path(path)):
         raise InputError(
             f"{option} {path}: is the current folder, one of its parents or the home folder; name a new output "
             "inside it (e.g. {option} out/)".replace("{option}", option)
@@ -290,6 +290,6 @@ class PlanerayGroup(TyperGroup):
 
 def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
     """PNG: display-scaled 8-bit preview; TIFF: the values as 16-bit codes (:func:`planeray.figures.save_image`)."""
-    from ..figures._common import save_image
+    from ..figures import save_image
 
     return save_image(image, path, scale_to=scale_to)

@@ -97,8 +97,8 @@ def simulate(
 ):
     """Simulate a capture of the five containers (milks, toothpaste, soap) with its labels."""
     from ..experiments.materials import check_capture_options, simulate_capture
+    from ..kernels.wall import TABLE_RUNS
     from ..mc.cache import cache_dir
-    from ..mc.wall import TABLE_RUNS
     from ..optical_data import MATERIAL_CLASSES
     from ..scenes.materials import tables_to_trace
     from ..timing import make_sweep

@@ -56,7 +56,7 @@ def _check_pulse_resources(video, out_dir: Path, opts: dict) -> None:
     """
     import shutil
 
-    from .._validate import _bytes_text, check_memory
+    from .._validate import bytes_text, check_memory
     from ..pulse.analysis import scratch_bytes
 
     H, W = video.shape
@@ -91,8 +91,8 @@ def _check_pulse_resources(video, out_dir: Path, opts: dict) -> None:
             kept.append("the magnified video of the region search")
         kept = " and ".join(kept)
         raise ValueError(
-            f"{video.source}: {video.n_frames:,} frames of {H}x{W} need about {_bytes_text(need)} of temporary disk "
-            f"space beside {out_dir} for {kept}, more than the {_bytes_text(free)} free there; "
+            f"{video.source}: {video.n_frames:,} frames of {H}x{W} need about {bytes_text(need)} of temporary disk "
+            f"space beside {out_dir} for {kept}, more than the {bytes_text(free)} free there; "
             + ("give --region (no search), " if "region" not in opts else "")
             + "write --out on a disk with more room, or use a shorter video"
         )
@@ -235,10 +235,10 @@ def _pulse_inputs(video_path, out_dir, *, fps, band, rate_band, alpha, levels, p
     with console.status(f"opening {video_path}"):
         video = open_video(video_path, fps=fps, channel=channel)  # the header only: no frame decoded yet
     _check_bands_against(video, {"--band": opts["band_hz"], "--rate-band": opts["rate_band_hz"]})
-    from ..pulse.evm import _pyramid_sizes
+    from ..pulse.evm import pyramid_sizes
 
     try:
-        _pyramid_sizes(video.shape, levels)
+        pyramid_sizes(video.shape, levels)
     except ValueError:
         raise ValueError(
             f"--levels {levels}: too many pyramid levels for {video.shape[0]}x{video.shape[1]} frames"
@@ -460,13 +460,13 @@ def pulse_report(
 ):
     """The simulated pulse study: Fig. 15a/b, rate accuracy over rates and seeds, SNR per method, false alarms."""
     from ..experiments.pulse import QUICK_REPORT, REPORT_RATES_BPM, pulse_report_steps, run_pulse_report
-    from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
+    from ..pulse.evm import DEFAULT_LEVELS, pyramid_sizes
     from ..pulse.rate import RATE_BAND_HZ
     from ..pulse.simulate import METHODS, LiveSettings
 
     shape = _bounds.image_size(size)
     try:  # the report magnifies with the paper's pyramid levels
-        _pyramid_sizes(shape, DEFAULT_LEVELS)
+        pyramid_sizes(shape, DEFAULT_LEVELS)
     except ValueError:
         raise ValueError(
             f"--size must be large enough for {DEFAULT_LEVELS} pyramid levels (at least 12x12), "

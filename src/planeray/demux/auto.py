@@ -55,7 +55,7 @@ import numpy as np
 
 from ..errors import InputError, PlanerayError
 from ..stack import Stack
-from .fast import DEFAULT_TOL, AdmmRowSolver, _threads, blas_one_thread
+from .fast import DEFAULT_TOL, AdmmRowSolver, blas_one_thread, solver_threads
 from .problem import AMBIENT_MODES, DemuxProblem, read_observations
 from .risk import pixel_scores
 
@@ -398,7 +398,7 @@ def _sample(
     return parts
 
 
-def _folds(n_images: int, folds: int, seed: int) -> list[np.ndarray]:
+def fold_indices(n_images: int, folds: int, seed: int) -> list[np.ndarray]:
     """Left-out image indices (into the used images) of each fold: a seeded, balanced split."""
     perm = np.random.default_rng(seed).permutation(n_images)
     return [np.sort(perm[k::folds]) for k in range(folds)]
@@ -541,7 +541,7 @@ class _Tasks:
     threads, one factorization per key shared by the parts (made by the first that needs it)."""
 
     def __init__(self, Bs, threads):
-        self.n_threads = _threads() if threads is None else threads
+        self.n_threads = solver_threads() if threads is None else threads
         self.n_parts = self.n_threads if min(B.shape[0] for B in Bs) >= 64 * self.n_threads else 1
         self._solvers: dict = {}
         self._lock = threading.Lock()
@@ -861,7 +861,7 @@ def choose_weights(
     column = problem.exposure_rows if ambient == "estimate" else None
     record: dict = {"worst_gap": 0.0}
     if criterion == CV_CRITERION:
-        split = _folds(problem.n_images, folds, seed)
+        split = fold_indices(problem.n_images, folds, seed)
 
         def score(a, b):
             return cv_score(

@@ -36,7 +36,7 @@ from ..timing import RowGeometry
 from ..transport import Transport
 from ._kernels import warm_up
 from .auto import WeightChoice, choose_weights, is_auto, resolve_ambient
-from .fast import _threads, blas_one_thread
+from .fast import blas_one_thread, solver_threads
 from .problem import DemuxProblem, RowGroup, read_observations
 from .solvers import SOLVERS, get_solver, options
 
@@ -163,7 +163,7 @@ def solve_chunk(
         A key of :data:`planeray.demux.SOLVERS`.
     """
     tasks = _plan(problem, observations, saturated, rows)
-    threads = _threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1
+    threads = solver_threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1
     run = lambda t: _run_task(problem, t, method, tol)  # noqa: E731
     with blas_one_thread():
         if threads > 1:
@@ -297,7 +297,7 @@ def _solve_in_order(problem: DemuxProblem, read, chunks, method, tol, done):
     if not chunks:
         return
     release = _cache_release(problem, [c for _, c in chunks])
-    threads = _threads() if "threads" in options(get_solver(method)) else 1
+    threads = solver_threads() if "threads" in options(get_solver(method)) else 1
     with blas_one_thread(), ThreadPoolExecutor(threads, thread_name_prefix="planeray-demux") as pool:
         if method == "fast":
             pool.submit(warm_up)  # Numba's start, while the first rows are read
@@ -521,7 +521,7 @@ def _write_chunk(group, res: ChunkResult, index: int) -> None:
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 
-@resumable._killable
+@resumable.killable
 @writes_output("out")
 def demultiplex_to_store(
     stack: Stack,
@@ -620,7 +620,7 @@ def demultiplex_to_store(
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():
         progress(sum(chunks[i].stop - chunks[i].start for i in range(len(chunks)) if done[i]))
-    _stop_after = resumable._stop_after_units()  # the tests' hook: a run killed after k chunks
+    _stop_after = resumable.stop_after_units()  # the tests' hook: a run killed after k chunks
     try:
         if _stop_after is not None:
             todo = todo[:_stop_after]

@@ -539,7 +539,7 @@ class _Dropped:
             raise np.linalg.LinAlgError("a Woodbury block lost positive definiteness")
 
 
-def _threads() -> int:
+def solver_threads() -> int:
     """Solver threads: Numba's thread count (the cores this process may use), at most two; one in a Dask worker.
 
     Numba's count is the one knob for planeray's parallel kernels (``NUMBA_NUM_THREADS`` or
@@ -701,7 +701,7 @@ def solve_fast(
     tol = DEFAULT_TOL if tol is None else float(tol)
     B = np.asarray(B, np.float64)
     P = B.shape[0]
-    threads = _threads() if threads is None else max(1, int(threads))
+    threads = solver_threads() if threads is None else max(1, int(threads))
     slices = [slice(s, min(P, s + _CHUNK)) for s in range(0, P, _CHUNK)]
     with blas_one_thread():
         solver = row_solver(group, alpha, beta, ambient)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..demux.fast import _threads, blas_one_thread
+from ..demux.fast import blas_one_thread, solver_threads
 from ..errors import InputError
 from ..timing import Sweep, paper_sweep
 from .camera import DesignCamera
@@ -195,7 +195,7 @@ def design_sweep(
     >>> len(d.sweep), bool(d.sweep.excluded.any()), d.expected_error < 1
     (6, False, True)
     """
-    from ..io._common import planeray_version
+    from ..io import planeray_version
 
     t0 = time.perf_counter()
     n = int(n_images)
@@ -220,7 +220,7 @@ def design_sweep(
     var = image_variance(candidates.rows, candidates.exposure_us, prior, camera)
     with blas_one_thread():
         crit = ExpectedError(
-            candidates.rows, var, prior.second_moment, alpha=alpha, criterion=criterion, threads=_threads()
+            candidates.rows, var, prior.second_moment, alpha=alpha, criterion=criterion, threads=solver_threads()
         )
         try:
             chosen, history = _select(crit, candidates.lit, n, int(max_passes), progress)

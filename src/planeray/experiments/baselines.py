@@ -29,7 +29,7 @@ def write_comparison(out_dir, images: dict, numbers: dict, name: str) -> list[Pa
 
     Returns the files written.
     """
-    from ..figures._common import display_scale, save_image
+    from ..figures import display_scale, save_image
     from ..io import atomic_file
     from ..io.atomic import written_together
     from ..io.marks import MARK_KEY, mark_text

@@ -192,14 +192,14 @@ def check_capture_options(
 def max_projector_rows(camera_rows: int) -> int:
     """Most projector rows a ``camera_rows``-row image of the materials scene may span (its kernel tables' reach)."""
     from ..scenes.base import DEFAULT_BAND_ROWS
-    from ..scenes.materials import _TABLE_REACH_ROWS
+    from ..scenes.materials import TABLE_REACH_ROWS
 
     H = int(camera_rows)
-    lo, hi = 1, H * _TABLE_REACH_ROWS
+    lo, hi = 1, H * TABLE_REACH_ROWS
     while lo < hi:  # the largest P with max(band, ceil(P/H) + 1) + ceil(P/H/2 + 1/2) <= reach
         mid = (lo + hi + 1) // 2
         rpc = mid / H
-        if max(DEFAULT_BAND_ROWS, math.ceil(rpc) + 1) + math.ceil(0.5 * rpc + 0.5) <= _TABLE_REACH_ROWS:
+        if max(DEFAULT_BAND_ROWS, math.ceil(rpc) + 1) + math.ceil(0.5 * rpc + 0.5) <= TABLE_REACH_ROWS:
             lo = mid
         else:
             hi = mid - 1

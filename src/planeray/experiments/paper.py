@@ -24,7 +24,7 @@ from ..camera import CameraModel
 from ..demux import demultiplex
 from ..devices import SimulatedEpiscan
 from ..errors import InputError
-from ..figures._common import display_scale, new_figure, save_png
+from ..figures import display_scale, new_figure, save_png
 from ..figures.contact_sheet import contact_sheet_figure
 from ..figures.profiles import delay_profiles_figure
 from ..io import atomic_file, jsonable

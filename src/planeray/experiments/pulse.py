@@ -77,7 +77,7 @@ def _write_csv(path: Path, header, rows) -> None:
 
 
 def _region_png(path: Path, mean_frame, region) -> None:
-    from ..figures._common import new_figure, save_png
+    from ..figures import new_figure, save_png
 
     mean = np.asarray(mean_frame)
     fig = new_figure((4.2, 4.2 * mean.shape[0] / mean.shape[1] + 0.4))

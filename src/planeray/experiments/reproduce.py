@@ -555,7 +555,7 @@ def inputs_digest() -> str:
 
 
 def _header(*, quick: bool, size, seed: int) -> dict:
-    from ..io._common import planeray_version
+    from ..io import planeray_version
 
     options = {"quick": bool(quick), "size": None if size is None else int(size), "seed": int(seed)}
     return {

@@ -1,7 +1,7 @@
 """Is the skin scene's fast vein model right?  Brute-force Monte Carlo and adding-doubling checks.
 
 * :func:`vein_validation`: the fast model (background kernel times the perturbation
-  table of :func:`planeray.mc.layered.mc_vein_table`) against brute-force Monte Carlo
+  table of :func:`planeray.kernels.vein.mc_vein_table`) against brute-force Monte Carlo
   with the blood cylinder actually in the medium
   (:func:`planeray.mc.layered.mc_vein_kernel_brute`), vein parallel (0 deg), oblique
   (45 deg) and across (90 deg) the projector rows, over depths and diameters: the vein's
@@ -25,9 +25,10 @@ import numpy as np
 
 from ..figures.skin_physics import vein_validation_figure
 from ..io import jsonable
+from ..kernels.vein import vein_ratio, vein_table_slice
 from ..mc.layered import mc_layered_profile, mc_vein_kernel_brute
 from ..optical_data_skin import skin_layers
-from ..scenes.skin import _table_slice, _vein_ratio, skin_tables
+from ..scenes.skin import skin_tables
 from ..timing import PAPER_LINES_PER_SECOND, band_bin_weights, band_centre_rows, band_width_rows
 
 __all__ = [
@@ -115,8 +116,8 @@ def vein_validation(*, wavelength_nm=638, tone="fair", cases=VALIDATION_CASES, n
             n_photons=n_photons,
             seed=0,
         )
-        sl = _table_slice(table, depth, diam)
-        ratio_fast = _vein_ratio(sl, table, np.array([rho]), np.array([angle]), off[None, :].astype(float))[0]
+        sl = vein_table_slice(table, depth, diam)
+        ratio_fast = vein_ratio(sl, table, np.array([rho]), np.array([angle]), off[None, :].astype(float))[0]
         fast = k0 * ratio_fast
         with np.errstate(invalid="ignore", divide="ignore"):
             ratio_brute = np.where(bg.values > 0, vein.values / bg.values, np.nan)

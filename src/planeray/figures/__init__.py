@@ -8,6 +8,7 @@ to draw into.  More figures: :mod:`planeray.figures.mc` (Monte Carlo profiles)
 and :mod:`planeray.figures.study` (the Sec. 5.2 study).
 """
 
+from ._common import display_scale, new_figure, save_image, save_png
 from .contact_sheet import contact_sheet_figure
 from .labels import label_map_figure
 from .profiles import delay_profiles_figure
@@ -15,6 +16,10 @@ from .pulse import pulse_methods_figure, pulse_signal_figure, rate_accuracy_figu
 from .transport import transport_profiles_figure
 
 __all__ = [
+    "display_scale",
+    "save_image",
+    "new_figure",
+    "save_png",
     "contact_sheet_figure",
     "delay_profiles_figure",
     "label_map_figure",

@@ -131,6 +131,7 @@ from ._common import (
     LazyArray,
     create_array,
     jsonable,
+    planeray_version,
     store_format,
     writable,
 )
@@ -150,6 +151,7 @@ __all__ = [
     "FORMAT_VERSION",
     "LazyArray",
     "jsonable",
+    "planeray_version",
     "store_format",
     "create_array",
     "writable",

@@ -99,7 +99,7 @@ def planeray_output_kind(path) -> str | None:
     return None
 
 
-def _is_protected(path: Path) -> bool:
+def is_protected(path: Path) -> bool:
     """The current folder, one of its parents, the home folder or a file-system root."""
     try:
         resolved = path.resolve()
@@ -133,7 +133,7 @@ def check_replaceable(path, *, overwrite: bool, kind: str | None = None, error=I
         return
     if not overwrite:
         raise error(ALREADY_EXISTS, path)
-    if _is_protected(path):
+    if is_protected(path):
         raise error("is the current folder, one of its parents or the home folder; name a new output inside it", path)
     if path.is_symlink():
         raise error("is a symbolic link; planeray replaces only results it wrote itself", path)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..demux.fast import DEFAULT_TOL, WarmStart, _threads, blas_one_thread, row_solver
+from ..demux.fast import DEFAULT_TOL, WarmStart, blas_one_thread, row_solver, solver_threads
 from ..demux.problem import DemuxProblem
 from ..errors import DeviceError, InputError, PlanerayError
 from ..stack import Stack
@@ -108,7 +108,7 @@ class WindowSolver:
         self.projector_rows = int(projector_rows)
         self.jitter_us = float(jitter_us)
         self.tol = DEFAULT_TOL if tol is None else float(tol)
-        self.threads = _threads() if threads is None else max(1, int(threads))
+        self.threads = solver_threads() if threads is None else max(1, int(threads))
         H, W = self.shape
         n = len(self.sweep)
         template = Stack(np.zeros((n, H, W), np.float32), self.sweep.delay_us, self.sweep.exposure_us,

@@ -316,7 +316,7 @@ def beyond_table_side(mask, model, *, offsets_rows, mm_per_row, rows_per_camera_
     a_mid = math.sqrt(a0 * a1) / h
     edges = []
     for s in (s1 * 0.999 / h, s0 * 1.001 / h):
-        k = fit.line_kernel(
+        k = fit.forward_kernel(
             s, a_mid, offsets_rows=offsets_rows, mm_per_row=h, rows_per_camera_row=rows_per_camera_row, table=table
         )
         edges.append(k / k.sum())

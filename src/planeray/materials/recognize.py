@@ -146,7 +146,7 @@ def fit_image(transport, *, mm_per_row, block_px=DEFAULT_BLOCK_PX, regions=None,
                 means.append(mean)
                 sds.append(np.maximum(sd, 0.01 * max(float(np.abs(mean).max()), 1e-30)))
                 where.append((r0, c0, m))
-    maps = {k: np.full((H, W), np.nan, np.float32) for k in _fit._MAP_NAMES}
+    maps = {k: np.full((H, W), np.nan, np.float32) for k in _fit.MAP_NAMES}
     for name in _RAW_NAMES:
         maps[name] = np.full((H, W), np.nan, np.float32)
     maps["mask"] = np.full((H, W), 255, np.uint8)
@@ -173,7 +173,7 @@ def fit_image(transport, *, mm_per_row, block_px=DEFAULT_BLOCK_PX, regions=None,
     values = values + (est[:, 0], est[:, 1], se[:, 0], se[:, 1])
     for i, (r0, c0, m) in enumerate(where):
         sl = (slice(r0, r0 + b), slice(c0, c0 + b))
-        for name, v in zip(_fit._MAP_NAMES + _RAW_NAMES, values):
+        for name, v in zip(_fit.MAP_NAMES + _RAW_NAMES, values):
             maps[name][sl][m] = v[i]
         maps["mask"][sl][m] = res.mask[i]
         maps["side"][sl][m] = side[i]
@@ -415,7 +415,9 @@ POOL_OWN_EVIDENCE = 1.0
 
 def _kernel_or_none(s, a, *, mm_per_row, offsets, rpc, table):
     try:
-        return _fit.line_kernel(s, a, offsets_rows=offsets, mm_per_row=mm_per_row, rows_per_camera_row=rpc, table=table)
+        return _fit.forward_kernel(
+            s, a, offsets_rows=offsets, mm_per_row=mm_per_row, rows_per_camera_row=rpc, table=table
+        )
     except InputError:  # outside the forward model at this row size
         return None
 
@@ -446,7 +448,8 @@ def subsurface_evidence(stack, *, mm_per_row, library=None, camera=None, table=N
         The chi-square gain (0 where a pixel has too few usable images).
     """
     from ..camera import CameraModel
-    from .stackfit import _footprint, _images, stack_design
+    from ..kernels.footprint import camera_row_footprint
+    from .stackfit import _images, stack_design
 
     design = stack_design(stack)
     imgs, ok = _images(stack, design)
@@ -454,7 +457,7 @@ def subsurface_evidence(stack, *, mm_per_row, library=None, camera=None, table=N
     var = camera.pixel_variance(imgs) + (_PIXEL_MODEL_SD * np.maximum(imgs, 0.0)) ** 2
     wts = np.where(ok, 1.0 / var, 0.0)  # (N, H, W)
     offsets, rpc = design.offsets_rows, design.rows_per_camera_row
-    f_off, f_w = _footprint(rpc)
+    f_off, f_w = camera_row_footprint(rpc)
     direct = np.zeros(offsets.size)
     for o, w in zip(f_off, f_w):
         direct[offsets == o] += w

@@ -8,7 +8,7 @@ directly, where the noise is simple (independent per image and pixel).
 Forward model
 -------------
 A pixel of camera row ``t`` seeing a homogeneous medium of line kernel
-``K(u; mu_s', mu_a)`` (:func:`planeray.materials.fit.line_kernel`: the Monte Carlo forward
+``K(u; mu_s', mu_a)`` (:func:`planeray.kernels.forward.forward_kernel`: the Monte Carlo forward
 table, averaged over the camera row's projector-row footprint, container walls optional)
 records in used stack image ``k``
 
@@ -73,29 +73,25 @@ from ..goodness import (
     describe_flags,
     fit_quality,
 )
+from ..kernels.footprint import camera_row_footprint
+from ..kernels.forward import ForwardTable, forward_table, kernel_per_row, model_kernel
+from ..kernels.walls import BOTTOM_ANGLE_DEG, check_wall_kind
 from ..stack import Stack
 from .fit import (
-    _MAP_NAMES,
-    _MU_A_BAD,
-    _MU_S_BAD,
-    BOTTOM_ANGLE_DEG,
+    MAP_NAMES,
     MAX_RELATIVE_SE,
     MODEL_RELATIVE_SD,
-    ForwardTable,
+    MU_A_BAD,
+    MU_S_BAD,
     TransportFit,
-    _bottom_row,
-    _check_wall_kind,
-    _footprint,
-    _grid_starts,
-    _group_walls,
-    _kernel_per_row,
-    _log_bounds,
-    _model_kernel,
-    _num,
-    _out_of_range,
-    _regions_and_walls,
+    bottom_row,
     describe_reasons,
-    forward_table,
+    grid_starts,
+    group_walls,
+    log_bounds,
+    num_or_none,
+    out_of_range,
+    regions_and_walls,
 )
 
 __all__ = ["StackDesign", "stack_design", "stack_model_images", "white_stack_scale", "fit_stack"]
@@ -216,10 +212,10 @@ def stack_model_images(
     ndarray (N, H)
         Image ``design.image_index[k]`` at camera row ``t`` (every pixel of the row alike).
     """
-    from .fit import line_kernel
+    from ..kernels.forward import forward_kernel
 
     design = design or stack_design(stack)
-    k = line_kernel(
+    k = forward_kernel(
         mu_s_prime_per_mm,
         mu_a_per_mm,
         offsets_rows=design.offsets_rows,
@@ -268,7 +264,7 @@ def white_stack_scale(white: Stack, *, albedo=0.99, design: StackDesign | None =
     if not 0.0 < float(albedo) <= 1.0:
         raise InputError(f"the white reference's albedo must be in (0, 1], got {albedo!r}")
     design = design or stack_design(white)
-    f_off, f_w = _footprint(design.rows_per_camera_row)
+    f_off, f_w = camera_row_footprint(design.rows_per_camera_row)
     direct = np.zeros(design.offsets_rows.size)
     for o, w in zip(f_off, f_w):
         direct[design.offsets_rows == o] += w
@@ -394,7 +390,7 @@ def _fit_region(
         A_g = A_g[:, ok]
 
     def kernel(x):
-        return _model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind)
+        return model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind)
 
     # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
     # :data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`), a correlated error of the model along their shapes
@@ -412,18 +408,18 @@ def _fit_region(
         one, Haskell et al. 1994) -- for walls also by the pixel's half (their positions come from the labels)."""
         if not parts or x is None:
             return None
-        free = _model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
+        free = model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
         mfp_rows = 1.0 / math.exp(x[0])  # 1 / mu_s' in rows (x[0] = log of the per-row mu_s')
         cols = []
         for ww, sd in parts:
-            cols.append(sd * c * (A @ (_model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free)))
+            cols.append(sd * c * (A @ (model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free)))
             bottom = bool(np.all(ww[:, 1] == BOTTOM_ANGLE_DEG))
             shift = mfp_rows if bottom else math.hypot(mfp_rows, 0.5 * foot_rows)
             hi, lo = ww.copy(), ww.copy()
             hi[:, 0] += shift
             lo[:, 0] = np.maximum(lo[:, 0] - shift, 0.0)
-            k_hi = _model_kernel(table, x[0], x[1], offsets, foot, hi, wall_kind)
-            k_lo = _model_kernel(table, x[0], x[1], offsets, foot, lo, wall_kind)
+            k_hi = model_kernel(table, x[0], x[1], offsets, foot, hi, wall_kind)
+            k_lo = model_kernel(table, x[0], x[1], offsets, foot, lo, wall_kind)
             cols.append(0.5 * c * (A @ (k_hi - k_lo)))
         return np.stack(cols, axis=1)
 
@@ -518,7 +514,7 @@ def _fit_region(
         out["mask"] |= 8
     if not se_log[1] <= max_relative_se:
         out["mask"] |= 16
-    k0 = _kernel_per_row(table, x[0], x[1], np.array([0, 1]), _footprint(1.0))
+    k0 = kernel_per_row(table, x[0], x[1], np.array([0, 1]), camera_row_footprint(1.0))
     if k0[1] < 0.05 * k0[0] and foot[0].size == 1:
         out["mask"] |= 32
     if not calibrated and not c > 0:
@@ -582,7 +578,7 @@ def fit_stack(
         None: the pixels' spread within each camera row (no row jitter).
     depth_mm : float or dict, optional
         Depth (mm) of a layer whose bottom loses the light (one value, or ``{region: depth_mm}``; the
-        slab's image series, :func:`planeray.materials.fit.line_kernel`); default semi-infinite media.
+        slab's image series, :func:`planeray.kernels.forward.forward_kernel`); default semi-infinite media.
     wall_kind : {"clear", "black"}
         The containers' walls (:data:`planeray.materials.fit.WALL_KINDS`).
     p_misfit : float
@@ -607,7 +603,7 @@ def fit_stack(
     if not h > 0:
         raise InputError(f"mm_per_row must be positive, got {mm_per_row!r}")
     table = table or forward_table()
-    _check_wall_kind(wall_kind)
+    check_wall_kind(wall_kind)
     design = stack_design(stack)
     H, W = stack.shape
     imgs, ok = _images(stack, design)
@@ -629,14 +625,14 @@ def fit_stack(
         if variance is not None:
             variance = variance / np.where(good, scale, 1.0)[None] ** 2
         ok &= good[None]
-    lab, dist = _regions_and_walls(labels, containers, (H, W), design.rows_per_camera_row, "stack")
+    lab, dist = regions_and_walls(labels, containers, (H, W), design.rows_per_camera_row, "stack")
     b = None if block_px is None else int(block_px)
     if b is not None and b < 1:
         raise InputError(f"block_px must be >= 1, got {block_px!r}")
     offsets = design.offsets_rows
-    foot = _footprint(design.rows_per_camera_row)
-    lo, hi = _log_bounds(table)
-    starts, Kg = _grid_starts(table, offsets, foot)
+    foot = camera_row_footprint(design.rows_per_camera_row)
+    lo, hi = log_bounds(table)
+    starts, Kg = grid_starts(table, offsets, foot)
     kw = dict(
         table=table, calibrated=calibrated, h=h, max_relative_se=max_relative_se,
         model_relative_sd=model_relative_sd, model_correlated_sd=model_correlated_sd, lo=lo, hi=hi,
@@ -646,7 +642,7 @@ def fit_stack(
     var_rows = None if camera is None else camera.row_jitter_rows(stack.lines_per_second) ** 2
 
     def bottom_of(region):
-        return _bottom_row(depth_mm, region, h)
+        return bottom_row(depth_mm, region, h)
 
     def fit_pixels(rows, cols, region):
         y, se, m = _region_data(imgs, ok, rows, cols, variance)
@@ -654,7 +650,7 @@ def fit_stack(
         Abar = np.empty((y.size, offsets.size))
         for k in range(y.size):
             Abar[k] = design.mean_matrix(rows[m[k]])[k] if m[k].any() else 0.0
-        walls = None if dist is None else _group_walls(dist[rows, cols])
+        walls = None if dist is None else group_walls(dist[rows, cols])
         bottom = bottom_of(region)
         if bottom is not None:
             walls = bottom if walls is None else np.concatenate([walls, bottom])
@@ -669,8 +665,8 @@ def fit_stack(
 
     def estimates(r):
         x, se_log, mask = r["x"], r["se_log"], r["mask"]
-        bad_s = (mask & _MU_S_BAD) > 0 or x is None
-        bad_a = (mask & _MU_A_BAD) > 0 or x is None
+        bad_s = (mask & MU_S_BAD) > 0 or x is None
+        bad_a = (mask & MU_A_BAD) > 0 or x is None
         s = np.nan if bad_s else math.exp(x[0]) / h
         a = np.nan if bad_a else math.exp(x[1]) / h
         return s, a, s * se_log[0], a * se_log[1]
@@ -682,13 +678,13 @@ def fit_stack(
         f |= FLAG_RANGE if r.get("out_of_range") else 0
         return f | (FLAG_EDGE if r["mask"] & (2 | 4) else 0)
 
-    def out_of_range(r, rows, cols, region):
-        """Walls or a bottom closer than the range of diffusion theory at the fitted mu_s' (fit._out_of_range)."""
-        return r["x"] is not None and _out_of_range(
+    def beyond_range(r, rows, cols, region):
+        """Walls or a bottom closer than the range of diffusion theory at the fitted mu_s' (fit.out_of_range)."""
+        return r["x"] is not None and out_of_range(
             r["x"][0], bottom_of(region), None if dist is None else dist[rows, cols]
         )
 
-    maps = {k: np.full((H, W), np.nan, np.float32) for k in _MAP_NAMES}
+    maps = {k: np.full((H, W), np.nan, np.float32) for k in MAP_NAMES}
     maps["mask"] = np.full((H, W), 255, np.uint8)
     maps["flags"] = np.full((H, W), 255, np.uint8)
     regions, profiles = {}, {}
@@ -696,11 +692,11 @@ def fit_stack(
         inside = lab == region
         rows, cols = np.nonzero(inside)
         r, y, se = fit_pixels(rows, cols, region)
-        r["out_of_range"] = out_of_range(r, rows, cols, region)
+        r["out_of_range"] = beyond_range(r, rows, cols, region)
         s, a, se_s, se_a = estimates(r)
         blocks_s, blocks_a, blocks_flagged = [], [], []
         if b is None:
-            for name, val in zip(_MAP_NAMES, (s, a, se_s, se_a)):
+            for name, val in zip(MAP_NAMES, (s, a, se_s, se_a)):
                 maps[name][inside] = val
             maps["mask"][inside] = r["mask"]
             maps["flags"][inside] = flags_of(r)
@@ -712,9 +708,9 @@ def fit_stack(
                     if not sub.any():
                         continue
                     rb = fit_pixels(*np.nonzero(sub), region)[0]
-                    rb["out_of_range"] = out_of_range(rb, *np.nonzero(sub), region)
+                    rb["out_of_range"] = beyond_range(rb, *np.nonzero(sub), region)
                     vals = estimates(rb)
-                    for name, val in zip(_MAP_NAMES, vals):
+                    for name, val in zip(MAP_NAMES, vals):
                         maps[name][sub] = val
                     maps["mask"][sub] = rb["mask"]
                     maps["flags"][sub] = flags_of(rb)
@@ -729,21 +725,21 @@ def fit_stack(
         q = r["quality"]
         regions[region] = {
             "pixels": int(inside.sum()),
-            "mu_s_prime_per_mm": _num(s),
-            "mu_s_prime_se_per_mm": _num(se_s),
-            "mu_a_per_mm": _num(a),
-            "mu_a_se_per_mm": _num(se_a),
+            "mu_s_prime_per_mm": num_or_none(s),
+            "mu_s_prime_se_per_mm": num_or_none(se_s),
+            "mu_a_per_mm": num_or_none(a),
+            "mu_a_se_per_mm": num_or_none(se_a),
             "not_identifiable": describe_reasons(int(r["mask"])),
             "mask": int(r["mask"]),
-            "chi2_per_dof": _num(r["chi2"]),
+            "chi2_per_dof": num_or_none(r["chi2"]),
             "fit_quality": None if q is None else q.to_json(),
             "model_fits": None if q is None else q.fits,
             "flags": describe_flags(flags_of(r)),
             "flag_bits": int(flags_of(r)),
             "noise_model": "camera" if camera is not None else "spread of the pixels within each camera row",
             "depth_mm": None if bottom_of(region) is None else float(bottom_of(region)[0, 0] * h),
-            "scale": _num(r["c"]),
-            "ambient_per_row_exposure": _num(r["b"]),
+            "scale": num_or_none(r["c"]),
+            "ambient_per_row_exposure": num_or_none(r["b"]),
             "log_estimate_per_mm": None if x is None else [float(v - math.log(h)) for v in x],
             "log_se": None if x is None else [float(v) for v in r["se_log"]],
             "log_correlation": r.get("log_correlation"),

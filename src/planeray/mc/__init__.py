@@ -1,10 +1,16 @@
-"""Monte Carlo photon transport in homogeneous slabs (compiled MCML-style engine).
+"""Monte Carlo photon transport: photons only (the forward models built on it are :mod:`planeray.kernels`).
 
-* :mod:`planeray.mc.engine`: photon transport (the compiled kernel and the entry points);
-* :mod:`planeray.mc.result`: :class:`MCProfile`, what a run returns;
-* :mod:`planeray.mc.cache`: the disk cache and the tables shipped with the package;
+* :mod:`planeray.mc.engine`: a homogeneous slab (the compiled kernel and the entry points);
+* :mod:`planeray.mc.wall`: beside a container wall (Sec. 8);
+* :mod:`planeray.mc.layered`: layered media with a blood cylinder (skin and veins);
+* :mod:`planeray.mc.events`: the event helpers the three kernels share (launch, Fresnel escape,
+  collision, Russian roulette, cutoff) and their batches;
+* :mod:`planeray.mc.result`: :class:`MCProfile`, what every run returns, and its assembly;
+* :mod:`planeray.mc.cache`: the one table store (shipped tables, else the user cache, else
+  built and saved) and the tables shipped with the package;
 * :mod:`planeray.mc.physics`: Fresnel reflectance and the Henyey-Greenstein phase function;
-* :mod:`planeray.mc.diffusion`: the diffusion dipole and the hybrid hand-off to diffusion;
+* :mod:`planeray.mc.diffusion`: all diffusion theory -- the dipole, its one K1 line law, the
+  hybrid hand-off and the quarter space beside a wall;
 * :mod:`planeray.mc.report`: CSV/JSON output of a profile;
 * :mod:`planeray.mc.mitsuba_ref`: the same profile rendered by Mitsuba 3, the independent
   check (optional extra ``mitsuba``).

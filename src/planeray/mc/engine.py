@@ -88,12 +88,29 @@ import math
 import numba
 import numpy as np
 
+from ..errors import InputError
 from ..medium import Medium, as_medium
 from ._batches import trace_batches
-from .cache import TABLES_DIR, cache_dir, cache_key, load_profile, save_profile, write_or_warn
-from .diffusion import diffusion_exit, diffusion_normal_radiance_ratio
-from .physics import fresnel_jit, hg_pdf_jit, hg_scatter_jit
-from .result import MCProfile
+from .cache import cache_key, load_profile, save_profile, stored
+from .diffusion import DIFFUSION_DEPTH_MFP, diffusion_exit, diffusion_normal_radiance_ratio
+from .events import (
+    ROULETTE_CHANCE,
+    ROULETTE_THRESHOLD,
+    batch_counts,
+    batch_states,
+    beyond_cutoff,
+    check_offsets,
+    check_photons,
+    collide,
+    free_path,
+    fresnel_escape,
+    launch,
+    new_tallies,
+    roulette,
+    uniform,
+)
+from .physics import fresnel_jit, hg_pdf_jit
+from .result import MCProfile, profile_from_tallies
 
 __all__ = [
     "mc_line_profile",
@@ -104,41 +121,6 @@ __all__ = [
     "ROULETTE_THRESHOLD",
     "ROULETTE_CHANCE",
 ]
-
-#: Default depth (transport mean free paths) at which photons in a half-space are
-#: handed to diffusion theory; see :func:`mc_line_profile`.
-DIFFUSION_DEPTH_MFP = 10.0
-ROULETTE_THRESHOLD = 1e-4
-ROULETTE_CHANCE = 10.0
-_N_BATCHES = 32
-
-
-# ---------------------------------------------------------------- random numbers
-@numba.njit(cache=True, inline="always")
-def _rotl(x, k):
-    return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
-
-
-@numba.njit(cache=True, inline="always")
-def _uniform(s):
-    """Next double in ``[0, 1)`` from xoshiro256+ state ``s`` (4 uint64, updated in place) [4]_."""
-    s0 = s[0]
-    s1 = s[1]
-    s2 = s[2]
-    s3 = s[3]
-    result = s0 + s3
-    t = s1 << np.uint64(17)
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    s3 = _rotl(s3, 45)
-    s[0] = s0
-    s[1] = s1
-    s[2] = s2
-    s[3] = s3
-    return float(result >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
 # ---------------------------------------------------------------- the kernel
@@ -181,19 +163,14 @@ def _trace(
     B = counts.size
     cont_hist = np.zeros((B, nh))
     cont_far = np.zeros(B)
-    refl_bins = np.zeros((B, nk))
-    rad_bins = np.zeros((B, nk))
-    refl = np.zeros(B)
-    trans = np.zeros(B)
-    absorbed = np.zeros(B)
-    truncated = np.zeros(B)
-    events = np.zeros(B, dtype=np.int64)
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events = new_tallies(B, nk)
     sigma_t = sigma_s + sigma_a
     albedo = sigma_s / sigma_t
     finite = d < np.inf
     # Straight-up radiance: normal transmission and the n^2 radiance law at the face.
     up_gain = (1.0 - fresnel_jit(1.0, n)) / (n * n)
     inv_bin = 1.0 / mm_per_row
+    cutoff_y = cutoff_mm if radial else np.inf  # a line source is infinitely long along y
     for b in range(B):
         s = states[b].copy()
         # Scalar accumulators per batch: writing neighbouring array slots from
@@ -205,15 +182,9 @@ def _trace(
         far_b = 0.0
         events_b = 0
         for _ in range(counts[b]):
-            x = (_uniform(s) - 0.5) * source_width_mm
-            y = 0.0
-            z = 0.0
-            ux = 0.0
-            uy = 0.0
-            uz = 1.0
-            w = w0
+            x, y, z, ux, uy, uz, w = launch((uniform(s) - 0.5) * source_width_mm, 0.0, w0)
             while True:
-                step = -math.log(1.0 - _uniform(s)) / sigma_t
+                step = free_path(s, sigma_t)
                 zn = z + step * uz
                 if zn > z_cont:
                     xc = x + (z_cont - z) / uz * ux
@@ -229,8 +200,7 @@ def _trace(
                     x += (zf - z) / uz * ux
                     y += (zf - z) / uz * uy
                     z = zf
-                    R = fresnel_jit(abs(uz), n)
-                    esc = w * (1.0 - R)
+                    esc, w = fresnel_escape(w, abs(uz), n)
                     if top:
                         refl_b += esc
                         k = _bin(x, y, inv_bin, radial) - kmin
@@ -238,7 +208,6 @@ def _trace(
                             refl_bins[b, int(k)] += esc
                     else:
                         trans_b += esc
-                    w *= R
                     uz = -uz
                     if w <= 0.0:
                         break
@@ -253,18 +222,14 @@ def _trace(
                         k = _bin(x, y, inv_bin, radial) - kmin
                         if 0 <= k < nk:
                             rad_bins[b, int(k)] += w * albedo * hg_pdf_jit(-uz, g) * math.exp(-tau) * up_gain
-                    abs_b += w * (1.0 - albedo)
-                    w *= albedo
-                    # New direction: HG polar angle, uniform azimuth, rotated into the frame.
-                    ux, uy, uz = hg_scatter_jit(ux, uy, uz, g, _uniform(s), _uniform(s))
-                if w < ROULETTE_THRESHOLD:
-                    if _uniform(s) < 1.0 / ROULETTE_CHANCE:
-                        abs_b -= w * (ROULETTE_CHANCE - 1.0)
-                        w *= ROULETTE_CHANCE
-                    else:
-                        abs_b += w
-                        break
-                if z > cutoff_mm or abs(x) > cutoff_mm or (radial and abs(y) > cutoff_mm):
+                    # Implicit capture, then a new direction: HG polar angle, uniform azimuth.
+                    dabs, w, ux, uy, uz = collide(s, w, albedo, ux, uy, uz, g)
+                    abs_b += dabs
+                w, dabs, alive = roulette(s, w)
+                abs_b += dabs
+                if not alive:
+                    break
+                if beyond_cutoff(x, y, z, cutoff_mm, cutoff_y, cutoff_mm):
                     trunc_b += w
                     break
         refl[b] = refl_b
@@ -449,7 +414,7 @@ def mc_point_profile(
     if radius_bins is None:
         radius_bins = np.arange(0, 51)
     if np.any(np.asarray(radius_bins) < 0):
-        raise ValueError("radius_bins must be non-negative")
+        raise InputError("radius_bins must be non-negative")
     return _profile("point", medium, n_photons, radius_bins, mm_per_bin, seed, cache, 0.0, cutoff_mm, None, progress)
 
 
@@ -467,31 +432,52 @@ def _profile(
     progress=None,
 ):
     """Validate, look up the caches, trace (:func:`_run`), store."""
-    n_photons = int(n_photons)
-    mm_per_row = float(mm_per_row)
+    n_photons = check_photons(n_photons)
+    mm_per_row = check_mm_per_row(mm_per_row)
     source_width_mm = float(source_width_mm)
-    if n_photons < 1:
-        raise ValueError(f"n_photons must be >= 1, got {n_photons}")
-    if not mm_per_row > 0:
-        raise ValueError(f"mm_per_row must be positive, got {mm_per_row}")
     if not source_width_mm >= 0:
-        raise ValueError(f"source_width_mm must be >= 0, got {source_width_mm}")
-    offsets_f = np.asarray(offsets_rows)
-    offsets = offsets_f.astype(np.int64).ravel()
-    if offsets.size == 0 or np.any(offsets != offsets_f.ravel()) or np.unique(offsets).size != offsets.size:
-        raise ValueError("offsets_rows must be distinct integers")
-    if cutoff_mm is None:
-        cutoff_mm = default_cutoff_mm(medium, offsets, mm_per_row=mm_per_row)
-    cutoff_mm = float(cutoff_mm)
-    if not cutoff_mm > 0:
-        raise ValueError(f"cutoff_mm must be positive, got {cutoff_mm}")
-
-    depth_mfp = float(diffusion_depth_mfp) if diffusion_depth_mfp else None
-    if depth_mfp is not None and not depth_mfp > 0:
-        raise ValueError(f"diffusion_depth_mfp must be positive or None, got {diffusion_depth_mfp}")
+        raise InputError(f"source_width_mm must be >= 0, got {source_width_mm}")
+    offsets = check_offsets(offsets_rows)
+    cutoff_mm = check_cutoff(medium, offsets, mm_per_row, cutoff_mm)
+    depth_mfp = check_depth_mfp(diffusion_depth_mfp)
     # The cache key (and MCProfile.params): these keys, values and order are what the
     # shipped tables were hashed with -- keep them as they are.
     params = dict(
+        **run_params(medium, n_photons, mm_per_row, seed),
+        source_width_mm=source_width_mm,
+        cutoff_mm=cutoff_mm,
+        diffusion_depth_mfp=depth_mfp,
+    )
+    if source == "point":
+        params["source"] = "point"  # line-source keys stay as they were: shipped tables remain valid
+
+    def build():
+        return _run(
+            medium,
+            n_photons,
+            offsets,
+            mm_per_row,
+            int(seed),
+            source_width_mm,
+            cutoff_mm,
+            params,
+            radial=source == "point",
+            progress=progress,
+        )
+
+    return stored(
+        f"{cache_key(params, offsets)}.npz",
+        load=load_profile,
+        build=build,
+        save=save_profile,
+        cache=cache,
+        on_hit=None if progress is None else (lambda: progress(n_photons)),
+    )
+
+
+def run_params(medium, n_photons, mm_per_row, seed) -> dict:
+    """The parameters every slab and wall run's cache key starts with: the medium, photons, bins and seed."""
+    return dict(
         sigma_s=medium.sigma_s,
         sigma_a=medium.sigma_a,
         g=medium.g,
@@ -500,60 +486,39 @@ def _profile(
         n_photons=n_photons,
         mm_per_row=mm_per_row,
         seed=int(seed),
-        source_width_mm=source_width_mm,
-        cutoff_mm=cutoff_mm,
-        diffusion_depth_mfp=depth_mfp,
     )
-    if source == "point":
-        params["source"] = "point"  # line-source keys stay as they were: shipped tables remain valid
-    path = None
-    if cache:
-        name = f"{cache_key(params, offsets)}.npz"
-        path = cache_dir() / name
-        for hit in (TABLES_DIR / name, path):
-            if hit.exists():
-                try:
-                    prof = load_profile(hit)
-                except (OSError, ValueError, KeyError):
-                    continue  # unreadable entry: recompute (and overwrite the user cache)
-                if progress is not None:
-                    progress(n_photons)
-                return prof
-
-    prof = _run(
-        medium,
-        n_photons,
-        offsets,
-        mm_per_row,
-        int(seed),
-        source_width_mm,
-        cutoff_mm,
-        params,
-        radial=source == "point",
-        progress=progress,
-    )
-    if path is not None:
-        write_or_warn(lambda p: save_profile(p, prof), path)
-    return prof
 
 
-def _batch_stats(per_batch, counts):
-    """Mean per photon and its standard error from the spread of batch means."""
-    n_total = counts.sum()
-    mean = per_batch.sum(axis=0) / n_total
-    used = counts > 0
-    if used.sum() < 2:
-        return mean, np.full(np.shape(mean), np.nan)
-    means = per_batch[used] / counts[used].reshape((-1,) + (1,) * (per_batch.ndim - 1))
-    return mean, means.std(axis=0, ddof=1) / np.sqrt(used.sum())
+def check_mm_per_row(mm_per_row) -> float:
+    """``mm_per_row`` as a positive float (InputError otherwise)."""
+    mm = float(mm_per_row)
+    if not mm > 0:
+        raise InputError(f"mm_per_row must be positive, got {mm}")
+    return mm
+
+
+def check_cutoff(medium, offsets, mm_per_row, cutoff_mm) -> float:
+    """The photon cutoff: ``cutoff_mm``, or :func:`default_cutoff_mm`; positive (InputError otherwise)."""
+    if cutoff_mm is None:
+        cutoff_mm = default_cutoff_mm(medium, offsets, mm_per_row=mm_per_row)
+    cutoff_mm = float(cutoff_mm)
+    if not cutoff_mm > 0:
+        raise InputError(f"cutoff_mm must be positive, got {cutoff_mm}")
+    return cutoff_mm
+
+
+def check_depth_mfp(diffusion_depth_mfp) -> float | None:
+    """The hand-off depth in transport mean free paths: positive, or None (no hand-off)."""
+    depth_mfp = float(diffusion_depth_mfp) if diffusion_depth_mfp else None
+    if depth_mfp is not None and not depth_mfp > 0:
+        raise InputError(f"diffusion_depth_mfp must be positive or None, got {diffusion_depth_mfp}")
+    return depth_mfp
 
 
 def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_mm, params, radial=False, progress=None):
     sigma_s, sigma_a, g, n, d = medium.sigma_s, medium.sigma_a, medium.g, medium.n, medium.thickness_mm
-    B = _N_BATCHES
-    counts = np.full(B, n_photons // B, dtype=np.int64)
-    counts[: n_photons % B] += 1
-    states = np.stack([s.generate_state(4, np.uint64) for s in np.random.SeedSequence(seed).spawn(B)])
+    counts = batch_counts(n_photons)
+    states = batch_states(seed)
     kmin = int(offsets.min())
     nk = int(offsets.max()) - kmin + 1
     r_sp = ((n - 1.0) / (n + 1.0)) ** 2
@@ -601,26 +566,18 @@ def _run(medium, n_photons, offsets, mm_per_row, seed, source_width_mm, cutoff_m
         rad_bins += exit_bins * (diffusion_normal_radiance_ratio(n) / mm_per_row)
         refl += w_cont * exit_total
         absorbed += w_cont * (1.0 - exit_total)
-    cols = offsets - kmin
-    values, stderr = _batch_stats(refl_bins[:, cols], counts)
-    radiance, rad_err = _batch_stats(rad_bins[:, cols], counts)
-    R_tot, r_err = _batch_stats(refl, counts)
-    T_tot, t_err = _batch_stats(trans, counts)
-    return MCProfile(
-        offsets_rows=offsets.copy(),
+    return profile_from_tallies(
+        offsets_rows=offsets,
+        first_bin=kmin,
         mm_per_row=mm_per_row,
-        values=values,
-        stderr=stderr,
-        radiance=radiance,
-        radiance_stderr=rad_err,
-        total_reflectance=float(R_tot),
-        total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(r_sp),
-        transmittance=float(T_tot),
-        transmittance_stderr=float(t_err),
-        absorbed=float(absorbed.sum() / n_photons),
-        truncated=float(truncated.sum() / n_photons),
-        n_photons=n_photons,
-        n_interactions=int(events.sum()),
+        counts=counts,
+        refl_bins=refl_bins,
+        rad_bins=rad_bins,
+        refl=refl,
+        trans=trans,
+        absorbed=absorbed,
+        truncated=truncated,
+        events=events,
+        specular_reflectance=r_sp,
         params=params,
     )

@@ -28,7 +28,7 @@ Two runs:
     by the pixel's distance ``rho`` from the vein and the offset ``u``; a second run with
     the same seed and no vein gives the ratio ``K_vein / K_background`` -- the vein's
     contrast in the plane-to-ray kernel.
-:func:`mc_vein_table`
+:func:`trace_virtual_veins` (:func:`planeray.kernels.vein.mc_vein_table` tabulates it)
     **perturbation** (the fast model's table): a pencil beam enters at the pixel and its
     exits, binned by ``x``, give the pixel's line kernel by reciprocity (the wall kernels of
     :mod:`planeray.mc.wall` do the same).  Along the way each photon records the optical
@@ -57,12 +57,8 @@ References
 
 from __future__ import annotations
 
-import functools
-import json
 import math
-import os
-from dataclasses import dataclass, replace
-from pathlib import Path
+from dataclasses import replace
 
 import numba
 import numpy as np
@@ -70,20 +66,35 @@ import numpy as np
 from ..errors import InputError
 from ..medium import Medium, as_medium
 from ._batches import trace_batches
-from .cache import TABLES_DIR, cache_dir, cache_key, save_table, write_or_warn
-from .engine import _N_BATCHES, ROULETTE_CHANCE, ROULETTE_THRESHOLD, _batch_stats, _uniform
-from .physics import fresnel_jit, hg_scatter_jit
+from .cache import cache_key, load_profile, save_profile, stored
+from .engine import check_mm_per_row
+from .events import (
+    N_BATCHES,
+    batch_counts,
+    batch_states,
+    beyond_cutoff,
+    check_offsets,
+    check_photons,
+    collide,
+    free_path,
+    fresnel_escape,
+    launch,
+    roulette,
+    uniform,
+)
+from .physics import fresnel_jit
+from .result import MCProfile, profile_from_tallies
 
 __all__ = [
     "LAYERED_VERSION",
     "LayeredResult",
-    "VeinTable",
     "mc_layered_profile",
     "mc_layered_vein_brute",
     "mc_vein_kernel_brute",
-    "mc_vein_table",
-    "vein_table_stored",
-    "vein_table_seconds",
+    "trace_virtual_veins",
+    "layer_arrays",
+    "layer_params",
+    "check_vein",
 ]
 
 #: Bumped whenever the layered runs' results change (part of every cache key).
@@ -185,25 +196,20 @@ def _trace(
         ev_b = 0
         for _ in range(counts[b]):
             if mode == _MODE_LINE:
-                x = (2.0 * _uniform(s) - 1.0) * src_x
-                y = (2.0 * _uniform(s) - 1.0) * src_y
+                x0 = (2.0 * uniform(s) - 1.0) * src_x
+                y0 = (2.0 * uniform(s) - 1.0) * src_y
             else:
-                x = 0.0
-                y = 0.0
-            x0 = x
-            z = 0.0
-            ux = 0.0
-            uy = 0.0
-            uz = 1.0
-            w = w0
+                x0 = 0.0
+                y0 = 0.0
+            x, y, z, ux, uy, uz, w = launch(x0, y0, w0)
             layer = 0
             in_cyl = False
             if nj > 0:
                 tau[:] = 0.0
             alive = True
             while alive:
-                left = -math.log(1.0 - _uniform(s))  # optical depth of this flight
-                collide = False
+                left = free_path(s, 1.0)  # optical depth of this flight
+                collided = False
                 while True:
                     if in_cyl:
                         mut = b_mut
@@ -257,7 +263,7 @@ def _trace(
                     y += seg * uy
                     z += seg * uz
                     if step < dist:
-                        collide = True
+                        collided = True
                         break
                     left -= dist * mut
                     if which == 2:
@@ -270,8 +276,7 @@ def _trace(
                     if which == -1:
                         z = zb[layer]
                         if layer == 0:  # the top face: partial escape (Fresnel)
-                            R = fresnel_jit(-uz, ns[0])
-                            esc = w * (1.0 - R)
+                            esc, w = fresnel_escape(w, -uz, ns[0])
                             refl_b += esc
                             if mode == _MODE_LINE:
                                 if abs(y) <= acc_y:
@@ -290,7 +295,6 @@ def _trace(
                                             for i in range(nr):
                                                 t += tau[j, c, i]
                                                 pert[b, j, c, i, k] += esc if t == 0.0 else esc * math.exp(-t)
-                            w *= R
                             uz = -uz
                             if w <= 0.0:
                                 alive = False
@@ -313,7 +317,7 @@ def _trace(
                         continue
                     ci = abs(uz)
                     R = fresnel_jit(ci, n1 / n2)
-                    if _uniform(s) < R:
+                    if uniform(s) < R:
                         uz = -uz
                     else:
                         rel = n1 / n2
@@ -322,7 +326,7 @@ def _trace(
                         uy *= rel
                         uz = ct if uz > 0.0 else -ct
                         layer = nxt
-                if not alive or not collide:
+                if not alive or not collided:
                     break
                 ev_b += 1
                 if in_cyl:
@@ -331,17 +335,13 @@ def _trace(
                 else:
                     alb = mus[layer] / (mus[layer] + mua[layer])
                     g = gs[layer]
-                abs_b += w * (1.0 - alb)
-                w *= alb
-                ux, uy, uz = hg_scatter_jit(ux, uy, uz, g, _uniform(s), _uniform(s))
-                if w < ROULETTE_THRESHOLD:
-                    if _uniform(s) < 1.0 / ROULETTE_CHANCE:
-                        abs_b -= w * (ROULETTE_CHANCE - 1.0)
-                        w *= ROULETTE_CHANCE
-                    else:
-                        abs_b += w
-                        break
-                if abs(x - x0) > cutoff_mm or abs(y) > cutoff_mm + src_y:
+                dabs, w, ux, uy, uz = collide(s, w, alb, ux, uy, uz, g)
+                abs_b += dabs
+                w, dabs, alive = roulette(s, w)
+                abs_b += dabs
+                if not alive:
+                    break
+                if beyond_cutoff(x - x0, y, z, cutoff_mm, cutoff_mm + src_y, math.inf):
                     trunc_b += w
                     break
         refl[b] = refl_b
@@ -353,7 +353,9 @@ def _trace(
 
 
 # ---------------------------------------------------------------- inputs
-def _layer_arrays(layers):
+def layer_arrays(layers):
+    """``(layers, boundaries, sigma_s, sigma_a, g, n)`` of a stack (top first), checked: every layer but the last
+    finite and positive (InputError otherwise)."""
     layers = [as_medium(m) for m in layers]
     if not layers:
         raise InputError("a layered medium needs at least one layer")
@@ -371,21 +373,9 @@ def _layer_arrays(layers):
     )
 
 
-def _medium_json(m: Medium) -> dict:
+def layer_params(m: Medium) -> dict:
+    """A layer's parameters as they enter the cache keys of layered runs and vein tables."""
     return {"sigma_s": m.sigma_s, "sigma_a": m.sigma_a, "g": m.g, "n": m.n, "thickness_mm": m.thickness_mm}
-
-
-def _states(seed):
-    return np.stack([s.generate_state(4, np.uint64) for s in np.random.SeedSequence(int(seed)).spawn(_N_BATCHES)])
-
-
-def _counts(n_photons):
-    n_photons = int(n_photons)
-    if n_photons < _N_BATCHES:
-        raise InputError(f"n_photons must be >= {_N_BATCHES}, got {n_photons}")
-    counts = np.full(_N_BATCHES, n_photons // _N_BATCHES, dtype=np.int64)
-    counts[: n_photons % _N_BATCHES] += 1
-    return counts
 
 
 def _run(
@@ -409,9 +399,9 @@ def _run(
     virtual=None,
     progress=None,
 ):
-    _, zb, mus, mua, gs, ns = _layer_arrays(layers)
-    counts = _counts(n_photons)
-    states = _states(seed)
+    _, zb, mus, mua, gs, ns = layer_arrays(layers)
+    counts = batch_counts(check_photons(n_photons, N_BATCHES))
+    states = batch_states(seed)
     cyl_on = cylinder is not None
     nx, ny = normal
     qc, zc, rc = (0.0, 1.0, 0.0) if cylinder is None else cylinder
@@ -465,65 +455,22 @@ def _run(
 
 
 # ---------------------------------------------------------------- the background kernel
-@dataclass(frozen=True)
-class LayeredResult:
-    """Line kernel of a layered medium (pencil beam at the pixel, exits binned by ``x``: reciprocity).
-
-    ``values[k]``: power leaving the top face through offset bin ``k`` (``[k - 1/2, k + 1/2)
-    * mm_per_row``) per unit incident power; the sum over all bins is the total diffuse
-    reflectance ``total_reflectance``.  Energy: ``specular + diffuse + transmitted +
-    absorbed + truncated == 1``.
-    """
-
-    offsets_rows: np.ndarray
-    mm_per_row: float
-    values: np.ndarray
-    stderr: np.ndarray
-    total_reflectance: float
-    total_reflectance_stderr: float
-    specular_reflectance: float
-    transmittance: float
-    absorbed: float
-    truncated: float
-    n_photons: int
-
-    @property
-    def energy_balance(self) -> float:
-        return self.specular_reflectance + self.total_reflectance + self.transmittance + self.absorbed + self.truncated
-
-
-_LAYERED_SCALARS = (
-    "mm_per_row",
-    "total_reflectance",
-    "total_reflectance_stderr",
-    "specular_reflectance",
-    "transmittance",
-    "absorbed",
-    "truncated",
-)
+#: The result of a layered run: the one result type of the photon kernels, :class:`~planeray.mc.result.MCProfile`
+#: (a pencil beam at the pixel, exits binned by ``x``: the pixel's line kernel by reciprocity).  ``values[k]``
+#: is the power leaving the top face through offset bin ``k`` per unit incident power; ``radiance`` is not
+#: estimated (NaN); ``params`` holds the layers.
+LayeredResult = MCProfile
 
 
 def _check_offsets(offsets_rows):
-    off = np.asarray(offsets_rows)
-    o = off.astype(np.int64).ravel()
-    if o.size == 0 or np.any(o != off.ravel()) or np.any(np.diff(o) != 1):
-        raise InputError("offsets_rows must be consecutive integers")
-    return o
+    return check_offsets(offsets_rows, consecutive=True)
 
 
-def _save_layered(path: Path, res: LayeredResult) -> None:
-    """Write a layered kernel to the cache, atomically."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
-    np.savez(
-        tmp,
-        offsets_rows=res.offsets_rows,
-        values=res.values,
-        stderr=res.stderr,
-        n_photons=np.int64(res.n_photons),
-        **{k: np.float64(getattr(res, k)) for k in _LAYERED_SCALARS},
-    )
-    os.replace(tmp, path)
+def _load_layered(path, params) -> MCProfile:
+    """A layered cache entry (written by :func:`~planeray.mc.cache.save_profile`, or an older entry without the
+    radiance, the transmittance's error, the collisions and the parameters: NaN, NaN, 0 and ``params``)."""
+    prof = load_profile(path)
+    return prof if prof.params else replace(prof, params=params)
 
 
 def mc_layered_profile(
@@ -564,65 +511,70 @@ def mc_layered_profile(
     True
     """
     off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
-    mm = float(mm_per_row)
+    mm = check_mm_per_row(mm_per_row)
     params = {
         "kind": "layered-profile",
         "version": LAYERED_VERSION,
-        "layers": [_medium_json(as_medium(m)) for m in layers],
+        "layers": [layer_params(as_medium(m)) for m in layers],
         "mm_per_row": mm,
         "n_photons": int(n_photons),
         "seed": int(seed),
     }
-    path = cache_dir() / f"layered-{cache_key(params, off)}.npz"
-    if cache:
-        for hit in (TABLES_DIR / path.name, path):
-            if hit.exists():
-                try:
-                    with np.load(hit, allow_pickle=False) as z:
-                        res = LayeredResult(
-                            **{k: z[k] for k in ("offsets_rows", "values", "stderr")},
-                            **{k: float(z[k]) for k in _LAYERED_SCALARS},
-                            n_photons=int(z["n_photons"]),
-                        )
-                except (OSError, ValueError, KeyError):
-                    continue
-                if progress is not None:
-                    progress(int(n_photons))
-                return res
-    counts, out = _run(
-        layers, n_photons=n_photons, seed=seed, mode=_MODE_PENCIL, mm=mm, kmin=off[0], nk=off.size, progress=progress
+
+    def build():
+        counts, out = _run(
+            layers,
+            n_photons=n_photons,
+            seed=seed,
+            mode=_MODE_PENCIL,
+            mm=mm,
+            kmin=off[0],
+            nk=off.size,
+            progress=progress,
+        )
+        return _pencil_result(layers, off, mm, counts, out, params)
+
+    return stored(
+        f"layered-{cache_key(params, off)}.npz",
+        load=lambda path: _load_layered(path, params),
+        build=build,
+        save=save_profile,
+        cache=cache,
+        on_hit=None if progress is None else (lambda: progress(int(n_photons))),
     )
-    refl_bins, _, _, refl, trans, absorbed, truncated, _ = out
-    values, err = _batch_stats(refl_bins, counts)
-    r, r_err = _batch_stats(refl, counts)
+
+
+def _pencil_result(layers, off, mm, counts, out, params) -> MCProfile:
+    """The result of a pencil-beam run from its per-batch tallies."""
+    refl_bins, _, _, refl, trans, absorbed, truncated, events = out
     n0 = as_medium(layers[0]).n
-    n = counts.sum()
-    res = LayeredResult(
+    return profile_from_tallies(
         offsets_rows=off,
+        first_bin=None,
         mm_per_row=mm,
-        values=values,
-        stderr=err,
-        total_reflectance=float(r),
-        total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(((n0 - 1.0) / (n0 + 1.0)) ** 2),
-        transmittance=float(trans.sum() / n),
-        absorbed=float(absorbed.sum() / n),
-        truncated=float(truncated.sum() / n),
-        n_photons=int(n),
+        counts=counts,
+        refl_bins=refl_bins,
+        refl=refl,
+        trans=trans,
+        absorbed=absorbed,
+        truncated=truncated,
+        events=events,
+        specular_reflectance=((n0 - 1.0) / (n0 + 1.0)) ** 2,
+        params=params,
     )
-    if cache:
-        write_or_warn(lambda p: _save_layered(p, res), path)
-    return res
 
 
 # ---------------------------------------------------------------- brute force: the vein in the medium
-def _normal(angle_deg):
+def vein_normal(angle_deg):
+    """The horizontal normal ``(cos a, -sin a)`` of a vein at ``angle_deg`` to the projector rows."""
     t = math.radians(float(angle_deg))
     return math.cos(t), -math.sin(t)
 
 
-def _check_vein(layers, depth_mm, diameter_mm):
-    _, zb, *_ = _layer_arrays(layers)
+def check_vein(layers, depth_mm, diameter_mm):
+    """``(axis depth, radius)`` of a vein ``depth_mm`` to its top, ``diameter_mm`` wide, inside the stack (InputError
+    otherwise)."""
+    _, zb, *_ = layer_arrays(layers)
     r = 0.5 * float(diameter_mm)
     top = float(depth_mm)
     if not (r > 0 and top > 0):
@@ -663,11 +615,11 @@ def mc_layered_vein_brute(
         arbitrary common units), ``ratio`` (``vein / background``, NaN where the
         background is 0), ``n_photons``.
     """
-    zc, r = _check_vein(layers, depth_mm, diameter_mm)
-    mm = float(mm_per_row)
+    zc, r = check_vein(layers, depth_mm, diameter_mm)
+    mm = check_mm_per_row(mm_per_row)
     rho = _check_offsets(np.arange(-24, 25) if rho_rows is None else rho_rows)
     off = _check_offsets(np.arange(-48, 49) if offsets_rows is None else offsets_rows)
-    nx, ny = _normal(angle_deg)
+    nx, ny = vein_normal(angle_deg)
     reach = (max(abs(rho[0]), abs(rho[-1])) + 0.5) * mm
     span = (max(abs(off[0]), abs(off[-1])) + 0.5) * mm
     margin = 15.0
@@ -736,10 +688,10 @@ def mc_vein_kernel_brute(
     :func:`mc_vein_table`, whose approximation this checks bin by bin).  Compare with
     :func:`mc_layered_profile` (same seed) for the ratio.
     """
-    zc, r = _check_vein(layers, depth_mm, diameter_mm)
+    zc, r = check_vein(layers, depth_mm, diameter_mm)
     off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
-    mm = float(mm_per_row)
-    nx, ny = _normal(angle_deg)
+    mm = check_mm_per_row(mm_per_row)
+    nx, ny = vein_normal(angle_deg)
     counts, out = _run(
         layers,
         n_photons=n_photons,
@@ -753,213 +705,52 @@ def mc_vein_kernel_brute(
         blood=blood,
         progress=progress,
     )
-    refl_bins, _, _, refl, trans, absorbed, truncated, _ = out
-    values, err = _batch_stats(refl_bins, counts)
-    r_tot, r_err = _batch_stats(refl, counts)
-    n0 = as_medium(layers[0]).n
-    n = counts.sum()
-    return LayeredResult(
-        offsets_rows=off,
-        mm_per_row=mm,
-        values=values,
-        stderr=err,
-        total_reflectance=float(r_tot),
-        total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(((n0 - 1.0) / (n0 + 1.0)) ** 2),
-        transmittance=float(trans.sum() / n),
-        absorbed=float(absorbed.sum() / n),
-        truncated=float(truncated.sum() / n),
-        n_photons=int(n),
-    )
-
-
-# ---------------------------------------------------------------- the perturbation table
-@dataclass(frozen=True)
-class VeinTable:
-    """How a vein changes the plane-to-ray kernel of a layered skin: ``K = K0(u) R(rho, u)``.
-
-    ``ratio[a, d, D, r, k]``: kernel ratio for angle ``angles_deg[a]`` (0: the vein parallel
-    to the projector rows, 90: across them), depth of the vein's top ``depths_mm[d]``,
-    diameter ``diameters_mm[D]``, the pixel's signed distance ``rho_rows[r]`` from the vein
-    axis (rows, ``rho = (x, y) . (cos a, -sin a)``) and offset ``offsets_rows[k]``.
-    ``kernel`` is the background line kernel ``K0`` (power per offset bin per unit
-    power), ``kernel_stderr`` its batch standard error, ``total_reflectance`` the total
-    diffuse reflectance of the skin.
-    """
-
-    angles_deg: np.ndarray
-    depths_mm: np.ndarray
-    diameters_mm: np.ndarray
-    rho_rows: np.ndarray
-    offsets_rows: np.ndarray
-    mm_per_row: float
-    ratio: np.ndarray
-    kernel: np.ndarray
-    kernel_stderr: np.ndarray
-    total_reflectance: float
-    params: dict
-
-    _ARRAYS = ("angles_deg", "depths_mm", "diameters_mm", "rho_rows", "offsets_rows", "kernel", "kernel_stderr")
-
-    def save(self, path) -> Path:
-        """Write the table as an ``.npz`` (no pickle); atomic (a temporary, then a rename)."""
-        return save_table(
-            path,
-            **{k: getattr(self, k) for k in self._ARRAYS},
-            ratio=self.ratio.astype(np.float32),
-            mm_per_row=np.float64(self.mm_per_row),
-            total_reflectance=np.float64(self.total_reflectance),
-            params=np.array(json.dumps(self.params, sort_keys=True)),
-        )
-
-    @classmethod
-    def load(cls, path) -> VeinTable:
-        """Read a table written by :meth:`save`."""
-        with np.load(path, allow_pickle=False) as z:
-            return cls(
-                **{k: z[k] for k in cls._ARRAYS},
-                ratio=z["ratio"].astype(np.float64),
-                mm_per_row=float(z["mm_per_row"]),
-                total_reflectance=float(z["total_reflectance"]),
-                params=json.loads(str(z["params"])),
-            )
-
-
-@functools.lru_cache(maxsize=8)
-def _read_vein_table(path: str, mtime_ns: int, size: int) -> VeinTable:
-    table = VeinTable.load(path)
-    for name in (*VeinTable._ARRAYS, "ratio"):
-        getattr(table, name).flags.writeable = False  # shared by every later hit: never changed in place
-    return table
-
-
-def _load_vein_table(path: str, mtime_ns: int, size: int) -> VeinTable:
-    """:meth:`VeinTable.load`, read once per file version (path, modification time, size) in a process.
-
-    A skin scene reads its tables at every build (a pulse video builds several); the arrays
-    of a cached table are read-only and its ``params`` a fresh copy at every hit.
-    """
-    table = _read_vein_table(path, mtime_ns, size)
-    return replace(table, params=json.loads(json.dumps(table.params)))
-
-
-#: Default grid of the vein tables: angles (deg), depth of the vein's top (mm), diameter (mm).
-TABLE_ANGLES_DEG = (0.0, 45.0, 90.0)
-TABLE_DEPTHS_MM = (1.0, 2.0, 3.0, 4.0, 5.0)
-TABLE_DIAMETERS_MM = (1.0, 2.0, 3.0, 4.0)
-
-
-def _rho_grid(rho_rows):
-    rho = np.asarray(rho_rows, dtype=np.float64).ravel()
-    if rho.size < 2 or not np.allclose(np.diff(rho), rho[1] - rho[0]) or rho[1] <= rho[0]:
-        raise InputError("rho_rows must be an increasing, evenly spaced grid")
-    return rho
-
-
-def _vein_table_key(layers, blood, depths_mm, diameters_mm, angles_deg, rho_rows, offsets_rows, mm, n_photons, seed):
-    """``(params, rho grid, offsets, file name)`` of a vein table: its cache entry is named by every input."""
-    rho = _rho_grid(np.arange(-48, 49, 2) if rho_rows is None else rho_rows)
-    off = _check_offsets(np.arange(-64, 65) if offsets_rows is None else offsets_rows)
     params = {
-        "kind": "skin-vein-table",
+        "kind": "layered-vein-brute",
         "version": LAYERED_VERSION,
-        "layers": [_medium_json(as_medium(m)) for m in layers],
-        "blood": _medium_json(as_medium(blood)),
-        "depths_mm": np.asarray(depths_mm, dtype=np.float64).tolist(),
-        "diameters_mm": np.asarray(diameters_mm, dtype=np.float64).tolist(),
-        "angles_deg": np.asarray(angles_deg, dtype=np.float64).tolist(),
-        "rho_rows": rho.tolist(),
-        "mm_per_row": float(mm),
+        "layers": [layer_params(as_medium(m)) for m in layers],
+        "blood": layer_params(as_medium(blood)),
+        "depth_mm": float(depth_mm),
+        "diameter_mm": float(diameter_mm),
+        "angle_deg": float(angle_deg),
+        "rho_rows": float(rho_rows),
+        "mm_per_row": mm,
         "n_photons": int(n_photons),
         "seed": int(seed),
     }
-    return params, rho, off, f"skin-{cache_key(params, off)}.npz"
+    return _pencil_result(layers, off, mm, counts, out, params)
 
 
-def vein_table_stored(layers, blood, *, mm_per_row=0.3, n_photons=400_000, seed=0) -> bool:
-    """Whether :func:`mc_vein_table` of these layers (default grids) is shipped or cached: no tracing needed."""
-    name = _vein_table_key(
-        layers, blood, TABLE_DEPTHS_MM, TABLE_DIAMETERS_MM, TABLE_ANGLES_DEG, None, None, mm_per_row, n_photons, seed
-    )[3]
-    return (TABLES_DIR / name).exists() or (cache_dir() / name).exists()
-
-
-def vein_table_seconds(layers, blood, *, mm_per_row=0.3, n_photons=400_000, fraction=0.02) -> float:
-    """Estimated seconds to trace :func:`mc_vein_table` of these layers on this machine, from a pilot run.
-
-    A run of a few photons (after one that compiles the kernels) measures the fixed cost; a run of
-    ``fraction`` of the photons (not cached) the cost per photon, scaled to ``n_photons``.
-    """
-    import time
-
-    kw = dict(mm_per_row=mm_per_row, seed=12345, cache=False)
-    mc_vein_table(layers, blood, n_photons=64, **kw)
-    t0 = time.perf_counter()
-    mc_vein_table(layers, blood, n_photons=64, **kw)
-    fixed = time.perf_counter() - t0
-    photons = max(int(n_photons * fraction), 2_000)
-    t0 = time.perf_counter()
-    mc_vein_table(layers, blood, n_photons=photons, **kw)
-    return fixed + max(time.perf_counter() - t0 - fixed, 0.0) * n_photons / photons
-
-
-def mc_vein_table(
-    layers,
-    blood: Medium,
-    *,
-    depths_mm=TABLE_DEPTHS_MM,
-    diameters_mm=TABLE_DIAMETERS_MM,
-    angles_deg=TABLE_ANGLES_DEG,
-    rho_rows=None,
-    offsets_rows=None,
-    mm_per_row=0.3,
-    n_photons=400_000,
-    seed=0,
-    cache=True,
+# ---------------------------------------------------------------- virtual veins (the perturbation run)
+def trace_virtual_veins(
+    layers, blood: Medium, *, depths_mm, diameters_mm, angles_deg, rho_rows, offsets_rows, mm_per_row, n_photons, seed,
     progress=None,
-) -> VeinTable:
-    """The vein perturbation table of a layered skin (pencil beam at the pixel + pathlength weighting).
+):  # fmt: skip
+    """One pencil-beam run through the vein-free layers tallying every virtual vein of a grid (the perturbation).
 
-    One run traces ``n_photons`` photons from a pencil beam at the pixel through the
-    vein-free layers.  Each photon carries the optical depth ``(mu_a,blood - mu_a,layer) L``
-    of its path inside every virtual vein of the grid -- per angle, per distance ``rho``
-    of the pixel from the vein (``rho_rows``, default every 2 rows over +-48 rows) and per
-    (depth, diameter) -- and every exit adds ``w`` to the background and ``w exp(-tau)`` to
-    each vein's bin ``(rho, u)``; their ratio is the vein's effect on the pixel's kernel
-    (exact for absorption; blood is taken to scatter like the tissue around it, which
-    :func:`mc_layered_vein_brute` checks).
+    Each photon carries the optical depth ``(mu_a,blood - mu_a,layer) L`` of its path inside
+    every virtual vein -- per angle, per distance ``rho`` of the pixel from the vein
+    (``rho_rows``, evenly spaced) and per (depth, diameter) -- and every exit adds ``w`` to the
+    background and ``w exp(-tau)`` to each vein's bin ``(rho, u)`` (the module docstring);
+    :func:`planeray.kernels.vein.mc_vein_table` turns the tallies into kernel ratios.
 
-    Cached like the other Monte Carlo results (shipped tables first, :data:`TABLES_DIR`,
-    then :func:`planeray.mc.cache.cache_dir`), keyed by every input.
+    Returns
+    -------
+    dict
+        ``counts`` (photons per batch), ``refl_bins`` ``(B, U)`` (the background's exits per
+        offset bin), ``pert`` ``(B, angles, depth x diameter combos, rho, U)`` (the veins')
+        and ``refl`` ``(B,)`` (all exits), per batch.
     """
-    _, zb, _, mua, _, _ = _layer_arrays(layers)
+    _, _, _, mua, _, _ = layer_arrays(layers)
     blood = as_medium(blood)
-    mm = float(mm_per_row)
-    params, rho, off, name = _vein_table_key(
-        layers, blood, depths_mm, diameters_mm, angles_deg, rho_rows, offsets_rows, mm, n_photons, seed
-    )
-    depths = np.asarray(depths_mm, dtype=np.float64)
-    diams = np.asarray(diameters_mm, dtype=np.float64)
-    angles = np.asarray(angles_deg, dtype=np.float64)
-    combos = [(d, D) for d in depths for D in diams]
-    for d, D in combos:
-        _check_vein(layers, d, D)
-    path = cache_dir() / name
-    if cache:
-        for hit in (TABLES_DIR / name, path):
-            if hit.exists():
-                try:
-                    stat = hit.stat()
-                    table = _load_vein_table(str(hit), stat.st_mtime_ns, stat.st_size)
-                except (OSError, ValueError, KeyError):
-                    continue
-                if progress is not None:
-                    progress(int(n_photons))
-                return table
+    rho = np.asarray(rho_rows, dtype=np.float64)
+    off = np.asarray(offsets_rows, dtype=np.int64)
+    mm = check_mm_per_row(mm_per_row)
+    combos = [(d, D) for d in depths_mm for D in diameters_mm]
     v_zc = np.array([d + 0.5 * D for d, D in combos])
     v_r = np.array([0.5 * D for _, D in combos])
     v_dmua = np.array([[blood.sigma_a - a for a in mua] for _ in combos])
-    nxy = np.array([_normal(a) for a in angles])
+    nxy = np.array([vein_normal(a) for a in angles_deg])
     counts, out = _run(
         layers,
         n_photons=n_photons,
@@ -973,29 +764,4 @@ def mc_vein_table(
         progress=progress,
     )
     refl_bins, _, pert, refl, *_ = out
-    kernel, kernel_err = _batch_stats(refl_bins, counts)
-    base = refl_bins.sum(axis=0)  # (u,)
-    pert = pert.sum(axis=0)  # (angle, combo, rho, u)
-    if np.allclose(rho, -rho[::-1]) and off[0] == -off[-1]:
-        # Mirroring x -> -x maps (rho, u) to (-rho, -u) at the same angle: average both.
-        base = base + base[::-1]
-        pert = pert + pert[:, :, ::-1, ::-1]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(base > 0, pert / base, 1.0)
-    ratio = ratio.reshape(angles.size, depths.size, diams.size, rho.size, off.size)
-    table = VeinTable(
-        angles_deg=angles,
-        depths_mm=depths,
-        diameters_mm=diams,
-        rho_rows=rho,
-        offsets_rows=off,
-        mm_per_row=mm,
-        ratio=ratio,
-        kernel=kernel,
-        kernel_stderr=kernel_err,
-        total_reflectance=float(refl.sum() / counts.sum()),
-        params=params,
-    )
-    if cache:
-        write_or_warn(table.save, path)
-    return table
+    return dict(counts=counts, refl_bins=refl_bins, pert=pert, refl=refl)

@@ -379,17 +379,17 @@ def mitsuba_line_profile(
     sigma_s, sigma_a, g = medium.sigma_s, medium.sigma_a, medium.g
     mm_per_row = float(mm_per_row)
     if not (math.isfinite(mm_per_row) and mm_per_row > 0):
-        raise ValueError(f"mm_per_row must be positive, got {mm_per_row}")
+        raise InputError(f"mm_per_row must be positive, got {mm_per_row}")
     width = mm_per_row if source_width_mm is None else float(source_width_mm)
     if not (math.isfinite(width) and width > 0):
-        raise ValueError(f"source_width_mm must be positive, got {source_width_mm}")
+        raise InputError(f"source_width_mm must be positive, got {source_width_mm}")
     offsets = np.asarray(offsets_rows)
     if offsets.ndim != 1 or offsets.size == 0 or not np.all(offsets == np.round(offsets)):
-        raise ValueError("offsets_rows must be a non-empty 1-D sequence of integers")
+        raise InputError("offsets_rows must be a non-empty 1-D sequence of integers")
     offsets = offsets.astype(np.int64)
     spp, passes, along_pixels = int(spp), int(passes), int(along_pixels)
     if spp < 1 or passes < 1 or along_pixels < 1 or passes * along_pixels < 2:
-        raise ValueError("need spp >= 1, passes >= 1, along_pixels >= 1 and passes * along_pixels >= 2")
+        raise InputError("need spp >= 1, passes >= 1, along_pixels >= 1 and passes * along_pixels >= 2")
 
     mi = _mitsuba(variant)
     kmin, kmax = int(offsets.min()), int(offsets.max())

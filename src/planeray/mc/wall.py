@@ -73,50 +73,48 @@ References
 
 from __future__ import annotations
 
-import functools
-import json
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numba
 import numpy as np
-from scipy.special import k1e
 
 from ..errors import InputError
 from ..medium import Medium, as_medium
 from ._batches import trace_batches
-from .cache import (
-    ENGINE_VERSION,
-    TABLES_DIR,
-    cache_dir,
-    cache_key,
-    load_profile,
-    save_profile,
-    save_table,
-    write_or_warn,
-)
-from .diffusion import boundary_mismatch_A, diffusion_exit, diffusion_normal_radiance_ratio
-from .engine import (
-    _N_BATCHES,
+from .cache import cache_key, load_profile, save_profile, stored
+from .diffusion import (
     DIFFUSION_DEPTH_MFP,
-    ROULETTE_CHANCE,
-    ROULETTE_THRESHOLD,
-    _batch_stats,
-    _uniform,
-    default_cutoff_mm,
-    mc_line_profile,
+    diffusion_exit,
+    diffusion_normal_radiance_ratio,
+    exits_oblique,
+    exits_parallel,
+    quarter_space,
 )
-from .physics import fresnel_jit, hg_pdf_jit, hg_scatter_jit
-from .result import MCProfile
+from .engine import check_cutoff, check_depth_mfp, check_mm_per_row, default_cutoff_mm, run_params
+from .events import (
+    N_BATCHES,
+    batch_counts,
+    beyond_cutoff,
+    check_offsets,
+    check_photons,
+    collide,
+    free_path,
+    fresnel_escape,
+    launch,
+    new_tallies,
+    roulette,
+)
+from .physics import fresnel_jit, hg_pdf_jit
+from .result import MCProfile, profile_from_tallies
 
 __all__ = [
     "WALL_MODELS",
     "WALL_VERSION",
     "mc_wall_profile",
-    "WallKernelTable",
-    "mc_wall_table",
     "wall_exit_fractions",
+    "check_wall_model",
+    "wall_run_params",
+    "trace_wall_run",
 ]
 
 #: Wall models: a clear wall with air behind it (Fresnel), or a black one.
@@ -188,14 +186,8 @@ def _trace_wall(
     B = counts.size
     cont_hist = np.zeros((B, nh, nd))
     cont_far = np.zeros(B)
-    refl_bins = np.zeros((B, nk))
-    rad_bins = np.zeros((B, nk))
-    refl = np.zeros(B)
-    trans = np.zeros(B)
-    absorbed = np.zeros(B)
-    truncated = np.zeros(B)
+    refl_bins, rad_bins, refl, trans, absorbed, truncated, events = new_tallies(B, nk)
     wall = np.zeros(B)
-    events = np.zeros(B, dtype=np.int64)
     sigma_t = sigma_s + sigma_a
     albedo = sigma_s / sigma_t
     finite = d < np.inf
@@ -212,15 +204,9 @@ def _trace_wall(
         events_b = 0
         for i in range(counts[b]):
             _photon_state(key, starts[b] + i, s)
-            x = 0.0
-            y = 0.0
-            z = 0.0
-            ux = 0.0
-            uy = 0.0
-            uz = 1.0
-            w = w0
+            x, y, z, ux, uy, uz, w = launch(0.0, 0.0, w0)
             while True:
-                step = -math.log(1.0 - _uniform(s)) / sigma_t
+                step = free_path(s, sigma_t)
                 # Distance to the wall along the direction of flight.
                 dn = ux * wcx + uy * wcy
                 s_wall = np.inf
@@ -242,9 +228,8 @@ def _trace_wall(
                     x += s_wall * ux
                     y += s_wall * uy
                     z += s_wall * uz
-                    R = fresnel_jit(dn, n_wall)
-                    wall_b += w * (1.0 - R)
-                    w *= R
+                    lost, w = fresnel_escape(w, dn, n_wall)
+                    wall_b += lost
                     ux -= 2.0 * dn * wcx
                     uy -= 2.0 * dn * wcy
                     if w <= 0.0:
@@ -267,8 +252,7 @@ def _trace_wall(
                     y = yc
                     top = uz < 0.0
                     z = 0.0 if top else d
-                    R = fresnel_jit(abs(uz), n)
-                    esc = w * (1.0 - R)
+                    esc, w = fresnel_escape(w, abs(uz), n)
                     if top:
                         refl_b += esc
                         k = math.floor(x * inv_bin + 0.5) - kmin
@@ -276,7 +260,6 @@ def _trace_wall(
                             refl_bins[b, int(k)] += esc
                     else:
                         trans_b += esc
-                    w *= R
                     uz = -uz
                     if w <= 0.0:
                         break
@@ -290,17 +273,13 @@ def _trace_wall(
                         k = math.floor(x * inv_bin + 0.5) - kmin
                         if 0 <= k < nk:
                             rad_bins[b, int(k)] += w * albedo * hg_pdf_jit(-uz, g) * math.exp(-tau) * up_gain
-                    abs_b += w * (1.0 - albedo)
-                    w *= albedo
-                    ux, uy, uz = hg_scatter_jit(ux, uy, uz, g, _uniform(s), _uniform(s))
-                if w < ROULETTE_THRESHOLD:
-                    if _uniform(s) < 1.0 / ROULETTE_CHANCE:
-                        abs_b -= w * (ROULETTE_CHANCE - 1.0)
-                        w *= ROULETTE_CHANCE
-                    else:
-                        abs_b += w
-                        break
-                if z > cutoff_mm or abs(x) > cutoff_mm or abs(y) > cutoff_mm:
+                    dabs, w, ux, uy, uz = collide(s, w, albedo, ux, uy, uz, g)
+                    abs_b += dabs
+                w, dabs, alive = roulette(s, w)
+                abs_b += dabs
+                if not alive:
+                    break
+                if beyond_cutoff(x, y, z, cutoff_mm, cutoff_mm, cutoff_mm):
                     trunc_b += w
                     break
         refl[b] = refl_b
@@ -313,313 +292,19 @@ def _trace_wall(
     return refl_bins, rad_bins, refl, trans, absorbed, truncated, wall, events, cont_hist, cont_far
 
 
-# ---------------------------------------------------------------- diffusion with a wall
-class _QuarterSpace:
-    """Diffusion (P1, extrapolated boundaries) of photons handed off at depth ``z_c`` beside a wall.
-
-    Sources: the crossing point at depth ``z_c`` and its negative image at
-    ``-(z_c + 2 z_b)`` above the top face (the engine's dipole), and both mirrored across
-    the wall's extrapolated boundary (``z_bw`` behind the wall) with opposite signs.
-    """
-
-    def __init__(self, z_c, sigma_a, sigma_tp, n, n_wall):
-        self.z_c = float(z_c)
-        self.sigma_a, self.sigma_tp, self.n = float(sigma_a), float(sigma_tp), float(n)
-        self.sigma_tr = math.sqrt(3.0 * sigma_a * sigma_tp)
-        D = 1.0 / (3.0 * sigma_tp)
-        self.z_b = 2.0 * boundary_mismatch_A(n) * D
-        self.z_bw = 2.0 * boundary_mismatch_A(n_wall) * D
-        self.depths = np.array([self.z_c, self.z_c + 2.0 * self.z_b])
-        self.e0 = 0.5 * float(np.sum(np.exp(-self.sigma_tr * self.depths)))  # exits without a wall
-        # Distances to the wall of the tabulated hand-off (beyond: as without a wall).
-        self.delta_max = 4.0 * self.z_c + (8.0 / self.sigma_tr if self.sigma_tr > 0 else 400.0 * self.z_c)
-        self._grid = None
-        self._memo = {}
-
-    def fractions(self, delta):
-        """``(E, W)`` at distances ``delta`` (interpolated from a grid computed once; far: ``(e0, 0)``)."""
-        if self._grid is None:
-            g = self.delta_max * np.linspace(0.0, 1.0, 241) ** 2  # dense near the wall
-            self._grid = (g, self.exit_fraction(g), self.wall_fraction(g))
-        g, E, W = self._grid
-        delta = np.asarray(delta, dtype=np.float64)
-        return np.interp(delta, g, E, right=self.e0), np.interp(delta, g, W, right=0.0)
-
-    def memo(self, key, compute):
-        """A value computed once per hand-off geometry (the exit laws do not depend on the wall's distance)."""
-        if key not in self._memo:
-            self._memo[key] = compute()
-        return self._memo[key]
-
-    # Exit flux through the top face of one source pair (no wall) ...
-    def line_law(self, xi):
-        """Flux per mm of ``x`` (integrated along ``y``) at lateral distance ``xi`` from the crossing."""
-        xi = np.asarray(xi, dtype=np.float64)
-        out = np.zeros_like(xi)
-        for zi in self.depths:
-            r = np.hypot(xi, zi)
-            if self.sigma_tr > 0.0:
-                out += zi * self.sigma_tr * k1e(self.sigma_tr * r) * np.exp(-self.sigma_tr * r) / r
-            else:
-                out += zi / (r * r)
-        return out / (2.0 * np.pi)
-
-    def point_law(self, rho):
-        """Flux per mm^2 at distance ``rho`` from the point above the crossing (Farrell's dipole)."""
-        rho = np.asarray(rho, dtype=np.float64)
-        out = np.zeros_like(rho)
-        for zi in self.depths:
-            r = np.hypot(rho, zi)
-            out += zi * (self.sigma_tr + 1.0 / r) * np.exp(-self.sigma_tr * r) / (r * r)
-        return out / (4.0 * np.pi)
-
-    # ... its integrals ...
-    def _sinh_grid(self, t_max, n=400):
-        c = max(self.z_c, 1e-9)
-        tau = np.linspace(0.0, math.asinh(t_max / c), n)
-        return c * np.sinh(tau), c * np.cosh(tau) * (tau[1] - tau[0])
-
-    def exit_fraction(self, delta):
-        """Fraction of the handed-off weight leaving through the top face inside the wall, ``E(delta)``."""
-        delta = np.asarray(delta, dtype=np.float64)
-        t_max = max(float(np.max(delta)) + 2.0 * self.z_bw, self.z_c) * 4.0 + 50.0 * self.z_c
-        y, dy = self._sinh_grid(t_max, 4000)
-        f = self.line_law(y) * dy
-        cum = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]))])  # int_0^t of the line law
-
-        def half(s):  # int_{-inf}^{s} line_law
-            s = np.asarray(s, dtype=np.float64)
-            return 0.5 * self.e0 + np.sign(s) * np.interp(np.abs(s), y, cum, right=0.5 * self.e0)
-
-        return half(delta) - half(-delta - 2.0 * self.z_bw)
-
-    def wall_fraction(self, delta):
-        """Fraction of the handed-off weight leaving through the wall plane at distance ``delta``, ``W(delta)``."""
-        delta = np.atleast_1d(np.asarray(delta, dtype=np.float64))
-        xw = 2.0 * (delta + self.z_bw)  # lateral position of the wall images
-        s_tr = self.sigma_tr
-        zs = (self.z_c, -self.depths[1])
-
-        def flux(z, dl, xi_w):
-            out = 0.0
-            for xi_i, sgn_x in ((0.0, 1.0), (xi_w, -1.0)):
-                dx = dl - xi_i
-                for z_i, sgn_z in zip(zs, (1.0, -1.0)):
-                    r = math.hypot(dx, z - z_i)
-                    kern = s_tr * k1e(s_tr * r) * math.exp(-s_tr * r) / r if s_tr > 0 else 1.0 / (r * r)
-                    out += sgn_x * sgn_z * kern * dx
-            return out / (2.0 * np.pi)
-
-        from scipy.integrate import quad  # here: scipy.integrate costs ~0.3 s to import, every process with a scene
-
-        res = np.empty_like(delta)
-        for i, (dl, xi_w) in enumerate(zip(delta, xw)):
-            dl = max(dl, 1e-3 * self.z_c)
-            # The real source's flux through the plane peaks at z_c with width ~delta: split there.
-            w = min(20.0 * dl, 0.5 * self.z_c)
-            parts = ((0.0, self.z_c - w), (self.z_c - w, self.z_c + w), (self.z_c + w, np.inf))
-            res[i] = sum(quad(flux, lo, hi, args=(dl, xi_w), limit=200)[0] for lo, hi in parts)
-        return res
-
-
-@functools.lru_cache(maxsize=8)
-def _quarter_space(z_c, sigma_a, sigma_tp, n, n_wall) -> _QuarterSpace:
-    """The hand-off geometry of a medium and wall, shared by every run (its exit laws are cached)."""
-    return _QuarterSpace(z_c, sigma_a, sigma_tp, n, n_wall)
-
-
-def wall_exit_fractions(delta_mm, *, medium: Medium, wall: str = "fresnel", diffusion_depth_mfp=DIFFUSION_DEPTH_MFP):
-    """Diffusion hand-off beside a wall: fractions leaving through the top face and through the wall.
-
-    For a photon handed to diffusion ``diffusion_depth_mfp`` transport mean free paths
-    deep at distance ``delta_mm`` from the wall (see the module docstring), returns
-    ``(E, W)``: the fraction that leaves through the top face inside the wall and the
-    fraction lost through the wall; ``1 - E - W`` is absorbed.  Without absorption
-    ``E + W = 1``; far from the wall ``E`` is the half-space value and ``W = 0``.
-
-    Examples
-    --------
-    >>> from planeray.medium import Medium
-    >>> E, W = wall_exit_fractions([0.5, 50.0], medium=Medium(sigma_s=2.0, sigma_a=0.0, g=0.5, n=1.33))
-    >>> bool(abs(E[0] + W[0] - 1.0) < 1e-3 and W[1] < 0.2 < 0.8 < W[0])
-    True
-    """
-    medium = as_medium(medium)
-    _check_wall(wall)
-    sigma_tp = medium.sigma_a + medium.sigma_s_prime
-    q = _quarter_space(
-        float(diffusion_depth_mfp) / sigma_tp, medium.sigma_a, sigma_tp, medium.n, _wall_index(wall, medium)
-    )
-    delta = np.atleast_1d(np.asarray(delta_mm, dtype=np.float64))
-    return q.exit_fraction(delta), q.wall_fraction(delta)
-
-
-def _tri_points():
-    """Quadrature of a triangle density on ``[-1, 1]`` (source uniform in one bin, exit in another)."""
-    t, wt = np.polynomial.legendre.leggauss(16)
-    t = 0.5 * (t + 1.0)
-    wt = 0.5 * wt
-    return np.concatenate([t - 1.0, t]), np.concatenate([t * wt, (1.0 - t) * wt])
-
-
-def _exits_parallel(cont, hmin, out_bins, mm, q: _QuarterSpace, wall_a):
-    """Exits of photons handed off beside a wall parallel to the lines (``phi = 0``, wall at ``x = a``).
-
-    ``cont`` is ``(B, nh)``: weight by the ``x`` bin of the crossing.  Returns the exit
-    weight per output bin ``(B, K)``, and per batch the exiting and wall-lost weight.
-    """
-    nh = cont.shape[1]
-    h = hmin + np.arange(nh)
-    k = np.asarray(out_bins)
-    tq, tw = _tri_points()
-    # Source uniform in its bin, exit integrated over another: triangle weights in x - x_c and x + x_c.
-    m1 = np.arange(int(k.min()) - int(h.max()), int(k.max()) - int(h.min()) + 1)
-    T1 = q.memo(
-        ("tri", int(m1[0]), int(m1[-1]), mm),
-        lambda: (q.line_law((m1[:, None] + tq[None, :]) * mm) * tw).sum(axis=1) * mm,
-    )
-    m2 = np.arange(int(k.min()) + int(h.min()), int(k.max()) + int(h.max()) + 1)
-    T2 = (q.line_law((m2[:, None] + tq[None, :]) * mm - 2.0 * (wall_a + q.z_bw)) * tw).sum(axis=1) * mm
-    P = T1[k[None, :] - h[:, None] - m1[0]] - T2[k[None, :] + h[:, None] - m2[0]]
-    # Exit bins beyond the wall get nothing; the bins the wall cuts, and crossing bins the
-    # wall cuts, by direct quadrature over the parts inside.
-    g8, w8 = np.polynomial.legendre.leggauss(8)
-    lo_k, hi_k = (k - 0.5) * mm, (k + 0.5) * mm
-    lo_h, hi_h = (h - 0.5) * mm, np.minimum((h + 0.5) * mm, wall_a)
-    P[:, lo_k >= wall_a] = 0.0
-    cut_k = np.flatnonzero((lo_k < wall_a) & (hi_k > wall_a))
-    cut_h = np.flatnonzero(hi_h < (h + 0.5) * mm)
-    for i in range(nh):
-        cols = cut_k if i not in cut_h else np.flatnonzero(lo_k < wall_a)
-        if cols.size == 0 or hi_h[i] <= lo_h[i]:
-            continue
-        xc = 0.5 * (lo_h[i] + hi_h[i]) + 0.5 * (hi_h[i] - lo_h[i]) * g8  # (8,)
-        wc = 0.5 * w8  # crossings spread uniformly over the part of the bin inside the wall
-        a_lo, a_hi = lo_k[cols], np.minimum(hi_k[cols], wall_a)
-        x = 0.5 * (a_lo + a_hi)[:, None] + 0.5 * (a_hi - a_lo)[:, None] * g8[None, :]  # (C, 8)
-        wx = 0.5 * (a_hi - a_lo)[:, None] * w8[None, :]
-        dx = x[:, :, None] - xc[None, None, :]
-        img = x[:, :, None] + xc[None, None, :] - 2.0 * (wall_a + q.z_bw)
-        f = q.line_law(dx) - q.line_law(img)
-        P[i, cols] = np.einsum("cs,cst,t->c", wx, f, wc)
-    # Exiting and wall-lost fractions per crossing bin (delta averaged over the bin's inside).
-    xs = 0.5 * (lo_h + hi_h)[:, None] + 0.5 * np.maximum(hi_h - lo_h, 0.0)[:, None] * g8[None, :]
-    E_d, W_d = q.fractions(np.maximum(wall_a - xs, 0.0))
-    E = (E_d * 0.5 * w8).sum(axis=1)
-    W = (W_d * 0.5 * w8).sum(axis=1)
-    return cont @ P, cont @ E, cont @ W
-
-
-class _HalfLineTable:
-    """``H(dx, t) = int_0^t F(sqrt(dx^2 + y^2)) dy`` of the point law ``F``, tabulated and bilinearly interpolated."""
-
-    def __init__(self, q: _QuarterSpace, dx_max, t_max):
-        self.q = q
-        c = max(q.z_c, 1e-9)
-        self.c = c
-        step = max(q.z_c / 6.0, dx_max / 6000.0)
-        self.dx = np.arange(0.0, dx_max + 2 * step, step)
-        self.tau = np.linspace(0.0, math.asinh(t_max / c), 256)
-        y = c * np.sinh(self.tau)
-        jac = c * np.cosh(self.tau)
-        f = q.point_law(np.hypot(self.dx[:, None], y[None, :])) * jac[None, :]
-        dtau = self.tau[1] - self.tau[0]
-        self.H = np.concatenate(
-            [np.zeros((self.dx.size, 1)), np.cumsum(0.5 * (f[:, 1:] + f[:, :-1]), axis=1) * dtau], axis=1
-        )
-
-    def __call__(self, dx, t):
-        dx = np.abs(dx)
-        tau = np.arcsinh(np.abs(t) / self.c)
-        fi = np.clip(dx / (self.dx[1] - self.dx[0]), 0, self.dx.size - 1.000001)
-        i = fi.astype(np.int64)
-        fx = fi - i
-        ft = np.clip(tau / (self.tau[1] - self.tau[0]), 0, self.tau.size - 1.000001)
-        j = ft.astype(np.int64)
-        fy = ft - j
-        H = self.H
-        val = (
-            H[i, j] * (1 - fx) * (1 - fy)
-            + H[i + 1, j] * fx * (1 - fy)
-            + H[i, j + 1] * (1 - fx) * fy
-            + H[i + 1, j + 1] * fx * fy
-        )
-        half = 0.5 * self.q.line_law(dx)
-        # Beyond the table's reach the half line holds all of it.
-        return np.where(tau >= self.tau[-1], half, np.minimum(val, half))
-
-
-def _exits_oblique(cont, hmin, out_bins, mm, q: _QuarterSpace, phi, dbin):
-    """Exits of photons handed off beside a wall at angle ``phi`` (radians, ``0 < phi <= pi/2``).
-
-    ``cont`` is ``(B, nh, nd)``: weight by the ``x`` bin of the crossing and by the bin of
-    its distance to the wall (the last column: far from it, no wall).  For a crossing at
-    distance ``delta`` the exit law depends only on ``x - x_c`` (the geometry is
-    invariant along the wall): the point law's flux integrated over the ``y`` inside the
-    wall, minus that of the image source across the wall.
-    """
-    B, nh, nd = cont.shape
-    k = np.asarray(out_bins)
-    m = np.arange(int(k.min()) - (hmin + nh - 1), int(k.max()) - hmin + 1)
-    idx = k[None, :] - (hmin + np.arange(nh))[:, None] - m[0]
-    deltas = (np.arange(nd - 1) + 0.5) * dbin
-    laws = q.memo(
-        ("oblique", float(phi), float(dbin), nd, int(m[0]), int(m[-1]), mm),
-        lambda: _oblique_laws(q, m, mm, phi, deltas),
-    )
-    exits = np.zeros((B, k.size))
-    for j in range(nd - 1):
-        exits += cont[:, :, j] @ laws[j][idx]
-    far = cont[:, :, nd - 1]
-    far_bins, _ = diffusion_exit(far, hmin, k, mm, q.z_c, q.sigma_a, q.sigma_tp, q.n)
-    exits += far_bins
-    E, W = q.fractions(deltas)
-    E, W = np.append(E, q.e0), np.append(W, 0.0)
-    return exits, cont.sum(axis=1) @ E, cont.sum(axis=1) @ W
-
-
-def _oblique_laws(q: _QuarterSpace, m, mm, phi, deltas):
-    """Exit laws ``(len(deltas), len(m))``: weight leaving through the bin ``m`` bins from the crossing's."""
-    tq, tw = _tri_points()
-    u = (m[:, None] + tq[None, :]) * mm  # x - x_c
-    cphi, sphi = math.cos(phi), math.sin(phi)
-    table = _HalfLineTable(
-        q,
-        np.abs(u).max() + 2.0 * (deltas.max() + q.z_bw) + 1.0,
-        (np.abs(u).max() + 3 * deltas.max()) / sphi + 50 * q.z_c,
-    )
-    L_u = q.line_law(u)
-    laws = np.empty((deltas.size, m.size))
-    for j, dl in enumerate(deltas):
-        off = 2.0 * (dl + q.z_bw)
-        s1 = (dl - u * cphi) / sphi  # y-limit of the inside, from the crossing
-        u2 = u - off * cphi  # from the image
-        s2 = s1 - off * sphi
-        L2 = L_u if cphi == 0.0 else q.line_law(u2)
-        J = (0.5 * L_u + np.sign(s1) * table(u, s1)) - (0.5 * L2 + np.sign(s2) * table(u2, s2))
-        laws[j] = (J * tw).sum(axis=1) * mm
-    return laws
-
-
 # ---------------------------------------------------------------- runs
-def _check_wall(wall):
+def check_wall_model(wall) -> str:
+    """``wall`` if it names a wall model (:data:`WALL_MODELS`); InputError otherwise."""
     if wall not in WALL_MODELS:
         raise InputError(f"unknown wall model {wall!r}; choose one of {', '.join(WALL_MODELS)}")
+    return wall
 
 
 def _wall_index(wall, medium):
     return medium.n if wall == "fresnel" else 1.0
 
 
-def _check_offsets(offsets_rows):
-    offsets_f = np.asarray(offsets_rows)
-    offsets = offsets_f.astype(np.int64).ravel()
-    if offsets.size == 0 or np.any(offsets != offsets_f.ravel()) or np.unique(offsets).size != offsets.size:
-        raise InputError("offsets_rows must be distinct integers")
-    return offsets
-
-
-def _wall_params(
+def wall_run_params(
     medium,
     offsets,
     *,
@@ -633,33 +318,18 @@ def _wall_params(
     diffusion_depth_mfp=DIFFUSION_DEPTH_MFP,
     cutoff_mm=None,
 ):
-    """Checked parameters of one wall run (the cache key's content)."""
+    """Checked parameters of one wall run (the cache key's content; :func:`trace_wall_run` reads them)."""
     a = float(wall_distance_mm)
-    n_photons = int(n_photons)
-    mm_per_row = float(mm_per_row)
-    if n_photons < 1:
-        raise InputError(f"n_photons must be >= 1, got {n_photons}")
-    if not mm_per_row > 0:
-        raise InputError(f"mm_per_row must be positive, got {mm_per_row}")
+    n_photons = check_photons(n_photons)
+    mm_per_row = check_mm_per_row(mm_per_row)
     if cutoff_mm is None:
         cutoff_mm = default_cutoff_mm(medium, offsets, mm_per_row=mm_per_row)
         if math.isfinite(a):
             cutoff_mm = max(cutoff_mm, 4.0 * a)
-    cutoff_mm = float(cutoff_mm)
-    if not cutoff_mm > 0:
-        raise InputError(f"cutoff_mm must be positive, got {cutoff_mm}")
-    depth_mfp = float(diffusion_depth_mfp) if diffusion_depth_mfp else None
-    if depth_mfp is not None and not depth_mfp > 0:
-        raise InputError(f"diffusion_depth_mfp must be positive or None, got {diffusion_depth_mfp}")
+    cutoff_mm = check_cutoff(medium, offsets, mm_per_row, cutoff_mm)
+    depth_mfp = check_depth_mfp(diffusion_depth_mfp)
     return dict(
-        sigma_s=medium.sigma_s,
-        sigma_a=medium.sigma_a,
-        g=medium.g,
-        n=medium.n,
-        thickness=None if medium.semi_infinite else medium.thickness_mm,
-        n_photons=n_photons,
-        mm_per_row=mm_per_row,
-        seed=int(seed),
+        **run_params(medium, n_photons, mm_per_row, seed),
         cutoff_mm=cutoff_mm,
         diffusion_depth_mfp=depth_mfp,
         source="pencil-wall",
@@ -735,7 +405,7 @@ def mc_wall_profile(
     0.0
     """
     medium = as_medium(medium)
-    _check_wall(wall)
+    check_wall_model(wall)
     a = float(wall_distance_mm)
     phi_deg = float(wall_angle_deg)
     if not a >= 0:  # also rejects NaN; inf: no wall (the reference of :func:`mc_wall_table`)
@@ -744,8 +414,8 @@ def mc_wall_profile(
         raise InputError(f"wall_angle_deg must lie in [0, 90], got {wall_angle_deg!r}")
     if offsets_rows is None:
         offsets_rows = np.arange(-50, 51)
-    offsets = _check_offsets(offsets_rows)
-    params = _wall_params(
+    offsets = check_offsets(offsets_rows)
+    params = wall_run_params(
         medium,
         offsets,
         wall_distance_mm=a,
@@ -757,23 +427,21 @@ def mc_wall_profile(
         cutoff_mm=cutoff_mm,
         seed=seed,
     )
-    path = None
-    if cache:
-        name = f"{cache_key(params, offsets)}.npz"
-        path = cache_dir() / name
-        for hit in (TABLES_DIR / name, path):
-            if hit.exists():
-                try:
-                    return load_profile(hit)
-                except (OSError, ValueError, KeyError):
-                    pass
-    prof, _ = _run_wall(medium, offsets, params)
-    if path is not None:
-        write_or_warn(lambda p: save_profile(p, prof), path)
-    return prof
+    return stored(
+        f"{cache_key(params, offsets)}.npz",
+        load=load_profile,
+        build=lambda: trace_wall_run(medium, offsets, params)[0],
+        save=save_profile,
+        cache=cache,
+    )
 
 
-def _run_wall(medium, offsets, params):
+def trace_wall_run(medium, offsets, params):
+    """Trace one wall run of :func:`wall_run_params`' parameters: ``(profile, per-batch radiance per photon)``.
+
+    The second, ``(N_BATCHES, U)``, is what :func:`planeray.kernels.wall.mc_wall_table` differences
+    photon by photon against a run without the wall (a control variate).
+    """
     sigma_s, sigma_a, g, n, d = medium.sigma_s, medium.sigma_a, medium.g, medium.n, medium.thickness_mm
     n_photons, mm, seed = params["n_photons"], params["mm_per_row"], params["seed"]
     cutoff_mm, a = params["cutoff_mm"], params["wall_distance_mm"]
@@ -782,9 +450,8 @@ def _run_wall(medium, offsets, params):
     if params["wall_angle_deg"] == 90.0:
         wcx = 0.0
     n_wall = _wall_index(params["wall"], medium)
-    B = _N_BATCHES
-    counts = np.full(B, n_photons // B, dtype=np.int64)
-    counts[: n_photons % B] += 1
+    B = N_BATCHES
+    counts = batch_counts(n_photons)
     key = np.random.SeedSequence(seed).generate_state(1, np.uint64)[0]
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
     kmin = int(offsets.min())
@@ -797,7 +464,7 @@ def _run_wall(medium, offsets, params):
     dbin, nd = 0.0, 1
     hmin, nh = 0, 1
     if np.isfinite(z_cont):
-        q = _quarter_space(z_cont, sigma_a, sigma_tp, n, n_wall)
+        q = quarter_space(z_cont, sigma_a, sigma_tp, n, n_wall)
         half = max(abs(kmin), abs(kmin + nk - 1)) * mm
         reach = int(np.ceil(min(cutoff_mm, half + 20.0 * z_cont) / mm))
         hmin, nh = -reach, 2 * reach + 1
@@ -839,371 +506,57 @@ def _run_wall(medium, offsets, params):
             exit_bins, e_tot = diffusion_exit(c1, hmin, out, mm, z_cont, sigma_a, sigma_tp, n)
             e_w, w_w = c1.sum(axis=1) * e_tot, np.zeros(B)
         elif wcy > 0.0:
-            exit_bins, e_w, w_w = _exits_oblique(cont, hmin, out, mm, q, phi, dbin)
+            exit_bins, e_w, w_w = exits_oblique(cont, hmin, out, mm, q, phi, dbin)
         else:
-            exit_bins, e_w, w_w = _exits_parallel(cont[:, :, 0], hmin, out, mm, q, a)
+            exit_bins, e_w, w_w = exits_parallel(cont[:, :, 0], hmin, out, mm, q, a)
         refl_bins += exit_bins
         rad_bins += exit_bins * (diffusion_normal_radiance_ratio(n) / mm)
         # Photons beyond the crossing histogram cannot reach the bins: they leave as without a wall.
         refl += e_w + far * q.e0
         wall += w_w
         absorbed += cont.sum(axis=(1, 2)) - e_w - w_w + far * (1.0 - q.e0)
-    cols = offsets - kmin
-    values, stderr = _batch_stats(refl_bins[:, cols], counts)
-    radiance, rad_err = _batch_stats(rad_bins[:, cols], counts)
-    R_tot, r_err = _batch_stats(refl, counts)
-    T_tot, t_err = _batch_stats(trans, counts)
-    W_tot, w_err = _batch_stats(wall, counts)
-    prof = MCProfile(
-        offsets_rows=offsets.copy(),
+    prof = profile_from_tallies(
+        offsets_rows=offsets,
+        first_bin=kmin,
         mm_per_row=mm,
-        values=values,
-        stderr=stderr,
-        radiance=radiance,
-        radiance_stderr=rad_err,
-        total_reflectance=float(R_tot),
-        total_reflectance_stderr=float(r_err),
-        specular_reflectance=float(r_sp),
-        transmittance=float(T_tot),
-        transmittance_stderr=float(t_err),
-        absorbed=float(absorbed.sum() / n_photons),
-        truncated=float(truncated.sum() / n_photons),
-        n_photons=n_photons,
-        n_interactions=int(events.sum()),
+        counts=counts,
+        refl_bins=refl_bins,
+        rad_bins=rad_bins,
+        refl=refl,
+        trans=trans,
+        absorbed=absorbed,
+        truncated=truncated,
+        events=events,
+        wall=wall,
+        specular_reflectance=r_sp,
         params=params,
-        wall_loss=float(W_tot),
-        wall_loss_stderr=float(w_err),
     )
+    cols = offsets - kmin
     per_photon = rad_bins[:, cols] / counts[:, None]
     return prof, per_photon
 
 
-# ---------------------------------------------------------------- kernel tables
-#: Default wall distances of a table, in projector rows: dense near the wall, out to the
-#: canonical kernel reach (:data:`planeray.kernels.MC_KERNEL_REACH_ROWS`).
-TABLE_DISTANCES_ROWS = (0.0, 1.5, 3.0, 5.0, 8.0, 12.0, 17.0, 24.0, 33.0, 45.0, 60.0, 80.0, 105.0, 140.0, 192.0)
-#: Default wall angles of a table: parallel, oblique and perpendicular to the lit lines (trays use 0 and 90).
-TABLE_ANGLES_DEG = (0.0, 45.0, 90.0)
-#: Photons per wall distance and angle of a table; the slab kernel gets :data:`TABLE_SLAB_PHOTONS`.
-TABLE_PHOTONS = 100_000
-TABLE_SLAB_PHOTONS = 1_000_000
+def wall_exit_fractions(delta_mm, *, medium: Medium, wall: str = "fresnel", diffusion_depth_mfp=DIFFUSION_DEPTH_MFP):
+    """Diffusion hand-off beside a wall: fractions leaving through the top face and through the wall.
 
-#: Monte Carlo runs of a default table (the slab, the reference without a wall, one per angle and distance):
-#: what :func:`mc_wall_table` counts with ``progress``.
-TABLE_RUNS = 2 + len(TABLE_ANGLES_DEG) * len(TABLE_DISTANCES_ROWS)
-__all__ += [
-    "TABLE_DISTANCES_ROWS",
-    "TABLE_ANGLES_DEG",
-    "TABLE_PHOTONS",
-    "TABLE_SLAB_PHOTONS",
-    "TABLE_RUNS",
-    "wall_table_stored",
-]
+    For a photon handed to diffusion ``diffusion_depth_mfp`` transport mean free paths
+    deep at distance ``delta_mm`` from the wall (see the module docstring), returns
+    ``(E, W)``: the fraction that leaves through the top face inside the wall and the
+    fraction lost through the wall; ``1 - E - W`` is absorbed.  Without absorption
+    ``E + W = 1``; far from the wall ``E`` is the half-space value and ``W = 0``.
 
-_TABLE_ARRAYS = (
-    "offsets_rows",
-    "angles_deg",
-    "distances_rows",
-    "kernel",
-    "kernel_stderr",
-    "wall_loss",
-    "slab",
-    "slab_stderr",
-)
-
-
-def _physical(kernel, angles_deg, distances_rows, offsets_rows):
-    """Kernels with what cannot be: no negative light (the control variate's noise), and nothing from
-    behind a wall parallel to the lines (angle 0: bins wholly beyond the wall, where the run with the
-    wall has no exits and the difference is the reference's noise alone)."""
-    k = np.clip(kernel, 0.0, None)
-    for i, ang in enumerate(angles_deg):
-        if ang == 0.0:
-            beyond = np.asarray(offsets_rows)[None, :] - 0.5 >= np.asarray(distances_rows)[:, None]
-            k[i][beyond] = 0.0
-    return k
-
-
-@dataclass(frozen=True)
-class WallKernelTable:
-    """Line kernels of a medium for pixels at several distances and angles from a wall.
-
-    ``kernel[i, j]`` is what a pixel ``distances_rows[j]`` projector rows from a wall at
-    ``angles_deg[i]`` (:func:`mc_wall_profile`) receives from the lit line at each offset,
-    in **Lambertian-equivalent reflectance per offset bin**: ``pi`` times the normal-view
-    radiance times the bin width, so that a white Lambertian surface would sum to 1 (the
-    unit of the scenes' transport).  ``slab`` is the same without a wall.
-
-    Attributes
-    ----------
-    medium : Medium
-    wall : str
-        ``"fresnel"`` or ``"absorbing"``.
-    mm_per_row : float
-    offsets_rows : ndarray (U,) of int
-    angles_deg : ndarray (A,)
-    distances_rows : ndarray (D,)
-    kernel, kernel_stderr : ndarray (A, D, U)
-        Kernels and their Monte Carlo standard errors.
-    wall_loss : ndarray (A, D)
-        Power lost through the wall per unit power entering at the pixel.
-    slab, slab_stderr : ndarray (U,)
-        The kernel far from any wall and its error.
-    params : dict
-        How the table was computed (photons, seed, versions).
-    """
-
-    medium: Medium
-    wall: str
-    mm_per_row: float
-    offsets_rows: np.ndarray
-    angles_deg: np.ndarray
-    distances_rows: np.ndarray
-    kernel: np.ndarray
-    kernel_stderr: np.ndarray
-    wall_loss: np.ndarray
-    slab: np.ndarray
-    slab_stderr: np.ndarray
-    params: dict = field(default_factory=dict)
-
-    @functools.cached_property
-    def _wall_effect(self) -> np.ndarray:
-        """``kernel - slab``, what :meth:`kernels` interpolates (computed once: a scene asks per pixel row)."""
-        return self.kernel - self.slab[None, None, :]
-
-    def kernels(self, distance_rows, angle_deg) -> np.ndarray:
-        """Kernels of pixels at ``distance_rows`` from a wall at ``angle_deg`` (broadcast), ``(..., U)``.
-
-        Bilinear interpolation of the wall's effect (``kernel - slab``) in angle and
-        distance; beyond the largest tabulated distance the slab kernel.  Angles outside
-        the tabulated range take the nearest tabulated angle.
-        """
-        d, a = np.broadcast_arrays(np.asarray(distance_rows, np.float64), np.asarray(angle_deg, np.float64))
-        pert = self._wall_effect
-        A, D = self.angles_deg, self.distances_rows
-        fa = np.interp(a, A, np.arange(A.size)) if A.size > 1 else np.zeros_like(a)
-        ia = np.minimum(np.floor(fa).astype(np.int64), A.size - 1)
-        ia1 = np.minimum(ia + 1, A.size - 1)
-        wa = (fa - ia)[..., None]
-        dd = np.clip(d, D[0], None)
-        fd = np.interp(dd, D, np.arange(D.size))
-        idd = np.minimum(np.floor(fd).astype(np.int64), D.size - 1)
-        id1 = np.minimum(idd + 1, D.size - 1)
-        wd = (fd - idd)[..., None]
-        p = (1 - wa) * ((1 - wd) * pert[ia, idd] + wd * pert[ia, id1]) + wa * (
-            (1 - wd) * pert[ia1, idd] + wd * pert[ia1, id1]
-        )
-        p = np.where((d > D[-1])[..., None], 0.0, p)
-        return self.slab + p
-
-    # ------------------------------------------------------------ storage
-    def save(self, path) -> Path:
-        """Write the table as one compressed ``.npz`` (no pickle), atomically."""
-        meta = {
-            "medium": self.medium.to_dict(),
-            "wall": self.wall,
-            "mm_per_row": self.mm_per_row,
-            "params": self.params,
-        }
-        arrays = {k: getattr(self, k) for k in _TABLE_ARRAYS}
-        arrays = {k: (v.astype(np.float32) if v.dtype.kind == "f" else v) for k, v in arrays.items()}
-        return save_table(path, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
-
-    @classmethod
-    def load(cls, path) -> WallKernelTable:
-        """Read a table written by :meth:`save`."""
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            arrays = {k: z[k] for k in _TABLE_ARRAYS}
-        arrays = {k: (v.astype(np.float64) if v.dtype.kind == "f" else v) for k, v in arrays.items()}
-        arrays["kernel"] = _physical(
-            arrays["kernel"], arrays["angles_deg"], arrays["distances_rows"], arrays["offsets_rows"]
-        )
-        return cls(
-            medium=Medium.from_dict(meta["medium"]),
-            wall=meta["wall"],
-            mm_per_row=float(meta["mm_per_row"]),
-            params=meta["params"],
-            **arrays,
-        )
-
-
-def wall_table_key(
-    medium: Medium,
-    *,
-    wall,
-    angles_deg,
-    distances_rows,
-    offsets_rows,
-    mm_per_row,
-    n_photons,
-    slab_photons,
-    seed,
-    diffusion_depth_mfp=DIFFUSION_DEPTH_MFP,
-) -> str:
-    """File name of a wall table in the caches: ``wall-`` and a hash of everything it depends on."""
-    params = dict(
-        kind="wall-table",
-        wall_version=WALL_VERSION,
-        medium=as_medium(medium).to_dict(),
-        wall=wall,
-        angles_deg=[float(v) for v in angles_deg],
-        distances_rows=[float(v) for v in distances_rows],
-        mm_per_row=float(mm_per_row),
-        n_photons=int(n_photons),
-        slab_photons=int(slab_photons),
-        seed=int(seed),
-        diffusion_depth_mfp=None if diffusion_depth_mfp is None else float(diffusion_depth_mfp),
-    )
-    return f"wall-{cache_key(params, np.asarray(offsets_rows, dtype=np.int64))}.npz"
-
-
-def wall_table_stored(medium: Medium, *, wall="fresnel", offsets_rows=None, mm_per_row=0.3) -> bool:
-    """Whether the default :func:`mc_wall_table` of ``medium`` is shipped or cached (no Monte Carlo to run).
-
-    Lets a front end say, before it starts, that tables will be traced (minutes each).
-    """
-    offsets = np.arange(-192, 193) if offsets_rows is None else np.asarray(offsets_rows, dtype=np.int64)
-    name = wall_table_key(
-        medium,
-        wall=wall,
-        angles_deg=np.asarray(TABLE_ANGLES_DEG, dtype=np.float64),
-        distances_rows=np.asarray(TABLE_DISTANCES_ROWS, dtype=np.float64),
-        offsets_rows=offsets,
-        mm_per_row=mm_per_row,
-        n_photons=TABLE_PHOTONS,
-        slab_photons=TABLE_SLAB_PHOTONS,
-        seed=0,
-    )
-    return (TABLES_DIR / name).exists() or (cache_dir() / name).exists()
-
-
-def mc_wall_table(
-    medium: Medium,
-    *,
-    wall="fresnel",
-    angles_deg=TABLE_ANGLES_DEG,
-    distances_rows=TABLE_DISTANCES_ROWS,
-    offsets_rows=None,
-    mm_per_row=0.3,
-    n_photons=TABLE_PHOTONS,
-    slab_photons=TABLE_SLAB_PHOTONS,
-    seed=0,
-    cache=True,
-    progress=None,
-) -> WallKernelTable:
-    """Line kernels of ``medium`` beside a wall, at every tabulated distance and angle.
-
-    The slab kernel is :func:`planeray.mc.mc_line_profile` (``slab_photons``); each wall
-    kernel is that plus the wall's effect, estimated as the difference between a run
-    with the wall (:func:`mc_wall_profile`, ``n_photons``) and one without it that traces
-    the very same photons (the same per-photon random streams): photons that never meet
-    the wall cancel exactly, so the difference carries only the noise of those that do
-    (a control variate).  Far from the wall the kernel is the slab's, without added noise.
-
-    Parameters
-    ----------
-    medium : Medium
-    wall : {"fresnel", "absorbing"}
-    angles_deg : sequence of float
-        Wall angles in ``[0, 90]`` (see :func:`mc_wall_profile`).
-    distances_rows : sequence of float
-        Distances from the pixel to the wall, projector rows, increasing.
-    offsets_rows : array_like of int, optional
-        Offset bins; default ``-192 .. 192`` (:data:`planeray.kernels.MC_KERNEL_REACH_ROWS`).
-    mm_per_row : float
-        Size of a projector row on the surface (mm).
-    n_photons, slab_photons : int
-        Photons per wall run and of the slab kernel.
-    seed : int
-    cache : bool
-        Look the table up in the shipped tables (:data:`planeray.mc.cache.TABLES_DIR`) and
-        the disk cache, and store it there when computed.
-    progress : callable, optional
-        Called with 1 after each Monte Carlo run (``1 + 1 + A * D`` runs).
-
-    Returns
-    -------
-    WallKernelTable
+    Examples
+    --------
+    >>> from planeray.medium import Medium
+    >>> E, W = wall_exit_fractions([0.5, 50.0], medium=Medium(sigma_s=2.0, sigma_a=0.0, g=0.5, n=1.33))
+    >>> bool(abs(E[0] + W[0] - 1.0) < 1e-3 and W[1] < 0.2 < 0.8 < W[0])
+    True
     """
     medium = as_medium(medium)
-    _check_wall(wall)
-    if offsets_rows is None:
-        offsets_rows = np.arange(-192, 193)
-    offsets = np.asarray(offsets_rows, dtype=np.int64)
-    angles = np.asarray(angles_deg, dtype=np.float64)
-    dists = np.asarray(distances_rows, dtype=np.float64)
-    if angles.size == 0 or np.any(np.diff(angles) <= 0) or angles.min() < 0 or angles.max() > 90:
-        raise InputError(f"angles_deg must increase within [0, 90], got {list(angles)}")
-    if dists.size == 0 or np.any(np.diff(dists) <= 0) or dists.min() < 0:
-        raise InputError(f"distances_rows must increase from >= 0, got {list(dists)}")
-    name = wall_table_key(
-        medium,
-        wall=wall,
-        angles_deg=angles,
-        distances_rows=dists,
-        offsets_rows=offsets,
-        mm_per_row=mm_per_row,
-        n_photons=n_photons,
-        slab_photons=slab_photons,
-        seed=seed,
+    check_wall_model(wall)
+    sigma_tp = medium.sigma_a + medium.sigma_s_prime
+    q = quarter_space(
+        float(diffusion_depth_mfp) / sigma_tp, medium.sigma_a, sigma_tp, medium.n, _wall_index(wall, medium)
     )
-    path = cache_dir() / name
-    if cache:
-        for hit in (TABLES_DIR / name, path):
-            if hit.exists():
-                try:
-                    return WallKernelTable.load(hit)
-                except (OSError, ValueError, KeyError):
-                    pass
-
-    def tick():
-        if progress is not None:
-            progress(1)
-
-    mm = float(mm_per_row)
-    slab = mc_line_profile(medium, n_photons=slab_photons, offsets_rows=offsets, mm_per_row=mm, seed=seed, cache=cache)
-    tick()
-    base = dict(n_photons=int(n_photons), offsets_rows=offsets, mm_per_row=mm, seed=seed, wall=wall)
-    ref_params = _wall_params(medium, offsets, wall_distance_mm=math.inf, wall_angle_deg=0.0, **base)
-    _, ref = _run_wall(medium, offsets, ref_params)
-    tick()
-    to_lambert = np.pi * mm
-    kernel = np.empty((angles.size, dists.size, offsets.size))
-    kernel_err = np.empty_like(kernel)
-    wall_loss = np.empty((angles.size, dists.size))
-    n_b = ref.shape[0]
-    for i, ang in enumerate(angles):
-        for j, dist in enumerate(dists):
-            params = _wall_params(medium, offsets, wall_distance_mm=dist * mm, wall_angle_deg=ang, **base)
-            prof, batches = _run_wall(medium, offsets, params)
-            diff = batches - ref
-            kernel[i, j] = to_lambert * (slab.radiance + diff.mean(axis=0))
-            kernel_err[i, j] = to_lambert * np.hypot(slab.radiance_stderr, diff.std(axis=0, ddof=1) / math.sqrt(n_b))
-            wall_loss[i, j] = prof.wall_loss
-            tick()
-    table = WallKernelTable(
-        medium=medium,
-        wall=wall,
-        mm_per_row=mm,
-        offsets_rows=offsets.copy(),
-        angles_deg=angles,
-        distances_rows=dists,
-        kernel=_physical(kernel, angles, dists, offsets),
-        kernel_stderr=kernel_err,
-        wall_loss=wall_loss,
-        slab=to_lambert * slab.radiance,
-        slab_stderr=to_lambert * slab.radiance_stderr,
-        params=dict(
-            n_photons=int(n_photons),
-            slab_photons=int(slab_photons),
-            seed=int(seed),
-            wall_version=WALL_VERSION,
-            engine_version=ENGINE_VERSION,
-            slab_total_reflectance=slab.total_reflectance,
-            diffusion_depth_mfp=DIFFUSION_DEPTH_MFP,
-        ),
-    )
-    if cache:
-        write_or_warn(table.save, path)
-    return table
+    delta = np.atleast_1d(np.asarray(delta_mm, dtype=np.float64))
+    return q.exit_fraction(delta), q.wall_fraction(delta)

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import InputError
 from ._workspace import DEFAULT_MEMORY_BYTES, Workspace
-from .evm import DEFAULT_ALPHA, DEFAULT_BAND_HZ, DEFAULT_LEVELS, Magnifier, _pyramid_sizes, level_alphas
+from .evm import DEFAULT_ALPHA, DEFAULT_BAND_HZ, DEFAULT_LEVELS, Magnifier, level_alphas, pyramid_sizes
 from .rate import RATE_BAND_HZ, PulseEstimate, estimate_heart_rate, find_pulse_region
 from .video_io import check_frame_count
 
@@ -294,7 +294,7 @@ def scratch_bytes(
     memory_bytes = DEFAULT_MEMORY_BYTES if memory_bytes is None else int(memory_bytes)
     T = int(n_frames)
     shape = tuple(int(s) for s in shape)
-    sizes = _pyramid_sizes(shape, levels)
+    sizes = pyramid_sizes(shape, levels)
     if pyramid == "gaussian":
         kept_levels = [levels]
     else:

@@ -133,7 +133,7 @@ def _up_chain(image, sizes):
     return image
 
 
-def _pyramid_sizes(shape, levels: int) -> list[tuple[int, int]]:
+def pyramid_sizes(shape, levels: int) -> list[tuple[int, int]]:
     sizes = [tuple(int(v) for v in shape)]
     for _ in range(levels):
         h, w = sizes[-1]
@@ -153,7 +153,7 @@ def pyramid_down(frames, levels: int) -> tuple[np.ndarray, list[tuple[int, int]]
     original down (``levels + 1`` sizes), which :func:`pyramid_up` needs to return exactly.
     """
     frames = np.asarray(frames, np.float32)
-    sizes = _pyramid_sizes(frames.shape[1:3], levels)
+    sizes = pyramid_sizes(frames.shape[1:3], levels)
     out = np.empty((frames.shape[0], *sizes[-1]), np.float32)
     for t in range(frames.shape[0]):
         out[t] = _down_chain(frames[t], levels)
@@ -175,7 +175,7 @@ def laplacian_pyramid(frames, levels: int) -> list[np.ndarray]:
     The frames are exactly the sum of every level up-sampled (the pyramid is lossless).
     """
     g = np.asarray(frames, np.float32)
-    sizes = _pyramid_sizes(g.shape[1:3], levels)
+    sizes = pyramid_sizes(g.shape[1:3], levels)
     bands = [np.empty((g.shape[0], *sz), np.float32) for sz in sizes]
     for t in range(g.shape[0]):
         for level, band in enumerate(_laplacian_frame(g[t], sizes)):
@@ -370,12 +370,12 @@ class Magnifier:
         if pyramid == "gaussian":
             if lambda_c is not None:
                 raise InputError("lambda_c applies to the laplacian pyramid only")
-            self.sizes = _pyramid_sizes(shape, self.levels)
+            self.sizes = pyramid_sizes(shape, self.levels)
             self.gains = {self.levels: self.alpha}
         elif pyramid == "laplacian":
             if lambda_c is not None:
                 check_positive(lambda_c, "lambda_c")
-            self.sizes = _pyramid_sizes(shape, self.levels)
+            self.sizes = pyramid_sizes(shape, self.levels)
             gains = level_alphas(shape, self.levels, alpha, lambda_c)
             self.gains = {level: g for level, g in enumerate(gains) if g}
         else:

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..timing import RowGeometry, band_bin_weights
+from ..kernels.footprint import footprint_kernel
+from ..timing import RowGeometry
 from ..transport import Transport
 
 __all__ = [
@@ -232,16 +233,6 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
 def scene_offsets(band_rows: int = DEFAULT_BAND_ROWS) -> np.ndarray:
     """Offsets ``-band_rows`` to ``band_rows`` of a scene's dense band."""
     return np.arange(-int(band_rows), int(band_rows) + 1)
-
-
-def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
-    """Direct light of one camera row spread over the projector rows it spans.
-
-    A camera row covers ``rows_per_camera_row`` projector rows; a Lambertian
-    surface returns each of them in equal share.  Sums to 1.
-    """
-    k = band_bin_weights(offsets_rows, 0.0, rows_per_camera_row)
-    return (k / k.sum()).astype(np.float64)
 
 
 def representative_pixels(

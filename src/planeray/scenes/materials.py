@@ -20,7 +20,7 @@ Model
   set and the projector's laser colour, red by default).
 * **Kernels.**  A container pixel's transport is the Monte Carlo line kernel of its
   medium (Henyey-Greenstein phase function, Fresnel top face) **with the container's
-  walls present**: :func:`planeray.mc.wall.mc_wall_table` traces, for pixels at 15
+  walls present**: :func:`planeray.kernels.wall.mc_wall_table` traces, for pixels at 15
   distances from a vertical wall at 0, 45 and 90 degrees to the projector's lines, the
   light each lit line sends to the pixel (by reciprocity, a pencil beam at the pixel),
   so pixels near a wall see light lost through it (a clear wall with air behind:
@@ -69,7 +69,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..mc.wall import WALL_MODELS, mc_wall_table
+from ..kernels.wall import mc_wall_table
+from ..mc.wall import WALL_MODELS
 from ..medium import Medium
 from ..optical_data import BACKGROUND_CLASS, MATERIAL_CLASSES, OPTICAL_SOURCES, material_medium
 from ..timing import RowGeometry
@@ -84,7 +85,7 @@ CONTAINERS = ("tray", "cup")
 #: A container pixel is "near a wall" when the walls change its kernel by more than this (L1, relative).
 NEAR_WALL_CHANGE = 0.05
 #: Offsets of the shipped kernel tables (projector rows).
-_TABLE_REACH_ROWS = 192
+TABLE_REACH_ROWS = 192
 
 # Slot centres (fractions of the field's height and width): three above, two below.
 _SLOTS = ((0.27, 0.18), (0.27, 0.50), (0.27, 0.82), (0.73, 0.34), (0.73, 0.66))
@@ -142,7 +143,7 @@ def container_layout(shape, projector_rows, *, placement=0, container="tray", mm
 def material_tables(
     *, source="narasimhan", channel="red", wall="fresnel", mm_per_row=DEFAULT_MM_PER_ROW, progress=None
 ):
-    """The wall-kernel tables of the five media (:func:`planeray.mc.wall.mc_wall_table`), by class id.
+    """The wall-kernel tables of the five media (:func:`planeray.kernels.wall.mc_wall_table`), by class id.
 
     The defaults ship with planeray; other choices are traced once (minutes) and cached.
     """
@@ -150,7 +151,7 @@ def material_tables(
         raise InputError(f"unknown wall model {wall!r}; choose one of {', '.join(WALL_MODELS)}")
     if source not in OPTICAL_SOURCES:
         raise InputError(f"unknown optical data source {source!r}; choose one of {', '.join(OPTICAL_SOURCES)}")
-    offsets = np.arange(-_TABLE_REACH_ROWS, _TABLE_REACH_ROWS + 1)
+    offsets = np.arange(-TABLE_REACH_ROWS, TABLE_REACH_ROWS + 1)
     key = (source, channel, wall, float(mm_per_row))
     if key not in _TRACED:  # kept for the process: a read-only cache must not cost a second tracing
         _TRACED[key] = {
@@ -172,11 +173,11 @@ _TRACED: dict = {}
 
 def tables_to_trace(*, source="narasimhan", channel="red", wall="fresnel", mm_per_row=DEFAULT_MM_PER_ROW) -> list:
     """Class ids whose wall-kernel tables :func:`material_tables` would trace (neither shipped nor cached)."""
-    from ..mc.wall import wall_table_stored
+    from ..kernels.wall import wall_table_stored
 
     if (source, channel, wall, float(mm_per_row)) in _TRACED:
         return []
-    offsets = np.arange(-_TABLE_REACH_ROWS, _TABLE_REACH_ROWS + 1)
+    offsets = np.arange(-TABLE_REACH_ROWS, TABLE_REACH_ROWS + 1)
     return [
         cid
         for cid in MATERIAL_CLASSES
@@ -265,9 +266,9 @@ def build(
     layout = container_layout(shape, projector_rows, placement=placement, container=container, mm_per_row=mm)
     half_foot = int(np.ceil(0.5 * rpc + 0.5))
     band = max(int(band_rows), int(np.ceil(rpc)) + 1)
-    if band + half_foot > _TABLE_REACH_ROWS:
+    if band + half_foot > TABLE_REACH_ROWS:
         raise InputError(
-            f"band_rows {band_rows} too wide for the kernel tables (at most {_TABLE_REACH_ROWS - half_foot})"
+            f"band_rows {band_rows} too wide for the kernel tables (at most {TABLE_REACH_ROWS - half_foot})"
         )
     offsets = scene_offsets(band)
     U = offsets.size

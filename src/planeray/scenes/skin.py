@@ -16,7 +16,7 @@ venous blood, locally straight, at any orientation in the image plane.  A skin p
       T_ss[t, s, u] = rho(s, t) (K0 * F)(u) prod_veins R_vein(rho_pix, u)
 
   ``K0`` is the plane-to-ray kernel of the vein-free layers: Monte Carlo
-  (:func:`planeray.mc.layered.mc_vein_table`; a pencil beam at the pixel, exits binned
+  (:func:`planeray.kernels.vein.mc_vein_table`; a pencil beam at the pixel, exits binned
   by the offset ``u`` of the row they leave through: the pixel's line kernel by
   reciprocity).  ``F`` is the camera row's footprint.  ``R_vein`` is the vein's
   multiplicative change of the kernel, a Monte Carlo **perturbation table** over the
@@ -104,7 +104,8 @@ from scipy.ndimage import convolve1d
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
-from ..mc.layered import TABLE_DEPTHS_MM, TABLE_DIAMETERS_MM, VeinTable, mc_layered_profile, mc_vein_table
+from ..kernels.vein import TABLE_DEPTHS_MM, TABLE_DIAMETERS_MM, mc_vein_table, vein_ratio, vein_table_slice
+from ..mc.layered import mc_layered_profile
 from ..mc.physics import fresnel_unpolarized
 from ..optical_data_skin import SKIN_N, skin_layers, tone_fraction
 from ..timing import RowGeometry
@@ -200,7 +201,7 @@ def skin_tables(
 def skin_tables_to_trace(wavelength_nm=638, tone="fair", *, mm_per_row=DEFAULT_MM_PER_ROW, skin=None, **thicknesses):
     """The layer stacks (:class:`~planeray.optical_data_skin.SkinLayers`) whose vein tables :func:`skin_tables`
     would trace with these arguments: neither shipped nor cached (empty: it reads them)."""
-    from ..mc.layered import vein_table_stored
+    from ..kernels.vein import vein_table_stored
 
     if skin is not None:
         stacks = [skin]
@@ -466,57 +467,6 @@ def skin_veins(scene: Scene) -> list[SkinVein]:
     return out
 
 
-# ---------------------------------------------------------------- the vein ratio
-def _table_slice(table: VeinTable, depth_mm, diameter_mm):
-    """``ratio[angle, rho, u]`` of one vein: bilinear in (depth, diameter) over the table grid."""
-
-    def weights(grid, v):
-        i = int(np.clip(np.searchsorted(grid, v) - 1, 0, len(grid) - 2))
-        w = float(np.clip((v - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0))
-        return i, w
-
-    i, wi = weights(table.depths_mm, depth_mm)
-    j, wj = weights(table.diameters_mm, diameter_mm)
-    r = table.ratio
-    return (
-        (1 - wi) * (1 - wj) * r[:, i, j]
-        + wi * (1 - wj) * r[:, i + 1, j]
-        + (1 - wi) * wj * r[:, i, j + 1]
-        + wi * wj * r[:, i + 1, j + 1]
-    )
-
-
-def _vein_ratio(sl, table: VeinTable, rho_rows, angle_deg, u_table):
-    """Kernel ratio ``(n, U)`` of pixels at ``rho_rows`` from a vein at ``angle_deg``; ``u_table`` (n, U) offsets,
-    or (U,): the same offsets for every pixel (one gather of the table's columns instead of one per pixel)."""
-    # Angles in (90, 180) mirror (y -> -y) onto 180 - a with rho -> -rho.
-    flip = angle_deg > 90.0
-    a = np.where(flip, 180.0 - angle_deg, angle_deg)
-    rho = np.where(flip, -rho_rows, rho_rows)
-    ga = table.angles_deg
-    ia = np.clip(np.searchsorted(ga, a) - 1, 0, ga.size - 2)
-    wa = np.clip((a - ga[ia]) / (ga[ia + 1] - ga[ia]), 0.0, 1.0)
-    gr = table.rho_rows
-    fr = (rho - gr[0]) / (gr[1] - gr[0])
-    ir = np.clip(np.floor(fr).astype(np.int64), 0, gr.size - 2)
-    wr = np.clip(fr - ir, 0.0, 1.0)
-    fk = u_table - table.offsets_rows[0]
-    ik = np.clip(np.floor(fk).astype(np.int64), 0, table.offsets_rows.size - 2)
-    wk = np.clip(fk - ik, 0.0, 1.0)
-    # bilinear in (angle, rho): each pixel's own table row (n, K), then linear along the offsets
-    rows = np.zeros((rho.size, sl.shape[-1]))
-    for da, wa_ in ((0, 1 - wa), (1, wa)):
-        for dr, wr_ in ((0, 1 - wr), (1, wr)):
-            rows += (wa_ * wr_)[:, None] * sl[ia + da, ir + dr]
-    if ik.ndim == 1:
-        lo, hi = rows[:, ik], rows[:, ik + 1]
-    else:
-        lo, hi = np.take_along_axis(rows, ik, axis=1), np.take_along_axis(rows, ik + 1, axis=1)
-    out = (1 - wk) * lo + wk * hi
-    far = (np.abs(u_table) > table.offsets_rows[-1]) | (np.abs(rho) > gr[-1])[:, None]
-    return np.where(far, 1.0, out)
-
-
 # ---------------------------------------------------------------- hair
 def _hair(rng, X, Y, col_mm, row_mm_img, *, density_per_cm2):
     """Coverage of each pixel by hair strands (fraction), seeded.
@@ -666,11 +616,11 @@ def build(
         if bi.size == 0:
             continue
         dist, rho_mm, ang = _nearest_segment(pts, X[bi, bj], Y[bi, bj])
-        sl = _table_slice(table, v["depth_mm"], v["diameter_mm"])
+        sl = vein_table_slice(table, v["depth_mm"], v["diameter_mm"])
         near = (np.abs(rho_mm) <= reach_mm) & on[bi, bj]
         if near.any():
             ti, si = bi[near], bj[near]
-            r = _vein_ratio(sl, table, rho_mm[near] / mm, ang[near], u_t[ti])
+            r = vein_ratio(sl, table, rho_mm[near] / mm, ang[near], u_t[ti])
             ratio[ti, si] *= r if blood_scale == 1.0 else np.power(np.maximum(r, 1e-12), float(blood_scale))
         rel = dist / (0.5 * v["diameter_mm"])
         over = (rel <= 1.0) & on[bi, bj] & (rel < best[bi, bj])

@@ -85,7 +85,7 @@ __all__ = ["build", "wax_kernel", "rose_pattern", "WAX_MEDIUM"]
 
 #: The default wax: a translucent paraffin with sigma_s' = 0.3 /mm, sigma_a = 0.003 /mm,
 #: HG g = 0.8 (sigma_s = sigma_s' / (1 - g)) and index 1.4, semi-infinite.  Its Monte
-#: Carlo kernel ships precomputed (:data:`planeray.mc.engine.TABLES_DIR`).
+#: Carlo kernel ships precomputed (:data:`planeray.mc.cache.TABLES_DIR`).
 WAX_MEDIUM = Medium.from_reduced(0.3, 0.003, g=0.8, n=1.4)
 
 

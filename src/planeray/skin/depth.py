@@ -9,7 +9,7 @@ projector rows, receives in the image of band ``k``::
     S_k(rho) = sum_u w_k(t, u) c(t, u) [(K0 R(rho, . ; a, depth, diameter)) * F](u)
 
 ``K0`` the background line kernel of the skin's layers (tone, wavelength), ``R`` the
-vein's perturbation table (:class:`planeray.mc.layered.VeinTable`, bilinear in depth and
+vein's perturbation table (:class:`planeray.kernels.vein.VeinTable`, bilinear in depth and
 diameter, the same interpolation the simulator uses), ``F`` the camera row's footprint,
 ``w_k`` the band's weights (Eq. 3 with the recorded jitter) and ``c`` the projector's
 edge rule.  The vein's **contrast** in image ``k`` is ``C_k(rho) = 1 - S_k(rho) /
@@ -51,24 +51,34 @@ the depth above ``max_depth_se_mm``, or their correlation above ``max_correlatio
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
-from scipy.ndimage import binary_dilation, convolve1d, distance_transform_edt, label
+from scipy.ndimage import binary_dilation, label
 from scipy.optimize import least_squares
-from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
 from ..camera import CameraModel
 from ..errors import InputError
 from ..goodness import DEFAULT_P_MISFIT, FLAG_EDGE, FLAG_MISFIT, FitQuality, describe_flags, fit_quality
-from ..mc.layered import VeinTable
-from ..scenes.base import DEFAULT_MM_PER_ROW, footprint_kernel
-from ..scenes.skin import SKIN_BAND_ROWS, _table_slice, _vein_ratio, skin_tables
-from ..timing import Band, RowGeometry, band_weights_at_row
+from ..scenes.base import DEFAULT_MM_PER_ROW
+from ..timing import Band
+from .vein_geometry import CentreLine, VeinPixels, centre_line, other_vein_ratio, vein_geometry
+from .vein_model import (
+    VeinModel,
+    background_signals,
+    far_bands,
+    image_variance,
+    model_offsets,
+    row_jitter_sigma,
+    row_weights,
+    usable_bands,
+    vein_contrast,
+    vein_model,
+    vein_signals,
+)
 
 __all__ = [
     "VeinModel",
@@ -83,6 +93,8 @@ __all__ = [
     "row_jitter_sigma",
     "vein_geometry",
     "centre_line",
+    "CentreLine",
+    "VeinPixels",
     "other_vein_ratio",
     "fit_vein",
     "fit_veins",
@@ -104,398 +116,6 @@ MODEL_RELATIVE_SD = 0.02
 #: The background kernel's error per image, relative (K0's Monte Carlo error is added to it): the images' vein-free
 #: backgrounds ``B_k`` must follow the skin model's kernel through the sweep within it, else the skin model is wrong.
 BACKGROUND_RELATIVE_SD = 0.03
-
-
-# ---------------------------------------------------------------- the forward model
-@dataclass(frozen=True)
-class VeinModel:
-    """What the contrast model needs: the skin's vein table, its kernel, the sweep and the geometry."""
-
-    table: VeinTable
-    kernel: np.ndarray  # K0 over table.offsets_rows
-    geometry: RowGeometry
-    bands: tuple  # of timing.Band
-    mm_per_row: float
-    band_rows: int = SKIN_BAND_ROWS
-    params: dict = field(default_factory=dict)
-
-    @property
-    def exposures_us(self) -> np.ndarray:
-        return np.array([b.exposure_us for b in self.bands])
-
-
-def vein_model(
-    bands,
-    geometry: RowGeometry,
-    *,
-    tone="fair",
-    wavelength_nm: int = 638,
-    mm_per_row: float = DEFAULT_MM_PER_ROW,
-    band_rows: int = SKIN_BAND_ROWS,
-    skin=None,
-    progress=None,
-) -> VeinModel:
-    """The contrast model of a skin (tone, wavelength) seen through a sweep's bands.
-
-    Parameters
-    ----------
-    bands : sequence of planeray.timing.Band
-        The images' illumination (e.g. ``stack.bands()``).
-    geometry : planeray.timing.RowGeometry
-        Camera rows and projector rows.
-    tone : str or float
-        Skin tone (name or epidermal melanosome fraction).
-    wavelength_nm : {638, 850}
-        Wavelength, nm.
-    mm_per_row : float
-        Size of a projector row on the skin, mm.
-    band_rows : int
-        Half-width of the offset band the scene models (rows).
-    skin : planeray.optical_data_skin.SkinLayers, optional
-        The skin's layers and blood as the user states them
-        (:func:`planeray.optical_data_skin.skin_model`: thicknesses, index, ``g``, optics per layer,
-        the blood); default the published layers of ``tone`` at ``wavelength_nm`` with the scene's
-        thicknesses.  Its tables are traced once (minutes) and cached
-        (:func:`planeray.scenes.skin.skin_tables_to_trace` says which).
-    progress : callable, optional
-        Called with the photons traced while a table is traced.
-
-    Returns
-    -------
-    VeinModel
-    """
-    from ..optical_data_skin import skin_layers
-
-    standard = skin is None or skin == skin_layers(
-        skin.wavelength_nm, tone, epidermis_mm=skin.layers[0].thickness_mm, dermis_mm=skin.layers[1].thickness_mm,
-        fat_mm=skin.layers[2].thickness_mm,
-    )  # fmt: skip
-    if skin is None:
-        table, kernel, _ = skin_tables(wavelength_nm, tone, mm_per_row=mm_per_row, progress=progress)
-    elif standard:  # the published layers at other thicknesses: the tone's tables (interpolated between tones)
-        th = dict(epidermis_mm=skin.layers[0].thickness_mm, dermis_mm=skin.layers[1].thickness_mm,
-                  fat_mm=skin.layers[2].thickness_mm)  # fmt: skip
-        table, kernel, _ = skin_tables(skin.wavelength_nm, tone, mm_per_row=mm_per_row, progress=progress, **th)
-    else:
-        table, kernel, _ = skin_tables(mm_per_row=mm_per_row, progress=progress, skin=skin)
-    params = {"tone": tone, "wavelength_nm": int(wavelength_nm if skin is None else skin.wavelength_nm),
-              "mm_per_row": float(mm_per_row)}  # fmt: skip
-    if skin is not None:
-        params["skin"] = skin.to_json()
-    return VeinModel(
-        table=table,
-        kernel=np.asarray(kernel, float),
-        geometry=geometry,
-        bands=tuple(bands),
-        mm_per_row=float(mm_per_row),
-        band_rows=int(band_rows),
-        params=params,
-    )
-
-
-def _offsets(model: VeinModel):
-    rpc = model.geometry.rows_per_camera_row
-    band = max(int(model.band_rows), int(np.ceil(rpc)) + 1)
-    offsets = np.arange(-band, band + 1)
-    half = int(np.ceil(0.5 * rpc + 0.5))
-    wide = np.arange(offsets[0] - half, offsets[-1] + half + 1)
-    foot = footprint_kernel(np.arange(-half, half + 1), rpc)
-    return offsets, wide, half, foot
-
-
-def _row_weights(model: VeinModel, rows, offsets):
-    """``(n_rows, K, U)``: band weights times the edge rule's coverage, per distinct camera row."""
-    out = []
-    for t in rows:
-        w = band_weights_at_row(model.bands, model.geometry, int(t), offsets)
-        w = w * model.geometry.coverage(int(t), offsets)[None, :]
-        out.append(w)
-    return np.stack(out) if out else np.zeros((0, len(model.bands), offsets.size))
-
-
-def vein_signals(model: VeinModel, rows, rho_mm, angle_deg, depth_mm, diameter_mm, *, _cache=None):
-    """Subsurface signal of each image at pixels near one vein, relative to the vein-free skin.
-
-    Parameters
-    ----------
-    model : VeinModel
-    rows : array_like of int, shape (n,)
-        Camera row of each pixel.
-    rho_mm : array_like, shape (n,)
-        Signed distance of each pixel from the vein's axis, mm (the scene's convention:
-        ``rho = (x, y) . (cos a, -sin a)``, ``x`` down, ``y`` right).
-    angle_deg : array_like, shape (n,)
-        Angle between the vein and the projector rows, degrees in [0, 180).
-    depth_mm : float
-        Depth of the vessel's top, mm (1-5, the tables' range).
-    diameter_mm : float
-        Vessel diameter, mm (1-4).
-
-    Returns
-    -------
-    ratio : ndarray (K, n)
-        ``S_k(rho) / S_k(no vein)`` for every band ``k``: one minus the contrast (Sec. 10's
-        short-range images; NaN where the band holds no light).
-    flood : ndarray (n,)
-        The same ratio for flood (ambient) light, all offsets summed.
-    """
-    rows = np.asarray(rows, dtype=np.int64)
-    rho = np.asarray(rho_mm, float) / model.mm_per_row
-    ang = np.broadcast_to(np.asarray(angle_deg, float), rho.shape)
-    offsets, wide, half, foot = _offsets(model)
-    cache = _cache if _cache is not None else {}
-    if "W" not in cache:
-        urows, inv = np.unique(rows, return_inverse=True)
-        cache["W"] = _row_weights(model, urows, offsets)
-        cache["inv"] = inv
-        k_row = np.interp(wide.astype(float), model.table.offsets_rows, model.kernel, left=0.0, right=0.0)
-        cache["k_row"] = k_row
-        base = convolve1d(k_row[None, :], foot[::-1], axis=1, mode="constant")[:, half:-half][0]
-        cache["base"] = base
-        cache["S0"] = np.einsum("rku,u->rk", cache["W"], base)  # (n_rows, K)
-    sl = _table_slice(model.table, float(depth_mm), float(diameter_mm))
-    r = _vein_ratio(sl, model.table, rho, ang, wide.astype(float))  # the same offsets for every pixel
-    sub = convolve1d(cache["k_row"][None, :] * r, foot[::-1], axis=1, mode="constant")[:, half:-half]
-    W = cache["W"][cache["inv"]]  # (n, K, U)
-    S = np.einsum("nku,nu->kn", W, sub)
-    S0 = cache["S0"][cache["inv"]].T
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(S0 > 0, S / S0, np.nan)
-    flood = sub.sum(axis=1) / cache["base"].sum()
-    return ratio, flood
-
-
-def background_signals(model: VeinModel, rows) -> np.ndarray:
-    """Subsurface signal of each image of vein-free skin at camera rows ``rows``, ``(K, n)``.
-
-    ``sum_u w_k(t, u) c(t, u) (K0 * F)(u)`` in transport units (light per unit of the
-    projector's line power; multiply by the camera's ``signal_scale`` for a normalized image).
-    """
-    rows = np.asarray(rows, dtype=np.int64)
-    offsets, wide, half, foot = _offsets(model)
-    urows, inv = np.unique(rows, return_inverse=True)
-    W = _row_weights(model, urows, offsets)
-    k_row = np.interp(wide.astype(float), model.table.offsets_rows, model.kernel, left=0.0, right=0.0)
-    base = convolve1d(k_row[None, :], foot[::-1], axis=1, mode="constant")[:, half:-half][0]
-    return np.einsum("rku,u->kr", W, base)[:, inv]
-
-
-def vein_contrast(model: VeinModel, rho_mm, angle_deg, depth_mm, diameter_mm, *, row=None) -> np.ndarray:
-    """Contrast ``1 - vein / background`` of a vein in each image, ``(K, n)``, at camera row ``row``.
-
-    ``row`` defaults to the middle camera row (where no band is cut by the projector's end).
-    """
-    rho = np.atleast_1d(np.asarray(rho_mm, float))
-    t = model.geometry.camera_rows // 2 if row is None else int(row)
-    ratio, _ = vein_signals(model, np.full(rho.size, t), rho, angle_deg, depth_mm, diameter_mm)
-    return 1.0 - ratio
-
-
-# ---------------------------------------------------------------- noise
-def image_variance(image, camera: CameraModel) -> np.ndarray:
-    """Variance of a stack image's pixels (normalized units) under the camera's noise model.
-
-    ``frames_averaged`` frames of Poisson electrons (``image * full_well``), Gaussian read
-    noise and a uniform rounding to ADC codes per frame, averaged:
-    ``var = (e + r^2) / (n FW^2) + 1 / (12 n span^2)``.
-    """
-    return camera.pixel_variance(image)
-
-
-def row_jitter_sigma(model: VeinModel, camera: CameraModel) -> np.ndarray:
-    """Relative standard deviation of each image's signal, per camera row, from the device's row jitter.
-
-    The trigger of every frame and camera row is offset by ``camera.row_jitter_us`` (Gaussian sigma),
-    moving the band by ``sigma_rows = row_jitter_us * lines_per_second`` projector rows along the
-    kernel; averaged over ``frames_averaged`` frames, the signal of the whole camera row changes by
-    ``|d ln S_k / du| sigma_rows / sqrt(frames)`` (the slope from the vein-free model, +-1 row).
-    """
-    t = model.geometry.camera_rows // 2
-    out = []
-    for b in model.bands:
-        step_us = 1e6 / b.lines_per_second
-        s = [
-            background_signals(
-                dataclasses.replace(model, bands=(dataclasses.replace(b, delay_us=b.delay_us + d),)), [t]
-            )[0, 0]
-            for d in (-step_us, step_us)
-        ]
-        slope = abs(math.log(max(s[1], 1e-300)) - math.log(max(s[0], 1e-300))) / 2.0
-        out.append(slope * camera.row_jitter_us * 1e-6 * b.lines_per_second / math.sqrt(camera.frames_averaged))
-    return np.array(out)
-
-
-def far_bands(model: VeinModel, *, excluded=None, level: float = 1e-4) -> np.ndarray:
-    """Images that see (almost) only ambient light: their band holds less than ``level`` of the
-    vein-free skin's signal in the brightest image of the sweep (the middle camera row)."""
-    s0 = background_signals(model, [model.geometry.camera_rows // 2])[:, 0]
-    ok = s0 < level * s0.max()
-    if excluded is not None:
-        ok &= ~np.asarray(excluded, bool)
-    return ok
-
-
-def usable_bands(bands, geometry: RowGeometry, *, excluded=None, band_rows: int = SKIN_BAND_ROWS) -> np.ndarray:
-    """Which images the depth fit uses: not excluded, no direct light, inside the modelled offsets.
-
-    An image carries direct (surface) light when its band, widened by 3 jitter sigmas, reaches
-    the camera row's footprint (``|u| <= rows_per_camera_row / 2 + 1``); its band must end
-    within ``band_rows`` (where the model has the kernel).
-    """
-    reach = 0.5 * geometry.rows_per_camera_row + 1.0
-    ok = []
-    for b in bands:
-        sigma = 3.0 * b.jitter_us * 1e-6 * b.lines_per_second
-        lo = abs(b.centre_rows) - 0.5 * b.width_rows - sigma
-        hi = abs(b.centre_rows) + 0.5 * b.width_rows + sigma
-        ok.append(lo > reach and hi <= band_rows)
-    ok = np.array(ok, bool)
-    if excluded is not None:
-        ok &= ~np.asarray(excluded, bool)
-    return ok
-
-
-# ---------------------------------------------------------------- the vein's geometry from a mask
-@dataclass
-class VeinPixels:
-    """Pixels around one vein: index, row, signed distance from the centre line and local angle."""
-
-    rows: np.ndarray
-    cols: np.ndarray
-    rho_mm: np.ndarray
-    angle_deg: np.ndarray
-    x_mm: np.ndarray  # position (for the tint gradient), mm, relative to the vein's centre
-    y_mm: np.ndarray
-    width_mm: float  # the mask's width across the vein (area / centre-line length)
-    line: CentreLine | None = None  # the centre line the distances are measured from
-
-
-def _pixel_mm(geometry: RowGeometry, mm_per_row: float, shape):
-    H, W = shape
-    x = (geometry.projector_row_of(np.arange(H)) + 0.5) * mm_per_row
-    col = geometry.projector_rows * mm_per_row / H
-    y = (np.arange(W) + 0.5) * col
-    return x, y, col
-
-
-@dataclass(frozen=True)
-class CentreLine:
-    """A vein's centre line from its mask: points (mm, surface ``(x down, y right)``) and local angles."""
-
-    points_mm: np.ndarray  # (m, 2), one per mask pixel: the local centroid
-    angle_deg: np.ndarray  # (m,), direction to the rows, in [0, 180)
-    px_mm: float  # the larger side of a camera pixel on the skin, mm
-    mask_points_mm: np.ndarray  # (m, 2), the mask's pixel centres
-
-
-def centre_line(component, geometry: RowGeometry, *, mm_per_row: float) -> CentreLine:
-    """The centre line of one vein's mask: the local centroid of the mask within a disc (on the axis of a
-    locally straight band; radius ``max(5 mm, 2.5 pixels)``) and the local direction, the principal axis of
-    the mask in the same disc.
-
-    Parameters
-    ----------
-    component : ndarray (H, W) bool
-        The vein's pixels.
-    geometry : RowGeometry
-    mm_per_row : float
-        Size of a projector row on the skin, mm.
-    """
-    xs, ys, col_mm = _pixel_mm(geometry, mm_per_row, component.shape)
-    row_mm = geometry.rows_per_camera_row * mm_per_row
-    ci_, cj_ = np.nonzero(component)
-    comp_pts = np.stack([xs[ci_], ys[cj_]], axis=1)
-    radius = max(5.0, 2.5 * max(row_mm, col_mm))
-    ctree = cKDTree(comp_pts)
-    S = np.empty_like(comp_pts)
-    dirs = np.empty_like(comp_pts)
-    for k, nb in enumerate(ctree.query_ball_point(comp_pts, r=radius)):
-        P = comp_pts[nb] if len(nb) >= 3 else comp_pts
-        S[k] = P.mean(axis=0)
-        _, _, vt = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)
-        dirs[k] = vt[0]
-    ang = np.degrees(np.arctan2(dirs[:, 0], dirs[:, 1])) % 180.0
-    return CentreLine(S, ang, float(max(row_mm, col_mm)), comp_pts)
-
-
-def _line_coords(line: CentreLine, P):
-    """Distance (mm) of points ``P`` (n, 2) from the nearest centre-line point, their signed ``rho`` (mm)
-    along its normal, its angle, and whether they lie beside the line (not beyond its ends)."""
-    S = line.points_mm
-    d, idx = cKDTree(S).query(P)
-    a = np.radians(line.angle_deg[idx])
-    dx, dy = P[:, 0] - S[idx, 0], P[:, 1] - S[idx, 1]
-    rho = dx * np.cos(a) - dy * np.sin(a)
-    along = dx * np.sin(a) + dy * np.cos(a)
-    return d, rho, line.angle_deg[idx], np.abs(along) <= 0.75 * line.px_mm
-
-
-def other_vein_ratio(model: VeinModel, line: CentreLine, rows, cols, depth_mm, diameter_mm):
-    """Ratio (K, n) and flood ratio (n,) of another vein (its centre line, depth, diameter) at pixels
-    ``(rows, cols)``: 1 beyond its ends and beyond the vein table's reach (the skin scene multiplies the
-    ratios of all veins)."""
-    rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
-    K = len(model.bands)
-    ratio, flood = np.ones((K, rows.size)), np.ones(rows.size)
-    xs, ys, _ = _pixel_mm(model.geometry, model.mm_per_row, (model.geometry.camera_rows, cols.max(initial=0) + 1))
-    P = np.stack([xs[rows], ys[cols]], axis=1)
-    _, rho, angle, ok = _line_coords(line, P)
-    ok &= np.abs(rho) <= (model.table.rho_rows[-1] + 1) * model.mm_per_row
-    if ok.any():
-        r, f = vein_signals(model, rows[ok], rho[ok], angle[ok], depth_mm, diameter_mm)
-        ratio[:, ok] = np.nan_to_num(r, nan=1.0)
-        flood[ok] = f
-    return ratio, flood
-
-
-def vein_geometry(
-    component, others, geometry: RowGeometry, *, mm_per_row: float, reach_mm: float = 12.0, guard_mm: float = 5.0
-) -> VeinPixels:
-    """Centre line of one vein's mask and the signed distance of every pixel near it.
-
-    Parameters
-    ----------
-    component : ndarray (H, W) bool
-        The vein's pixels (one connected component of a mask).
-    others : ndarray (H, W) bool
-        Every other vein's pixels: pixels within ``guard_mm`` of them are left out.
-    geometry : RowGeometry
-    mm_per_row : float
-        Size of a projector row on the skin, mm.
-    reach_mm : float
-        Pixels up to this distance from the centre line are used, mm.
-    guard_mm : float
-        Distance kept from other veins, mm.
-    """
-    shape = component.shape
-    xs, ys, col_mm = _pixel_mm(geometry, mm_per_row, shape)
-    row_mm = geometry.rows_per_camera_row * mm_per_row
-    line = centre_line(component, geometry, mm_per_row=mm_per_row)
-    S = line.points_mm
-    X, Y = np.meshgrid(xs, ys, indexing="ij")
-    dist_other = distance_transform_edt(~others, sampling=(row_mm, col_mm)) if others.any() else np.full(shape, np.inf)
-    near = dist_other > guard_mm
-    P = np.stack([X[near], Y[near]], axis=1)
-    d, rho, angle, ok = _line_coords(line, P)
-    keep = d <= reach_mm
-    P, rho, angle, ok = P[keep], rho[keep], angle[keep], ok[keep]
-    ri, ci = np.nonzero(near)
-    ri, ci = ri[keep][ok], ci[keep][ok]
-    centre = S.mean(axis=0)
-    comp_pts = line.mask_points_mm
-    _, _, vt = np.linalg.svd(comp_pts - comp_pts.mean(axis=0), full_matrices=False)
-    along_all = comp_pts @ vt[0]
-    length = float(along_all.max() - along_all.min()) + min(row_mm, col_mm)
-    return VeinPixels(
-        rows=ri,
-        cols=ci,
-        rho_mm=rho[ok],
-        angle_deg=angle[ok],
-        x_mm=P[ok, 0] - centre[0],
-        y_mm=P[ok, 1] - centre[1],
-        width_mm=float(component.sum() * row_mm * col_mm / length),
-        line=line,
-    )
 
 
 # ---------------------------------------------------------------- the fit
@@ -1009,8 +629,8 @@ def _background_quality(model: VeinModel, B, var_B, relative_sd, p_misfit):
     mid = model.geometry.camera_rows // 2
     s0 = background_signals(model, [mid])[:, 0]
     # the kernel's Monte Carlo error through the band weights (independent bins), relative to each image's signal
-    offsets, wide, half, foot = _offsets(model)
-    w = _row_weights(model, [mid], offsets)[0]  # (K, U)
+    offsets, wide, half, foot = model_offsets(model)
+    w = row_weights(model, [mid], offsets)[0]  # (K, U)
     err = np.interp(offsets.astype(float), model.table.offsets_rows, model.table.kernel_stderr, left=0.0, right=0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         rel_mc = np.sqrt((w**2 * err[None, :] ** 2).sum(axis=1)) / s0

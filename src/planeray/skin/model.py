@@ -129,7 +129,7 @@ def tables_to_trace(model: SkinLayers, tone, *, mm_per_row: float) -> list:
 
 def trace_seconds(stacks, *, mm_per_row: float) -> float:
     """Estimated seconds to trace the vein tables of ``stacks`` on this machine (a timed pilot run each)."""
-    from ..mc.layered import vein_table_seconds
+    from ..kernels.vein import vein_table_seconds
     from ..scenes.skin import TABLE_PHOTONS
 
     return float(

@@ -350,7 +350,7 @@ def make_app(source: ViewSource, *, token: str, loopback_only: bool = True, repo
     from starlette.routing import Route, WebSocketRoute
     from starlette.websockets import WebSocketDisconnect
 
-    from ..io._common import planeray_version
+    from ..io import planeray_version
 
     static = _load_static()
     hello = {

@@ -25,14 +25,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mc import mc_line_profile
-from .mc.diffusion import (
+from ..errors import InputError
+from ..mc import mc_line_profile
+from ..mc.diffusion import (
     boundary_mismatch_A,
     dipole_line_kernel,
     dipole_reflectance,
     dipole_total_reflectance,
 )
-from .medium import Medium, as_medium
+from ..medium import Medium, as_medium
 
 __all__ = [
     "boundary_mismatch_A",
@@ -121,4 +122,4 @@ def line_kernel(medium: Medium, offsets_rows, *, mm_per_row, model):
         )
     if model == "mc":
         return mc_line_kernel(medium, offsets_rows, mm_per_row=mm_per_row)
-    raise ValueError(f"unknown kernel model {model!r}; expected one of {KERNEL_MODELS}")
+    raise InputError(f"unknown kernel model {model!r}; expected one of {KERNEL_MODELS}")

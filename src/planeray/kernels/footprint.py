@@ -1,0 +1,39 @@
+"""A camera row's footprint on the projector's rows: what a pixel's kernel is averaged over.
+
+A camera row spans ``rows_per_camera_row`` projector rows (the capture's geometry); a
+Lambertian surface returns each in equal share (:func:`planeray.timing.band_bin_weights`).
+The scenes spread a pixel's direct light with :func:`footprint_kernel`; the forward model of
+the fit averages the line kernel over :func:`camera_row_footprint`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..timing import band_bin_weights
+
+__all__ = ["footprint_kernel", "camera_row_footprint"]
+
+
+def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
+    """Direct light of one camera row spread over the projector rows it spans.
+
+    A camera row covers ``rows_per_camera_row`` projector rows; a Lambertian
+    surface returns each of them in equal share.  Sums to 1.
+    """
+    k = band_bin_weights(offsets_rows, 0.0, rows_per_camera_row)
+    return (k / k.sum()).astype(np.float64)
+
+
+def camera_row_footprint(rows_per_camera_row):
+    """``(offsets, weights)``: the projector-row offsets a camera row spans around its centre and their shares.
+
+    One row (``rows_per_camera_row <= 1``): ``([0], [1])``.  The weights sum to 1.
+    """
+    rpc = float(rows_per_camera_row)
+    if rpc <= 1.0 + 1e-12:
+        return np.zeros(1, np.int64), np.ones(1)
+    half = int(np.ceil(0.5 * rpc + 0.5))
+    f = np.arange(-half, half + 1)
+    w = band_bin_weights(f, 0.0, rpc)
+    return f, w / w.sum()
