@@ -363,7 +363,7 @@ def test_cross_validation_predicts_left_out_images_with_the_ambient():
     B = np.asarray(stack.images, np.float64)[problem.image_index, 0, :].T
     e = problem.exposure_rows
     N = B.shape[1]
-    split = auto_mod._folds(N, 5, 0)
+    split = auto_mod.fold_indices(N, 5, 0)
     alpha, beta = 0.1, 1e-3
     ours = auto_mod.cv_score([g], [B], [None], [np.ones_like(B)], split, alpha, beta, tol=1e-7, threads=1, ambient=e)
     with_a, without_a = np.zeros(B.shape[0]), np.zeros(B.shape[0])

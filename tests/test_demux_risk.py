@@ -187,7 +187,7 @@ def test_solves_stopped_at_a_certified_gap_shape_the_curves_at_small_alpha(monke
     Exact solves: every pixel to the iteration cap, then the float64 active-set finish.
     """
     group, X_true, B, w = _issue_geometry()
-    folds = auto_mod._folds(B.shape[1], 5, 0)
+    folds = auto_mod.fold_indices(B.shape[1], 5, 0)
     beta = 0.01
 
     def scores(a, tol, exact=False):
