@@ -63,6 +63,17 @@ class CameraModel:
         Gaussian sigma of laser-to-shutter timing jitter (blurs band edges).
     row_jitter_us : float
         Gaussian sigma of the per-frame, per-row trigger offset (row artifacts).
+
+    See Also
+    --------
+    planeray.SimulatedEpiscan : the simulated device that uses it.
+    planeray.simulate_stack : a simulated sweep.
+
+    Examples
+    --------
+    >>> cam = CameraModel(read_noise_e=2.0)
+    >>> cam.max_code, cam.frames_averaged
+    (4095, 8)
     """
 
     bit_depth: int = 12

@@ -113,6 +113,23 @@ def line_kernel(medium: Medium, offsets_rows, *, mm_per_row, model):
     -------
     kernel : ndarray of float64
     total : float
+
+    See Also
+    --------
+    planeray.Medium : the medium's optical constants.
+    planeray.mc_line_profile : the Monte Carlo profile behind ``model="mc"``.
+
+    Examples
+    --------
+    The dipole's kernel of a scattering medium, one value per offset (projector rows):
+
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> kernel, total = pr.line_kernel(
+    ...     pr.Medium(sigma_s=1.0, sigma_a=0.01, g=0.0), np.arange(-3, 4), mm_per_row=0.5, model="dipole"
+    ... )
+    >>> kernel.shape, bool(kernel[3] == kernel.max()), bool(0 < total < 1)
+    ((7,), True, True)
     """
     if model == "dipole":
         return (

@@ -73,6 +73,10 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     pixels : array_like (P, 2)
         ``(row, col)`` pixel coordinates.
 
+    See Also
+    --------
+    transport_delay_profiles : the same from a transport, at any delay.
+
     Examples
     --------
     >>> from planeray.acquire import simulate_stack
@@ -82,6 +86,12 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     >>> prof = measured_delay_profiles(stack, [(8, 8)])
     >>> prof.values.shape  # (pixels, exposures, delays)
     (1, 5, 17)
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Fig. 9.
     """
     px = _check_pixels(pixels, stack.shape)
     delays, exposures = stack.delays(), stack.exposures()
@@ -202,10 +212,28 @@ def transport_delay_profiles(
         ``values`` is ``(H, W, D)`` for ``pixels=None``, else ``(P, D)``;
         area-normalized over delay in milliseconds like :func:`area_normalize`.
 
+    See Also
+    --------
+    measured_delay_profiles : the profiles of a captured stack (Fig. 9).
+
     Notes
     -----
     Without an exposure only the dense band is used: sparse long-range entries
     have no place on the band's offset grid.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4, Fig. 9.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> T = pr.make_scene("corner", (8, 8), seed=0).transport
+    >>> profiles = pr.transport_delay_profiles(T, [(4, 4)], exposure_us=600.0)
+    >>> profiles.values.shape[0], profiles.exposure_us
+    (1, 600.0)
     """
     from .timing import Band
 

@@ -281,6 +281,15 @@ class RowGeometry:
         Number of projector rows ``P`` seen by the camera; defaults to ``H``
         (one camera row per projector row).  ``P = 720, H = 128`` models the
         paper's 128x128 images of a 720-row PicoPro.
+
+    See Also
+    --------
+    planeray.Transport : a transport over this geometry.
+
+    Examples
+    --------
+    >>> RowGeometry(128, 720).rows_per_camera_row
+    5.625
     """
 
     camera_rows: int
@@ -393,6 +402,40 @@ class Band:
     a realized per-frame, per-row trigger offset in projector rows; the weights are
     then the average over the ``F`` frames -- this is what produces horizontal row
     artifacts when a band edge sits on the epipolar plane (``|t_d| ~ t_e/2``).
+
+    Parameters
+    ----------
+    delay_us : float
+        Synchronization delay ``t_d`` in microseconds.
+    exposure_us : float
+        Row exposure ``t_e`` in microseconds (> 0).
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second (Eq. 2).
+    jitter_us : float
+        Standard deviation of the synchronization jitter, microseconds.
+    line_width_us : float
+        Width of the laser line in scan time, microseconds.
+    row_shifts_rows : ndarray (F, H), optional
+        Realized per-frame, per-row trigger offsets in projector rows.
+
+    See Also
+    --------
+    planeray.band_image : the image of a band.
+    Sweep : one band per image.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Eqs. 2-3.
+
+    Examples
+    --------
+    The paper's scan rate turns microseconds into projector rows (Eq. 2):
+
+    >>> band = Band(delay_us=375.0, exposure_us=600.0)
+    >>> band.centre_rows, band.width_rows
+    (20.25, 32.4)
     """
 
     delay_us: float
@@ -592,6 +635,23 @@ class RowPattern:
     ``pattern`` has one value per projector row ``v = 0 .. P-1``; the weight of an
     offset bin is the exact average of the piecewise-constant pattern over the
     bin's part inside the projector (:meth:`RowGeometry.bin_parts`).
+
+    Parameters
+    ----------
+    pattern : ndarray (P,)
+        Intensity of each projector row (1 = full intensity).
+
+    See Also
+    --------
+    planeray.relight : the image under a pattern.
+    Band : a (delay, exposure) illumination.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = RowPattern(np.ones(4)).weights(RowGeometry(4), np.arange(4)[:, None], np.array([-1, 0, 1]))
+    >>> w.tolist()[0]  # the row above row 0 is off the projector
+    [0.0, 1.0, 1.0]
     """
 
     pattern: np.ndarray
@@ -621,6 +681,34 @@ class Sweep:
     left out of demultiplexing (Sec. 4).  ``record`` holds what a sweep file says about
     where the sweep came from (a designed sweep: its prior, camera and criterion;
     :func:`planeray.io.read_sweep`), or None.
+
+    Parameters
+    ----------
+    delay_us, exposure_us : ndarray (N,)
+        Delay ``t_d`` and exposure ``t_e`` of each image, microseconds.
+    excluded : ndarray of bool (N,)
+        Images left out of demultiplexing.
+    name : str
+        A name for the record (``"paper"``, ``"quick"``, ``"custom"``).
+    record : dict, optional
+        Where the sweep came from (a sweep file's record).
+
+    See Also
+    --------
+    paper_sweep, quick_sweep, make_sweep
+    Sweep.grid : every delay at every exposure.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    >>> sweep = Sweep.grid([-750.0, 0.0, 750.0], [600.0])
+    >>> len(sweep), sweep.excluded.tolist()
+    (3, [False, False, False])
     """
 
     delay_us: np.ndarray
@@ -670,6 +758,11 @@ def paper_sweep() -> Sweep:
     """The paper's sweep (Sec. 6): delays -1500..1500 us step 187.5 (17) x exposures
     600..1200 us step 150 (5) = 85 images, 10 boundary images flagged -> N = 75.
 
+    See Also
+    --------
+    quick_sweep : 27 images for quick looks.
+    Sweep.grid : any grid of delays and exposures.
+
     Examples
     --------
     >>> sweep = paper_sweep()
@@ -677,12 +770,39 @@ def paper_sweep() -> Sweep:
     (85, 10)
     >>> sweep_support_rows(sweep, PAPER_LINES_PER_SECOND)
     114
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6.
     """
     return Sweep.grid(np.arange(-8, 9) * 187.5, np.arange(600.0, 1201.0, 150.0), name="paper")
 
 
 def quick_sweep() -> Sweep:
-    """A small sweep for quick looks and tests: 9 delays x 3 exposures."""
+    """A small sweep for quick looks and tests: 9 delays x 3 exposures.
+
+    Delays -1500..1500 us in steps of 375 us, exposures 600, 900 and 1200 us; the
+    boundary images (band edge on the epipolar plane) are flagged as in
+    :func:`paper_sweep`.
+
+    Returns
+    -------
+    Sweep
+        27 (delay, exposure) settings in microseconds.
+
+    See Also
+    --------
+    paper_sweep : the paper's 85-image sweep.
+    make_sweep : a named sweep.
+
+    Examples
+    --------
+    >>> sweep = quick_sweep()
+    >>> len(sweep), int(sweep.excluded.sum()), sweep.name
+    (27, 4, 'quick')
+    """
     return Sweep.grid(np.arange(-4, 5) * 375.0, np.array([600.0, 900.0, 1200.0]), name="quick")
 
 
@@ -691,7 +811,33 @@ SWEEPS = {"paper": paper_sweep, "quick": quick_sweep}
 
 
 def make_sweep(name: str) -> Sweep:
-    """Look up a named sweep in :data:`SWEEPS`."""
+    """A named sweep of :data:`SWEEPS` (what ``--sweep NAME`` of the command line takes).
+
+    Parameters
+    ----------
+    name : {'paper', 'quick'}
+        ``"paper"``: the paper's 85 images (Sec. 6); ``"quick"``: 27 images.
+
+    Returns
+    -------
+    Sweep
+        The (delay, exposure) settings in microseconds.
+
+    Raises
+    ------
+    ValueError
+        An unknown name (the message lists the known ones).
+
+    See Also
+    --------
+    paper_sweep, quick_sweep
+    planeray.io.read_sweep : a sweep from a file.
+
+    Examples
+    --------
+    >>> len(make_sweep("paper")), len(make_sweep("quick"))
+    (85, 27)
+    """
     try:
         return SWEEPS[name]()
     except KeyError:

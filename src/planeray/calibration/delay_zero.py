@@ -225,6 +225,30 @@ def calibrate_delay_zero(
     InputError
         Non-finite or blank images, a sweep that does not bracket the peak, fewer
         than 5 delays.
+
+    See Also
+    --------
+    delay_zero_sweep : the fine sweep it reads.
+    device_capture : a ``capture(delay_us)`` from any device.
+    calibrate_lines_per_second : the scan rate.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6 (calibration).
+
+    Examples
+    --------
+    A device whose synchronization is 40 us late:
+
+    >>> import planeray as pr
+    >>> from planeray.calibration import delay_zero_sweep, device_capture
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("diffuse_plane", (16, 16), projector_rows=90, seed=0), seed=1)
+    >>> sweep = delay_zero_sweep(600.0, step_us=20.0)
+    >>> cal = pr.calibrate_delay_zero(device_capture(device, delay_error_us=40.0), sweep.delay_us)
+    >>> abs(cal.delay_zero_us - 40.0) < 10.0
+    True
     """
     d = np.asarray(delays_us, dtype=np.float64).ravel()
     if d.size < 5 or not np.all(np.isfinite(d)):

@@ -413,6 +413,12 @@ def demultiplex(
     DemuxResult
         ``transport`` (``T`` over ``offsets_rows``), per-pixel ``maps`` and ``attrs``.
 
+    See Also
+    --------
+    demultiplex_to_store : the same into a resumable store on disk.
+    DemuxProblem : the problem it solves.
+    planeray.demux.choose_weights : the ``"auto"`` weights.
+
     Examples
     --------
     >>> from planeray.acquire import simulate_stack
@@ -422,6 +428,12 @@ def demultiplex(
     >>> result = demultiplex(stack)
     >>> result.transport.dense.shape, bool(result.maps["converged"].all())
     ((8, 8, 229), True)
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4, the optimization below Eq. 6.
     """
     ambient = resolve_ambient(ambient, alpha, beta)
     _check_run_options(method, chunk_rows, tol, ambient=ambient)
@@ -583,6 +595,28 @@ def demultiplex_to_store(
     -------
     pathlib.Path
         The finished store.
+
+    See Also
+    --------
+    planeray.demultiplex : the same in memory.
+    planeray.read_transport : read the store back.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.demultiplex_to_store(stack, pathlib.Path(tmp) / "T.zarr")
+    ...     T, attrs = pr.read_transport(path)
+    >>> T.dense.shape, attrs["alpha"]
+    ((8, 8, 229), 0.01)
     """
     out = Path(out)
     check_replaceable(out, overwrite=overwrite, kind="transport", error=TransportError)

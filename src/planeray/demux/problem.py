@@ -145,6 +145,25 @@ class DemuxProblem:
     exposure_rows : ndarray (N,) float64
         Row exposure of each used image in projector rows (``I_w``, Eq. 2): the
         ambient column.
+
+    See Also
+    --------
+    planeray.demultiplex : solve it for a whole stack.
+    planeray.demux.SOLVERS : the solvers by name.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4, the optimization below Eq. 6.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> problem = pr.DemuxProblem.from_stack(stack, alpha=0.01, beta=0.01)
+    >>> problem.n_offsets, len(problem.image_index)  # offsets u = -114..114; 4 boundary images left out
+    (229, 23)
     """
 
     def __init__(

@@ -57,6 +57,21 @@ def write_stack(stack: Stack, path, *, overwrite: bool = False, progress=None) -
     StackError
         ``path`` exists and ``overwrite`` is False, an image is not finite or does
         not match the stack's shape, or the metadata is not JSON-serializable.
+
+    See Also
+    --------
+    read_stack : read it back.
+    planeray.export_folder : an import folder of image files instead.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.write_stack(stack, pathlib.Path(tmp) / "stack.zarr")
+    ...     path.name, pr.read_stack(path).images.shape
+    ('stack.zarr', (27, 8, 8))
     """
     path = Path(path)
     if not isinstance(stack, Stack):
@@ -152,6 +167,11 @@ def read_stack(path, *, lazy: bool = True) -> Stack:
         ``all_chunks_stored`` -- e.g. ``s.zarr: images: chunk (12, 2, 0) is missing
         (image 12, rows 64-95) -- the store is incomplete`` -- or that cannot be
         decoded...).
+
+    See Also
+    --------
+    write_stack : write one.
+    planeray.import_folder : a folder of image files.
 
     Notes
     -----

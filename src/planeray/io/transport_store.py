@@ -111,6 +111,20 @@ def write_transport(
     TransportError
         ``path`` exists and ``overwrite`` is False, or ``attrs`` is not
         JSON-serializable.
+
+    See Also
+    --------
+    read_transport : read it back.
+    planeray.demultiplex_to_store : demultiplex straight into a store.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> T = pr.make_scene("corner", (8, 8), seed=0).transport
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     pr.write_transport(T, pathlib.Path(tmp) / "T.zarr").name
+    'T.zarr'
     """
     path = Path(path)
     if not isinstance(transport, Transport):
@@ -162,11 +176,27 @@ def read_transport(path) -> tuple[Transport, dict]:
         0) is missing (rows 64-127) -- the store is incomplete`` -- or a chunk that
         cannot be decoded).
 
+    See Also
+    --------
+    write_transport : write one.
+    planeray.demultiplex_to_store : demultiplex into one.
+
     Notes
     -----
     Stores written by this version of planeray store every chunk and carry the
     attribute ``all_chunks_stored = true``; older stores, which skipped chunks
     equal to the fill value, are read with absent chunks as 0.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> T = pr.make_scene("corner", (8, 8), seed=0).transport
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.write_transport(T, pathlib.Path(tmp) / "T.zarr", attrs={"note": "ground truth"})
+    ...     back, attrs = pr.read_transport(path)
+    >>> back.dense.shape == T.dense.shape, attrs["note"]
+    (True, 'ground truth')
     """
     path = Path(path)
     group = open_group(path, TransportError)

@@ -375,6 +375,11 @@ def mc_line_profile(
         of a line source along ``y`` lit at ``x = 0``, with batch standard errors
         and the energy balance.
 
+    See Also
+    --------
+    planeray.line_kernel : the tabulated kernel for a scene.
+    planeray.Medium : the optical constants.
+
     Notes
     -----
     See the module docstring for the transport scheme (MCML [1]_, HG sampling

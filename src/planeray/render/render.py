@@ -528,6 +528,29 @@ def render_transport(
     Returns
     -------
     RenderResult
+
+    See Also
+    --------
+    planeray.render.RenderResult : what it returns.
+    planeray.make_scene : the built-in analytic scenes.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Eq. 4.
+    .. [2] W. Jakob et al., "Mitsuba 3 renderer", https://mitsuba-renderer.org, 2022.
+
+    Examples
+    --------
+    A corner of a room, 8 x 8 pixels, 4 samples per pixel:
+
+    >>> from importlib.resources import files
+    >>> import planeray as pr
+    >>> scene = files("planeray") / "render" / "scenes" / "room_corner.xml"
+    >>> result = pr.render_transport(scene, shape=(8, 8), projector_rows=16, spp=4, band_rows=8)
+    >>> result.transport.dense.shape
+    (8, 8, 17)
     """
     import time
 

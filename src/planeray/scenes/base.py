@@ -138,6 +138,16 @@ def list_scenes(*, parametric: bool = False) -> dict[str, str]:
 
     With ``parametric``, the scenes that take an argument are listed too, as
     ``NAME:ARGUMENT`` (e.g. ``mitsuba:FILE.xml``).
+
+    See Also
+    --------
+    make_scene : build one by name.
+
+    Examples
+    --------
+    >>> scenes = list_scenes()
+    >>> "wax" in scenes, "skin" in scenes
+    (True, True)
     """
     _discover()
     out = {k: v.description for k, v in sorted(_REGISTRY.items()) if v.argument is None}
@@ -182,6 +192,11 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
         Seed of every random element (textures); same seed, same bytes.
     **params
         Scene-specific physical parameters (see each scene's docstring).
+
+    See Also
+    --------
+    list_scenes : the names.
+    planeray.simulate_stack : capture a sweep of it.
 
     Examples
     --------

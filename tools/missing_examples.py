@@ -1,0 +1,77 @@
+"""List the public names of planeray whose docstring lacks an Examples section.
+
+The public names are those of ``planeray.__all__`` (the front door, ``import planeray as pr``) and of
+the ``__all__`` of each public top-level module and subpackage (``planeray.demux``, ``planeray.skin``,
+...: the modules of the API reference).  Only functions and classes are listed: a constant
+(``PAPER_LINES_PER_SECOND``, ``__version__``) or a module has no docstring of its own to hold one.
+
+Usage::
+
+    python tools/missing_examples.py           # one line per name lacking an Example, then the count
+    python tools/missing_examples.py --count   # the counts only
+
+Exits 1 when a name lacks an Example (so CI or a test can use it), 0 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import inspect
+import pkgutil
+import re
+import sys
+
+_EXAMPLES = re.compile(r"^\s*Examples\s*\n\s*-{8,}\s*\n", re.MULTILINE)
+
+
+def public_names() -> dict[str, object]:
+    """Every public function and class, by the dotted name a user imports it under (first seen wins)."""
+    import planeray
+
+    found: dict[str, object] = {}
+    seen: set[int] = set()
+    modules = [("planeray", planeray)]
+    for info in sorted(pkgutil.iter_modules(planeray.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        modules.append((f"planeray.{info.name}", importlib.import_module(f"planeray.{info.name}")))
+    for prefix, module in modules:
+        for name in getattr(module, "__all__", ()):
+            obj = getattr(module, name, None)
+            if not (inspect.isfunction(obj) or inspect.isclass(obj)):
+                continue  # constants, modules
+            if id(obj) in seen:
+                continue
+            seen.add(id(obj))
+            found[f"{prefix}.{name}"] = obj
+    return found
+
+
+def has_example(obj) -> bool:
+    """Whether the object's own docstring has a numpydoc Examples section with a ``>>>`` line."""
+    doc = inspect.getdoc(obj) or ""
+    m = _EXAMPLES.search(doc)
+    return bool(m) and ">>>" in doc[m.end() :]
+
+
+def missing() -> list[str]:
+    """The dotted names of the public functions and classes without an Example."""
+    return [name for name, obj in public_names().items() if not has_example(obj)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--count", action="store_true", help="print the counts only")
+    args = parser.parse_args(argv)
+    names = public_names()
+    lacking = missing()
+    if not args.count:
+        for name in lacking:
+            print(name)
+    print(f"{len(lacking)} of {len(names)} public functions and classes lack an Example", file=sys.stderr)
+    return 1 if lacking else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
