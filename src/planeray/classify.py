@@ -32,7 +32,7 @@ __all__ = [
 #: keyword (tuned on demultiplexed transports of the built-in scenes: 64x64
 #: camera rows of a 360-row projector, the paper's sweep, the default camera,
 #: four seeds; the strong-peak contrast, the displaced share and the core
-#: broadening re-tuned for issue 23 on every built-in scene at 64, 128 and 256
+#: broadening re-tuned with the edge rule on every built-in scene at 64, 128 and 256
 #: camera rows of 720, seeds 0 and 1; checked on the ground truth).
 CLASSIFY_THRESHOLDS = {
     "smooth_bins": 5,  # box smoothing over offsets before floor and peak finding
@@ -143,7 +143,7 @@ def _tail_floor(S, valid, offsets, tail_rows, clip=5.0):
     the valid samples of the other one does not count: a few samples of a
     sparse estimate are often all zero, and a floor of 0 turned the whole
     ambient floor into "indirect light" (two camera rows near each end of the
-    projector read as subsurface, issue 23).
+    projector read as subsurface).
     """
     N = S.shape[0]
     levels, counts = [], []

@@ -1,4 +1,4 @@
-"""Goodness of fit: when a measurement cannot be trusted (issue 41).
+"""Goodness of fit: when a measurement cannot be trusted.
 
 Every inverse method of planeray (``materials fit`` per region and per block, the stack fit,
 ``skin depth``, recognition) fits a forward model to data whose noise it knows (the camera's

@@ -17,11 +17,11 @@ dermis
     saturation ``S = 0.7``, water ``W = 0.65``.
 blood
     ``mu_a,blood(S) = S mu_a,oxy + (1 - S) mu_a,deoxy`` of whole blood (150 g/L Hb).  The
-    venous value (``S = 0.7``) at each line is the one issue 13 quotes from [1]_ (0.892 and
+    venous value (``S = 0.7``) at each line is the one quoted from [1]_ (0.892 and
     0.512 mm^-1); the split into oxy and deoxy follows the ratio of Prahl's tabulated molar
     extinction coefficients [2]_ (Gratzer/Kollias, 640 nm: 442 / 4345.2 cm^-1/M; 850 nm:
     1058 / 691.32 cm^-1/M), so changing ``S`` moves ``mu_a`` as the haemoglobin spectra do.
-    Blood scattering: ``mu_s`` 7.84 / 5.88 mm^-1 (issue 13 after [1]_), ``g = 0.9``.
+    Blood scattering: ``mu_s`` 7.84 / 5.88 mm^-1 (after [1]_), ``g = 0.9``.
 water
     Hale & Querry 1973 [4]_: 0.00031 mm^-1 at 638 nm, 0.0043 mm^-1 at 850 nm.
 scattering of epidermis and dermis
@@ -29,7 +29,7 @@ scattering of epidermis and dermis
     the values of the generic-skin scattering power laws of [1]_.
 subcutaneous fat
     Bashkatov et al. 2005 [5]_: ``mu_s' = 2.7 mm^-1`` and ``mu_a = 0.19 mm^-1`` at 600 nm
-    (the values issue 13 quotes).  ``mu_s'`` is scaled as ``lambda^-0.68``; ``mu_a`` at 600 nm
+    (the values quoted there).  ``mu_s'`` is scaled as ``lambda^-0.68``; ``mu_a`` at 600 nm
     is mostly the blood in the fat, so it is carried to 638 and 850 nm with the absorption
     spectrum of blood at ``S = 0.7`` (Prahl [2]_, 600 nm: 3200 / 14677.2 cm^-1/M; a factor
     0.24 at 638 nm and 0.14 at 850 nm) plus water (``W = 0.2``): 0.046 and 0.028 mm^-1.
@@ -94,7 +94,7 @@ SKIN_G = 0.9
 SKIN_N = 1.4
 
 _WATER_MU_A = {638: 0.00031, 850: 0.0043}  # Hale & Querry 1973 [4]
-_VENOUS_MU_A = {638: 0.892, 850: 0.512}  # S = 0.7 whole blood, issue 13 after Jacques 2013 [1]
+_VENOUS_MU_A = {638: 0.892, 850: 0.512}  # S = 0.7 whole blood, after Jacques 2013 [1]
 _VENOUS_S = 0.7
 _HB_EPSILON = {638: (442.0, 4345.2), 850: (1058.0, 691.32)}  # Prahl [2]: (HbO2, Hb), cm^-1/M
 _BLOOD_MU_S = {638: 7.84, 850: 5.88}

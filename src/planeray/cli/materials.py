@@ -997,7 +997,7 @@ def recognize_cmd(
     truth = _read_labels(labels, "--labels", shape) if labels is not None else None
     by_containers = lib.physical and pool_mm is None and planeray_output_kind(input_path) != "transport"
     details = None
-    if by_containers:  # each container fitted from the stack's images (issue 41)
+    if by_containers:  # each container fitted from the stack's images
         from ..camera import CameraModel
 
         stack, meta, mm = _stack_and_row_size(input_path, mm_per_row)

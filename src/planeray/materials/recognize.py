@@ -1,4 +1,4 @@
-"""Recognition by fitted parameters over an image: fit, name, pool (issue 27, part 2).
+"""Recognition by fitted parameters over an image: fit, name, pool.
 
 * :func:`fit_image`: ``mu_s'`` and ``mu_a`` per block of pixels (within regions, when
   given) with :func:`planeray.materials.fit.fit_profiles`, and on which side of the forward
@@ -383,7 +383,7 @@ def accuracy_by_distance(pred, truth, wall_distance_mm, *, classes, bins_mm=WALL
     return out
 
 
-# ---------------------------------------------------------------- recognition that travels (issue 41)
+# ---------------------------------------------------------------- recognition that travels
 #: Chi-square gain that makes a pixel "a scattering medium": the best medium kernel (one more coefficient than
 #: a surface's direct light) must improve the chi-square by this much -- chi2.isf(1e-6, 1) = 24 for one kernel,
 #: rounded up for the choice among :data:`_GENERIC_MEDIA` and the library's (a look-elsewhere margin).

@@ -91,7 +91,7 @@ References
    resolution diffuse optical tomography using short range indirect subsurface
    imaging", ICCP 2020.
 .. [3] S. Y. Park et al., forearm vein depth 4.8 +- 2.2 mm and diameters 3-4.5 mm by
-   ultrasound (issue 13), 2023.
+   ultrasound, 2023.
 """
 
 from __future__ import annotations
