@@ -29,7 +29,7 @@ interpolated smoothly (cubic) in ``log K`` over ``(log mu_s', sqrt(mu_a))``.
   path around the line (offsets below ``1 / mu_s'``), which at the capture's sampling
   carries little of the profile and cannot be separated from ``mu_s'`` with a single
   line kernel.  The bias this costs for a medium of another ``g`` is measured
-  (docs/user_guide/materials.md, "Measuring the medium").
+  (docs/user_guide/materials_fit.md).
 * **Refractive index** ``n``: the table's (:data:`DEFAULT_N` = 1.33, water-based media);
   the user states another by building a table with it (:func:`build_forward_table`).
 * **Camera rows.**  A camera row spans ``rows_per_camera_row`` projector rows; its kernel

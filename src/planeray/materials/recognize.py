@@ -6,7 +6,7 @@
 * :func:`recognize_image`: those maps named against a :class:`~planeray.materials.library.MediaLibrary`,
   per pixel and, by default, with the log-likelihoods pooled over a disc
   (:data:`DEFAULT_POOL_MM`) -- the default that the recognition study measured best next to
-  container walls (docs/user_guide/materials.md, "Recognition by parameters");
+  container walls (docs/user_guide/materials_library.md);
 * :func:`accuracy_by_distance`: per-class accuracy in bins of distance to the nearest wall
   (:data:`WALL_BINS_MM`);
 * :func:`entries_from_capture`: library entries from labelled regions of a capture ("add

@@ -108,8 +108,8 @@ STACK_MODEL_RELATIVE_SD = MODEL_RELATIVE_SD
 #: over the offsets (table interpolation: 2-6 % against direct Monte Carlo, tests and tools/validate_stack_fit.py).
 STACK_MODEL_CORRELATED_SD = 0.03
 #: The walls' effect on the kernel (diffusion theory's method of images) is off by this share of itself: against
-#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect (
-#: docs/user_guide/materials.md, "Container walls").
+#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect
+#: (docs/user_guide/materials_fit.md, "Container walls").
 WALL_EFFECT_SD = 0.2
 #: (and, both, their distances by a transport mean free path: ``_fit_region``'s ``effect_columns``)
 #: Diffusion theory's walls and bottom are trusted DIFFUSION_RANGE_MFP transport mean free paths (1 / mu_s') away

@@ -94,7 +94,7 @@ __all__ = [
 #: were off by up to 0.52 mm; at a 0.25 mm threshold two fits at 0.20 and 0.23 mm were off by 0.57 and 0.56 mm).
 MAX_DEPTH_SE_MM = 0.2
 #: The forward model's error, measured against forward models it was not built from -- brute-force Monte
-#: Carlo with the blood in the medium (docs/user_guide/skin.md, "What the checks say": the fast model's short-range
+#: Carlo with the blood in the medium (docs/user_guide/skin_scene.md, "What the checks say": the fast model's short-range
 #: contrast within 0-9 % for veins 1-2 mm deep, 18-25 % low for 3 mm, 12-16 % low on dark skin):
 #: the vein's contrast is off by a common factor ``1 + s``, ``s`` a nuisance parameter of the fit with a Gaussian prior
 #: of this standard deviation (its uncertainty enters every standard error) ...
