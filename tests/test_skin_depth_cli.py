@@ -214,3 +214,48 @@ def test_the_row_size_comes_from_acquisition_json_and_the_fit_says_whether_the_m
     r = _run("skin", "depth", folder("silent"), "--out", tmp_path / "depth2", *common)
     assert one_line_error(r) and "mm_per_row" in r.output and "acquisition.json" in r.output
     assert not (tmp_path / "depth2").exists()
+
+
+def test_new_vein_tables_are_announced_with_an_estimate_before_tracing_and_shipped_ones_silently_used(
+    capture, tmp_path, monkeypatch
+):
+    """A row size the shipped tables were not traced at (0.31 mm; 451 s of silence once): the tables to trace
+    are named with a time measured on a pilot run *before* tracing starts, then traced under a progress bar;
+    at the capture's own 0.3 mm (shipped tables) nothing is announced."""
+    import planeray.skin.depth as depth
+    import planeray.skin.model as model
+    from planeray.skin.model import stated_skin_model, tables_to_trace
+
+    monkeypatch.setenv("PLANERAY_CACHE", str(tmp_path / "empty-cache"))  # no user cache: only shipped tables
+    skin, _ = stated_skin_model({}, tone="fair", wavelength_nm=638)
+    assert tables_to_trace(skin, "fair", mm_per_row=0.3) == []  # the capture's row size: shipped
+    assert tables_to_trace(skin, "fair", mm_per_row=0.31) != []  # another one: to trace
+
+    events = []
+
+    def pilot(stacks, *, mm_per_row):
+        events.append(("pilot", mm_per_row))
+        return 451.0
+
+    class Traced(Exception):
+        pass  # raised by the stand-in: tracing started
+
+    def trace(*args, progress=None, **kw):
+        events.append(("trace", kw["mm_per_row"]))
+        raise Traced  # what was printed before tracing is what this test checks
+
+    real_vein_model = depth.vein_model
+    monkeypatch.setattr(model, "trace_seconds", pilot)
+    monkeypatch.setattr(depth, "vein_model", trace)
+    r = _run("skin", "depth", capture / "arm.zarr", "--mask", capture / "mask.png", "--mm-per-row", "0.31",
+             "--out", tmp_path / "o")  # fmt: skip
+    out = " ".join(r.output.split())
+    note = out.index("neither shipped nor cached")
+    assert "about 8 minutes" in out and "pilot run" in out, out
+    assert r.exit_code == 1 and note < out.index("Traced") and not (tmp_path / "o").exists()  # then tracing began
+    assert events == [("pilot", 0.31), ("trace", 0.31)]
+    events.clear()
+    monkeypatch.setattr(depth, "vein_model", real_vein_model)
+    r = _run("skin", "depth", capture / "arm.zarr", "--mask", capture / "mask.png", "--out", tmp_path / "o2")
+    assert r.exit_code == 0, r.output
+    assert "neither shipped nor cached" not in r.output and events == []  # no pilot run either
