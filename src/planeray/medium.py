@@ -204,7 +204,14 @@ class Medium:
 
 
 def as_medium(value) -> Medium:
-    """``value`` if it is a :class:`Medium`; otherwise a ``TypeError`` saying how to build one."""
+    """``value`` if it is a :class:`Medium`; otherwise a ``TypeError`` saying how to build one.
+
+    Examples
+    --------
+    >>> m = Medium(sigma_s=1.0, sigma_a=0.01, g=0.9)
+    >>> as_medium(m) is m
+    True
+    """
     if isinstance(value, Medium):
         return value
     raise TypeError(

@@ -38,6 +38,14 @@ class DelayProfiles:
         Area-normalized intensities (NaN where the sweep has no image).
     raw : ndarray (P, E, D) float32
         Intensities before normalization.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> profiles = pr.measured_delay_profiles(stack, [(4, 4)])
+    >>> type(profiles).__name__, profiles.values.shape  # pixel x exposure x delay
+    ('DelayProfiles', (1, 3, 9))
     """
 
     pixels: np.ndarray
@@ -51,6 +59,15 @@ def area_normalize(values, delay_us):
     """Divide each profile (last axis) by its area over delay in milliseconds.
 
     Missing samples (NaN) are skipped; a profile with no positive area is left at 0.
+
+    Examples
+    --------
+    Profiles over delay (us) divided by their area over delay in milliseconds:
+
+    >>> import numpy as np
+    >>> p = area_normalize(np.array([[1.0, 1.0, 1.0]]), np.array([-500.0, 0.0, 500.0]))
+    >>> p.round(3).tolist()
+    [[1.0, 1.0, 1.0]]
     """
     values = np.asarray(values, dtype=np.float64)
     x = np.asarray(delay_us, dtype=np.float64) * 1e-3
@@ -109,6 +126,16 @@ def write_profiles_csv(profiles: DelayProfiles, path) -> Path:
     One line per pixel, exposure and delay with a measurement (missing ones are skipped).
     The first line is planeray's mark, a comment (``# planeray_mark: planeray:table:VERSION``;
     pandas: ``read_csv(path, comment="#")``), then the header.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = write_profiles_csv(pr.measured_delay_profiles(stack, [(4, 4)]), pathlib.Path(tmp) / "p.csv")
+    ...     path.read_text().splitlines()[1]
+    'row,col,exposure_us,delay_us,raw,normalized'
     """
     from .io.marks import MARK_KEY, mark_text
 
@@ -150,6 +177,13 @@ class TransportDelayProfiles:
         :func:`area_normalize`).
     raw : ndarray, same shape as ``values``, float32
         Profiles before normalization.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> T = pr.make_scene("corner", (8, 8), seed=0).transport
+    >>> pr.transport_delay_profiles(T, [(4, 4)], exposure_us=600.0).values.shape[0]
+    1
     """
 
     pixels: np.ndarray | None

@@ -137,6 +137,12 @@ def offset_window(centre_rows: float, width_rows: float) -> Band:
 
     The same illumination as a (delay, exposure) band, parameterized in rows:
     exact fractional bin weights, no jitter.
+
+    Examples
+    --------
+    >>> band = offset_window(0.0, 1.0)  # one projector row on the epipolar plane
+    >>> band.centre_rows, band.width_rows
+    (0.0, 1.0)
     """
     check_number(centre_rows, "band centre (rows)")
     check_positive(width_rows, "band width (rows)")
@@ -277,7 +283,13 @@ def relight(transport: Transport, pattern) -> np.ndarray:
 
 
 def single_line_pattern(projector_rows: int, row: int) -> np.ndarray:
-    """A single lit projector row (the paper's virtual single-line illumination)."""
+    """A single lit projector row (the paper's virtual single-line illumination).
+
+    Examples
+    --------
+    >>> single_line_pattern(5, 2).tolist()
+    [0.0, 0.0, 1.0, 0.0, 0.0]
+    """
     if not 0 <= row < projector_rows:
         raise InputError(f"projector row {row} outside 0..{projector_rows - 1}")
     p = np.zeros(projector_rows)
@@ -292,6 +304,17 @@ def load_pattern(path, projector_rows: int) -> np.ndarray:
     profile.  An image (``.png``, ``.tif``, ``.tiff``, ``.jpg``): the mean of each
     image row, top to bottom, scaled to [0, 1] by the image's dtype range.
     Profiles of another length are resampled linearly over the projector height.
+
+    Examples
+    --------
+    A profile of 3 values resampled linearly to 6 projector rows:
+
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pathlib.Path(tmp) / "pattern.txt"
+    ...     np.savetxt(path, [0.0, 1.0, 0.0])
+    ...     load_pattern(path, 6).round(2).tolist()
+    [0.0, 0.25, 0.75, 0.75, 0.25, 0.0]
     """
     path = Path(path)
     if not path.exists():
@@ -385,7 +408,13 @@ def short_long_range(transport: Transport, max_rows: float, *, epipolar_rows: fl
 
 
 def michelson_contrast(values, *, axis=-1) -> np.ndarray:
-    """Michelson contrast ``(max - min) / (max + min)`` along ``axis`` (e.g. a scan line)."""
+    """Michelson contrast ``(max - min) / (max + min)`` along ``axis`` (e.g. a scan line).
+
+    Examples
+    --------
+    >>> float(michelson_contrast([1.0, 3.0, 2.0]))
+    0.5
+    """
     v = np.asarray(values, dtype=np.float64)
     hi, lo = v.max(axis=axis), v.min(axis=axis)
     return (hi - lo) / np.maximum(hi + lo, 1e-12)

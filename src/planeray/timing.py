@@ -120,18 +120,39 @@ def delay_from_sync_offset(sync_offset_us, exposure_us, *, line_time_us=None, li
 
 
 def sync_offset_from_delay(delay_us, exposure_us, *, line_time_us=None, lines_per_second=None):
-    """Inverse of Eq. 1: ``t'_o = t_e/2 - t_p/2 - t_d`` (see :func:`delay_from_sync_offset`)."""
+    """Inverse of Eq. 1: ``t'_o = t_e/2 - t_p/2 - t_d`` (see :func:`delay_from_sync_offset`).
+
+    Examples
+    --------
+    The inverse of :func:`delay_from_sync_offset`:
+
+    >>> t_o = sync_offset_from_delay(375.0, 600.0, lines_per_second=PAPER_LINES_PER_SECOND)
+    >>> float(delay_from_sync_offset(t_o, 600.0, lines_per_second=PAPER_LINES_PER_SECOND))
+    375.0
+    """
     t_p = _line_time_us(line_time_us, lines_per_second)
     return 0.5 * np.asarray(exposure_us, dtype=float) - 0.5 * t_p - np.asarray(delay_us, dtype=float)
 
 
 def band_centre_rows(delay_us, lines_per_second):
-    """Band centre ``I_d = v_p t_d`` in projector rows, Eq. 2 (``v_p`` in lines per second)."""
+    """Band centre ``I_d = v_p t_d`` in projector rows, Eq. 2 (``v_p`` in lines per second).
+
+    Examples
+    --------
+    >>> float(band_centre_rows(375.0, PAPER_LINES_PER_SECOND))  # 375 us at 54,000 rows/s
+    20.25
+    """
     return np.asarray(delay_us, dtype=float) * 1e-6 * float(lines_per_second)
 
 
 def band_width_rows(exposure_us, lines_per_second):
-    """Band width ``I_w = v_p t_e`` in projector rows, Eq. 2 (``v_p`` in lines per second)."""
+    """Band width ``I_w = v_p t_e`` in projector rows, Eq. 2 (``v_p`` in lines per second).
+
+    Examples
+    --------
+    >>> float(band_width_rows(600.0, PAPER_LINES_PER_SECOND))  # the paper's shortest exposure
+    32.4
+    """
     return np.asarray(exposure_us, dtype=float) * 1e-6 * float(lines_per_second)
 
 
@@ -141,6 +162,14 @@ def illumination(offset_rows, delay_us, exposure_us, lines_per_second):
     ``L(u) = 1`` where ``|u - I_d| < I_w / 2`` and 0 elsewhere, with ``u = v - t``
     the projector-row offset.  Use :func:`band_bin_weights` for its exact
     discretization on 1-row bins.
+
+    Examples
+    --------
+    A 600 us band centred 375 us away lights offsets 4 to 36 (Eq. 3):
+
+    >>> import numpy as np
+    >>> illumination(np.array([0.0, 10.0, 40.0]), 375.0, 600.0, PAPER_LINES_PER_SECOND).tolist()
+    [0.0, 1.0, 0.0]
     """
     centre = band_centre_rows(delay_us, lines_per_second)
     half = 0.5 * band_width_rows(exposure_us, lines_per_second)
@@ -601,6 +630,13 @@ def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_r
     Returns
     -------
     weights : ndarray (N, U) float64
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> bands = quick_sweep().bands(PAPER_LINES_PER_SECOND)
+    >>> band_weights_at_row(bands, RowGeometry(64, 720), 32, np.arange(-114, 115)).shape
+    (27, 229)
     """
     bands = list(bands)
     offsets = np.asarray(offsets_rows)
@@ -748,7 +784,15 @@ class Sweep:
 
 
 def boundary_images(delay_us, exposure_us, *, margin_us=PAPER_BOUNDARY_MARGIN_US):
-    """Flag images whose band edge sits on the epipolar plane: ``||t_d| - t_e/2| <= margin``."""
+    """Flag images whose band edge sits on the epipolar plane: ``||t_d| - t_e/2| <= margin``.
+
+    Examples
+    --------
+    A band whose edge is on the epipolar plane (``|t_d| = t_e / 2``) is a boundary image:
+
+    >>> boundary_images([0.0, 300.0, 750.0], [600.0, 600.0, 600.0]).tolist()
+    [False, True, False]
+    """
     d = np.asarray(delay_us, dtype=float)
     e = np.asarray(exposure_us, dtype=float)
     return np.abs(np.abs(d) - 0.5 * e) <= margin_us + 1e-9
@@ -846,7 +890,13 @@ def make_sweep(name: str) -> Sweep:
 
 def sweep_support_rows(sweep: Sweep, lines_per_second, *, include_excluded=False) -> int:
     """Half-width ``K`` of the offset support ``-K..K`` reached by a sweep's bands:
-    ``max |I_d| + I_w / 2`` rounded up (114 rows -> 229 offsets for the paper's sweep)."""
+    ``max |I_d| + I_w / 2`` rounded up (114 rows -> 229 offsets for the paper's sweep).
+
+    Examples
+    --------
+    >>> sweep_support_rows(quick_sweep(), PAPER_LINES_PER_SECOND)
+    114
+    """
     keep = np.ones(len(sweep), bool) if include_excluded else ~sweep.excluded
     reach = np.abs(band_centre_rows(sweep.delay_us[keep], lines_per_second)) + 0.5 * band_width_rows(
         sweep.exposure_us[keep], lines_per_second

@@ -49,6 +49,8 @@ def cycle_delays(exposure_us: float, delays_us=DEFAULT_CYCLE_DELAYS_US) -> tuple
     """The delays of Eq. 7's cycle at ``exposure_us``: those whose band is off the epipolar plane
     (``|t_d| > t_e/2``) and whose edge is not on it (the boundary images a stack leaves out, Sec. 4).
 
+    Examples
+    --------
     >>> cycle_delays(600.0)
     (562.5, 750.0, 937.5, 1125.0)
     >>> cycle_delays(1200.0)

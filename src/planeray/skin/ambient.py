@@ -95,6 +95,8 @@ def relative_spectrum(kind: str, wavelength_nm) -> np.ndarray:
 def band_irradiance_w_m2(lux: float, kind: str, wavelength_nm: float, *, filter_fwhm_nm: float = 10.0) -> float:
     """Irradiance (W/m^2) in a box band of ``filter_fwhm_nm`` around ``wavelength_nm`` for ``lux``.
 
+    Examples
+    --------
     >>> round(band_irradiance_w_m2(100_000, "sun", 638.0), 1)
     12.5
     >>> band_irradiance_w_m2(500, "led", 850.0) < 1e-4
@@ -120,6 +122,8 @@ def ambient_e_per_us(
 ) -> float:
     """The camera model's ``ambient_e_per_us`` for an ambient light (see the module notes).
 
+    Examples
+    --------
     >>> round(ambient_e_per_us(100_000, "sun", 638.0), 1)
     10.8
     """

@@ -77,6 +77,8 @@ _PAPER_ROWS = 720
 def paper_patch_px(shape) -> int:
     """The paper's 200-pixel patch scaled to an image of ``shape``: ``round(200 H / 720)``, at least 8.
 
+    Examples
+    --------
     >>> paper_patch_px((128, 128)), paper_patch_px((720, 1280))
     (36, 200)
     """
@@ -158,6 +160,8 @@ def compose(images, delays_us, delay_map_us) -> np.ndarray:
     interpolates linearly between the two delay images around ``t_d*`` (``delays_us`` sorted
     ascending).  On the delays themselves it is exactly ``I_{t_d*}``.
 
+    Examples
+    --------
     >>> imgs = np.stack([np.zeros((1, 2)), np.ones((1, 2))])
     >>> compose(imgs, [0, 100], np.array([[0.0, 25.0]])).tolist()
     [[0.0, 0.25]]

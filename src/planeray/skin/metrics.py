@@ -173,6 +173,8 @@ def background_bands(
 def cnr(image, vein, background) -> float:
     """Contrast-to-noise ratio ``|mu_bg - mu_vein| / sigma_bg`` (``sigma_bg`` with ddof = 1).
 
+    Examples
+    --------
     >>> img = np.array([1.0, 1.2, 0.8, 1.0, 0.5])
     >>> round(cnr(img, img == 0.5, img != 0.5), 3)
     3.062
@@ -191,6 +193,8 @@ def cnr(image, vein, background) -> float:
 def weber_contrast(image, vein, background) -> float:
     """Weber contrast ``(mu_vein - mu_bg) / mu_bg``.
 
+    Examples
+    --------
     >>> img = np.array([2.0, 2.0, 1.0])
     >>> weber_contrast(img, img == 1.0, img == 2.0)
     -0.5
