@@ -10,7 +10,15 @@ __all__ = ["PlanerayError", "InputError", "StackError", "TransportError", "Devic
 
 
 class PlanerayError(Exception):
-    """Base class of every error planeray raises on purpose."""
+    """Base class of every error planeray raises on purpose.
+
+    Examples
+    --------
+    Every error planeray raises on purpose is one; the command line prints its message in one line:
+
+    >>> issubclass(InputError, PlanerayError), issubclass(DeviceError, PlanerayError)
+    (True, True)
+    """
 
 
 class InputError(PlanerayError, ValueError):
@@ -22,6 +30,14 @@ class InputError(PlanerayError, ValueError):
         What is wrong, in words.
     path : str or os.PathLike, optional
         The file or folder concerned; prefixed to the message.
+
+    Examples
+    --------
+    >>> err = InputError("manifest.csv has no delay_us column", "capture/manifest.csv")
+    >>> str(err)
+    'capture/manifest.csv: manifest.csv has no delay_us column'
+    >>> isinstance(err, ValueError)
+    True
     """
 
     def __init__(self, problem: str, path=None):
@@ -31,15 +47,45 @@ class InputError(PlanerayError, ValueError):
 
 
 class StackError(InputError):
-    """A delay-exposure stack (native store or import folder) is malformed."""
+    """A delay-exposure stack (native store or import folder) is malformed.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> try:
+    ...     pr.Stack(np.zeros((2, 4, 4)), [0.0], [600.0, 600.0], 54000.0)
+    ... except StackError as err:
+    ...     print(err)
+    2 images but 1 delays and 2 exposures
+    """
 
 
 class TransportError(InputError):
-    """A transport store is malformed."""
+    """A transport store is malformed.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     try:
+    ...         pr.read_transport(pathlib.Path(tmp) / "missing.zarr")
+    ...     except TransportError:
+    ...         print("refused")
+    refused
+    """
 
 
 class DeviceError(PlanerayError, RuntimeError):
-    """A device cannot be opened or refused a setting (missing SDK, no camera, bad timing)."""
+    """A device cannot be opened or refused a setting (missing SDK, no camera, bad timing).
+
+    Examples
+    --------
+    >>> err = DeviceError("no uEye camera found (camera_id 0)")
+    >>> isinstance(err, RuntimeError), str(err)
+    (True, 'no uEye camera found (camera_id 0)')
+    """
 
 
 class StorageError(PlanerayError, OSError):
@@ -54,6 +100,12 @@ class StorageError(PlanerayError, OSError):
         What failed and why.
     path : str or os.PathLike, optional
         The output (or input) concerned; prefixed to the message.
+
+    Examples
+    --------
+    >>> err = StorageError("disk full while writing images", "out/stack.zarr")
+    >>> isinstance(err, OSError), err.path
+    (True, 'out/stack.zarr')
     """
 
     def __init__(self, problem: str, path=None):

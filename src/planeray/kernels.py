@@ -81,6 +81,16 @@ def mc_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, n_photons=MC_KER
         Diffusely reflected power per bin per unit line power.
     total : float
         Total diffuse reflectance of the medium (all exit positions).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.medium import Medium
+    >>> kernel, total = mc_line_kernel(
+    ...     Medium(sigma_s=1.0, sigma_a=0.1, g=0.9), np.arange(-5, 6), mm_per_row=1.0, n_photons=5_000
+    ... )
+    >>> kernel.shape, bool(0 < total < 1)
+    ((11,), True)
     """
     k = np.asarray(offsets_rows, dtype=np.int64)
     reach = max(MC_KERNEL_REACH_ROWS, int(64 * np.ceil((np.abs(k).max() + 1) / 64.0)))

@@ -120,7 +120,13 @@ def _line(wavelength_nm) -> int:
 
 
 def tone_fraction(tone) -> float:
-    """Melanosome volume fraction of a tone: a name of :data:`SKIN_TONES` or a fraction in ``[0, 0.5]``."""
+    """Melanosome volume fraction of a tone: a name of :data:`SKIN_TONES` or a fraction in ``[0, 0.5]``.
+
+    Examples
+    --------
+    >>> tone_fraction("fair"), tone_fraction(0.05)
+    (0.03, 0.05)
+    """
     if isinstance(tone, str):
         if tone not in SKIN_TONES:
             raise InputError(f"unknown skin tone {tone!r}; choose one of {', '.join(SKIN_TONES)} or a fraction")
@@ -132,7 +138,13 @@ def tone_fraction(tone) -> float:
 
 
 def melanosome_mu_a(wavelength_nm) -> float:
-    """Absorption of a melanosome, ``6.6e11 lambda^-3.33 cm^-1`` (Jacques [3]_), in mm^-1."""
+    """Absorption of a melanosome, ``6.6e11 lambda^-3.33 cm^-1`` (Jacques [3]_), in mm^-1.
+
+    Examples
+    --------
+    >>> round(melanosome_mu_a(638), 1)  # 1/mm
+    30.2
+    """
     return 6.6e11 * float(wavelength_nm) ** -3.33 / 10.0
 
 
@@ -140,6 +152,11 @@ def blood_mu_a(wavelength_nm, saturation=_VENOUS_S) -> float:
     """Absorption of whole blood (150 g/L) at oxygen saturation ``saturation``, mm^-1.
 
     ``S mu_oxy + (1 - S) mu_deoxy``, scaled so ``S = 0.7`` gives the issue's venous value.
+
+    Examples
+    --------
+    >>> round(blood_mu_a(638), 3), round(blood_mu_a(850), 3)  # 1/mm, venous (saturation 0.7)
+    (0.892, 0.512)
     """
     line = _line(wavelength_nm)
     s = float(saturation)
@@ -151,13 +168,27 @@ def blood_mu_a(wavelength_nm, saturation=_VENOUS_S) -> float:
 
 
 def blood_medium(wavelength_nm, saturation=_VENOUS_S) -> Medium:
-    """Venous blood as a :class:`Medium` (index matched to the tissue around it)."""
+    """Venous blood as a :class:`Medium` (index matched to the tissue around it).
+
+    Examples
+    --------
+    >>> m = blood_medium(850)
+    >>> round(m.sigma_a, 3), m.g
+    (0.512, 0.9)
+    """
     line = _line(wavelength_nm)
     return Medium(sigma_s=_BLOOD_MU_S[line], sigma_a=blood_mu_a(line, saturation), g=SKIN_G, n=SKIN_N)
 
 
 def epidermis_medium(wavelength_nm, melanin_fraction, thickness_mm=0.1) -> Medium:
-    """Epidermis with melanosome fraction ``melanin_fraction`` (Jacques 2013 [1]_)."""
+    """Epidermis with melanosome fraction ``melanin_fraction`` (Jacques 2013 [1]_).
+
+    Examples
+    --------
+    >>> m = epidermis_medium(638, tone_fraction("fair"))
+    >>> round(m.sigma_a, 3)  # 1/mm
+    0.905
+    """
     line = _line(wavelength_nm)
     m = tone_fraction(melanin_fraction)
     mu_a = m * melanosome_mu_a(line) + _EPIDERMIS_WATER * _WATER_MU_A[line]
@@ -165,14 +196,27 @@ def epidermis_medium(wavelength_nm, melanin_fraction, thickness_mm=0.1) -> Mediu
 
 
 def dermis_medium(wavelength_nm, thickness_mm=1.5, *, blood_fraction=_DERMIS_BLOOD, saturation=_DERMIS_S) -> Medium:
-    """Dermis with blood fraction ``blood_fraction`` at saturation ``saturation`` (Jacques 2013 [1]_)."""
+    """Dermis with blood fraction ``blood_fraction`` at saturation ``saturation`` (Jacques 2013 [1]_).
+
+    Examples
+    --------
+    >>> round(dermis_medium(638).sigma_a, 4)  # 1/mm
+    0.002
+    """
     line = _line(wavelength_nm)
     mu_a = float(blood_fraction) * blood_mu_a(line, saturation) + _DERMIS_WATER * _WATER_MU_A[line]
     return Medium(sigma_s=_DERMIS_MU_S[line], sigma_a=mu_a, g=SKIN_G, n=SKIN_N, thickness_mm=thickness_mm)
 
 
 def fat_medium(wavelength_nm, thickness_mm=8.0) -> Medium:
-    """Subcutaneous fat (Bashkatov et al. 2005 [5]_)."""
+    """Subcutaneous fat (Bashkatov et al. 2005 [5]_).
+
+    Examples
+    --------
+    >>> m = fat_medium(638)
+    >>> m.thickness_mm
+    8.0
+    """
     line = _line(wavelength_nm)
     mu_s_prime = _FAT_MU_S_PRIME_600 * (line / 600.0) ** -_FAT_B
     eo, ed = _HB_EPSILON[line]
@@ -184,7 +228,14 @@ def fat_medium(wavelength_nm, thickness_mm=8.0) -> Medium:
 
 @dataclass(frozen=True)
 class SkinLayers:
-    """The layer stack of the skin, top first, and the blood of its veins."""
+    """The layer stack of the skin, top first, and the blood of its veins.
+
+    Examples
+    --------
+    >>> layers = skin_layers(638, "fair")
+    >>> [round(layer.thickness_mm, 2) for layer in layers.layers][:2], layers.wavelength_nm
+    ([0.1, 1.5], 638)
+    """
 
     wavelength_nm: int
     layers: tuple  # of Medium, each with its thickness

@@ -309,6 +309,13 @@ def default_cutoff_mm(medium: Medium, offsets_rows, *, mm_per_row) -> float:
         The binned window (bins of ``mm_per_row``).
     mm_per_row : float
         Bin width in mm.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.medium import Medium
+    >>> default_cutoff_mm(Medium(sigma_s=1.0, sigma_a=0.01, g=0.9), np.arange(-50, 51), mm_per_row=1.0) > 50
+    True
     """
     medium = as_medium(medium)
     sigma_a = medium.sigma_a
@@ -449,6 +456,13 @@ def mc_point_profile(
         its area for ``R_d(r)`` per mm^2, compare with
         :func:`planeray.kernels.dipole_reflectance`), ``radiance`` the
         normal-view radiance averaged over it (mm^-2 sr^-1 per unit power).
+
+    Examples
+    --------
+    >>> from planeray.medium import Medium
+    >>> p = mc_point_profile(Medium(sigma_s=1.0, sigma_a=0.1, g=0.9), n_photons=5_000)
+    >>> abs(p.energy_balance - 1.0) < 1e-9
+    True
     """
     medium = as_medium(medium)
     if radius_bins is None:

@@ -72,6 +72,12 @@ class Scene:
     maps : dict of str to ndarray (H, W)
         Further per-pixel ground truth a scene provides (the ``materials`` scene: class
         ids, distance to the nearest container wall, pixels whose kernel the wall changes).
+
+    Examples
+    --------
+    >>> scene = make_scene("wax", (8, 8), seed=0)
+    >>> scene.name, scene.transport.dense.shape[:2], scene.labels.shape
+    ('wax', (8, 8), (8, 8))
     """
 
     name: str
@@ -109,6 +115,25 @@ def register_scene(name: str, description: str, *, argument: str | None = None):
     ``mitsuba`` scene: ``mitsuba:path/to/scene.xml``); ``argument`` names it for
     help texts, and ``build`` receives it as the keyword ``argument``.
     Parametric scenes are listed by ``list_scenes(parametric=True)`` only.
+
+    Examples
+    --------
+    A scene of your own, then built by name like the built-in ones:
+
+    >>> import numpy as np
+    >>> from planeray.transport import Transport
+    >>> @register_scene("doc_flat", "a flat grey plane (an example)")
+    ... def _flat(shape, projector_rows, seed, **params):
+    ...     H, W = shape
+    ...     dense = np.zeros((H, W, 3), np.float32)
+    ...     dense[..., 1] = 0.5
+    ...     T = Transport(dense, np.array([-1, 0, 1]))
+    ...     return Scene(
+    ...         "doc_flat", T, direct=dense[..., 1], ambient_albedo=np.full(shape, 0.5), labels=np.ones(shape, int)
+    ...     )
+    >>> make_scene("doc_flat", (8, 8)).transport.dense.shape
+    (8, 8, 3)
+    >>> del _REGISTRY["doc_flat"]  # this example leaves the registry as it found it
     """
 
     def deco(build):
@@ -157,7 +182,13 @@ def list_scenes(*, parametric: bool = False) -> dict[str, str]:
 
 
 def split_scene_name(text: str) -> tuple[str, str | None]:
-    """``"mitsuba:room.xml"`` -> ``("mitsuba", "room.xml")``; ``"wax"`` -> ``("wax", None)``."""
+    """``"mitsuba:room.xml"`` -> ``("mitsuba", "room.xml")``; ``"wax"`` -> ``("wax", None)``.
+
+    Examples
+    --------
+    >>> split_scene_name("mitsuba:room.xml"), split_scene_name("wax")
+    (('mitsuba', 'room.xml'), ('wax', None))
+    """
     name, sep, argument = str(text).partition(":")
     return name, (argument if sep else None)
 
@@ -233,7 +264,14 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
 
 
 def scene_offsets(band_rows: int = DEFAULT_BAND_ROWS) -> np.ndarray:
-    """Offsets ``-band_rows`` to ``band_rows`` of a scene's dense band."""
+    """Offsets ``-band_rows`` to ``band_rows`` of a scene's dense band.
+
+    Examples
+    --------
+    >>> offsets = scene_offsets(4)
+    >>> offsets.tolist()
+    [-4, -3, -2, -1, 0, 1, 2, 3, 4]
+    """
     return np.arange(-int(band_rows), int(band_rows) + 1)
 
 
@@ -242,6 +280,14 @@ def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
 
     A camera row covers ``rows_per_camera_row`` projector rows; a Lambertian
     surface returns each of them in equal share.  Sums to 1.
+
+    Examples
+    --------
+    A camera row of 2 projector rows returns light from the rows it spans:
+
+    >>> import numpy as np
+    >>> footprint_kernel(np.arange(-2, 3), 2.0).tolist()
+    [0.0, 0.25, 0.5, 0.25, 0.0]
     """
     k = band_bin_weights(offsets_rows, 0.0, rows_per_camera_row)
     return (k / k.sum()).astype(np.float64)
@@ -257,6 +303,13 @@ def representative_pixels(
     Other effects: the pixels whose noise-free delay profile (the paper's delays at
     ``exposure_us``, rendered from the ground truth) has the most prominent second
     peak beside the one on the epipolar plane -- the clearest two-peak profiles.
+
+    Examples
+    --------
+    >>> scene = make_scene("mirror_ball", (32, 32), seed=0)
+    >>> pixels, labels = representative_pixels(scene, 114)
+    >>> len(pixels) == len(labels) > 0
+    True
     """
     from scipy.ndimage import distance_transform_edt
 
