@@ -28,7 +28,13 @@ _FINGERPRINT = "run_fingerprint"
 
 
 def partial_path(out) -> Path:
-    """The hidden partial store next to ``out``."""
+    """The hidden partial store next to ``out``.
+
+    Examples
+    --------
+    >>> partial_path("out/T.zarr").as_posix()
+    'out/.T.zarr.partial'
+    """
     out = Path(out)
     return out.parent / f".{out.name}.partial"
 
@@ -39,6 +45,18 @@ def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], o
     ``create`` lays out the store's arrays and attributes in an empty directory
     and returns the Zarr group.  Raises :class:`InputError` when an unfinished
     run with another fingerprint is in the way (unless ``restart``).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> mark_done(group, 0)
+    >>> open_partial(out, "inputs-v1", 3, None) is not None  # the same run resumes
+    True
+    >>> tmp.cleanup()
     """
     import zarr
 
@@ -74,6 +92,17 @@ def discard_if_empty(out) -> bool:
 
     Called when a run fails: a partial store with finished units is kept (the next run
     resumes it), one without any holds nothing worth keeping and is not left behind.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> discard_if_empty(out), partial_path(out).exists()
+    (True, False)
+    >>> tmp.cleanup()
     """
     import zarr
 
@@ -89,12 +118,37 @@ def discard_if_empty(out) -> bool:
 
 
 def mark_done(group, index: int) -> None:
-    """Mark unit ``index`` done (call after its data is written)."""
+    """Mark unit ``index`` done (call after its data is written).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> mark_done(group, 1)
+    >>> done_units(group).tolist()
+    [False, True, False]
+    >>> tmp.cleanup()
+    """
     group[_DONE][index] = True
 
 
 def done_units(group) -> np.ndarray:
-    """Boolean mask of the finished units."""
+    """Boolean mask of the finished units.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> done_units(group).tolist()
+    [False, False, False]
+    >>> tmp.cleanup()
+    """
     return np.asarray(group[_DONE][:], dtype=bool)
 
 
@@ -106,6 +160,19 @@ def promote(out, *, overwrite: bool, kind: str | None = None, error=InputError) 
     ``out`` may not be replaced (for instance it appeared while the run was going),
     the finished partial store is kept as it is: a re-run with the same inputs
     finds every unit done and finishes without recomputing.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> for unit in range(3):
+    ...     mark_done(group, unit)
+    >>> promote(out, overwrite=False).name, partial_path(out).exists()
+    ('result.zarr', False)
+    >>> tmp.cleanup()
     """
     import zarr
 

@@ -64,6 +64,15 @@ def store_format(path) -> str | None:
 
     Read from the Zarr group's ``format`` attribute (``zarr.json``) without opening
     the arrays; a folder with a ``manifest.csv`` is a stack import folder.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.write_transport(pr.make_scene("corner", (8, 8), seed=0).transport, pathlib.Path(tmp) / "T.zarr")
+    ...     store_format(path), store_format(tmp)
+    ('transport', None)
     """
     import json
 
@@ -93,7 +102,14 @@ def planeray_version() -> str:
 
 # ----------------------------------------------------------------------------
 def jsonable(value, where: str = "metadata", error=StackError):
-    """Convert numpy scalars/arrays, tuples and paths to plain JSON types (recursively)."""
+    """Convert numpy scalars/arrays, tuples and paths to plain JSON types (recursively).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> jsonable({"delay_us": np.array([0.0, 375.0]), "frames": np.int64(8), "size": (128, 128)})
+    {'delay_us': [0.0, 375.0], 'frames': 8, 'size': [128, 128]}
+    """
     if value is None or isinstance(value, (bool, str)):
         return value
     if isinstance(value, (int, float)):
@@ -163,6 +179,13 @@ def create_array(group, name: str, **kwargs):
 
     The returned array has ``write_empty_chunks`` on; an array reopened later
     does not (see :func:`writable`).
+
+    Examples
+    --------
+    >>> import zarr
+    >>> group = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    >>> create_array(group, "T", shape=(4, 4), chunks=(2, 4), dtype="float32").shape
+    (4, 4)
     """
     kwargs.setdefault("compressors", COMPRESSORS)
     return group.create_array(name, config=WRITE_CONFIG, **kwargs)
@@ -175,6 +198,14 @@ def writable(group, name: str):
     store: a writer that reopens a store (a resumed run) must get its arrays
     through this function, or the chunks it writes that equal the fill value are
     skipped and the store, marked :data:`ALL_CHUNKS_ATTR`, is refused on reading.
+
+    Examples
+    --------
+    >>> import zarr
+    >>> group = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    >>> _ = create_array(group, "done", shape=(3,), chunks=(3,), dtype="bool", fill_value=False)
+    >>> writable(group, "done").shape
+    (3,)
     """
     return group[name].with_config(WRITE_CONFIG)
 
@@ -366,6 +397,16 @@ class LazyArray:
         :class:`~planeray.errors.TransportError`).
     name : str, optional
         The array's name in messages (default: its name in the store).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     lazy = pr.read_stack(pr.write_stack(stack, pathlib.Path(tmp) / "s.zarr")).images
+    ...     type(lazy).__name__, lazy.shape, lazy[0].shape
+    ('LazyArray', (27, 8, 8), (8, 8))
     """
 
     def __init__(self, array, *, path=None, error=StackError, name: str | None = None):

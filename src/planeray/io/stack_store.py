@@ -116,6 +116,23 @@ def create_stack_group(
     image and mask, through arrays that store chunks equal to the fill value
     (the returned group's ``images``/``saturated`` after reopening:
     :func:`planeray.io.writable`), or :func:`read_stack` refuses the store.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     group = create_stack_group(
+    ...         pathlib.Path(tmp) / "s",
+    ...         (2, 8, 8),
+    ...         [0.0, 375.0],
+    ...         [600.0, 600.0],
+    ...         [False, False],
+    ...         54000.0,
+    ...         8,
+    ...         {"source": "example"},
+    ...     )
+    ...     group["images"].shape
+    (2, 8, 8)
     """
     n, h, w = (int(x) for x in shape)
     group = zarr.open_group(str(directory), mode="w", zarr_format=3)
@@ -283,6 +300,18 @@ def validate_images(stack: Stack, path=None) -> None:
     ------
     StackError
         Naming the index of the first non-finite image.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> images = np.zeros((1, 2, 2), np.float32)
+    >>> images[0, 0, 0] = np.nan
+    >>> try:
+    ...     validate_images(pr.Stack(images, [0.0], [600.0], 54000.0))
+    ... except pr.errors.StackError as err:
+    ...     print("refused:", "NaN" in str(err))
+    refused: True
     """
     try:
         _check_finite_images(stack.images, path)

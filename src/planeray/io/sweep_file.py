@@ -71,6 +71,15 @@ def read_sweep(path) -> Sweep:
     InputError
         One line naming the file and the problem (not JSON, a missing or malformed field, a
         setting listed twice, another format).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.io.write_sweep(pr.quick_sweep(), pathlib.Path(tmp) / "quick.json")
+    ...     len(read_sweep(path))
+    27
     """
     path = Path(path)
     try:

@@ -40,6 +40,13 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
     every chunk of every array, also those equal to the fill value (create them
     with :func:`planeray.io.create_array`, write through
     :func:`planeray.io.writable`), or :func:`read_transport` refuses the store.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> attrs = transport_attrs(np.arange(-3, 4), 720, attrs={"note": "example"})
+    >>> attrs["projector_rows"], attrs["note"]
+    (720, 'example')
     """
     out = jsonable(dict(attrs or {}), "attrs", TransportError)
     out.update(
@@ -64,6 +71,16 @@ def read_transport_maps(path) -> dict:
     TransportError
         The store cannot be opened, a chunk of a map is absent from a store marked
         ``all_chunks_stored`` or cannot be decoded (naming the map and the rows).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     maps = read_transport_maps(pr.demultiplex_to_store(stack, pathlib.Path(tmp) / "T.zarr"))
+    >>> maps["converged"].shape
+    (8, 8)
     """
     path = Path(path)
     group = open_group(path, TransportError)

@@ -46,12 +46,24 @@ def _level(level) -> int:
 
 
 def white(shape, *, level: int = 255) -> np.ndarray:
-    """Every pixel lit at ``level`` (0-255): the sweep's illumination."""
+    """Every pixel lit at ``level`` (0-255): the sweep's illumination.
+
+    Examples
+    --------
+    >>> white((2, 3)).shape, int(white((2, 3), level=128).max())
+    ((2, 3), 128)
+    """
     return np.full(_shape(shape), _level(level), np.uint8)
 
 
 def black(shape) -> np.ndarray:
-    """Every pixel dark: the laser off (a dark frame)."""
+    """Every pixel dark: the laser off (a dark frame).
+
+    Examples
+    --------
+    >>> int(black((2, 3)).max())
+    0
+    """
     return np.zeros(_shape(shape), np.uint8)
 
 
@@ -72,7 +84,13 @@ def comb(shape, step_rows: int, phase: int, *, level: int = 255) -> np.ndarray:
 
 
 def rows(shape, first: int, last: int | None = None, *, level: int = 255) -> np.ndarray:
-    """Row ``first`` lit, or the band of rows ``first`` to ``last`` (both included)."""
+    """Row ``first`` lit, or the band of rows ``first`` to ``last`` (both included).
+
+    Examples
+    --------
+    >>> rows((6, 2), 2, 3)[:, 0].tolist()  # rows 2 to 3 lit
+    [0, 0, 255, 255, 0, 0]
+    """
     h, w = _shape(shape)
     last = first if last is None else last
     a = check_integer(first, "first row", minimum=0, maximum=h - 1)
@@ -89,6 +107,13 @@ def rectification_card(shape, *, step_rows: int = 40) -> np.ndarray:
     short ticks at both edges mark every tenth row between.  Point the camera at a
     flat target, show the card, and turn the camera until each line lies on one
     camera row (the numbers tell which projector row it is).
+
+    Examples
+    --------
+    >>> card = rectification_card((100, 200), step_rows=40)
+    >>> import numpy as np
+    >>> card.shape, np.flatnonzero(card.min(axis=1) == 255).tolist()  # the rows of the full-width lines
+    ((100, 200), [0, 40, 80])
     """
     from PIL import Image, ImageDraw, ImageFont
 
@@ -122,6 +147,16 @@ def load_pattern(path) -> np.ndarray:
     InputError
         Missing, unreadable, or not 8-bit (a 16-bit image would need a scaling the
         pattern must not get).
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pathlib.Path(tmp) / "p.npy"
+    ...     np.save(path, rows((4, 4), 1))
+    ...     load_pattern(path).shape
+    (4, 4, 3)
     """
     path = Path(path)
     if not path.is_file():
@@ -153,6 +188,11 @@ def as_rgb8(pattern) -> np.ndarray:
     ``uint8`` and ``bool`` arrays are taken as they are (True = 255); floats must lie
     in ``[0, 1]`` and become ``round(255 x)``; grey is repeated on the three channels.
     Nothing else is changed: no scaling, filtering or gamma.
+
+    Examples
+    --------
+    >>> as_rgb8(white((2, 3))).shape
+    (2, 3, 3)
     """
     a = np.asarray(pattern)
     if a.ndim == 3 and a.shape[2] == 1:
@@ -182,6 +222,12 @@ def place(pattern, shape, at) -> np.ndarray:
     ------
     InputError
         It does not fit there (nothing is cropped).
+
+    Examples
+    --------
+    >>> placed = place(white((1, 2)), (3, 4), (1, 2))
+    >>> placed[..., 0].tolist()
+    [[0, 0, 0, 0], [0, 0, 255, 255], [0, 0, 0, 0]]
     """
     p = as_rgb8(pattern)
     h, w = _shape(shape)
@@ -201,6 +247,11 @@ def parse_pattern(spec: str, shape) -> np.ndarray:
     ``white``, ``black``, ``comb:K:J`` (every ``K``-th row from ``J``), ``row:R``,
     ``rows:A:B`` (rows ``A`` to ``B``, both included), ``card`` or ``card:STEP``;
     anything else is read as an image file.
+
+    Examples
+    --------
+    >>> parse_pattern("white", (2, 2)).tolist()
+    [[255, 255], [255, 255]]
     """
     name, _, rest = spec.partition(":")
     args = rest.split(":") if rest else []

@@ -26,7 +26,13 @@ LIST_TIMEOUT_S = 20.0
 
 
 def window_library_available() -> bool:
-    """Whether pyglet, the windowing library of the projector window, is installed."""
+    """Whether pyglet, the windowing library of the projector window, is installed.
+
+    Examples
+    --------
+    >>> isinstance(window_library_available(), bool)
+    True
+    """
     from importlib.util import find_spec
 
     return find_spec("pyglet") is not None
@@ -59,6 +65,12 @@ class Screen:
         The RandR output's name (``HDMI-1``), when the server names it.
     refresh_hz : float or None
         Its refresh rate, when the server knows it.
+
+    Examples
+    --------
+    >>> s = Screen(index=1, display=":0", x_screen=0, head=1, x=1920, y=0, width=1280, height=720)
+    >>> s.width, s.height
+    (1280, 720)
     """
 
     index: int
@@ -102,6 +114,11 @@ def display_name(display: str | None = None) -> str:
     ------
     InputError
         Neither is set.
+
+    Examples
+    --------
+    >>> display_name(":1")
+    ':1'
     """
     name = display if display is not None else os.environ.get("DISPLAY")
     if not name:
@@ -153,6 +170,13 @@ def list_screens(display: str | None = None, *, refresh: bool = False) -> list[S
     ------
     InputError
         No display, no pyglet, or the display cannot be reached.
+
+    Examples
+    --------
+    The screens of the X display (needs a display: the projector is one of them)
+
+    >>> [(s.index, s.width, s.height) for s in list_screens()]  # doctest: +SKIP
+    [(0, 1920, 1080), (1, 1280, 720)]
     """
     name = display_name(display)
     if name in _CACHE and not refresh:
@@ -167,7 +191,13 @@ def list_screens(display: str | None = None, *, refresh: bool = False) -> list[S
 
 
 def get_screen(index: int, display: str | None = None) -> Screen:
-    """Screen ``index`` of the display, or a one-line refusal naming the screens there are."""
+    """Screen ``index`` of the display, or a one-line refusal naming the screens there are.
+
+    Examples
+    --------
+    >>> get_screen(1).height  # doctest: +SKIP
+    720
+    """
     screens = list_screens(display)
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not 0 <= index < len(screens):
         have = ", ".join(f"{s.index} ({s.width}x{s.height})" for s in screens)
@@ -186,6 +216,11 @@ def grab_screen(screen: Screen) -> np.ndarray:
     ------
     DeviceError
         The X server cannot be read.
+
+    Examples
+    --------
+    >>> grab_screen(get_screen(1)).shape  # doctest: +SKIP
+    (720, 1280, 3)
     """
     from PIL import ImageGrab
 
