@@ -97,6 +97,14 @@ class FitQuality:
         Degrees of freedom: samples minus fitted parameters (at least 1).
     p_misfit : float
         The p-value below which the model is said not to fit.
+
+    Examples
+    --------
+    >>> q = FitQuality(chi2=12.0, dof=10)
+    >>> round(q.reduced_chi2, 2), q.fits
+    (1.2, True)
+    >>> FitQuality(chi2=60.0, dof=10).fits
+    False
     """
 
     chi2: float
@@ -168,5 +176,13 @@ def fit_quality(chi2, dof, *, p_misfit=DEFAULT_P_MISFIT) -> FitQuality:
 
 
 def describe_flags(bits: int) -> list[str]:
-    """The texts of :data:`FLAGS` set in ``bits``."""
+    """The texts of :data:`FLAGS` set in ``bits``.
+
+    Examples
+    --------
+    >>> describe_flags(FLAG_EDGE)
+    ['a parameter at the edge of the forward model (not reported as a fit)']
+    >>> describe_flags(0)
+    []
+    """
     return [text for bit, text in FLAGS.items() if int(bits) & bit]

@@ -83,7 +83,21 @@ Provider = Callable[[float, float, float], np.ndarray]
 # ---------------------------------------------------------------------------- setup
 @dataclass
 class StudySetup:
-    """Offsets ``u`` (U,), the band matrix ``A`` (N, U) and its :class:`RowGroup`."""
+    """Offsets ``u`` (U,), the band matrix ``A`` (N, U) and its :class:`RowGroup`.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 5.2.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> setup.A.shape, setup.offsets.size  # 23 used images x 229 offsets
+    ((23, 229), 229)
+    """
 
     offsets: np.ndarray
     A: np.ndarray
@@ -91,7 +105,20 @@ class StudySetup:
 
 
 def study_setup(sweep=None, lines_per_second: float = PAPER_LINES_PER_SECOND) -> StudySetup:
-    """The paper sweep's used bands over ``u = -K..K`` (75 x 229 for the paper sweep)."""
+    """The paper sweep's used bands over ``u = -K..K`` (75 x 229 for the paper sweep).
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 5.2.
+
+    Examples
+    --------
+    >>> setup = study_setup()  # the paper's sweep
+    >>> setup.A.shape
+    (75, 229)
+    """
     sweep = paper_sweep() if sweep is None else sweep
     K = sweep_support_rows(sweep, lines_per_second)
     u = np.arange(-K, K + 1)
@@ -106,6 +133,14 @@ def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float 
 
     ``g`` enters only through the similarity relation.  ``eta = 1`` (index-matched
     boundary) matches the Monte Carlo engine's default ``n = 1``.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> profile = dipole_provider(setup.offsets, mm_per_row=1.0)
+    >>> profile(1.0, 0.01, 0.9).shape  # sigma_s, sigma_a (1/mm), g
+    (229,)
     """
     from .mc.diffusion import dipole_line_kernel
 
@@ -133,6 +168,14 @@ def mc_provider(
     with ``sigma_a = 0`` a photon scatters until it leaves or is handed to
     diffusion theory 10 transport mean free paths deep (~250 collisions at the
     defaults; see :func:`planeray.mc.mc_line_profile`).
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> profile = mc_provider(setup.offsets, n_photons=2_000, cache=False)
+    >>> profile(1.0, 0.1, 0.9).shape
+    (229,)
     """
     from .mc import mc_line_profile
 
@@ -163,6 +206,13 @@ def default_provider(
     (what the paper's Mitsuba profiles had); the full study's 33 profiles take
     ~50 s on 2 cores the first time, then come from the disk cache.  The dipole
     is instant and smooth.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> default_provider(setup.offsets, use_mc=False).name.startswith("dipole")
+    True
     """
     if use_mc:
         return mc_provider(offsets, mm_per_row, n_photons)
@@ -170,6 +220,27 @@ def default_provider(
 
 
 def resolve_provider(provider, offsets) -> Provider:
+    """The provider named by ``provider``: None or ``"mc"`` (Monte Carlo), ``"dipole"``, or a callable as it is.
+
+    Parameters
+    ----------
+    provider : None, {"mc", "dipole"} or callable
+        ``profile(sigma_s, sigma_a, g) -> T`` over ``offsets`` (1/mm; T per projector row).
+    offsets : ndarray of int
+        Offsets ``u`` of the profiles, projector rows.
+
+    Returns
+    -------
+    callable
+        ``profile(sigma_s, sigma_a, g)``.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> resolve_provider("dipole", setup.offsets).name.startswith("dipole")
+    True
+    """
     if provider is None or provider in ("mc", "dipole"):
         return default_provider(offsets, use_mc=provider != "dipole")
     if callable(provider):
@@ -178,6 +249,26 @@ def resolve_provider(provider, offsets) -> Provider:
 
 
 def cached_provider(provider: Provider) -> Provider:
+    """``provider`` remembering each profile it made (the sweeps ask for the same profiles again).
+
+    Parameters
+    ----------
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm).
+
+    Returns
+    -------
+    callable
+        The same profiles, each computed once.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> profile = cached_provider(dipole_provider(setup.offsets))
+    >>> profile(1.0, 0.01, 0.9) is profile(1.0, 0.01, 0.9)  # computed once
+    True
+    """
     cache = {}
 
     def profile(sigma_s, sigma_a, g):
@@ -191,7 +282,16 @@ def cached_provider(provider: Provider) -> Provider:
 
 
 def scaled_truth(A, T) -> np.ndarray:
-    """``T`` scaled so that ``max(A T) = 1`` (normalized images)."""
+    """``T`` scaled so that ``max(A T) = 1`` (normalized images).
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> round(float((setup.A @ T).max()), 6)
+    1.0
+    """
     T = np.clip(np.asarray(T, np.float64), 0.0, None)
     peak = float(np.max(A @ T))
     if not peak > 0:
@@ -201,7 +301,17 @@ def scaled_truth(A, T) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- core
 def reconstruct(setup: StudySetup, B, methods=METHODS, alpha=0.01, beta=0.01) -> dict:
-    """Reconstructions ``{method: X (P, U)}`` of observations ``B`` (P, N)."""
+    """Reconstructions ``{method: X (P, U)}`` of observations ``B`` (P, N).
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> X = reconstruct(setup, setup.A @ T, methods=("pinv", "full"))
+    >>> sorted(X), X["full"].shape
+    (['full', 'pinv'], (1, 229))
+    """
     B = np.atleast_2d(np.asarray(B, np.float64))
     out = {}
     for m in methods:
@@ -223,7 +333,17 @@ def _observations(setup: StudySetup, T, noise, seeds, point=0):
 
 
 def mse_trials(setup: StudySetup, T, noise, seeds=5, methods=METHODS, alpha=0.01, beta=0.01, point=0, return_x=False):
-    """MSE against ``T`` of each method for ``seeds`` noise realizations: ``{method: (seeds,)}``."""
+    """MSE against ``T`` of each method for ``seeds`` noise realizations: ``{method: (seeds,)}``.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> mse = mse_trials(setup, T, noise=0.05, seeds=2, methods=("nnls", "full"))
+    >>> mse["full"].shape, bool(mse["full"].mean() < mse["nnls"].mean())
+    ((2,), True)
+    """
     B = _observations(setup, T, noise, seeds, point)
     X = reconstruct(setup, B, methods, alpha, beta)
     mse = {m: ((x - T[None]) ** 2).mean(axis=1) for m, x in X.items()}
@@ -235,7 +355,16 @@ def _truth(setup, provider, sigma_s, sigma_a, g):
 
 
 def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_NOISE, seed=0, **params) -> dict:
-    """Fig. 5a/b: truth and one reconstruction per method (noise realization ``seed``)."""
+    """Fig. 5a/b: truth and one reconstruction per method (noise realization ``seed``).
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> example = reconstruction_example(setup, dipole_provider(setup.offsets))
+    >>> example["full"].shape == example["truth"].shape
+    True
+    """
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
     B = _observations(setup, T, noise, seed + 1)[seed : seed + 1]
@@ -249,7 +378,16 @@ def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_
 
 
 def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, *, progress=None, **params) -> dict:
-    """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``; ``progress(1)`` after each noise level."""
+    """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``; ``progress(1)`` after each noise level.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> out = noise_sweep(setup, dipole_provider(setup.offsets), [0.01, 0.1], seeds=2)
+    >>> out["mse"]["full"].shape
+    (2, 2)
+    """
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
     mse = {m: np.zeros((len(noises), seeds)) for m in METHODS}
@@ -274,6 +412,17 @@ def auto_weights(setup: StudySetup, B, *, criterion: str | None = None) -> tuple
     ``criterion="cv-images"``: 5-fold cross-validation over the images, seed 0), the
     observations of the ``P`` noise realizations pooled like the pixels of a stack, weighted
     alike (the study's noise is the same for every image).
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> import numpy as np
+    >>> B = setup.A @ T + 0.02 * np.random.default_rng(0).standard_normal((20, setup.A.shape[0]))
+    >>> alpha, beta = auto_weights(setup, B)
+    >>> alpha > 0 and beta > 0
+    True
     """
     from .demux.auto import (
         CV_CRITERION,
@@ -343,7 +492,16 @@ def parameter_sweep(
     ``mse`` ``(len(values), seeds)``) and ``best_fixed`` (the pair of
     :data:`FIXED_ALPHAS` x :data:`FIXED_BETAS` with the lowest mean MSE for that profile,
     found with knowledge of the truth: ``alpha``, ``beta``, ``mse`` ``(len(values),)``),
-    on the same noise realizations."""
+    on the same noise realizations.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> out = parameter_sweep(setup, dipole_provider(setup.offsets), "sigma_a", [0.0, 0.1], seeds=2)
+    >>> out["mse"]["full"].shape
+    (2, 2)
+    """
     if name not in DEFAULT_PARAMS:
         raise ValueError(f"unknown parameter {name!r}")
     mse = {m: np.zeros((len(values), seeds)) for m in METHODS}
@@ -378,6 +536,14 @@ def regularization_sweep(
     seeds) and ``variance`` (``mse - bias2``), each ``(len(alphas), len(betas))``;
     the same noise realizations are used at every grid point.  ``progress(1)``
     after each grid point.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> out = regularization_sweep(setup, dipole_provider(setup.offsets), [0.01, 0.1], [0.01], seeds=2)
+    >>> out["mse"].shape, out["variance"].shape
+    ((2, 1), (2, 1))
     """
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
@@ -402,7 +568,13 @@ def regularization_sweep(
 
 
 def grids(quick: bool = False) -> dict:
-    """The swept values (full, or reduced for tests)."""
+    """The swept values (full, or reduced for tests).
+
+    Examples
+    --------
+    >>> sorted(grids(quick=True))
+    ['alpha', 'beta', 'g', 'noise', 'sigma_a', 'sigma_s']
+    """
     if quick:
         return {
             "noise": np.array([0.005, 0.05, 0.3]),

@@ -33,12 +33,24 @@ _SCENES = Path(__file__).resolve().parent / "scenes"
 
 
 def example_scenes() -> dict[str, Path]:
-    """The shipped example scene files by name (``mirror_ball``, ``disco_ball``, ``wax_candle``, ``room_corner``)."""
+    """The shipped example scene files by name (``mirror_ball``, ``disco_ball``, ``wax_candle``, ``room_corner``).
+
+    Examples
+    --------
+    >>> sorted(example_scenes())
+    ['disco_ball', 'mirror_ball', 'room_corner', 'wax_candle']
+    """
     return {p.stem: p for p in sorted(_SCENES.glob("*.xml"))}
 
 
 def example_scene(name: str) -> Path:
-    """Path of a shipped example scene file (a name of :func:`example_scenes`, or a path as it is)."""
+    """Path of a shipped example scene file (a name of :func:`example_scenes`, or a path as it is).
+
+    Examples
+    --------
+    >>> example_scene("room_corner").name
+    'room_corner.xml'
+    """
     scenes = example_scenes()
     if name in scenes:
         return scenes[name]

@@ -56,7 +56,13 @@ LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 
 
 class RenderWarning(UserWarning):
-    """Light the render leaves out: long-range entries dropped (the message says how much), or a caustic pass skipped."""
+    """Light the render leaves out: long-range entries dropped (the message says how much), or a caustic pass skipped.
+
+    Examples
+    --------
+    >>> issubclass(RenderWarning, UserWarning)
+    True
+    """
 
 
 @dataclass
@@ -83,6 +89,13 @@ class RenderResult:
         Everything that rebuilds the render (scene file and digest, rig, parameters, variant, timings).
     dropped_fraction : float
         Fraction of the light beyond the band that was neither dense nor sparse.
+
+    Examples
+    --------
+    >>> from planeray.render import example_scene
+    >>> result = render_transport(example_scene("room_corner"), shape=(8, 8), projector_rows=16, spp=4, band_rows=8)
+    >>> type(result).__name__, result.direct.shape, result.labels.shape
+    ('RenderResult', (8, 8), (8, 8))
     """
 
     transport: Transport
@@ -572,6 +585,12 @@ def render_work(scene_file, **kwargs) -> int:
     """Number of ``progress`` units of a render with these parameters (without rendering).
 
     Silent about what the render itself will warn of (a caustic pass skipped): it renders nothing.
+
+    Examples
+    --------
+    >>> from planeray.render import example_scene
+    >>> render_work(example_scene("room_corner"), shape=(8, 8), projector_rows=16, spp=4) > 0
+    True
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RenderWarning)
@@ -622,6 +641,23 @@ def render_to_store(
     -------
     path : Path
     result : RenderResult
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> from planeray.render import example_scene
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path, result = render_to_store(
+    ...         example_scene("room_corner"),
+    ...         pathlib.Path(tmp) / "T.zarr",
+    ...         shape=(8, 8),
+    ...         projector_rows=16,
+    ...         spp=4,
+    ...         band_rows=8,
+    ...     )
+    ...     pr.read_transport(path)[0].dense.shape
+    (8, 8, 17)
     """
     import time
 

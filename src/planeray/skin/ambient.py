@@ -133,7 +133,14 @@ def ambient_e_per_us(
 
 
 def ambient_table(wavelength_nm: float, *, laser_electrons: float = 6000.0, filter_fwhm_nm: float = 10.0) -> list:
-    """One row per :data:`AMBIENT_LEVELS` entry: lux, spectrum, W/m^2 in band, ``ambient_e_per_us``."""
+    """One row per :data:`AMBIENT_LEVELS` entry: lux, spectrum, W/m^2 in band, ``ambient_e_per_us``.
+
+    Examples
+    --------
+    >>> rows = ambient_table(850)
+    >>> len(rows) == len(AMBIENT_LEVELS), sorted(rows[0])[:2]
+    (True, ['ambient_e_per_us', 'band_w_m2'])
+    """
     rows = []
     for name, (lux, kind) in AMBIENT_LEVELS.items():
         rows.append(

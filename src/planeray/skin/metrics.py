@@ -116,6 +116,14 @@ def vein_ids_from_mask(mask) -> np.ndarray:
     """Integer vein ids (1, 2, ...; 0 off veins) from a boolean mask: 8-connected components.
 
     For a user mask without ids (a PNG/TIFF drawn over a captured image).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mask = np.zeros((4, 6), bool)
+    >>> mask[:, 1] = mask[:, 4] = True
+    >>> vein_ids_from_mask(mask)[0].tolist()
+    [0, 1, 0, 0, 2, 0]
     """
     labels, _ = ndimage.label(np.asarray(mask, bool), structure=np.ones((3, 3), bool))
     return labels.astype(np.int32)
