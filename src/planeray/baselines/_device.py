@@ -14,7 +14,19 @@ DEFAULT_FRAME_PERIOD_US = 1e6 / 60.0
 
 @runtime_checkable
 class PatternDevice(Protocol):
-    """A projector-camera that can project a row pattern for a full-frame exposure."""
+    """A projector-camera that can project a row pattern for a full-frame exposure.
+
+    Examples
+    --------
+    >>> from planeray.baselines import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> import numpy as np
+    >>> isinstance(device, PatternDevice)
+    True
+    >>> image, saturated = device.capture_pattern(np.ones(16), exposure_us=16_666.7)
+    >>> image.shape
+    (16, 16)
+    """
 
     def capture_pattern(self, pattern, exposure_us: float, frame_period_us: float = DEFAULT_FRAME_PERIOD_US):
         """Return ``(normalized image (H, W), saturation mask (H, W))``."""
@@ -84,6 +96,13 @@ def simulated_device(
         Simulate noise.
     lines_per_second : float, optional
         Projector line rate (default: the paper's 54,000 lines/s).
+
+    Examples
+    --------
+    >>> from planeray.baselines import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> device.lines_per_second, device.scene.name
+    (54000.0, 'corner')
     """
     from ..camera import CameraModel
     from ..devices import SimulatedEpiscan
