@@ -111,6 +111,17 @@ def search_delay_zero(
     ------
     InputError
         No response over the frame (nothing changes with delay).
+
+    Examples
+    --------
+    A camera whose epipolar response comes 5000 us after its trigger, once per 60 Hz frame:
+
+    >>> import numpy as np
+    >>> def capture(delay_us):
+    ...     phase = (delay_us - 5000.0 + 8333.3) % 16666.7 - 8333.3
+    ...     return np.full((4, 4), 1.0 if abs(phase) < 300.0 else 0.1)
+    >>> search_delay_zero(capture, exposure_us=600.0)["centre_us"]
+    5000.0
     """
     if not (exposure_us > 0 and frame_period_us > 0):
         raise InputError("exposure_us and frame_period_us must be positive")
@@ -223,6 +234,17 @@ def calibrate_base_trigger_delay(
         The fine calibration with ``base_trigger_delay_us`` set; ``details``
         hold ``base_used_us``, ``required_base_us``, ``fits_sweeps`` and the
         coarse ``search``.  The device is left at the calibrated base.
+
+    Examples
+    --------
+    On a camera whose trigger delay is settable (here the uEye driver; tests/test_ueye.py runs it on a
+    stand-in SDK):
+
+    >>> import planeray as pr
+    >>> from planeray.timing import paper_sweep
+    >>> with pr.devices.open_device("ueye", parameter_file="rig/episcan.ini") as cam:  # doctest: +SKIP
+    ...     cal = calibrate_base_trigger_delay(cam, sweeps=[paper_sweep()])
+    ...     cal.base_trigger_delay_us
     """
     v_p = float(device.lines_per_second)
     t_p = 1e6 / v_p

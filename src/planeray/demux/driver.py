@@ -82,6 +82,14 @@ class DemuxResult:
 
     ``maps`` holds the per-pixel maps of :data:`MAP_NAMES` and, when the ambient was
     estimated, :data:`AMBIENT_MAP` (also :attr:`ambient`).
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> result = pr.demultiplex(stack)
+    >>> type(result).__name__, result.transport.dense.shape, "converged" in result.maps
+    ('DemuxResult', (8, 8, 229), True)
     """
 
     transport: Transport
@@ -160,6 +168,16 @@ def solve_chunk(
         The camera rows (absolute).
     method : str
         A key of :data:`planeray.demux.SOLVERS`.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> import numpy as np
+    >>> problem = pr.DemuxProblem.from_stack(stack)
+    >>> chunk = solve_chunk(problem, np.asarray(stack.images)[problem.image_index], None, slice(0, 2))
+    >>> chunk.T.shape  # 2 camera rows x 8 columns x 229 offsets
+    (2, 8, 229)
     """
     tasks = _plan(problem, observations, saturated, rows)
     threads = _threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1

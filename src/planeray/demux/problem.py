@@ -69,7 +69,13 @@ MIN_IMAGES = 4
 
 
 def difference_matrix(n: int) -> np.ndarray:
-    """Forward difference ``D`` (``(n-1, n)``): the discrete ``d/dv`` of the smoothness term."""
+    """Forward difference ``D`` (``(n-1, n)``): the discrete ``d/dv`` of the smoothness term.
+
+    Examples
+    --------
+    >>> difference_matrix(3).tolist()
+    [[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0]]
+    """
     D = np.zeros((max(n - 1, 0), n))
     idx = np.arange(n - 1)
     D[idx, idx] = -1.0
@@ -96,6 +102,14 @@ class RowGroup:
         ``x`` are the light *per projector row* of each bin, so that smoothness and
         sparsity weigh every bin alike; the transport is ``T = x * on_projector``
         (a bin the projector's end cuts to a sliver holds the light of the sliver).
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> group = pr.DemuxProblem.from_stack(stack).groups[0]
+    >>> type(group).__name__, group.A.shape
+    ('RowGroup', (23, 8))
     """
 
     rows: np.ndarray

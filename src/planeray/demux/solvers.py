@@ -32,7 +32,13 @@ SOLVERS: dict[str, Callable] = {"fast": solve_fast, "pinv": solve_pinv, "nnls": 
 
 
 def get_solver(method: str) -> Callable:
-    """The solver registered as ``method``; an :class:`~planeray.errors.InputError` names the choices otherwise."""
+    """The solver registered as ``method``; an :class:`~planeray.errors.InputError` names the choices otherwise.
+
+    Examples
+    --------
+    >>> get_solver("fast").__name__
+    'solve_fast'
+    """
     try:
         return SOLVERS[method]
     except KeyError:
