@@ -39,6 +39,12 @@ class DesignCamera:
         The steps of the camera's exposure and trigger delay (us); 0: any value.
     source : str
         Where these came from (``"default"``, ``"device:NAME"``, ``"file:PATH"``).
+
+    Examples
+    --------
+    >>> cam = DesignCamera()  # the default camera of the simulated Episcan
+    >>> cam.lines_per_second, cam.model.read_noise_e, cam.source
+    (54000.0, 7.0, 'default')
     """
 
     model: CameraModel = field(default_factory=CameraModel)
@@ -95,6 +101,13 @@ def camera_from_device(device, name: str) -> DesignCamera:
 
     A camera that does not describe its noise gets the default model, with its averaging where
     known.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("corner", (8, 8), seed=0), seed=0)
+    >>> camera_from_device(device, "sim").lines_per_second
+    54000.0
     """
     from ..devices.capabilities import has
 
@@ -130,6 +143,16 @@ def camera_from_file(path) -> DesignCamera:
     ------
     InputError
         One line naming the file: unreadable, or no camera in it.
+
+    Examples
+    --------
+    >>> import json, pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pathlib.Path(tmp) / "acquisition.json"
+    ...     _ = path.write_text(json.dumps({"lines_per_second": 52000.0, "camera": {"read_noise_e": 3.0}}))
+    ...     cam = camera_from_file(path)
+    >>> cam.lines_per_second, cam.model.read_noise_e
+    (52000.0, 3.0)
     """
     path = Path(path)
     if path.is_dir() and (path / "zarr.json").is_file():

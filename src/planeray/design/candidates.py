@@ -43,6 +43,13 @@ def band_rows(delay_us, exposure_us, offsets_rows, *, lines_per_second, jitter_u
 
     The bands of an interior camera row (every offset bin whole on the projector): Eq. 3 on 1-row
     bins, the edges blurred by ``jitter_us`` (as the demultiplexer's matrix is).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rows = band_rows([0.0, 375.0], [600.0, 600.0], np.arange(-40, 41), lines_per_second=54000.0)
+    >>> rows.shape, round(float(rows[0].sum()), 1)  # each band 32.4 projector rows wide
+    ((2, 81), 32.4)
     """
     offsets = np.asarray(offsets_rows)
     K = int(np.abs(offsets).max(initial=0))
@@ -67,6 +74,13 @@ class Candidates:
         Each candidate's band over the offsets (:func:`band_rows`).
     description : dict
         JSON record: bounds, steps, margin, count.
+
+    Examples
+    --------
+    >>> from planeray.design import candidate_settings
+    >>> cands = candidate_settings(support_rows=20, exposure_range_us=(300, 600))
+    >>> type(cands).__name__, cands.rows.shape[1], len(cands) == cands.rows.shape[0]
+    ('Candidates', 41, True)
     """
 
     delay_us: np.ndarray

@@ -65,6 +65,14 @@ class SweepDesign:
     seconds : float
     record : dict
         What the sweep file records (``record``): prior, camera, criterion, candidates, seed.
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> d = design_sweep(4, prior=prior)
+    >>> type(d).__name__, len(d.sweep), d.expected_error > 0
+    ('SweepDesign', 4, True)
     """
 
     sweep: Sweep
@@ -76,7 +84,19 @@ class SweepDesign:
 
 
 def image_variance(rows, exposure_us, prior: TransportPrior, camera: DesignCamera) -> np.ndarray:
-    """The noise variance of images with illumination ``rows`` at the prior's mean transport (normalized units)."""
+    """The noise variance of images with illumination ``rows`` at the prior's mean transport (normalized units).
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> from planeray.design import candidate_settings
+    >>> cands = candidate_settings(support_rows=20, exposure_range_us=(300, 600))
+    >>> from planeray.design import DesignCamera
+    >>> variance = image_variance(cands.rows, cands.exposure_us, prior, DesignCamera())
+    >>> variance.shape == (len(cands),), bool((variance > 0).all())
+    (True, True)
+    """
     model = camera.model
     signal = (np.asarray(rows) @ prior.mean) / model.signal_scale  # the mean in transport units (Eq. 4)
     return model.image_variance(signal, np.asarray(exposure_us, np.float64), ambient_albedo=prior.ambient_albedo)
@@ -272,6 +292,14 @@ def expected_error(
     relative transport error ``sqrt(E / E||x||^2)``, for the Bayesian criteria their value.
 
     Bands beyond the prior's support are cut to it (that light is not in the prior).
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> from planeray.timing import quick_sweep
+    >>> 0 < expected_error(quick_sweep(), prior=prior) < 1  # relative transport error of the quick sweep
+    True
     """
     camera = camera or DesignCamera()
     used = ~sweep.excluded
