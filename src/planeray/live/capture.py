@@ -72,6 +72,28 @@ class Frame:
     generation : int
         The timing request it answers (a new :meth:`LiveCapture.set_timing` or ``set_cycle`` starts
         a new generation).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> from planeray.live import Frame
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> frames = [
+    ...     Frame(
+    ...         i,
+    ...         stack.images[i],
+    ...         stack.saturated[i],
+    ...         float(stack.delay_us[i]),
+    ...         float(stack.exposure_us[i]),
+    ...         time_s=i / 30,
+    ...         captured_at=i / 30,
+    ...         generation=0,
+    ...     )
+    ...     for i in range(len(stack))
+    ... ]
+    >>> frames[4].delay_us, frames[4].exposure_us, frames[4].image.shape
+    (0.0, 600.0, (8, 8))
     """
 
     index: int
