@@ -82,6 +82,17 @@ class FeatureDefinition:
         A transport's offsets (empty for a stack).
     demux : dict
         A transport's demultiplexing options (``alpha``, ``beta``, ``method``), empty for a stack.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> from planeray.materials import capture_features
+    >>> features, signal, definition = capture_features(stack)
+    >>> type(definition).__name__, definition.kind, len(definition.delay_us) == features.shape[1]
+    ('FeatureDefinition', 'stack', True)
     """
 
     kind: str
@@ -221,6 +232,18 @@ def normalize_profiles(values, delay_us, *, floor="edge"):
     part over delay in ms; a profile with no positive area becomes 0.  ``floor``:
     ``"edge"`` subtracts the mean of the :data:`EDGE_SAMPLES` outermost samples at each
     end, ``"min"`` the minimum, ``"none"`` nothing.
+
+    Examples
+    --------
+    Returns the normalized profiles (float32) and the area each was divided by (1/ms units of the input).
+    The floor here is the mean of the two outermost samples at each end (0.35):
+
+    >>> import numpy as np
+    >>> p, area = normalize_profiles(
+    ...     np.array([[0.1, 0.6, 1.1, 0.6, 0.1]]), np.array([-1000.0, -500.0, 0.0, 500.0, 1000.0])
+    ... )
+    >>> p.round(2).tolist(), area.tolist()
+    ([[-0.4, 0.4, 1.2, 0.4, -0.4]], [0.625])
     """
     if floor not in FLOORS:
         raise InputError(f"unknown floor {floor!r}; choose one of {', '.join(FLOORS)}")
@@ -325,6 +348,19 @@ def transport_features(
     :func:`stack_features`; ``demux`` records the demultiplexing options and ``floor``
     the floor removed from the stack before demultiplexing (:func:`remove_floor`), both
     compared by a model.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> from planeray.materials import capture_transport
+    >>> features, signal, definition = transport_features(
+    ...     capture_transport(stack), lines_per_second=54000.0, demux={"alpha": 0.01, "beta": 0.01, "method": "fast"}
+    ... )
+    >>> features.shape[0], definition.kind
+    (64, 'transport')
     """
     mine = transport_definition(
         transport,
@@ -347,6 +383,16 @@ def remove_floor(stack: Stack, *, floor="edge") -> Stack:
     delays at each end; ``"min"``: the minimum; ``"none"``: the stack itself), taken
     per pixel over the delays of each exposure and subtracted from all its images: what
     the ambient light adds (``ambient x t_e x albedo``) goes, exactly.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> floored = remove_floor(stack)
+    >>> floored.images.shape == stack.images.shape, bool(floored.images.min() < stack.images.min())
+    (True, True)
     """
     if floor not in FLOORS:
         raise InputError(f"unknown floor {floor!r}; choose one of {', '.join(FLOORS)}")
