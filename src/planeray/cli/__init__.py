@@ -112,7 +112,22 @@ skin.skin_app.command("pulse-report")(_friendly_errors(pulse.pulse_report))
 
 
 def main(argv: list[str] | None = None):
-    """Console entry point (``planeray``)."""
+    """Console entry point (``planeray``).
+
+    Examples
+    --------
+    The command line from Python (what the ``planeray`` command runs); it ends with the exit status:
+
+    >>> import contextlib, io
+    >>> out = io.StringIO()
+    >>> with contextlib.redirect_stdout(out):
+    ...     try:
+    ...         main(["scenes"])
+    ...     except SystemExit as done:
+    ...         status = done.code
+    >>> status, "translucent wax object" in out.getvalue()
+    (0, True)
+    """
     import sys
 
     args = _join_pixel_args(list(sys.argv[1:] if argv is None else argv))
