@@ -89,12 +89,12 @@ def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=Non
 
     Examples
     --------
-    The demo at 16 x 16 pixels, its messages kept out of the way:
+    The demo at 8 x 8 pixels, its messages kept out of the way:
 
     >>> import io, pathlib, tempfile
     >>> from rich.console import Console
     >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     paths = run_demo(pathlib.Path(tmp) / "out", size=16, console=Console(file=io.StringIO()))
+    ...     paths = run_demo(pathlib.Path(tmp) / "out", size=8, console=Console(file=io.StringIO()))
     >>> sorted(paths)[:3]
     ['fig8_contact_sheet', 'fig9_delay_profiles', 'fig9_profiles_csv']
     """
