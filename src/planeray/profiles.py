@@ -94,6 +94,12 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     --------
     transport_delay_profiles : the same from a transport, at any delay.
 
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Fig. 9.
+
     Examples
     --------
     >>> from planeray.acquire import simulate_stack
@@ -103,12 +109,6 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     >>> prof = measured_delay_profiles(stack, [(8, 8)])
     >>> prof.values.shape  # (pixels, exposures, delays)
     (1, 5, 17)
-
-    References
-    ----------
-    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
-       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
-       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Fig. 9.
     """
     px = _check_pixels(pixels, stack.shape)
     delays, exposures = stack.delays(), stack.exposures()

@@ -164,6 +164,12 @@ def sharpened_epipolar(transport: Transport, *, width_rows: float = 1.0) -> np.n
     epipolar_image : the epipolar image of Eq. 5.
     band_image : any band.
 
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Fig. 11.
+
     Examples
     --------
     On a direct-only scene the one-row epipolar image is the direct image itself:
@@ -173,12 +179,6 @@ def sharpened_epipolar(transport: Transport, *, width_rows: float = 1.0) -> np.n
     >>> scene = make_scene("diffuse_plane", (16, 16), seed=0)
     >>> bool(np.allclose(sharpened_epipolar(scene.transport, width_rows=1.0), scene.direct, atol=1e-6))
     True
-
-    References
-    ----------
-    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
-       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
-       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Fig. 11.
     """
     return transport.render(offset_window(0.0, width_rows))
 

@@ -807,6 +807,12 @@ def paper_sweep() -> Sweep:
     quick_sweep : 27 images for quick looks.
     Sweep.grid : any grid of delays and exposures.
 
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6.
+
     Examples
     --------
     >>> sweep = paper_sweep()
@@ -814,12 +820,6 @@ def paper_sweep() -> Sweep:
     (85, 10)
     >>> sweep_support_rows(sweep, PAPER_LINES_PER_SECOND)
     114
-
-    References
-    ----------
-    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
-       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
-       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6.
     """
     return Sweep.grid(np.arange(-8, 9) * 187.5, np.arange(600.0, 1201.0, 150.0), name="paper")
 

@@ -234,11 +234,6 @@ def capture_direct_global(
     .. [1] Nayar et al., "Fast separation of direct and global components of a
        scene using high frequency illumination", SIGGRAPH 2006.
 
-    References
-    ----------
-    .. [1] S. K. Nayar, G. Krishnan, M. D. Grossberg, R. Raskar, "Fast separation of direct and global
-       components of a scene using high frequency illumination", ACM SIGGRAPH 2006.
-
     Examples
     --------
     >>> from planeray.baselines import simulated_device

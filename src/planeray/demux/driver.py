@@ -437,6 +437,12 @@ def demultiplex(
     DemuxProblem : the problem it solves.
     planeray.demux.choose_weights : the ``"auto"`` weights.
 
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4, the optimization below Eq. 6.
+
     Examples
     --------
     >>> from planeray.acquire import simulate_stack
@@ -446,12 +452,6 @@ def demultiplex(
     >>> result = demultiplex(stack)
     >>> result.transport.dense.shape, bool(result.maps["converged"].all())
     ((8, 8, 229), True)
-
-    References
-    ----------
-    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
-       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
-       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4, the optimization below Eq. 6.
     """
     ambient = resolve_ambient(ambient, alpha, beta)
     _check_run_options(method, chunk_rows, tol, ambient=ambient)
