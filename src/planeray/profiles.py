@@ -87,8 +87,16 @@ def measured_delay_profiles(stack: Stack, pixels) -> DelayProfiles:
     Parameters
     ----------
     stack : Stack
+        The captured (or simulated) images with their delays and exposures (us).
     pixels : array_like (P, 2)
         ``(row, col)`` pixel coordinates.
+
+    Returns
+    -------
+    DelayProfiles
+        ``values`` (P, exposures, delays): each profile area-normalized over delay in
+        milliseconds (1/ms; NaN where the stack has no image), ``raw`` the image values,
+        ``delay_us`` and ``exposure_us`` the grid.
 
     See Also
     --------

@@ -159,6 +159,18 @@ def sharpened_epipolar(transport: Transport, *, width_rows: float = 1.0) -> np.n
     rows for the paper's sweep): windows narrower than ``2 *`` that cell show the
     regularizer's spread of it, not more detail.
 
+    Parameters
+    ----------
+    transport : Transport
+        Light transport ``T`` (ground truth or demultiplexed).
+    width_rows : float
+        Width of the band in projector rows (> 0; 1: one projector row).
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32
+        The sharpened epipolar image, in normalized image units.
+
     See Also
     --------
     epipolar_image : the epipolar image of Eq. 5.

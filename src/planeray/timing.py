@@ -802,6 +802,11 @@ def paper_sweep() -> Sweep:
     """The paper's sweep (Sec. 6): delays -1500..1500 us step 187.5 (17) x exposures
     600..1200 us step 150 (5) = 85 images, 10 boundary images flagged -> N = 75.
 
+    Returns
+    -------
+    Sweep
+        85 (delay, exposure) settings in microseconds, exposure-major (the rows of Fig. 8).
+
     See Also
     --------
     quick_sweep : 27 images for quick looks.

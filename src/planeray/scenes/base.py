@@ -161,8 +161,15 @@ def _discover() -> None:
 def list_scenes(*, parametric: bool = False) -> dict[str, str]:
     """Names and one-line descriptions of the registered scenes.
 
-    With ``parametric``, the scenes that take an argument are listed too, as
-    ``NAME:ARGUMENT`` (e.g. ``mitsuba:FILE.xml``).
+    Parameters
+    ----------
+    parametric : bool
+        Also the scenes that take an argument, as ``NAME:ARGUMENT`` (e.g. ``mitsuba:FILE.xml``).
+
+    Returns
+    -------
+    dict of str to str
+        Name -> one-line description.
 
     See Also
     --------
@@ -223,6 +230,12 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
         Seed of every random element (textures); same seed, same bytes.
     **params
         Scene-specific physical parameters (see each scene's docstring).
+
+    Returns
+    -------
+    Scene
+        Its exact ground-truth ``transport`` (normalized image value per projector row),
+        the ``direct`` light, the ``ambient_albedo`` and the effect ``labels`` of each pixel.
 
     See Also
     --------
