@@ -7,8 +7,9 @@ the ``__all__`` of each public top-level module and subpackage (``planeray.demux
 
 Usage::
 
-    python tools/missing_examples.py           # one line per name lacking an Example, then the count
-    python tools/missing_examples.py --count   # the counts only
+    python tools/missing_examples.py             # one line per name lacking an Example, then the count
+    python tools/missing_examples.py --count     # the counts only
+    python tools/missing_examples.py --sections  # also the names lacking Parameters, Returns or See Also
 
 Exits 1 when a name lacks an Example (so CI or a test can use it), 0 otherwise.
 """
@@ -55,6 +56,32 @@ def has_example(obj) -> bool:
     return bool(m) and ">>>" in doc[m.end() :]
 
 
+def _headers(obj) -> set[str]:
+    return set(re.findall(r"^(\w[\w ]*)\n-{3,}$", inspect.getdoc(obj) or "", re.MULTILINE))
+
+
+def missing_sections() -> dict[str, list[str]]:
+    """Per dotted name, the numpydoc sections it lacks of Parameters (a callable with parameters; a class
+    may give Attributes instead), Returns (functions) and See Also."""
+    out = {}
+    for name, obj in public_names().items():
+        heads = _headers(obj)
+        try:
+            params = [p for p in inspect.signature(obj).parameters if not p.startswith("_")]
+        except (TypeError, ValueError):
+            params = []
+        lacking = []
+        if params and not heads & {"Parameters", "Attributes" if inspect.isclass(obj) else "Parameters"}:
+            lacking.append("Parameters")
+        if inspect.isfunction(obj) and not heads & {"Returns", "Yields"}:
+            lacking.append("Returns")
+        if "See Also" not in heads:
+            lacking.append("See Also")
+        if lacking:
+            out[name] = lacking
+    return out
+
+
 def missing() -> list[str]:
     """The dotted names of the public functions and classes without an Example."""
     return [name for name, obj in public_names().items() if not has_example(obj)]
@@ -63,6 +90,7 @@ def missing() -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", action="store_true", help="print the counts only")
+    parser.add_argument("--sections", action="store_true", help="also list the names lacking other sections")
     args = parser.parse_args(argv)
     names = public_names()
     lacking = missing()
@@ -70,6 +98,14 @@ def main(argv: list[str] | None = None) -> int:
         for name in lacking:
             print(name)
     print(f"{len(lacking)} of {len(names)} public functions and classes lack an Example", file=sys.stderr)
+    if args.sections:
+        sections = missing_sections()
+        if not args.count:
+            for name, which in sections.items():
+                print(f"{name}: no {', '.join(which)}")
+        for section in ("Parameters", "Returns", "See Also"):
+            n = sum(section in which for which in sections.values())
+            print(f"{n} lack {section}", file=sys.stderr)
     return 1 if lacking else 0
 
 

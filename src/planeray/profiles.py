@@ -39,6 +39,11 @@ class DelayProfiles:
     raw : ndarray (P, E, D) float32
         Intensities before normalization.
 
+    See Also
+    --------
+    measured_delay_profiles : the profiles of a stack.
+    write_profiles_csv : as a CSV file.
+
     Examples
     --------
     >>> import planeray as pr
@@ -59,6 +64,22 @@ def area_normalize(values, delay_us):
     """Divide each profile (last axis) by its area over delay in milliseconds.
 
     Missing samples (NaN) are skipped; a profile with no positive area is left at 0.
+
+    Parameters
+    ----------
+    values : array_like (..., D)
+        Profiles over delay (last axis).
+    delay_us : array_like (D,)
+        The delays, microseconds (sorted).
+
+    Returns
+    -------
+    ndarray (..., D)
+        The profiles divided by their areas (1/ms).
+
+    See Also
+    --------
+    measured_delay_profiles : profiles so normalized.
 
     Examples
     --------
@@ -135,6 +156,22 @@ def write_profiles_csv(profiles: DelayProfiles, path) -> Path:
     The first line is planeray's mark, a comment (``# planeray_mark: planeray:table:VERSION``;
     pandas: ``read_csv(path, comment="#")``), then the header.
 
+    Parameters
+    ----------
+    profiles : DelayProfiles
+        From :func:`measured_delay_profiles`.
+    path : str or path
+        The CSV file to write (replaced if it exists).
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+
+    See Also
+    --------
+    measured_delay_profiles : the profiles.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -185,6 +222,10 @@ class TransportDelayProfiles:
         :func:`area_normalize`).
     raw : ndarray, same shape as ``values``, float32
         Profiles before normalization.
+
+    See Also
+    --------
+    transport_delay_profiles : the profiles of a transport.
 
     Examples
     --------

@@ -138,6 +138,23 @@ def offset_window(centre_rows: float, width_rows: float) -> Band:
     The same illumination as a (delay, exposure) band, parameterized in rows:
     exact fractional bin weights, no jitter.
 
+    Parameters
+    ----------
+    centre_rows : float
+        Centre of the band, projector rows from the epipolar plane.
+    width_rows : float
+        Width of the band, projector rows (> 0).
+
+    Returns
+    -------
+    Band
+        An illumination for :meth:`Transport.render`.
+
+    See Also
+    --------
+    band_image : the same from a delay and an exposure.
+    sharpened_epipolar : a band on the epipolar plane.
+
     Examples
     --------
     >>> band = offset_window(0.0, 1.0)  # one projector row on the epipolar plane
@@ -297,6 +314,22 @@ def relight(transport: Transport, pattern) -> np.ndarray:
 def single_line_pattern(projector_rows: int, row: int) -> np.ndarray:
     """A single lit projector row (the paper's virtual single-line illumination).
 
+    Parameters
+    ----------
+    projector_rows : int
+        Rows of the projector ``P``.
+    row : int
+        The lit row, ``0 .. P-1``.
+
+    Returns
+    -------
+    ndarray (P,)
+        1 at ``row``, 0 elsewhere.
+
+    See Also
+    --------
+    relight : the image under a pattern.
+
     Examples
     --------
     >>> single_line_pattern(5, 2).tolist()
@@ -316,6 +349,23 @@ def load_pattern(path, projector_rows: int) -> np.ndarray:
     profile.  An image (``.png``, ``.tif``, ``.tiff``, ``.jpg``): the mean of each
     image row, top to bottom, scaled to [0, 1] by the image's dtype range.
     Profiles of another length are resampled linearly over the projector height.
+
+    Parameters
+    ----------
+    path : str or path
+        The pattern file.
+    projector_rows : int
+        Rows of the projector ``P``.
+
+    Returns
+    -------
+    ndarray (P,)
+        Intensity of each projector row (1 = full).
+
+    See Also
+    --------
+    relight : the image under the pattern.
+    single_line_pattern : one lit row.
 
     Examples
     --------
@@ -421,6 +471,22 @@ def short_long_range(transport: Transport, max_rows: float, *, epipolar_rows: fl
 
 def michelson_contrast(values, *, axis=-1) -> np.ndarray:
     """Michelson contrast ``(max - min) / (max + min)`` along ``axis`` (e.g. a scan line).
+
+    Parameters
+    ----------
+    values : array_like
+        Non-negative values, e.g. a scan line of an image.
+    axis : int
+        Axis along which the contrast is taken.
+
+    Returns
+    -------
+    ndarray
+        The contrast, 0 to 1.
+
+    See Also
+    --------
+    sharpened_epipolar : Fig. 11's contrast of sharpened images.
 
     Examples
     --------

@@ -105,6 +105,11 @@ def delay_from_sync_offset(sync_offset_us, exposure_us, *, line_time_us=None, li
     delay_us : float or ndarray
         Delay ``t_d`` between the centre of exposure and the centre of illumination.
 
+    See Also
+    --------
+    sync_offset_from_delay : the inverse.
+    band_centre_rows : the delay in projector rows (Eq. 2).
+
     Examples
     --------
     The paper's line time at 54,000 lines/s is 18.5 us; a sync offset of 0 with a
@@ -122,6 +127,28 @@ def delay_from_sync_offset(sync_offset_us, exposure_us, *, line_time_us=None, li
 def sync_offset_from_delay(delay_us, exposure_us, *, line_time_us=None, lines_per_second=None):
     """Inverse of Eq. 1: ``t'_o = t_e/2 - t_p/2 - t_d`` (see :func:`delay_from_sync_offset`).
 
+    Parameters
+    ----------
+    delay_us : float or array_like
+        Delay ``t_d`` in microseconds.
+    exposure_us : float or array_like
+        Row exposure ``t_e`` in microseconds.
+    line_time_us : float, optional
+        ``t_p``, the time the projector lights one scanline, in microseconds (default
+        ``1e6 / lines_per_second``).
+    lines_per_second : float, optional
+        Projector scan rate ``v_p`` in rows per second; used only when ``line_time_us`` is None.
+
+    Returns
+    -------
+    sync_offset_us : float or ndarray
+        ``t'_o`` in microseconds: the time from the start of a row's exposure to the moment the projector
+        lights that row.
+
+    See Also
+    --------
+    delay_from_sync_offset : Eq. 1.
+
     Examples
     --------
     The inverse of :func:`delay_from_sync_offset`:
@@ -137,6 +164,23 @@ def sync_offset_from_delay(delay_us, exposure_us, *, line_time_us=None, lines_pe
 def band_centre_rows(delay_us, lines_per_second):
     """Band centre ``I_d = v_p t_d`` in projector rows, Eq. 2 (``v_p`` in lines per second).
 
+    Parameters
+    ----------
+    delay_us : float or array_like
+        Delay ``t_d`` in microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+
+    Returns
+    -------
+    float or ndarray
+        ``I_d`` in projector rows (positive: below the camera row's epipolar plane).
+
+    See Also
+    --------
+    band_width_rows : the band's width.
+    Band : a band as an illumination.
+
     Examples
     --------
     >>> float(band_centre_rows(375.0, PAPER_LINES_PER_SECOND))  # 375 us at 54,000 rows/s
@@ -147,6 +191,22 @@ def band_centre_rows(delay_us, lines_per_second):
 
 def band_width_rows(exposure_us, lines_per_second):
     """Band width ``I_w = v_p t_e`` in projector rows, Eq. 2 (``v_p`` in lines per second).
+
+    Parameters
+    ----------
+    exposure_us : float or array_like
+        Row exposure ``t_e`` in microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+
+    Returns
+    -------
+    float or ndarray
+        ``I_w`` in projector rows.
+
+    See Also
+    --------
+    band_centre_rows : the band's centre.
 
     Examples
     --------
@@ -162,6 +222,25 @@ def illumination(offset_rows, delay_us, exposure_us, lines_per_second):
     ``L(u) = 1`` where ``|u - I_d| < I_w / 2`` and 0 elsewhere, with ``u = v - t``
     the projector-row offset.  Use :func:`band_bin_weights` for its exact
     discretization on 1-row bins.
+
+    Parameters
+    ----------
+    offset_rows : float or array_like
+        Offsets ``u = v - t`` in projector rows.
+    delay_us, exposure_us : float
+        Delay ``t_d`` and exposure ``t_e`` in microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+
+    Returns
+    -------
+    ndarray of float
+        1 inside the band, 0 outside (the projector's full intensity is 1).
+
+    See Also
+    --------
+    band_bin_weights : its exact discretization on 1-row bins.
+    Band : the band with jitter and the projector's ends.
 
     Examples
     --------
@@ -235,6 +314,11 @@ def band_bin_weights(offset_rows, centre_rows, width_rows, *, blur_sigma_rows=0.
     weights : ndarray of float64
         Fraction of each bin lit by the band; they sum to ``width_rows`` over all bins.
 
+    See Also
+    --------
+    illumination : the continuous band (Eq. 3).
+    band_interval_weights : the same over any intervals.
+
     Examples
     --------
     A 600 us band at 54,000 lines/s is 32.4 rows wide; its bin weights add up to that
@@ -271,6 +355,10 @@ def band_interval_weights(lo_rows, hi_rows, centre_rows, width_rows, *, blur_sig
     -------
     weights : ndarray of float64
         Length of each interval lit by the band (rows); 0 below ``1e-10``.
+
+    See Also
+    --------
+    band_bin_weights : over 1-row bins.
 
     Examples
     --------
@@ -631,6 +719,10 @@ def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_r
     -------
     weights : ndarray (N, U) float64
 
+    See Also
+    --------
+    Band.weights : one band at many rows.
+
     Examples
     --------
     >>> import numpy as np
@@ -786,6 +878,22 @@ class Sweep:
 def boundary_images(delay_us, exposure_us, *, margin_us=PAPER_BOUNDARY_MARGIN_US):
     """Flag images whose band edge sits on the epipolar plane: ``||t_d| - t_e/2| <= margin``.
 
+    Parameters
+    ----------
+    delay_us, exposure_us : array_like
+        Delay ``t_d`` and exposure ``t_e`` of each image, microseconds.
+    margin_us : float
+        How close (microseconds) a band edge may come to the epipolar plane (the paper: 75).
+
+    Returns
+    -------
+    ndarray of bool
+        True for the images left out of demultiplexing.
+
+    See Also
+    --------
+    Sweep : its ``excluded`` flags.
+
     Examples
     --------
     A band whose edge is on the epipolar plane (``|t_d| = t_e / 2``) is a boundary image:
@@ -896,6 +1004,24 @@ def make_sweep(name: str) -> Sweep:
 def sweep_support_rows(sweep: Sweep, lines_per_second, *, include_excluded=False) -> int:
     """Half-width ``K`` of the offset support ``-K..K`` reached by a sweep's bands:
     ``max |I_d| + I_w / 2`` rounded up (114 rows -> 229 offsets for the paper's sweep).
+
+    Parameters
+    ----------
+    sweep : Sweep
+        The (delay, exposure) settings, microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+    include_excluded : bool
+        Count the boundary images too (default: only the images demultiplexing uses).
+
+    Returns
+    -------
+    int
+        ``K``: the demultiplexer's unknowns are the offsets ``-K..K`` (projector rows).
+
+    See Also
+    --------
+    paper_sweep : 114 rows for the paper's sweep.
 
     Examples
     --------
