@@ -82,6 +82,10 @@ class ProfileCharacter:
     cell_rows : float
         Half-width of the unresolved cell used.
 
+    See Also
+    --------
+    characterize : computes it.
+
     Examples
     --------
     >>> import numpy as np
@@ -313,6 +317,11 @@ def characterize(
     ------
     InputError
         Profiles and offsets of different lengths, or an unknown threshold.
+
+    See Also
+    --------
+    classify_transport : the labels of a whole transport.
+    ProfileCharacter : what it returns.
 
     Notes
     -----
@@ -741,6 +750,10 @@ def visible_effect_mask(scene, *, support_rows=114, resolution_rows=6.075, min_f
     -------
     mask : ndarray (H, W) bool
 
+    See Also
+    --------
+    label_agreement : scores labels on these pixels.
+
     Examples
     --------
     >>> import planeray as pr
@@ -786,6 +799,11 @@ def label_agreement(pred, truth_labels, *, mask=None, n_labels=5) -> dict:
         ``(n_labels, n_labels)`` int64 array, rows true label, columns predicted;
         ``overall``: fraction of all evaluated pixels predicted right (NaN if none);
         ``n``: number of evaluated pixels.
+
+    See Also
+    --------
+    classify_transport : the predicted labels.
+    visible_effect_mask : the pixels worth scoring.
 
     Examples
     --------

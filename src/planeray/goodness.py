@@ -76,6 +76,22 @@ def _check_p(p_misfit) -> float:
 def misfit_threshold(dof: int, *, p_misfit=DEFAULT_P_MISFIT) -> float:
     """The reduced chi-square above which a fit of ``dof`` degrees of freedom is flagged.
 
+    Parameters
+    ----------
+    dof : int
+        Degrees of freedom.
+    p_misfit : float
+        The probability that a right model is flagged.
+
+    Returns
+    -------
+    float
+        The reduced chi-square threshold.
+
+    See Also
+    --------
+    fit_quality : applies it.
+
     Examples
     --------
     >>> round(misfit_threshold(75), 2), round(misfit_threshold(10_000), 3)
@@ -97,6 +113,11 @@ class FitQuality:
         Degrees of freedom: samples minus fitted parameters (at least 1).
     p_misfit : float
         The p-value below which the model is said not to fit.
+
+    See Also
+    --------
+    fit_quality : builds it.
+    misfit_threshold : the flag's threshold.
 
     Examples
     --------
@@ -164,6 +185,23 @@ class FitQuality:
 def fit_quality(chi2, dof, *, p_misfit=DEFAULT_P_MISFIT) -> FitQuality:
     """:class:`FitQuality` of a fit: ``chi2`` of its whitened residuals at ``dof`` degrees of freedom.
 
+    Parameters
+    ----------
+    chi2 : float
+        Sum of the squared whitened residuals (noise model and model-error floor included).
+    dof : int
+        Degrees of freedom (observations minus fitted parameters).
+    p_misfit : float
+        The false-alarm probability of the misfit flag for a right model.
+
+    Returns
+    -------
+    FitQuality
+
+    See Also
+    --------
+    misfit_threshold : the threshold it applies.
+
     Examples
     --------
     >>> q = fit_quality(80.0, 75)
@@ -177,6 +215,20 @@ def fit_quality(chi2, dof, *, p_misfit=DEFAULT_P_MISFIT) -> FitQuality:
 
 def describe_flags(bits: int) -> list[str]:
     """The texts of :data:`FLAGS` set in ``bits``.
+
+    Parameters
+    ----------
+    bits : int
+        An OR of :data:`FLAG_MISFIT`, :data:`FLAG_EDGE`, :data:`FLAG_NOT_FITTED`, :data:`FLAG_RANGE`.
+
+    Returns
+    -------
+    list of str
+        One sentence per flag set.
+
+    See Also
+    --------
+    FitQuality : a fit's verdict.
 
     Examples
     --------

@@ -276,6 +276,10 @@ def recorded_mm_per_row(metadata) -> tuple[float | None, str | None]:
         The row size and ``"acquisition.json"``, ``"the capture's record"`` or ``"the scene's record"``;
         ``(None, None)`` when nothing records it.
 
+    See Also
+    --------
+    Stack : its ``metadata``.
+
     Examples
     --------
     >>> recorded_mm_per_row({"acquisition": {"mm_per_row": 0.25}, "scene": {"mm_per_row": 0.3}})

@@ -112,6 +112,11 @@ def bin_projector_rows(per_row, geometry: RowGeometry, offsets_rows, *, far: boo
     entries : tuple of ndarray ``(row, col, offset, value)``
         Nonzero light outside the band (empty arrays when ``far`` is False).
 
+    See Also
+    --------
+    Transport : the offset bins.
+    planeray.timing.RowGeometry.row_bins : the overlap rule.
+
     Examples
     --------
     Two camera rows of a three-row projector: camera row 0 sits at ``p_0 = 0.25``,

@@ -191,6 +191,10 @@ class WeightChoice:
         The pair with the lowest score; the chosen pair is the one nearest the paper's 0.01 /
         0.01 among those within one standard error of it (:func:`summarize`).
 
+    See Also
+    --------
+    choose_weights : returns it.
+
     Examples
     --------
     >>> import planeray as pr
@@ -835,6 +839,11 @@ def choose_weights(
     Returns
     -------
     WeightChoice
+
+    See Also
+    --------
+    demultiplex : ``alpha="auto"``, ``beta="auto"`` call it.
+    WeightChoice : what it returns.
 
     References
     ----------

@@ -83,6 +83,19 @@ class DemuxResult:
     ``maps`` holds the per-pixel maps of :data:`MAP_NAMES` and, when the ambient was
     estimated, :data:`AMBIENT_MAP` (also :attr:`ambient`).
 
+    Parameters
+    ----------
+    transport : Transport
+        ``T`` over ``offsets_rows`` (normalized image value per projector row).
+    maps : dict of str to ndarray (H, W)
+        Per-pixel diagnostics: ``converged``, ``iterations``, ``objective``, ``residual_rms``, ...
+    attrs : dict
+        The run's record (weights, method, the sweep's epipolar resolution, ...).
+
+    See Also
+    --------
+    demultiplex : returns it.
+
     Examples
     --------
     >>> import planeray as pr
@@ -168,6 +181,15 @@ def solve_chunk(
         The camera rows (absolute).
     method : str
         A key of :data:`planeray.demux.SOLVERS`.
+
+    Returns
+    -------
+    ChunkResult
+        ``T`` (rows, W, U) and the chunk's per-pixel maps.
+
+    See Also
+    --------
+    demultiplex : every chunk of a stack.
 
     Examples
     --------

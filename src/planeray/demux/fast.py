@@ -698,6 +698,11 @@ def solve_fast(
         ``converged`` is True where the certificate proved the gap ``<= tol``; ``gap`` is
         each pixel's certified relative gap.
 
+    See Also
+    --------
+    solve_cvxpy : the reference solver of the same problem.
+    get_solver : solvers by name.
+
     References
     ----------
     .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,

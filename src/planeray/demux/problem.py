@@ -71,6 +71,20 @@ MIN_IMAGES = 4
 def difference_matrix(n: int) -> np.ndarray:
     """Forward difference ``D`` (``(n-1, n)``): the discrete ``d/dv`` of the smoothness term.
 
+    Parameters
+    ----------
+    n : int
+        Number of offsets.
+
+    Returns
+    -------
+    ndarray (n - 1, n) float64
+        ``D`` with ``(D x)_i = x_{i+1} - x_i``.
+
+    See Also
+    --------
+    DemuxProblem : its smoothness term ``alpha ||D T||^2``.
+
     Examples
     --------
     >>> difference_matrix(3).tolist()
@@ -102,6 +116,10 @@ class RowGroup:
         ``x`` are the light *per projector row* of each bin, so that smoothness and
         sparsity weigh every bin alike; the transport is ``T = x * on_projector``
         (a bin the projector's end cuts to a sliver holds the light of the sliver).
+
+    See Also
+    --------
+    DemuxProblem : its groups.
 
     Examples
     --------

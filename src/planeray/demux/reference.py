@@ -24,6 +24,25 @@ __all__ = ["solve_pinv", "solve_nnls", "solve_cvxpy"]
 def solve_pinv(group: RowGroup, B, alpha=0.0, beta=0.0, tol=None) -> SolveResult:
     """Pseudo-inverse ``x = A^+ b`` for all pixels at once (ignores alpha, beta).
 
+    Parameters
+    ----------
+    group : RowGroup
+        Camera rows sharing one illumination matrix ``A`` (N, V).
+    B : ndarray (P, N)
+        Observations of ``P`` pixels: normalized image values of the ``N`` used images.
+    alpha, beta, tol
+        Ignored (the signature every solver shares).
+
+    Returns
+    -------
+    SolveResult
+        ``X = A^+ B`` (P, V), negative values included.
+
+    See Also
+    --------
+    solve_nnls : non-negative.
+    solve_fast : with the paper's regularization.
+
     Examples
     --------
     >>> import numpy as np
@@ -44,6 +63,25 @@ def solve_pinv(group: RowGroup, B, alpha=0.0, beta=0.0, tol=None) -> SolveResult
 
 def solve_nnls(group: RowGroup, B, alpha=0.0, beta=0.0, tol=None) -> SolveResult:
     """Unregularized NNLS per pixel (Lawson-Hanson active set; ignores alpha, beta).
+
+    Parameters
+    ----------
+    group : RowGroup
+        Camera rows sharing one illumination matrix ``A`` (N, V).
+    B : ndarray (P, N)
+        Observations of ``P`` pixels: normalized image values of the ``N`` used images.
+    alpha, beta, tol
+        Ignored (the signature every solver shares).
+
+    Returns
+    -------
+    SolveResult
+        ``X`` (P, V) >= 0.
+
+    See Also
+    --------
+    solve_pinv : no constraint at all.
+    solve_fast : with the paper's regularization.
 
     Examples
     --------
@@ -103,6 +141,28 @@ def solve_cvxpy(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None, *, ambient=
 
     ``ambient``: the ambient column ``I_w`` (N,) of Eq. 6a (each pixel's ambient in
     ``SolveResult.ambient``); None: the paper's problem.
+
+    Parameters
+    ----------
+    group : RowGroup
+        Camera rows sharing one illumination matrix ``A`` (N, V).
+    B : ndarray (P, N)
+        Observations of ``P`` pixels: normalized image values of the ``N`` used images.
+    alpha, beta : float
+        Smoothness and sparsity weights (the paper: 0.01 each).
+    tol : float, optional
+        The solver's tolerance.
+    ambient : ndarray (N,), optional
+        The ambient column ``I_w`` of Eq. 6a (projector rows of exposure); None: the paper's problem.
+
+    Returns
+    -------
+    SolveResult
+        ``X`` (P, V) and the per-pixel diagnostics.
+
+    See Also
+    --------
+    solve_fast : the same problem, fast.
 
     References
     ----------

@@ -32,6 +32,10 @@ class SolveResult:
         The certified relative objective gap of each pixel (``(f - f*) / f*`` is at most
         this), when the solver certifies one (``fast``); inf where nothing was usable.
 
+    See Also
+    --------
+    solve_fast, solve_cvxpy, solve_nnls, solve_pinv : return it.
+
     Examples
     --------
     >>> import numpy as np
