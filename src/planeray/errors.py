@@ -12,6 +12,10 @@ __all__ = ["PlanerayError", "InputError", "StackError", "TransportError", "Devic
 class PlanerayError(Exception):
     """Base class of every error planeray raises on purpose.
 
+    See Also
+    --------
+    InputError, StackError, TransportError, DeviceError, StorageError
+
     Examples
     --------
     Every error planeray raises on purpose is one; the command line prints its message in one line:
@@ -31,6 +35,10 @@ class InputError(PlanerayError, ValueError):
     path : str or os.PathLike, optional
         The file or folder concerned; prefixed to the message.
 
+    See Also
+    --------
+    StackError, TransportError : malformed stores.
+
     Examples
     --------
     >>> err = InputError("manifest.csv has no delay_us column", "capture/manifest.csv")
@@ -49,6 +57,17 @@ class InputError(PlanerayError, ValueError):
 class StackError(InputError):
     """A delay-exposure stack (native store or import folder) is malformed.
 
+    Parameters
+    ----------
+    problem : str
+        What is wrong, in words.
+    path : str or os.PathLike, optional
+        The file or folder concerned; prefixed to the message.
+
+    See Also
+    --------
+    planeray.read_stack, planeray.import_folder : raise it.
+
     Examples
     --------
     >>> import numpy as np
@@ -63,6 +82,17 @@ class StackError(InputError):
 
 class TransportError(InputError):
     """A transport store is malformed.
+
+    Parameters
+    ----------
+    problem : str
+        What is wrong, in words.
+    path : str or os.PathLike, optional
+        The file or folder concerned; prefixed to the message.
+
+    See Also
+    --------
+    planeray.read_transport : raises it.
 
     Examples
     --------
@@ -79,6 +109,10 @@ class TransportError(InputError):
 
 class DeviceError(PlanerayError, RuntimeError):
     """A device cannot be opened or refused a setting (missing SDK, no camera, bad timing).
+
+    See Also
+    --------
+    planeray.devices.open_device : raises it.
 
     Examples
     --------
@@ -100,6 +134,10 @@ class StorageError(PlanerayError, OSError):
         What failed and why.
     path : str or os.PathLike, optional
         The output (or input) concerned; prefixed to the message.
+
+    See Also
+    --------
+    planeray.io.atomic_directory, planeray.io.atomic_file : the writes behind it.
 
     Examples
     --------

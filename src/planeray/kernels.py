@@ -82,6 +82,11 @@ def mc_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, n_photons=MC_KER
     total : float
         Total diffuse reflectance of the medium (all exit positions).
 
+    See Also
+    --------
+    planeray.mc.mc_line_profile : the Monte Carlo profile.
+    planeray.line_kernel : by model name.
+
     Examples
     --------
     >>> import numpy as np

@@ -30,6 +30,20 @@ _FINGERPRINT = "run_fingerprint"
 def partial_path(out) -> Path:
     """The hidden partial store next to ``out``.
 
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+
+    Returns
+    -------
+    pathlib.Path
+        ``.NAME.partial`` beside ``out``.
+
+    See Also
+    --------
+    open_partial : opens it.
+
     Examples
     --------
     >>> partial_path("out/T.zarr").as_posix()
@@ -45,6 +59,28 @@ def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], o
     ``create`` lays out the store's arrays and attributes in an empty directory
     and returns the Zarr group.  Raises :class:`InputError` when an unfinished
     run with another fingerprint is in the way (unless ``restart``).
+
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+    fingerprint : str
+        What identifies the run's inputs and parameters.
+    n_units : int
+        Units of work (images, chunks of rows).
+    create : callable
+        ``create(directory) -> zarr.Group``: lays out the store in an empty folder.
+    restart : bool
+        Discard an unfinished run of another fingerprint instead of refusing.
+
+    Returns
+    -------
+    zarr.Group
+        The partial store, opened for writing.
+
+    See Also
+    --------
+    mark_done, done_units, promote
 
     Examples
     --------
@@ -93,6 +129,20 @@ def discard_if_empty(out) -> bool:
     Called when a run fails: a partial store with finished units is kept (the next run
     resumes it), one without any holds nothing worth keeping and is not left behind.
 
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+
+    Returns
+    -------
+    bool
+        True if the partial store was removed.
+
+    See Also
+    --------
+    open_partial : creates it.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -120,6 +170,21 @@ def discard_if_empty(out) -> bool:
 def mark_done(group, index: int) -> None:
     """Mark unit ``index`` done (call after its data is written).
 
+    Parameters
+    ----------
+    group : zarr.Group
+        The partial store.
+    index : int
+        The unit finished.
+
+    Returns
+    -------
+    None
+
+    See Also
+    --------
+    done_units : the units marked.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -137,6 +202,19 @@ def mark_done(group, index: int) -> None:
 
 def done_units(group) -> np.ndarray:
     """Boolean mask of the finished units.
+
+    Parameters
+    ----------
+    group : zarr.Group
+        The partial store.
+
+    Returns
+    -------
+    ndarray of bool (n_units,)
+
+    See Also
+    --------
+    mark_done : marks one.
 
     Examples
     --------
@@ -160,6 +238,26 @@ def promote(out, *, overwrite: bool, kind: str | None = None, error=InputError) 
     ``out`` may not be replaced (for instance it appeared while the run was going),
     the finished partial store is kept as it is: a re-run with the same inputs
     finds every unit done and finishes without recomputing.
+
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+    overwrite : bool
+        Replace an existing ``out`` (only a planeray result of the same ``kind``).
+    kind : str, optional
+        What the store is (``"stack"``, ``"transport"``).
+    error : type
+        The exception raised when ``out`` may not be replaced.
+
+    Returns
+    -------
+    pathlib.Path
+        ``out``.
+
+    See Also
+    --------
+    open_partial : the run's start.
 
     Examples
     --------

@@ -65,6 +65,19 @@ def store_format(path) -> str | None:
     Read from the Zarr group's ``format`` attribute (``zarr.json``) without opening
     the arrays; a folder with a ``manifest.csv`` is a stack import folder.
 
+    Parameters
+    ----------
+    path : str or path
+        A folder.
+
+    Returns
+    -------
+    {"stack", "transport"} or None
+
+    See Also
+    --------
+    planeray.read_stack, planeray.read_transport
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -103,6 +116,24 @@ def planeray_version() -> str:
 # ----------------------------------------------------------------------------
 def jsonable(value, where: str = "metadata", error=StackError):
     """Convert numpy scalars/arrays, tuples and paths to plain JSON types (recursively).
+
+    Parameters
+    ----------
+    value : object
+        Numbers, strings, lists, tuples, dicts, numpy scalars and arrays, paths.
+    where : str
+        What the value is, for the error message.
+    error : type
+        The exception raised for a value that has no JSON form.
+
+    Returns
+    -------
+    object
+        The value in plain JSON types (lists, dicts, floats, ints, strings, None).
+
+    See Also
+    --------
+    planeray.write_stack : its metadata passes through it.
 
     Examples
     --------
@@ -180,6 +211,23 @@ def create_array(group, name: str, **kwargs):
     The returned array has ``write_empty_chunks`` on; an array reopened later
     does not (see :func:`writable`).
 
+    Parameters
+    ----------
+    group : zarr.Group
+        The store's group.
+    name : str
+        The array's name.
+    **kwargs
+        ``shape``, ``chunks``, ``dtype``, ``fill_value``... as for ``zarr.Group.create_array``.
+
+    Returns
+    -------
+    zarr.Array
+
+    See Also
+    --------
+    writable : the same setting for an array opened again.
+
     Examples
     --------
     >>> import zarr
@@ -198,6 +246,21 @@ def writable(group, name: str):
     store: a writer that reopens a store (a resumed run) must get its arrays
     through this function, or the chunks it writes that equal the fill value are
     skipped and the store, marked :data:`ALL_CHUNKS_ATTR`, is refused on reading.
+
+    Parameters
+    ----------
+    group : zarr.Group
+        The store's group, opened for writing.
+    name : str
+        The array's name.
+
+    Returns
+    -------
+    zarr.Array
+
+    See Also
+    --------
+    create_array : a new array so set.
 
     Examples
     --------
@@ -397,6 +460,10 @@ class LazyArray:
         :class:`~planeray.errors.TransportError`).
     name : str, optional
         The array's name in messages (default: its name in the store).
+
+    See Also
+    --------
+    planeray.read_stack : gives its images as one.
 
     Examples
     --------

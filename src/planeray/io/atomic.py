@@ -276,6 +276,10 @@ def atomic_directory(path, *, overwrite: bool = False, kind: str | None = None, 
         The file system refused (read-only folder, disk full...): one line naming
         ``path`` and the cause; nothing is left behind.
 
+    See Also
+    --------
+    atomic_file : one file.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -348,6 +352,10 @@ def atomic_file(path, *, overwrite: bool = True, error=InputError):
     ------
     StorageError
         The file system refused (read-only folder, disk full...).
+
+    See Also
+    --------
+    atomic_directory : a whole folder.
 
     Examples
     --------

@@ -121,6 +121,10 @@ def write_image(path, image, *, bit_depth: int = 16, black_level: float = 0) -> 
     InputError
         Unknown extension, image not 2-D or not finite, invalid bit depth.
 
+    See Also
+    --------
+    planeray.export_folder : a stack's images so written.
+
     Examples
     --------
     >>> import pathlib, tempfile

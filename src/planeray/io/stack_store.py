@@ -117,6 +117,34 @@ def create_stack_group(
     (the returned group's ``images``/``saturated`` after reopening:
     :func:`planeray.io.writable`), or :func:`read_stack` refuses the store.
 
+    Parameters
+    ----------
+    directory : str or path
+        An empty folder.
+    shape : (int, int, int)
+        ``(N, H, W)``: images and their size.
+    delay_us, exposure_us : array_like (N,)
+        Delay and exposure of each image, microseconds.
+    excluded : array_like of bool (N,)
+        Images left out of demultiplexing.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    projector_rows : int
+        Projector rows spanned by the image height.
+    metadata : dict
+        The acquisition record (JSON-serializable).
+    path : str or path, optional
+        The store's final name, for error messages.
+
+    Returns
+    -------
+    zarr.Group
+        The store's group with ``images``, ``saturated`` and the vectors, images at 0.
+
+    See Also
+    --------
+    planeray.write_stack : a whole stack at once.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -296,10 +324,19 @@ def validate_images(stack: Stack, path=None) -> None:
     path : str or os.PathLike, optional
         Named in the error message.
 
+    Returns
+    -------
+    None
+        Returns when every value is finite; raises otherwise.
+
     Raises
     ------
     StackError
         Naming the index of the first non-finite image.
+
+    See Also
+    --------
+    planeray.write_stack : validates before writing.
 
     Examples
     --------

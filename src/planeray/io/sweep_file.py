@@ -72,6 +72,11 @@ def read_sweep(path) -> Sweep:
         One line naming the file and the problem (not JSON, a missing or malformed field, a
         setting listed twice, another format).
 
+    See Also
+    --------
+    write_sweep : write one.
+    planeray.make_sweep : a named sweep.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -167,6 +172,11 @@ def write_sweep(sweep: Sweep, path, *, overwrite: bool = False) -> Path:
     Returns
     -------
     pathlib.Path
+
+    See Also
+    --------
+    read_sweep : read it back.
+    planeray.design.design_sweep : a designed sweep to write.
 
     Examples
     --------

@@ -41,6 +41,26 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
     with :func:`planeray.io.create_array`, write through
     :func:`planeray.io.writable`), or :func:`read_transport` refuses the store.
 
+    Parameters
+    ----------
+    offsets_rows : array_like of int
+        The offsets ``u`` of the dense band, projector rows.
+    projector_rows : int
+        Projector rows spanned by the image height.
+    attrs : dict, optional
+        The caller's attributes (JSON-serializable).
+    path : str or path, optional
+        The store, for error messages.
+
+    Returns
+    -------
+    dict
+        ``attrs`` with the reserved format fields.
+
+    See Also
+    --------
+    planeray.write_transport : writes them.
+
     Examples
     --------
     >>> import numpy as np
@@ -66,11 +86,25 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
 def read_transport_maps(path) -> dict:
     """Per-pixel 2-D arrays stored beside ``T`` (e.g. demultiplexing diagnostics), by name.
 
+    Parameters
+    ----------
+    path : str or path
+        A transport store.
+
+    Returns
+    -------
+    dict of str to ndarray (H, W)
+        The maps by name (``converged``, ``iterations``, ``objective``, ...).
+
     Raises
     ------
     TransportError
         The store cannot be opened, a chunk of a map is absent from a store marked
         ``all_chunks_stored`` or cannot be decoded (naming the map and the rows).
+
+    See Also
+    --------
+    planeray.read_transport : the transport itself.
 
     Examples
     --------

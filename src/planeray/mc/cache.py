@@ -31,6 +31,15 @@ TABLES_DIR = Path(__file__).with_name("tables")
 def cache_dir() -> Path:
     """Cache folder: ``$PLANERAY_CACHE/mc`` if set, else ``~/.cache/planeray/mc``.
 
+    Returns
+    -------
+    pathlib.Path
+        The folder (not created).
+
+    See Also
+    --------
+    planeray.mc_line_profile : ``cache=True`` stores there.
+
     Examples
     --------
     >>> import os

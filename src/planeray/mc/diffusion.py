@@ -46,6 +46,20 @@ def boundary_mismatch_A(eta):
     boundary condition, with Groenhuis' fit ``F_dr(eta)`` [1]_ (``A ~ 1`` for ``eta = 1``).
     The extrapolated boundary sits ``2 A D`` above the surface.
 
+    Parameters
+    ----------
+    eta : float
+        Relative refractive index of the medium.
+
+    Returns
+    -------
+    float
+        ``A``.
+
+    See Also
+    --------
+    dipole_reflectance : uses it.
+
     Examples
     --------
     >>> round(float(boundary_mismatch_A(1.0)), 2), round(float(boundary_mismatch_A(1.4)), 2)
@@ -98,6 +112,16 @@ def dipole_reflectance(medium: Medium, r_mm):
     r_mm : array_like of float
         Distances from the entry point, mm.
 
+    Returns
+    -------
+    ndarray
+        ``R_d(r)`` per mm^2 (fraction of the incident power).
+
+    See Also
+    --------
+    dipole_total_reflectance : its integral.
+    dipole_line_kernel : a lit line.
+
     Examples
     --------
     >>> from planeray.medium import Medium
@@ -114,6 +138,20 @@ def dipole_total_reflectance(medium: Medium):
     """Total diffuse reflectance ``R_d = int R_d(r) 2 pi r dr`` of the dipole (closed form [1]_).
 
     ``medium`` is semi-infinite; only ``sigma_a``, ``sigma_s_prime`` and ``n`` matter.
+
+    Parameters
+    ----------
+    medium : Medium
+        The medium (1/mm coefficients, index ``n``).
+
+    Returns
+    -------
+    float
+        The fraction of the incident power that leaves the surface.
+
+    See Also
+    --------
+    dipole_reflectance : per distance.
 
     Examples
     --------
@@ -150,6 +188,11 @@ def dipole_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, subsamples=1
     kernel : ndarray of float64
         Light reaching each bin per unit of line illumination; sums to the total
         diffuse reflectance of the medium when the bins cover the whole profile.
+
+    See Also
+    --------
+    dipole_reflectance : the point source.
+    planeray.line_kernel : the kernel a scene uses.
 
     Examples
     --------
@@ -211,6 +254,10 @@ def diffusion_exit(hist, hmin, out_bins, mm_per_row, z_mm, sigma_a, sigma_tp, n)
     exit_total : float
         Fraction of the continued weight that leaves the medium (anywhere).
 
+    See Also
+    --------
+    planeray.mc_line_profile : the engine that hands photons to it.
+
     Examples
     --------
     A unit of weight handed to diffusion 2 mm deep under bin 0, leaving through bins -2..2 (1 mm each):
@@ -253,6 +300,20 @@ def diffusion_normal_radiance_ratio(n):
     outside); outside, the normal radiance is ``L(1) (1 - R(1)) / n^2`` and the
     exitance ``2 pi int L(mu) (1 - R(mu)) mu dmu``.  0.398 sr^-1 for ``n = 1``
     (Lambertian: 1/pi = 0.318; Chandrasekhar's exact H-function value: 0.401).
+
+    Parameters
+    ----------
+    n : float
+        Relative refractive index of the medium.
+
+    Returns
+    -------
+    float
+        Radiance per unit exitance, 1/sr.
+
+    See Also
+    --------
+    planeray.mc_line_profile : its ``radiance``.
 
     Examples
     --------

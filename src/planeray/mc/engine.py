@@ -310,6 +310,15 @@ def default_cutoff_mm(medium: Medium, offsets_rows, *, mm_per_row) -> float:
     mm_per_row : float
         Bin width in mm.
 
+    Returns
+    -------
+    float
+        The cutoff distance in mm.
+
+    See Also
+    --------
+    planeray.mc_line_profile : uses it.
+
     Examples
     --------
     >>> import numpy as np
@@ -456,6 +465,11 @@ def mc_point_profile(
         its area for ``R_d(r)`` per mm^2, compare with
         :func:`planeray.kernels.dipole_reflectance`), ``radiance`` the
         normal-view radiance averaged over it (mm^-2 sr^-1 per unit power).
+
+    See Also
+    --------
+    planeray.mc_line_profile : a lit line.
+    planeray.kernels.dipole_reflectance : the diffusion dipole's ``R_d(r)``.
 
     Examples
     --------

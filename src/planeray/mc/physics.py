@@ -120,6 +120,10 @@ def fresnel_unpolarized(cos_i, n):
     ndarray of float64
         Reflectance ``(r_s^2 + r_p^2) / 2``.
 
+    See Also
+    --------
+    planeray.mc_line_profile : the engine that uses it.
+
     Examples
     --------
     Inside water (n = 1.33) at normal incidence 2 % is reflected; past the critical angle all of it:
@@ -143,6 +147,15 @@ def sample_hg_cos(xi, g):
     g : float
         Anisotropy, ``-1 < g < 1``.
 
+    Returns
+    -------
+    ndarray
+        Cosines of the scattering angle, in [-1, 1].
+
+    See Also
+    --------
+    hg_phase : the density it samples.
+
     Examples
     --------
     The mean cosine of Henyey-Greenstein scattering is ``g``:
@@ -157,6 +170,22 @@ def sample_hg_cos(xi, g):
 
 def hg_phase(mu, g):
     """Henyey-Greenstein phase function ``p(mu)`` per steradian (integrates to 1 over the sphere).
+
+    Parameters
+    ----------
+    mu : array_like
+        Cosine of the scattering angle.
+    g : float
+        Anisotropy, -1 < g < 1.
+
+    Returns
+    -------
+    ndarray
+        ``p(mu)`` per steradian.
+
+    See Also
+    --------
+    sample_hg_cos : draws from it.
 
     Examples
     --------

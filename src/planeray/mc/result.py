@@ -61,6 +61,10 @@ class MCProfile:
     wall_loss_stderr : float
         Its batch standard error.
 
+    See Also
+    --------
+    planeray.mc_line_profile, planeray.mc.mc_point_profile : return it.
+
     Examples
     --------
     >>> from planeray.mc import mc_line_profile

@@ -73,6 +73,10 @@ class Scene:
         Further per-pixel ground truth a scene provides (the ``materials`` scene: class
         ids, distance to the nearest container wall, pixels whose kernel the wall changes).
 
+    See Also
+    --------
+    make_scene : builds one by name.
+
     Examples
     --------
     >>> scene = make_scene("wax", (8, 8), seed=0)
@@ -115,6 +119,24 @@ def register_scene(name: str, description: str, *, argument: str | None = None):
     ``mitsuba`` scene: ``mitsuba:path/to/scene.xml``); ``argument`` names it for
     help texts, and ``build`` receives it as the keyword ``argument``.
     Parametric scenes are listed by ``list_scenes(parametric=True)`` only.
+
+    Parameters
+    ----------
+    name : str
+        The scene's name (no ``:``).
+    description : str
+        One line for ``planeray scenes``.
+    argument : str, optional
+        For a parametric scene, the name of its argument (``FILE.xml``).
+
+    Returns
+    -------
+    callable
+        The decorator; it returns ``build`` unchanged.
+
+    See Also
+    --------
+    make_scene : builds a registered scene.
 
     Examples
     --------
@@ -191,6 +213,20 @@ def list_scenes(*, parametric: bool = False) -> dict[str, str]:
 def split_scene_name(text: str) -> tuple[str, str | None]:
     """``"mitsuba:room.xml"`` -> ``("mitsuba", "room.xml")``; ``"wax"`` -> ``("wax", None)``.
 
+    Parameters
+    ----------
+    text : str
+        A scene name as typed.
+
+    Returns
+    -------
+    name : str
+    argument : str or None
+
+    See Also
+    --------
+    is_scene_name : whether it is registered.
+
     Examples
     --------
     >>> split_scene_name("mitsuba:room.xml"), split_scene_name("wax")
@@ -202,6 +238,19 @@ def split_scene_name(text: str) -> tuple[str, str | None]:
 
 def is_scene_name(text: str) -> bool:
     """True if ``text`` names a registered scene (``NAME`` or, for a parametric one, ``NAME:ARGUMENT``).
+
+    Parameters
+    ----------
+    text : str
+        A name as typed (``wax``, ``mitsuba:room.xml``).
+
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    split_scene_name : its parts.
 
     Examples
     --------
@@ -279,6 +328,19 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
 def scene_offsets(band_rows: int = DEFAULT_BAND_ROWS) -> np.ndarray:
     """Offsets ``-band_rows`` to ``band_rows`` of a scene's dense band.
 
+    Parameters
+    ----------
+    band_rows : int
+        Half-width of the dense band, projector rows.
+
+    Returns
+    -------
+    ndarray of int
+
+    See Also
+    --------
+    planeray.Transport : its ``offsets_rows``.
+
     Examples
     --------
     >>> offsets = scene_offsets(4)
@@ -293,6 +355,22 @@ def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
 
     A camera row covers ``rows_per_camera_row`` projector rows; a Lambertian
     surface returns each of them in equal share.  Sums to 1.
+
+    Parameters
+    ----------
+    offsets_rows : array_like of int
+        Offsets ``u``, projector rows.
+    rows_per_camera_row : float
+        Projector rows one camera row spans (``P / H``).
+
+    Returns
+    -------
+    ndarray of float64
+        The kernel, summing to 1.
+
+    See Also
+    --------
+    planeray.timing.band_bin_weights : the same bin rule.
 
     Examples
     --------
@@ -316,6 +394,28 @@ def representative_pixels(
     Other effects: the pixels whose noise-free delay profile (the paper's delays at
     ``exposure_us``, rendered from the ground truth) has the most prominent second
     peak beside the one on the epipolar plane -- the clearest two-peak profiles.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with ground-truth labels.
+    support_rows : int
+        Half-width of the sweep's offset support, projector rows.
+    per_label : int
+        Pixels per effect.
+    exposure_us : float
+        Exposure of the delay profiles compared, microseconds.
+
+    Returns
+    -------
+    pixels : ndarray (P, 2) of int
+        ``(row, col)`` of each pixel.
+    labels : list of str
+        The effect of each (a name of :data:`EFFECTS`).
+
+    See Also
+    --------
+    planeray.measured_delay_profiles : their profiles.
 
     Examples
     --------
