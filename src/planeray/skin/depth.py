@@ -90,7 +90,7 @@ __all__ = [
 
 
 #: A larger standard error of the depth reports the vein unresolved, mm: a resolved vein's depth is then within
-#: the issue's 0.5 mm at 2.5 standard errors (on the seeded forearm, fits with standard errors of 0.26-0.48 mm
+#: the target's 0.5 mm at 2.5 standard errors (on the seeded forearm, fits with standard errors of 0.26-0.48 mm
 #: were off by up to 0.52 mm; at a 0.25 mm threshold two fits at 0.20 and 0.23 mm were off by 0.57 and 0.56 mm).
 MAX_DEPTH_SE_MM = 0.2
 #: The forward model's error, measured against forward models it was not built from -- brute-force Monte

@@ -31,8 +31,8 @@ projector at 0.3 mm per row, so the band is 2.96-8.89 pixels there, 1.48-4.44 at
 hair are left out of the vein region as well.  The pooled (all-veins) CNR uses the union of
 the vein regions against the union of the bands.
 
-A vein counts as **detected** when its CNR is at least ``min_cnr`` (1 by default, the issue's
-rule) *and* it is darker than its band (veins absorb: a brighter "vein" is not a vein seen).
+A vein counts as **detected** when its CNR is at least ``min_cnr`` (1 by default, the
+rule of the study) *and* it is darker than its band (veins absorb: a brighter "vein" is not a vein seen).
 A vein with fewer than ``min_pixels`` usable pixels (or band pixels) is reported with
 ``cnr = None`` and ``detected = False`` -- never a made-up number.
 
