@@ -158,6 +158,14 @@ def material_medium(material, *, source: str = "narasimhan", channel: str = "red
     channel : {"red", "green", "blue"}
         Colour of the projector's line.
 
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    material_media : all five.
+
     Examples
     --------
     >>> m = material_medium("fat_free_milk")
@@ -192,6 +200,23 @@ def material_medium(material, *, source: str = "narasimhan", channel: str = "red
 def material_media(*, source: str = "narasimhan", channel: str = "red") -> dict[int, Medium]:
     """The five media by class id (:func:`material_medium` for each).
 
+    Parameters
+    ----------
+    source : {"narasimhan", "jensen"}
+        The published constants of the milks (Narasimhan et al. 2006 or Jensen et al. 2001).
+    channel : {"red", "green", "blue"}
+        The laser line.
+
+    Returns
+    -------
+    dict of int to Medium
+        Class id -> medium (1/mm coefficients).
+
+    See Also
+    --------
+    material_medium : one material.
+    optical_table : as table rows.
+
     Examples
     --------
     >>> media = material_media()
@@ -207,6 +232,22 @@ def optical_table(*, source: str = "narasimhan", channel: str = "red") -> list[d
     Each row: ``class_id``, ``name``, the medium's fields, ``sigma_s_prime``,
     ``transport_mfp_mm`` and the diffusion length ``1 / sigma_tr`` in mm
     (``sigma_tr = sqrt(3 sigma_a (sigma_a + sigma_s'))``).
+
+    Parameters
+    ----------
+    source : {"narasimhan", "jensen"}
+        The published constants of the milks.
+    channel : {"red", "green", "blue"}
+        The laser line.
+
+    Returns
+    -------
+    list of dict
+        One row per medium.
+
+    See Also
+    --------
+    material_media : the media themselves.
 
     Examples
     --------

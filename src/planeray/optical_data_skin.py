@@ -122,6 +122,20 @@ def _line(wavelength_nm) -> int:
 def tone_fraction(tone) -> float:
     """Melanosome volume fraction of a tone: a name of :data:`SKIN_TONES` or a fraction in ``[0, 0.5]``.
 
+    Parameters
+    ----------
+    tone : str or float
+        ``"very_fair"``, ``"fair"``, ``"medium"``, ``"olive"``, ``"brown"``, ``"dark"`` or a fraction.
+
+    Returns
+    -------
+    float
+        Melanosome volume fraction.
+
+    See Also
+    --------
+    epidermis_medium : uses it.
+
     Examples
     --------
     >>> tone_fraction("fair"), tone_fraction(0.05)
@@ -140,6 +154,20 @@ def tone_fraction(tone) -> float:
 def melanosome_mu_a(wavelength_nm) -> float:
     """Absorption of a melanosome, ``6.6e11 lambda^-3.33 cm^-1`` (Jacques [3]_), in mm^-1.
 
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+
+    Returns
+    -------
+    float
+        Absorption coefficient, 1/mm.
+
+    See Also
+    --------
+    epidermis_medium : uses it.
+
     Examples
     --------
     >>> round(melanosome_mu_a(638), 1)  # 1/mm
@@ -152,6 +180,22 @@ def blood_mu_a(wavelength_nm, saturation=_VENOUS_S) -> float:
     """Absorption of whole blood (150 g/L) at oxygen saturation ``saturation``, mm^-1.
 
     ``S mu_oxy + (1 - S) mu_deoxy``, scaled so ``S = 0.7`` gives the published venous value (Jacques 2013 [1]_).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    saturation : float
+        Oxygen saturation, 0 to 1.
+
+    Returns
+    -------
+    float
+        Absorption coefficient, 1/mm.
+
+    See Also
+    --------
+    blood_medium : the blood as a medium.
 
     Examples
     --------
@@ -170,6 +214,21 @@ def blood_mu_a(wavelength_nm, saturation=_VENOUS_S) -> float:
 def blood_medium(wavelength_nm, saturation=_VENOUS_S) -> Medium:
     """Venous blood as a :class:`Medium` (index matched to the tissue around it).
 
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    saturation : float
+        Oxygen saturation, 0 to 1.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    blood_mu_a : its absorption.
+
     Examples
     --------
     >>> m = blood_medium(850)
@@ -182,6 +241,23 @@ def blood_medium(wavelength_nm, saturation=_VENOUS_S) -> Medium:
 
 def epidermis_medium(wavelength_nm, melanin_fraction, thickness_mm=0.1) -> Medium:
     """Epidermis with melanosome fraction ``melanin_fraction`` (Jacques 2013 [1]_).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    melanin_fraction : float
+        Melanosome volume fraction (:func:`tone_fraction`).
+    thickness_mm : float
+        Thickness, mm.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    skin_layers : the whole skin.
 
     Examples
     --------
@@ -198,6 +274,25 @@ def epidermis_medium(wavelength_nm, melanin_fraction, thickness_mm=0.1) -> Mediu
 def dermis_medium(wavelength_nm, thickness_mm=1.5, *, blood_fraction=_DERMIS_BLOOD, saturation=_DERMIS_S) -> Medium:
     """Dermis with blood fraction ``blood_fraction`` at saturation ``saturation`` (Jacques 2013 [1]_).
 
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    thickness_mm : float
+        Thickness, mm.
+    blood_fraction : float
+        Blood volume fraction.
+    saturation : float
+        The blood's oxygen saturation.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    skin_layers : the whole skin.
+
     Examples
     --------
     >>> round(dermis_medium(638).sigma_a, 4)  # 1/mm
@@ -210,6 +305,21 @@ def dermis_medium(wavelength_nm, thickness_mm=1.5, *, blood_fraction=_DERMIS_BLO
 
 def fat_medium(wavelength_nm, thickness_mm=8.0) -> Medium:
     """Subcutaneous fat (Bashkatov et al. 2005 [5]_).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    thickness_mm : float
+        Thickness, mm.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    skin_layers : the whole skin.
 
     Examples
     --------
@@ -229,6 +339,19 @@ def fat_medium(wavelength_nm, thickness_mm=8.0) -> Medium:
 @dataclass(frozen=True)
 class SkinLayers:
     """The layer stack of the skin, top first, and the blood of its veins.
+
+    Parameters
+    ----------
+    wavelength_nm : int
+        The wavelength, nm.
+    layers : tuple of Medium
+        Epidermis, dermis, fat, top first (``thickness_mm`` each).
+    blood : Medium
+        The veins' blood.
+
+    See Also
+    --------
+    skin_layers : builds one.
 
     Examples
     --------
@@ -266,6 +389,25 @@ def skin_layers(
     blood_saturation=_VENOUS_S,
 ) -> SkinLayers:
     """Epidermis, dermis and fat at ``wavelength_nm`` for a skin ``tone``, and venous blood.
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    tone : str or float
+        A name of :data:`SKIN_TONES` or a melanosome fraction.
+    epidermis_mm, dermis_mm, fat_mm : float
+        Layer thicknesses, mm.
+    blood_saturation : float
+        The blood's oxygen saturation.
+
+    Returns
+    -------
+    SkinLayers
+
+    See Also
+    --------
+    skin_model : with any constant replaced.
 
     Examples
     --------
@@ -328,6 +470,10 @@ def skin_model(
     Returns
     -------
     SkinLayers
+
+    See Also
+    --------
+    skin_layers : the published model.
 
     Examples
     --------

@@ -114,6 +114,20 @@ skin.skin_app.command("pulse-report")(_friendly_errors(pulse.pulse_report))
 def main(argv: list[str] | None = None):
     """Console entry point (``planeray``).
 
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``planeray`` (default: the process's own).
+
+    Returns
+    -------
+    None
+        Ends with ``SystemExit``: status 0, or 1 after a one-line error.
+
+    See Also
+    --------
+    planeray.demo.run_demo : the demo's workflow as a function.
+
     Examples
     --------
     The command line from Python (what the ``planeray`` command runs); it ends with the exit status:

@@ -83,6 +83,11 @@ class FeatureDefinition:
     demux : dict
         A transport's demultiplexing options (``alpha``, ``beta``, ``method``), empty for a stack.
 
+    See Also
+    --------
+    capture_features : features so defined.
+    MaterialModel : keeps the definition it was trained on.
+
     Examples
     --------
     >>> import numpy as np
@@ -233,6 +238,26 @@ def normalize_profiles(values, delay_us, *, floor="edge"):
     ``"edge"`` subtracts the mean of the :data:`EDGE_SAMPLES` outermost samples at each
     end, ``"min"`` the minimum, ``"none"`` nothing.
 
+    Parameters
+    ----------
+    values : array_like (..., D)
+        Profiles over delay (last axis, delays sorted).
+    delay_us : array_like (D,)
+        The delays, microseconds.
+    floor : {"edge", "min", "none"}
+        The floor removed first.
+
+    Returns
+    -------
+    profiles : ndarray (..., D) float32
+        The profiles over their areas (1/ms).
+    area : ndarray (...)
+        The areas (input units times ms).
+
+    See Also
+    --------
+    planeray.profiles.area_normalize : the plain normalization.
+
     Examples
     --------
     Returns the normalized profiles (float32) and the area each was divided by (1/ms units of the input).
@@ -301,6 +326,10 @@ def stack_features(stack: Stack, *, floor="edge", definition: FeatureDefinition 
         Sum over exposures of the curves' areas (0: a pixel with no usable profile).
     definition : FeatureDefinition
 
+    See Also
+    --------
+    transport_features : from a transport.
+
     Examples
     --------
     >>> from planeray.acquire import simulate_stack
@@ -349,6 +378,31 @@ def transport_features(
     the floor removed from the stack before demultiplexing (:func:`remove_floor`), both
     compared by a model.
 
+    Parameters
+    ----------
+    transport : Transport
+        A (demultiplexed) transport.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    floor : {"edge", "min", "none"}
+        The floor removed from the stack before demultiplexing (recorded).
+    demux : dict
+        The demultiplexing options (recorded, compared by a model).
+    definition : FeatureDefinition, optional
+        A model's definition.
+    source : str, optional
+        Name of the capture, for messages.
+
+    Returns
+    -------
+    features : ndarray (H * W, U) float32
+    signal : ndarray (H, W)
+    definition : FeatureDefinition
+
+    See Also
+    --------
+    capture_transport : the transport of a capture.
+
     Examples
     --------
     >>> import numpy as np
@@ -383,6 +437,22 @@ def remove_floor(stack: Stack, *, floor="edge") -> Stack:
     delays at each end; ``"min"``: the minimum; ``"none"``: the stack itself), taken
     per pixel over the delays of each exposure and subtracted from all its images: what
     the ambient light adds (``ambient x t_e x albedo``) goes, exactly.
+
+    Parameters
+    ----------
+    stack : Stack
+        The capture.
+    floor : {"edge", "min", "none"}
+        The floor to subtract.
+
+    Returns
+    -------
+    Stack
+        A new stack; the input is left as it is.
+
+    See Also
+    --------
+    stack_features : the same floor.
 
     Examples
     --------

@@ -55,6 +55,15 @@ def read_label_image(path, *, shape=None) -> np.ndarray:
     shape : (int, int), optional
         The stack's image size: a label image of another size is refused.
 
+    Returns
+    -------
+    ndarray (H, W) int64
+        Class ids.
+
+    See Also
+    --------
+    write_label_image : writes one.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -123,6 +132,25 @@ def write_label_image(path, labels, *, overwrite: bool = True, kind: str = "segm
     TIFF tag ``Software``): ``"segmentation"`` for a predicted map, ``"labels"`` for the
     ground truth of a simulated capture.  Callers check that an existing ``path`` may be
     replaced (:func:`planeray.io.atomic.check_replaceable`) before any work.
+
+    Parameters
+    ----------
+    path : str or path
+        ``.png`` (palette) or ``.tif`` (16-bit).
+    labels : array_like (H, W) of int
+        Class ids.
+    overwrite : bool
+        Replace an existing file (only one planeray wrote).
+    kind : str
+        planeray's mark of the file (``"segmentation"``, ``"labels"``).
+
+    Returns
+    -------
+    pathlib.Path
+
+    See Also
+    --------
+    read_label_image : reads it back.
 
     Examples
     --------

@@ -177,6 +177,11 @@ class MaterialModel:
         (K + 1), ``precision`` (K + 1, K + 1) and ``calibration`` (sorted squared
         distances of held-out training pixels).
 
+    See Also
+    --------
+    train_model : trains one.
+    load_model : reads a saved one.
+
     References
     ----------
     .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
@@ -507,6 +512,20 @@ def load_model(path) -> MaterialModel:
     damaged or altered file), one containing a type outside :data:`ALLOWED_TYPES`, or a
     record inconsistent with its estimator (feature count, classes).
 
+    Parameters
+    ----------
+    path : str or path
+        A ``.zip`` written by :meth:`MaterialModel.save`.
+
+    Returns
+    -------
+    MaterialModel
+
+    See Also
+    --------
+    MaterialModel.save : writes one.
+    train_model : trains one.
+
     Examples
     --------
     >>> import numpy as np
@@ -681,6 +700,37 @@ def capture_features(
     paper's 0.01, 0.01, ``"fast"``) do.  A transport, if not given, is
     :func:`capture_transport` of the stack.  Returns ``(features, signal, definition)``.
 
+    Parameters
+    ----------
+    stack : Stack
+        The capture.
+    kind : {"stack", "transport"}
+        Measured profiles, or the profiles of the demultiplexed transport.
+    floor : {"edge", "min", "none"}
+        The floor removed before the area normalization.
+    definition : FeatureDefinition, optional
+        A model's definition: fixes kind, floor and demultiplexing.
+    transport : Transport, optional
+        The capture's transport, when already demultiplexed.
+    demux : dict, optional
+        Demultiplexing options (``alpha``, ``beta``, ``method``).
+    source : str, optional
+        Name of the capture, for messages.
+    progress : callable, optional
+        Called as the demultiplexing advances.
+
+    Returns
+    -------
+    features : ndarray (H * W, F) float32
+        One area-normalized profile per pixel (1/ms).
+    signal : ndarray (H, W)
+        Each pixel's profile area before normalization.
+    definition : FeatureDefinition
+
+    See Also
+    --------
+    train_model : learns from them.
+
     Examples
     --------
     >>> import numpy as np
@@ -727,6 +777,25 @@ def capture_transport(stack: Stack, *, floor: str = "edge", demux: dict | None =
 
     :func:`~planeray.materials.features.remove_floor` then :func:`planeray.demux.demultiplex`
     with ``demux`` (default :data:`DEFAULT_DEMUX`).
+
+    Parameters
+    ----------
+    stack : Stack
+        The capture.
+    floor : {"edge", "min", "none"}
+        The floor removed before demultiplexing.
+    demux : dict, optional
+        Demultiplexing options (default :data:`DEFAULT_DEMUX`).
+    progress : callable, optional
+        Called as the demultiplexing advances.
+
+    Returns
+    -------
+    Transport
+
+    See Also
+    --------
+    transport_features : its features.
 
     Examples
     --------
@@ -827,6 +896,11 @@ def train_model(
     Returns
     -------
     MaterialModel
+
+    See Also
+    --------
+    MaterialModel : the model.
+    load_model : a saved model.
 
     References
     ----------

@@ -58,6 +58,10 @@ LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 class RenderWarning(UserWarning):
     """Light the render leaves out: long-range entries dropped (the message says how much), or a caustic pass skipped.
 
+    See Also
+    --------
+    render_transport : warns with it.
+
     Examples
     --------
     >>> issubclass(RenderWarning, UserWarning)
@@ -90,6 +94,10 @@ class RenderResult:
     dropped_fraction : float
         Fraction of the light beyond the band that was neither dense nor sparse.
 
+    See Also
+    --------
+    render_transport : returns it.
+
     Examples
     --------
     >>> from planeray.render import example_scene
@@ -116,6 +124,24 @@ def labels_from_classes(classes, *, label_fraction=0.1, floor_fraction=1e-3) -> 
     ``label_fraction`` of its direct light (the rule of the built-in ``corner``
     and ``mirror_ball`` scenes), else direct diffuse (1); pixels whose total is
     below ``floor_fraction`` of the image's 99th percentile are 0 (none).
+
+    Parameters
+    ----------
+    classes : array_like (4, H, W)
+        Light per path class: direct, subsurface, diffuse and specular interreflection.
+    label_fraction : float
+        Share of the direct light an indirect class needs to label a pixel.
+    floor_fraction : float
+        Pixels below this share of the image's 99th percentile are labelled 0.
+
+    Returns
+    -------
+    ndarray (H, W) of int
+        Keys of :data:`planeray.scenes.EFFECTS`.
+
+    See Also
+    --------
+    RenderResult : its ``labels``.
 
     Examples
     --------
@@ -586,6 +612,22 @@ def render_work(scene_file, **kwargs) -> int:
 
     Silent about what the render itself will warn of (a caustic pass skipped): it renders nothing.
 
+    Parameters
+    ----------
+    scene_file : str or path
+        A Mitsuba 3 scene file.
+    **kwargs
+        The options of :func:`render_transport`.
+
+    Returns
+    -------
+    int
+        The total the ``progress`` callback will count to.
+
+    See Also
+    --------
+    render_transport : the render.
+
     Examples
     --------
     >>> from planeray.render import example_scene
@@ -637,10 +679,33 @@ def render_to_store(
     ``ambient_albedo``, ``labels`` and ``light_<class>`` and, for RGB, ``T_rgb``
     (H, W, U, 3); its attributes record every parameter.
 
+    Parameters
+    ----------
+    scene_file : str or path
+        A Mitsuba 3 scene file.
+    out : str or path
+        The transport store to write.
+    overwrite : bool
+        Replace a finished store planeray wrote.
+    restart : bool
+        Discard an unfinished render instead of resuming it.
+    lines_per_second : float, optional
+        Recorded in the store (default: the paper's).
+    progress : callable, optional
+        ``progress(n)`` with the work units just done.
+    on_resume : callable, optional
+        ``on_resume(done, total)`` (batches) when an unfinished render is continued.
+    **kwargs
+        The options of :func:`render_transport`.
+
     Returns
     -------
     path : Path
     result : RenderResult
+
+    See Also
+    --------
+    render_transport : in memory.
 
     Examples
     --------

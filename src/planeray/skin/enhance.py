@@ -77,6 +77,20 @@ _PAPER_ROWS = 720
 def paper_patch_px(shape) -> int:
     """The paper's 200-pixel patch scaled to an image of ``shape``: ``round(200 H / 720)``, at least 8.
 
+    Parameters
+    ----------
+    shape : (int, int)
+        The image size ``(H, W)``.
+
+    Returns
+    -------
+    int
+        Patch size, pixels.
+
+    See Also
+    --------
+    enhance_contrast : its ``patch_px``.
+
     Examples
     --------
     >>> paper_patch_px((128, 128)), paper_patch_px((720, 1280))
@@ -160,6 +174,23 @@ def compose(images, delays_us, delay_map_us) -> np.ndarray:
     interpolates linearly between the two delay images around ``t_d*`` (``delays_us`` sorted
     ascending).  On the delays themselves it is exactly ``I_{t_d*}``.
 
+    Parameters
+    ----------
+    images : ndarray (D, H, W)
+        The delay images.
+    delays_us : array_like (D,)
+        Their delays, microseconds, ascending.
+    delay_map_us : ndarray (H, W)
+        The chosen delay ``t_d*`` of each pixel, microseconds.
+
+    Returns
+    -------
+    ndarray (H, W)
+
+    See Also
+    --------
+    enhance_contrast : chooses the map.
+
     Examples
     --------
     >>> imgs = np.stack([np.zeros((1, 2)), np.ones((1, 2))])
@@ -199,6 +230,10 @@ class EnhanceResult:
     delays_us : ndarray (N,)
     params : dict
         The patch and filter sizes used.
+
+    See Also
+    --------
+    enhance_contrast : returns it.
 
     References
     ----------
@@ -271,6 +306,10 @@ def enhance_contrast(
     Returns
     -------
     EnhanceResult
+
+    See Also
+    --------
+    compose : the composite of Eq. 7.
 
     Examples
     --------

@@ -91,6 +91,10 @@ def band_definition(mm_per_px, *, gap_mm: float = BAND_GAP_MM, width_mm: float =
         ``definition`` (text), ``gap_mm``, ``width_mm``, ``mm_per_px`` and the band in pixels
         (``gap_px``, ``width_px``; along the rows).
 
+    See Also
+    --------
+    background_bands : the bands.
+
     Examples
     --------
     >>> b = band_definition(1.6875)
@@ -116,6 +120,19 @@ def vein_ids_from_mask(mask) -> np.ndarray:
     """Integer vein ids (1, 2, ...; 0 off veins) from a boolean mask: 8-connected components.
 
     For a user mask without ids (a PNG/TIFF drawn over a captured image).
+
+    Parameters
+    ----------
+    mask : array_like of bool (H, W)
+        Vein pixels.
+
+    Returns
+    -------
+    ndarray (H, W) of int
+
+    See Also
+    --------
+    vein_metrics : metrics per id.
 
     Examples
     --------
@@ -150,6 +167,10 @@ def background_bands(
     -------
     dict of int to ndarray (H, W) bool
 
+    See Also
+    --------
+    vein_metrics : uses them.
+
     Examples
     --------
     >>> ids = np.zeros((9, 9), int)
@@ -181,6 +202,22 @@ def background_bands(
 def cnr(image, vein, background) -> float:
     """Contrast-to-noise ratio ``|mu_bg - mu_vein| / sigma_bg`` (``sigma_bg`` with ddof = 1).
 
+    Parameters
+    ----------
+    image : array_like (H, W)
+        The image.
+    vein, background : array_like of bool (H, W)
+        The vein's pixels and its background band.
+
+    Returns
+    -------
+    float
+
+    See Also
+    --------
+    weber_contrast : the contrast without the noise.
+    vein_metrics : per vein of an id map.
+
     Examples
     --------
     >>> img = np.array([1.0, 1.2, 0.8, 1.0, 0.5])
@@ -200,6 +237,22 @@ def cnr(image, vein, background) -> float:
 
 def weber_contrast(image, vein, background) -> float:
     """Weber contrast ``(mu_vein - mu_bg) / mu_bg``.
+
+    Parameters
+    ----------
+    image : array_like (H, W)
+        The image.
+    vein, background : array_like of bool (H, W)
+        The vein's pixels and its background band.
+
+    Returns
+    -------
+    float
+        Negative for a vein darker than its background.
+
+    See Also
+    --------
+    cnr : over the background's noise.
 
     Examples
     --------
@@ -262,6 +315,10 @@ def vein_metrics(
         with ``id``, ``pixels``, ``band_pixels``, ``mu_vein``, ``mu_bg``, ``sigma_bg``, ``cnr``,
         ``weber``, ``detected`` and, where given, ``depth_mm`` and ``diameter_mm``; ``band``:
         the band's definition and values (:func:`band_definition`).
+
+    See Also
+    --------
+    cnr, weber_contrast : the two measures.
 
     Examples
     --------
