@@ -67,7 +67,11 @@ def missing_sections() -> dict[str, list[str]]:
     for name, obj in public_names().items():
         heads = _headers(obj)
         try:
-            params = [p for p in inspect.signature(obj).parameters if not p.startswith("_")]
+            params = [
+                p.name
+                for p in inspect.signature(obj).parameters.values()
+                if not p.name.startswith("_") and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+            ]
         except (TypeError, ValueError):
             params = []
         lacking = []

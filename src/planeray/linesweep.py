@@ -53,6 +53,11 @@ class LineSweep:
     metadata : dict
         Free-form, JSON-serializable (device description, truth of a simulation).
 
+    See Also
+    --------
+    planeray.calibrate_lines_per_second : reads it.
+    planeray.calibration.write_line_sweep : stores it.
+
     Examples
     --------
     >>> import planeray as pr

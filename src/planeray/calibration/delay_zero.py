@@ -43,6 +43,11 @@ class DelayZeroCalibration:
         (:func:`planeray.calibration.calibrate_base_trigger_delay`).  None when
         the sweep's base is unknown (a simulated device, a stack without it).
 
+    See Also
+    --------
+    planeray.calibrate_delay_zero : returns it.
+    write_calibration : stores it.
+
     Examples
     --------
     >>> import planeray as pr
@@ -83,6 +88,24 @@ def delay_zero_sweep(exposure_us: float = 600.0, *, step_us: float = 10.0, half_
     plateau (``|t_d| < t_e/2``) with baseline on both sides even for a sync error
     of a few hundred microseconds.  No image is flagged: every one is used.
 
+    Parameters
+    ----------
+    exposure_us : float
+        The exposure of every image, microseconds.
+    step_us : float
+        Delay step, microseconds.
+    half_range_us : float, optional
+        The sweep covers ``-half_range_us .. half_range_us`` (default: see above).
+
+    Returns
+    -------
+    Sweep
+        No image flagged.
+
+    See Also
+    --------
+    planeray.calibrate_delay_zero : reads its images.
+
     Examples
     --------
     >>> sweep = delay_zero_sweep(600.0, step_us=10.0)
@@ -103,6 +126,24 @@ def device_capture(device, *, exposure_us: float = 600.0, delay_error_us: float 
     ``delay_error_us`` simulates an unknown synchronization error: the device
     really runs at ``commanded - delay_error_us`` (so the calibration should
     return ``delay_zero_us = delay_error_us``).  Leave it 0 for a real device.
+
+    Parameters
+    ----------
+    device : Device
+        An open device.
+    exposure_us : float
+        The exposure of every image, microseconds.
+    delay_error_us : float
+        A synchronization error to simulate, microseconds (0 for a real device).
+
+    Returns
+    -------
+    callable
+        ``capture(delay_us) -> image`` (H, W).
+
+    See Also
+    --------
+    planeray.calibrate_delay_zero : takes it.
 
     Examples
     --------

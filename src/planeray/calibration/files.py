@@ -25,6 +25,23 @@ def write_line_sweep(sweep: LineSweep, path, *, overwrite: bool = False) -> Path
     and only if it is a line sweep planeray wrote
     (:func:`planeray.io.atomic.check_replaceable`).
 
+    Parameters
+    ----------
+    sweep : LineSweep
+        The images and their record.
+    path : str or path
+        The ``.npz`` file.
+    overwrite : bool
+        Replace a file planeray wrote.
+
+    Returns
+    -------
+    pathlib.Path
+
+    See Also
+    --------
+    read_line_sweep : reads it back.
+
     Examples
     --------
     >>> import planeray as pr
@@ -80,6 +97,14 @@ def read_line_sweep(path, *, exposure_us: float | None = None, rows_per_line: in
     exposure_us, rows_per_line : optional
         Override (or, for image files, give) the exposure and comb step;
         image files default to the paper's 500 us and ``k = 1``.
+
+    Returns
+    -------
+    LineSweep
+
+    See Also
+    --------
+    write_line_sweep : writes one.
 
     Examples
     --------
@@ -231,6 +256,15 @@ def write_calibration(
     crash leaves the old file or the new one, never half of either); see
     :func:`calibration_target` for what is refused.
 
+    Parameters
+    ----------
+    path : str or path
+        An ``acquisition.json`` (or the folder holding it).
+    lines : LineCalibration, optional
+        The line velocity.
+    delay_zero : DelayZeroCalibration, optional
+        The delay zero (and base trigger delay).
+
     Returns
     -------
     dict
@@ -240,6 +274,10 @@ def write_calibration(
     ------
     InputError
         Nothing to write, or a file that cannot be updated (:func:`calibration_target`).
+
+    See Also
+    --------
+    planeray.import_folder : reads the file.
 
     Examples
     --------

@@ -50,6 +50,10 @@ class LineCount:
         RMS distance of the detected lines from their regular grid, in spacings (a comb's:
         a few hundredths; peaks found in noise: ~0.2).
 
+    See Also
+    --------
+    count_lines : returns it.
+
     Examples
     --------
     >>> import planeray as pr
@@ -280,6 +284,10 @@ def count_lines(image, *, dark=None, flat=None) -> LineCount:
     InputError
         Not a finite 2-D image, blank or pure noise, or fewer than 3 lines.
 
+    See Also
+    --------
+    planeray.calibrate_lines_per_second : the whole calibration.
+
     Examples
     --------
     >>> import planeray as pr
@@ -414,6 +422,11 @@ class LineCalibration:
         ``"end positions"`` (each image's window estimated from its end lines).
     details : dict
         Per-image counts, spacings and end fractions (JSON-serializable).
+
+    See Also
+    --------
+    planeray.calibrate_lines_per_second : returns it.
+    write_calibration : stores it.
 
     Examples
     --------

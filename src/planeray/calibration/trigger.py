@@ -57,6 +57,24 @@ def required_base_trigger_delay_us(
 ) -> float:
     """The least base trigger delay that realizes every point of ``sweeps``: ``max t'_o + min delay``.
 
+    Parameters
+    ----------
+    sweeps : iterable of Sweep
+        The sweeps the base must serve.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    min_trigger_delay_us : float
+        The camera's least trigger delay, microseconds.
+
+    Returns
+    -------
+    float
+        Microseconds.
+
+    See Also
+    --------
+    calibrate_base_trigger_delay : finds the base.
+
     Examples
     --------
     >>> from planeray.timing import paper_sweep
@@ -111,6 +129,10 @@ def search_delay_zero(
     ------
     InputError
         No response over the frame (nothing changes with delay).
+
+    See Also
+    --------
+    calibrate_base_trigger_delay : then refines it.
 
     Examples
     --------
@@ -186,6 +208,21 @@ def with_base_trigger_delay(result: DelayZeroCalibration, base_used_us: float) -
     ``t_d = 0``, so that base plus ``delay_zero_us`` is the trigger delay at
     ``t'_o = 0``.
 
+    Parameters
+    ----------
+    result : DelayZeroCalibration
+        The fine delay zero, measured with ``base_used_us``.
+    base_used_us : float
+        The base trigger delay of that sweep, microseconds.
+
+    Returns
+    -------
+    DelayZeroCalibration
+
+    See Also
+    --------
+    calibrate_base_trigger_delay : uses it.
+
     Examples
     --------
     >>> from planeray.calibration import DelayZeroCalibration
@@ -234,6 +271,11 @@ def calibrate_base_trigger_delay(
         The fine calibration with ``base_trigger_delay_us`` set; ``details``
         hold ``base_used_us``, ``required_base_us``, ``fits_sweeps`` and the
         coarse ``search``.  The device is left at the calibrated base.
+
+    See Also
+    --------
+    search_delay_zero : the coarse search.
+    planeray.calibrate_delay_zero : the fine delay zero.
 
     Examples
     --------

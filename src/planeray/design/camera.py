@@ -40,6 +40,10 @@ class DesignCamera:
     source : str
         Where these came from (``"default"``, ``"device:NAME"``, ``"file:PATH"``).
 
+    See Also
+    --------
+    camera_from_device, camera_from_file : from a device or a file.
+
     Examples
     --------
     >>> cam = DesignCamera()  # the default camera of the simulated Episcan
@@ -102,6 +106,21 @@ def camera_from_device(device, name: str) -> DesignCamera:
     A camera that does not describe its noise gets the default model, with its averaging where
     known.
 
+    Parameters
+    ----------
+    device : Device
+        An open device.
+    name : str
+        Its registered name (for the record).
+
+    Returns
+    -------
+    DesignCamera
+
+    See Also
+    --------
+    camera_from_file : from a file.
+
     Examples
     --------
     >>> import planeray as pr
@@ -139,10 +158,23 @@ def camera_from_file(path) -> DesignCamera:
     ``camera`` object or top-level sensor fields, ``lines_per_second``, ``sync``), or a sweep file's
     camera record (``record.camera``).
 
+    Parameters
+    ----------
+    path : str or path
+        A native stack, an ``acquisition.json`` or a sweep file.
+
+    Returns
+    -------
+    DesignCamera
+
     Raises
     ------
     InputError
         One line naming the file: unreadable, or no camera in it.
+
+    See Also
+    --------
+    camera_from_device : from an open device.
 
     Examples
     --------

@@ -44,6 +44,26 @@ def band_rows(delay_us, exposure_us, offsets_rows, *, lines_per_second, jitter_u
     The bands of an interior camera row (every offset bin whole on the projector): Eq. 3 on 1-row
     bins, the edges blurred by ``jitter_us`` (as the demultiplexer's matrix is).
 
+    Parameters
+    ----------
+    delay_us, exposure_us : array_like (C,)
+        The settings, microseconds.
+    offsets_rows : array_like (U,) of int
+        Offsets ``u``, projector rows.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    jitter_us : float
+        Synchronization jitter blurring the band edges, microseconds.
+
+    Returns
+    -------
+    ndarray (C, U)
+        The fraction of each offset bin each band lights.
+
+    See Also
+    --------
+    planeray.timing.band_bin_weights : Eq. 3 on bins.
+
     Examples
     --------
     >>> import numpy as np
@@ -74,6 +94,10 @@ class Candidates:
         Each candidate's band over the offsets (:func:`band_rows`).
     description : dict
         JSON record: bounds, steps, margin, count.
+
+    See Also
+    --------
+    candidate_settings : builds them.
 
     Examples
     --------
@@ -143,6 +167,10 @@ def candidate_settings(
     Returns
     -------
     Candidates
+
+    See Also
+    --------
+    design_sweep : chooses among them.
 
     Examples
     --------

@@ -81,6 +81,10 @@ class ExpectedError:
         Python threads over which the candidates' forms are split (hold BLAS to one thread meanwhile:
         on a shared 2-core machine a two-thread OpenBLAS inverts a 229 x 229 matrix 40x slower).
 
+    See Also
+    --------
+    design_sweep : minimizes it.
+
     Examples
     --------
     >>> from planeray.design import transport_prior

@@ -58,6 +58,10 @@ class TransportPrior:
     description : dict
         JSON record: the sources, geometry, pixels, seed and smoothness mixed in.
 
+    See Also
+    --------
+    transport_prior : builds one.
+
     Examples
     --------
     >>> from planeray.design import transport_prior
@@ -160,6 +164,10 @@ def transport_prior(
     Returns
     -------
     TransportPrior
+
+    See Also
+    --------
+    design_sweep : uses it.
 
     Examples
     --------

@@ -66,6 +66,10 @@ class SweepDesign:
     record : dict
         What the sweep file records (``record``): prior, camera, criterion, candidates, seed.
 
+    See Also
+    --------
+    design_sweep : returns it.
+
     Examples
     --------
     >>> from planeray.design import transport_prior
@@ -85,6 +89,26 @@ class SweepDesign:
 
 def image_variance(rows, exposure_us, prior: TransportPrior, camera: DesignCamera) -> np.ndarray:
     """The noise variance of images with illumination ``rows`` at the prior's mean transport (normalized units).
+
+    Parameters
+    ----------
+    rows : ndarray (C, U)
+        Rows of the illumination matrix.
+    exposure_us : array_like (C,)
+        Their exposures, microseconds.
+    prior : TransportPrior
+        Gives the mean transport.
+    camera : DesignCamera
+        The noise model.
+
+    Returns
+    -------
+    ndarray (C,)
+        Variances in normalized image units squared.
+
+    See Also
+    --------
+    planeray.CameraModel : its noise model.
 
     Examples
     --------
@@ -207,6 +231,11 @@ def design_sweep(
     -------
     SweepDesign
 
+    See Also
+    --------
+    transport_prior : the prior.
+    planeray.io.write_sweep : store the result as a sweep file.
+
     Examples
     --------
     >>> from planeray.design import transport_prior
@@ -292,6 +321,26 @@ def expected_error(
     relative transport error ``sqrt(E / E||x||^2)``, for the Bayesian criteria their value.
 
     Bands beyond the prior's support are cut to it (that light is not in the prior).
+
+    Parameters
+    ----------
+    sweep : Sweep
+        Any sweep (its used images count).
+    prior : TransportPrior
+        The transports to expect.
+    camera : DesignCamera, optional
+        The camera's noise and timing (default: the simulated Episcan's).
+    alpha : float
+        The smoothness weight of the demultiplexing.
+    criterion : {"mse", "bayes-a", "bayes-d"}
+
+    Returns
+    -------
+    float
+
+    See Also
+    --------
+    design_sweep : a sweep that minimizes it.
 
     Examples
     --------

@@ -52,6 +52,11 @@ class Device(Protocol):
     next :meth:`grab` (a camera realizes the pair together: its trigger delay
     depends on both), so :meth:`set_timing` is the call that checks a pair.
 
+    See Also
+    --------
+    DeviceBase : its defaults.
+    open_device : a registered device.
+
     Examples
     --------
     Any object with these methods is a device; the simulated Episcan is one:
@@ -99,6 +104,10 @@ class DeviceBase:
     Subclass it (or write the calls yourself) so that ``with open_device(...) as dev:``
     always releases the hardware.
 
+    See Also
+    --------
+    Device : the protocol.
+
     Examples
     --------
     A minimal device of your own (here a constant image), usable by every command through the protocol:
@@ -141,6 +150,21 @@ class DeviceBase:
 def apply_timing(device, delay_us: float, exposure_us: float) -> None:
     """Set one sweep point on any device (``set_timing``, or the two setters of an older device).
 
+    Parameters
+    ----------
+    device : Device
+        An open device.
+    delay_us, exposure_us : float
+        The sweep point, microseconds.
+
+    Returns
+    -------
+    None
+
+    See Also
+    --------
+    planeray.acquire_sweep : sets every point of a sweep.
+
     Examples
     --------
     >>> import planeray as pr
@@ -177,6 +201,24 @@ def register_device(name: str, description: str, *, hardware: bool = False):
     required.  ``hardware`` marks devices that talk to a camera (the command line
     then asks for their calibration).  See ``devices/simulated.py`` for a
     factory function and ``devices/ueye.py`` for a registered class.
+
+    Parameters
+    ----------
+    name : str
+        The device's name (``--device NAME``).
+    description : str
+        One line for ``planeray devices``.
+    hardware : bool
+        Whether it talks to a camera.
+
+    Returns
+    -------
+    callable
+        The decorator; it returns the factory unchanged.
+
+    See Also
+    --------
+    open_device : opens a registered device.
 
     Examples
     --------
@@ -221,6 +263,15 @@ def _discover() -> None:
 def list_devices() -> dict[str, str]:
     """Names and one-line descriptions of all registered devices.
 
+    Returns
+    -------
+    dict of str to str
+        Name -> description.
+
+    See Also
+    --------
+    open_device : opens one.
+
     Examples
     --------
     >>> sorted(list_devices())[:3]
@@ -241,6 +292,20 @@ def _entry(name: str) -> _Entry:
 def device_options(name: str) -> dict[str, object]:
     """The options of device ``name`` and their defaults (``inspect.Parameter.empty`` when required).
 
+    Parameters
+    ----------
+    name : str
+        A registered device.
+
+    Returns
+    -------
+    dict of str to object
+        Option -> default.
+
+    See Also
+    --------
+    open_device : opens it with options.
+
     Examples
     --------
     >>> options = device_options("sim")
@@ -258,6 +323,19 @@ def device_options(name: str) -> dict[str, object]:
 def is_hardware(name: str) -> bool:
     """Whether device ``name`` talks to a camera.
 
+    Parameters
+    ----------
+    name : str
+        A registered device.
+
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    list_devices : every device.
+
     Examples
     --------
     >>> is_hardware("sim"), is_hardware("ueye")
@@ -269,10 +347,26 @@ def is_hardware(name: str) -> bool:
 def open_device(name: str, **options) -> Device:
     """Open a registered device by name with its keyword options.
 
+    Parameters
+    ----------
+    name : str
+        A registered device (:func:`list_devices`).
+    **options
+        Its keyword options (:func:`device_options`).
+
+    Returns
+    -------
+    Device
+        Open; close it (or use ``with``).
+
     Raises
     ------
     InputError
         Unknown device, an option the device does not take, or a required option missing.
+
+    See Also
+    --------
+    register_device : adds a device.
 
     Examples
     --------

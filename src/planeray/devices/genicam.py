@@ -91,6 +91,14 @@ def _load_aravis():
 def aravis_available() -> bool:
     """Whether Aravis 0.8 can be loaded through PyGObject.
 
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    GenICamEpiscan : the device it serves.
+
     Examples
     --------
     >>> isinstance(aravis_available(), bool)
@@ -151,6 +159,11 @@ class GenICamEpiscan(TriggeredTiming, DeviceBase):
         Aravis's fake camera only: its GenICam file (default :data:`FAKE_GENICAM_XML`).
     fake_trigger_hz : float
         Aravis's fake camera only: the rate of its trigger clock (the projector's VSYNC).
+
+    See Also
+    --------
+    UEyeEpiscan : the paper's camera.
+    aravis_available : whether it can run here.
 
     References
     ----------

@@ -80,6 +80,14 @@ _AUTO_FEATURES = (
 def pyueye_available() -> bool:
     """Whether IDS's Python binding (and the uEye library under it) can be imported.
 
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    UEyeEpiscan : the device it serves.
+
     Examples
     --------
     >>> isinstance(pyueye_available(), bool)
@@ -138,6 +146,11 @@ class UEyeEpiscan(TriggeredTiming, DeviceBase):
     exposure_tolerance_us : float, optional
         Largest accepted difference between requested and realized exposure
         (default: half the camera's exposure increment, plus 0.5 us).
+
+    See Also
+    --------
+    GenICamEpiscan : any GenICam camera.
+    pyueye_available : whether it can run here.
 
     References
     ----------
