@@ -509,3 +509,9 @@ def test_browser_code_blocks_are_not_clipped(browser, site):
     finally:
         page.close()
     assert clipped == {}
+
+
+def test_every_public_name_has_parameters_returns_and_see_also():
+    """Every public function and class documents its Parameters (a class may give Attributes), a function its
+    Returns, and each points to its neighbours (See Also): the API reference reads as numpydoc throughout."""
+    assert _public_names().missing_sections() == {}

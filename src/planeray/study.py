@@ -85,6 +85,19 @@ Provider = Callable[[float, float, float], np.ndarray]
 class StudySetup:
     """Offsets ``u`` (U,), the band matrix ``A`` (N, U) and its :class:`RowGroup`.
 
+    Parameters
+    ----------
+    offsets : ndarray (U,) of int
+        Offsets ``u``, projector rows.
+    A : ndarray (N, U)
+        The used images' bands.
+    group : RowGroup
+        ``A`` as the solvers take it.
+
+    See Also
+    --------
+    study_setup : builds it.
+
     References
     ----------
     .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
@@ -106,6 +119,21 @@ class StudySetup:
 
 def study_setup(sweep=None, lines_per_second: float = PAPER_LINES_PER_SECOND) -> StudySetup:
     """The paper sweep's used bands over ``u = -K..K`` (75 x 229 for the paper sweep).
+
+    Parameters
+    ----------
+    sweep : Sweep, optional
+        Default: the paper's.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+
+    Returns
+    -------
+    StudySetup
+
+    See Also
+    --------
+    reconstruct : solves with it.
 
     References
     ----------
@@ -133,6 +161,24 @@ def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float 
 
     ``g`` enters only through the similarity relation.  ``eta = 1`` (index-matched
     boundary) matches the Monte Carlo engine's default ``n = 1``.
+
+    Parameters
+    ----------
+    offsets : array_like of int
+        Offsets ``u``, projector rows.
+    mm_per_row : float
+        Size of a projector row on the surface, mm.
+    eta : float
+        Relative refractive index of the medium.
+
+    Returns
+    -------
+    callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) -> ndarray (U,).
+
+    See Also
+    --------
+    mc_provider : by Monte Carlo.
 
     Examples
     --------
@@ -168,6 +214,30 @@ def mc_provider(
     with ``sigma_a = 0`` a photon scatters until it leaves or is handed to
     diffusion theory 10 transport mean free paths deep (~250 collisions at the
     defaults; see :func:`planeray.mc.mc_line_profile`).
+
+    Parameters
+    ----------
+    offsets : array_like of int
+        Offsets ``u``, projector rows.
+    mm_per_row : float
+        Size of a projector row on the surface, mm.
+    n_photons : int
+        Photons per profile.
+    seed : int
+        Seed of the tracing.
+    n : float
+        Relative refractive index of the medium.
+    cache : bool
+        Keep profiles on disk.
+
+    Returns
+    -------
+    callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) -> ndarray (U,).
+
+    See Also
+    --------
+    dipole_provider : the diffusion dipole.
 
     Examples
     --------
@@ -207,6 +277,25 @@ def default_provider(
     ~50 s on 2 cores the first time, then come from the disk cache.  The dipole
     is instant and smooth.
 
+    Parameters
+    ----------
+    offsets : array_like of int
+        Offsets ``u``, projector rows.
+    mm_per_row : float
+        Size of a projector row on the surface, mm.
+    n_photons : int
+        Photons per profile (Monte Carlo).
+    use_mc : bool
+        Monte Carlo (True) or the dipole.
+
+    Returns
+    -------
+    callable
+
+    See Also
+    --------
+    resolve_provider : by name.
+
     Examples
     --------
     >>> from planeray.timing import quick_sweep
@@ -233,6 +322,10 @@ def resolve_provider(provider, offsets) -> Provider:
     -------
     callable
         ``profile(sigma_s, sigma_a, g)``.
+
+    See Also
+    --------
+    default_provider : the default.
 
     Examples
     --------
@@ -261,6 +354,10 @@ def cached_provider(provider: Provider) -> Provider:
     callable
         The same profiles, each computed once.
 
+    See Also
+    --------
+    resolve_provider : a provider by name.
+
     Examples
     --------
     >>> from planeray.timing import quick_sweep
@@ -284,6 +381,21 @@ def cached_provider(provider: Provider) -> Provider:
 def scaled_truth(A, T) -> np.ndarray:
     """``T`` scaled so that ``max(A T) = 1`` (normalized images).
 
+    Parameters
+    ----------
+    A : ndarray (N, U)
+        The bands.
+    T : array_like (U,)
+        A profile.
+
+    Returns
+    -------
+    ndarray (U,)
+
+    See Also
+    --------
+    mse_trials : uses it.
+
     Examples
     --------
     >>> from planeray.timing import quick_sweep
@@ -302,6 +414,25 @@ def scaled_truth(A, T) -> np.ndarray:
 # ---------------------------------------------------------------------------- core
 def reconstruct(setup: StudySetup, B, methods=METHODS, alpha=0.01, beta=0.01) -> dict:
     """Reconstructions ``{method: X (P, U)}`` of observations ``B`` (P, N).
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+    B : array_like (P, N)
+        Observations.
+    methods : tuple of {"pinv", "nnls", "full"}
+        The reconstructions.
+    alpha, beta : float
+        Weights of the full method.
+
+    Returns
+    -------
+    dict of str to ndarray (P, U)
+
+    See Also
+    --------
+    mse_trials : their errors.
 
     Examples
     --------
@@ -335,6 +466,34 @@ def _observations(setup: StudySetup, T, noise, seeds, point=0):
 def mse_trials(setup: StudySetup, T, noise, seeds=5, methods=METHODS, alpha=0.01, beta=0.01, point=0, return_x=False):
     """MSE against ``T`` of each method for ``seeds`` noise realizations: ``{method: (seeds,)}``.
 
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+    T : ndarray (U,)
+        The true profile (:func:`scaled_truth`).
+    noise : float
+        Standard deviation of the image noise, normalized units.
+    seeds : int
+        Noise realizations.
+    methods : tuple of str
+        The reconstructions.
+    alpha, beta : float
+        Weights of the full method.
+    point : int
+        Seeds the noise per grid point.
+    return_x : bool
+        Also return the reconstructions.
+
+    Returns
+    -------
+    dict of str to ndarray (seeds,)
+        (and the reconstructions with ``return_x``).
+
+    See Also
+    --------
+    reconstruct : one reconstruction.
+
     Examples
     --------
     >>> from planeray.timing import quick_sweep
@@ -356,6 +515,29 @@ def _truth(setup, provider, sigma_s, sigma_a, g):
 
 def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_NOISE, seed=0, **params) -> dict:
     """Fig. 5a/b: truth and one reconstruction per method (noise realization ``seed``).
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    noise : float
+        Image noise, normalized units.
+    seed : int
+        The noise realization.
+    **params
+        ``sigma_s``, ``sigma_a``, ``g`` (1/mm), ``alpha``, ``beta``.
+
+    Returns
+    -------
+    dict
+        ``truth`` and each method's reconstruction, with their MSE.
+
+    See Also
+    --------
+    noise_sweep : over noise levels.
 
     Examples
     --------
@@ -379,6 +561,31 @@ def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_
 
 def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, *, progress=None, **params) -> dict:
     """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``; ``progress(1)`` after each noise level.
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    noises : array_like
+        Noise levels, normalized units.
+    seeds : int
+        Realizations per level.
+    progress : callable, optional
+        ``progress(1)`` after each level.
+    **params
+        ``sigma_s``, ``sigma_a``, ``g`` (1/mm), ``alpha``, ``beta``.
+
+    Returns
+    -------
+    dict
+        ``mse[method]`` (len(noises), seeds).
+
+    See Also
+    --------
+    parameter_sweep : over the medium.
 
     Examples
     --------
@@ -412,6 +619,23 @@ def auto_weights(setup: StudySetup, B, *, criterion: str | None = None) -> tuple
     ``criterion="cv-images"``: 5-fold cross-validation over the images, seed 0), the
     observations of the ``P`` noise realizations pooled like the pixels of a stack, weighted
     alike (the study's noise is the same for every image).
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+    B : array_like (P, N)
+        Observations (noise realizations pooled).
+    criterion : str, optional
+        ``"gcv"`` (default) or ``"cv-images"``.
+
+    Returns
+    -------
+    alpha, beta : float
+
+    See Also
+    --------
+    planeray.demux.choose_weights : the same for a stack.
 
     Examples
     --------
@@ -494,6 +718,37 @@ def parameter_sweep(
     found with knowledge of the truth: ``alpha``, ``beta``, ``mse`` ``(len(values),)``),
     on the same noise realizations.
 
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    name : {"sigma_s", "sigma_a", "g"}
+        The parameter swept.
+    values : array_like
+        Its values.
+    seeds : int
+        Realizations per value.
+    noise : float
+        Image noise, normalized units.
+    progress : callable, optional
+        ``progress(1)`` after each value.
+    auto : bool
+        Also the automatic weights and the best fixed pair.
+    **params
+        The other parameters.
+
+    Returns
+    -------
+    dict
+        ``mse[method]`` (len(values), seeds), and with ``auto`` ``auto`` and ``best_fixed``.
+
+    See Also
+    --------
+    regularization_sweep : over the weights.
+
     Examples
     --------
     >>> from planeray.timing import quick_sweep
@@ -537,6 +792,33 @@ def regularization_sweep(
     the same noise realizations are used at every grid point.  ``progress(1)``
     after each grid point.
 
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    alphas, betas : array_like
+        The grid of weights.
+    seeds : int
+        Realizations.
+    noise : float
+        Image noise, normalized units.
+    progress : callable, optional
+        ``progress(1)`` after each grid point.
+    **params
+        ``sigma_s``, ``sigma_a``, ``g`` (1/mm).
+
+    Returns
+    -------
+    dict
+        ``mse``, ``bias2`` and ``variance``, each (len(alphas), len(betas)).
+
+    See Also
+    --------
+    auto_weights : the weights chosen from the data.
+
     Examples
     --------
     >>> from planeray.timing import quick_sweep
@@ -569,6 +851,20 @@ def regularization_sweep(
 
 def grids(quick: bool = False) -> dict:
     """The swept values (full, or reduced for tests).
+
+    Parameters
+    ----------
+    quick : bool
+        The reduced grids of the tests and ``--quick``.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``noise``, ``sigma_s``, ``sigma_a``, ``g``, ``alpha``, ``beta``.
+
+    See Also
+    --------
+    noise_sweep, parameter_sweep, regularization_sweep : sweep them.
 
     Examples
     --------

@@ -16,6 +16,11 @@ DEFAULT_FRAME_PERIOD_US = 1e6 / 60.0
 class PatternDevice(Protocol):
     """A projector-camera that can project a row pattern for a full-frame exposure.
 
+    See Also
+    --------
+    simulated_device : one.
+    capture_direct_global, emulate_delay_image : use it.
+
     Examples
     --------
     >>> from planeray.baselines import simulated_device
@@ -96,6 +101,14 @@ def simulated_device(
         Simulate noise.
     lines_per_second : float, optional
         Projector line rate (default: the paper's 54,000 lines/s).
+
+    Returns
+    -------
+    SimulatedEpiscan
+
+    See Also
+    --------
+    compare_direct_global, compare_emulation : the comparisons it serves.
 
     Examples
     --------

@@ -28,9 +28,24 @@ def band_pattern(
     as on the synchronized device).  The bands of several rows are added; they
     must not overlap.
 
+    Parameters
+    ----------
+    geometry : RowGeometry
+        Camera and projector rows.
+    camera_rows : int or array_like of int
+        The camera rows the pattern serves.
+    delay_us, exposure_us : float
+        The (delay, exposure) emulated, microseconds.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+
     Returns
     -------
     pattern : ndarray (P,) float64, values in [0, 1]
+
+    See Also
+    --------
+    emulate_delay_image : captures under such patterns.
 
     Examples
     --------
@@ -72,6 +87,10 @@ class EmulationResult:
     delay_us, exposure_us, capture_exposure_us : float
         The emulated delay and exposure (band centre and width), and the
         conventional exposure of each capture.
+
+    See Also
+    --------
+    emulate_delay_image : returns it.
 
     Examples
     --------
@@ -143,6 +162,10 @@ def emulate_delay_image(
     Returns
     -------
     EmulationResult
+
+    See Also
+    --------
+    compare_emulation : against the synchronized capture.
 
     References
     ----------

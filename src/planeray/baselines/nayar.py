@@ -31,6 +31,20 @@ def default_period_rows(geometry: RowGeometry) -> int:
     footprint and another darkens it.  6 rows for ``P = H``, 16 rows for 128
     camera rows of a 720-row projector.
 
+    Parameters
+    ----------
+    geometry : RowGeometry
+        Camera and projector rows.
+
+    Returns
+    -------
+    int
+        The stripe period, projector rows.
+
+    See Also
+    --------
+    stripe_patterns : the patterns.
+
     Examples
     --------
     >>> from planeray.timing import RowGeometry
@@ -69,6 +83,10 @@ def stripe_patterns(
     -------
     patterns : ndarray (n_shifts, projector_rows) float64
         Values ``1`` (bright) and ``low`` (dark).
+
+    See Also
+    --------
+    separate_direct_global : separates their captures.
 
     References
     ----------
@@ -120,6 +138,10 @@ def separate_direct_global(images, *, pattern_contrast_b: float = 0.0):
     -------
     direct, global : ndarray (H, W) float64
 
+    See Also
+    --------
+    capture_direct_global : captures and separates.
+
     References
     ----------
     .. [1] S. K. Nayar, G. Krishnan, M. D. Grossberg, R. Raskar, "Fast separation
@@ -166,6 +188,10 @@ class DirectGlobalResult:
         Captures taken, the dark frame included.
     period_rows, n_shifts : int
     pattern_contrast_b : float
+
+    See Also
+    --------
+    capture_direct_global : returns it.
 
     Examples
     --------
@@ -228,6 +254,10 @@ def capture_direct_global(
     Returns
     -------
     DirectGlobalResult
+
+    See Also
+    --------
+    compare_direct_global : against the synchronized epipolar image.
 
     References
     ----------

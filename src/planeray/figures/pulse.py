@@ -45,6 +45,10 @@ def pulse_signal_figure(time_s, signal, estimate, *, raw=None, truth_bpm=None, t
     matplotlib.figure.Figure
         Two Axes: signal (percent of its mean) and power spectrum (bpm).
 
+    See Also
+    --------
+    pulse_methods_figure : Fig. 15b.
+
     References
     ----------
     .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
@@ -110,6 +114,10 @@ def pulse_methods_figure(time_s, signals: dict, *, snr_db: dict | None = None, t
     matplotlib.figure.Figure
         One Axes per signal, sharing both axes.
 
+    See Also
+    --------
+    pulse_signal_figure : Fig. 15a.
+
     References
     ----------
     .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
@@ -149,6 +157,27 @@ def rate_accuracy_figure(true_bpm, estimated_bpm, *, labels=None, ax=None, out=N
     """Estimated against true heart rate (one series per estimator), with the +-2 bpm band.
 
     ``estimated_bpm``: dict label -> array (same length as ``true_bpm``; NaN for no pulse detected).
+
+    Parameters
+    ----------
+    true_bpm : array_like
+        The true mean heart rates, beats per minute.
+    estimated_bpm : dict of str to array_like
+        Estimator -> its rates (NaN: no pulse detected).
+    labels : optional
+        Unused (kept for callers).
+    ax : matplotlib.axes.Axes, optional
+        Draw into it.
+    out : str or path, optional
+        Also save as PNG.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    See Also
+    --------
+    pulse_signal_figure : one video's pulse.
 
     Examples
     --------

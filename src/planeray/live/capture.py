@@ -73,6 +73,10 @@ class Frame:
         The timing request it answers (a new :meth:`LiveCapture.set_timing` or ``set_cycle`` starts
         a new generation).
 
+    See Also
+    --------
+    LiveCapture : produces them.
+
     Examples
     --------
     >>> import numpy as np
@@ -122,6 +126,10 @@ class LiveCapture:
         core it gets; a camera is paced by its trigger).
     close_device : bool
         Close the device when the capture stops.
+
+    See Also
+    --------
+    LiveTransport : demultiplexes its frames.
 
     Examples
     --------

@@ -19,6 +19,23 @@ __all__ = ["write_snapshot", "snapshot_path"]
 def snapshot_path(folder, view: str, *, now: float | None = None) -> Path:
     """A new name in ``folder`` for a snapshot of ``view``: ``snapshot-YYYYmmdd-HHMMSS-VIEW.zarr`` (``-2``... if taken).
 
+    Parameters
+    ----------
+    folder : str or path
+        Where snapshots go.
+    view : str
+        The view's name.
+    now : float, optional
+        The time (seconds since the epoch; default: now).
+
+    Returns
+    -------
+    pathlib.Path
+
+    See Also
+    --------
+    write_snapshot : writes it.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -58,6 +75,15 @@ def write_snapshot(
         The view it was taken in (recorded).
     excluded : ndarray of bool, optional
         The images left out of demultiplexing (default: the paper's boundary rule).
+
+    Returns
+    -------
+    pathlib.Path
+        The stack written.
+
+    See Also
+    --------
+    planeray.read_stack : reads it.
 
     Examples
     --------

@@ -55,6 +55,27 @@ def window_stack(frames, *, lines_per_second: float, projector_rows: int, jitter
     """The frames of a window as a :class:`~planeray.stack.Stack` (one image per frame, in order, all used):
     what an offline ``planeray demux`` of the same images reads.
 
+    Parameters
+    ----------
+    frames : sequence of Frame
+        A window of frames.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    projector_rows : int
+        Projector rows spanned by the image height.
+    jitter_us : float
+        Synchronization jitter, microseconds (recorded).
+    metadata : dict, optional
+        More of the record.
+
+    Returns
+    -------
+    Stack
+
+    See Also
+    --------
+    WindowSolver : solves a window.
+
     Examples
     --------
     >>> import numpy as np
@@ -111,6 +132,10 @@ class WindowSolver:
         Certified relative objective gap (the fast solver's default, 1e-4).
     threads : int, optional
         Solver threads (default: Numba's count, at most two).
+
+    See Also
+    --------
+    planeray.demultiplex : the offline solve.
 
     References
     ----------
@@ -289,6 +314,10 @@ class LiveUpdate:
     warm : bool
         Whether it was warm-started.
 
+    See Also
+    --------
+    LiveTransport : its updates.
+
     Examples
     --------
     >>> import numpy as np
@@ -356,6 +385,10 @@ class LiveTransport:
         Warm-start each window from the last (False: every window cold, for comparison).
     frame_timeout_s : float
         How long to wait for a new frame before the loop reports the device stalled.
+
+    See Also
+    --------
+    WindowSolver : the solver it runs.
 
     Examples
     --------

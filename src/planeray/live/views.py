@@ -49,6 +49,21 @@ def cycle_delays(exposure_us: float, delays_us=DEFAULT_CYCLE_DELAYS_US) -> tuple
     """The delays of Eq. 7's cycle at ``exposure_us``: those whose band is off the epipolar plane
     (``|t_d| > t_e/2``) and whose edge is not on it (the boundary images a stack leaves out, Sec. 4).
 
+    Parameters
+    ----------
+    exposure_us : float
+        The cycle's exposure, microseconds.
+    delays_us : tuple of float
+        The candidate delays, microseconds.
+
+    Returns
+    -------
+    tuple of float
+
+    See Also
+    --------
+    composite_view : the composite of a cycle.
+
     Examples
     --------
     >>> cycle_delays(600.0)
@@ -72,6 +87,19 @@ def cycle_delays(exposure_us: float, delays_us=DEFAULT_CYCLE_DELAYS_US) -> tuple
 def vein_view(image) -> np.ndarray:
     """The vein view of a delay image: its contrast stretched (percentiles, then CLAHE), in [0, 1], float32.
 
+    Parameters
+    ----------
+    image : array_like (H, W)
+        A delay image.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+
+    See Also
+    --------
+    composite_view : Eq. 7's composite.
+
     Examples
     --------
     >>> import numpy as np
@@ -89,6 +117,21 @@ def composite_view(frames) -> tuple[np.ndarray, dict]:
 
     Returns the composite (float32, ~1 on skin: the locally normalized delay images) and
     ``{"delays_us": [...], "delay_map_us": [min, max]}``.
+
+    Parameters
+    ----------
+    frames : sequence of Frame
+        One frame per delay of :func:`cycle_delays`, one exposure.
+
+    Returns
+    -------
+    image : ndarray (H, W) float32
+    info : dict
+        ``delays_us`` used and the ``delay_map_us`` range.
+
+    See Also
+    --------
+    planeray.skin.enhance_contrast : Eq. 7.
 
     References
     ----------
@@ -132,6 +175,10 @@ class PulseMonitor:
         The shortest window analysed (two periods of the rate band's slowest 0.7 Hz).
     spectrum_points : int
         Samples of the spectrum kept for display (the rate band and up to 3.3 Hz).
+
+    See Also
+    --------
+    planeray.pulse.analysis.analyze_pulse : the analysis.
 
     References
     ----------

@@ -48,6 +48,21 @@ def _level(level) -> int:
 def white(shape, *, level: int = 255) -> np.ndarray:
     """Every pixel lit at ``level`` (0-255): the sweep's illumination.
 
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    level : int
+        Brightness, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    black : the laser off.
+
     Examples
     --------
     >>> white((2, 3)).shape, int(white((2, 3), level=128).max())
@@ -59,6 +74,19 @@ def white(shape, *, level: int = 255) -> np.ndarray:
 def black(shape) -> np.ndarray:
     """Every pixel dark: the laser off (a dark frame).
 
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    white : the laser on.
+
     Examples
     --------
     >>> int(black((2, 3)).max())
@@ -69,6 +97,25 @@ def black(shape) -> np.ndarray:
 
 def comb(shape, step_rows: int, phase: int, *, level: int = 255) -> np.ndarray:
     """Rows ``phase, phase + k, phase + 2k, ...`` lit (``k = step_rows``), the others dark (Sec. 6).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    step_rows : int
+        ``k``: rows between lit rows.
+    phase : int
+        The first lit row.
+    level : int
+        Brightness of the lit rows, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    planeray.rig.capture_comb : captures every phase.
 
     Examples
     --------
@@ -85,6 +132,25 @@ def comb(shape, step_rows: int, phase: int, *, level: int = 255) -> np.ndarray:
 
 def rows(shape, first: int, last: int | None = None, *, level: int = 255) -> np.ndarray:
     """Row ``first`` lit, or the band of rows ``first`` to ``last`` (both included).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    first : int
+        The first lit row.
+    last : int, optional
+        The last lit row (default: ``first``).
+    level : int
+        Brightness, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    comb : rows ``k`` apart.
 
     Examples
     --------
@@ -107,6 +173,21 @@ def rectification_card(shape, *, step_rows: int = 40) -> np.ndarray:
     short ticks at both edges mark every tenth row between.  Point the camera at a
     flat target, show the card, and turn the camera until each line lies on one
     camera row (the numbers tell which projector row it is).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    step_rows : int
+        Rows between the numbered lines.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    parse_pattern : ``card`` by name.
 
     Examples
     --------
@@ -142,11 +223,24 @@ def rectification_card(shape, *, step_rows: int = 40) -> np.ndarray:
 def load_pattern(path) -> np.ndarray:
     """An image file (PNG, TIFF, BMP..., 8-bit grey or RGB) or a ``.npy`` array, as a pattern.
 
+    Parameters
+    ----------
+    path : str or path
+        The image or ``.npy`` file.
+
+    Returns
+    -------
+    ndarray uint8
+
     Raises
     ------
     InputError
         Missing, unreadable, or not 8-bit (a 16-bit image would need a scaling the
         pattern must not get).
+
+    See Also
+    --------
+    parse_pattern : a name or a file.
 
     Examples
     --------
@@ -189,6 +283,19 @@ def as_rgb8(pattern) -> np.ndarray:
     in ``[0, 1]`` and become ``round(255 x)``; grey is repeated on the three channels.
     Nothing else is changed: no scaling, filtering or gamma.
 
+    Parameters
+    ----------
+    pattern : array_like
+        Grey ``(rows, columns)`` or RGB ``(rows, columns, 3)``, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns, 3) uint8
+
+    See Also
+    --------
+    parse_pattern : patterns by name.
+
     Examples
     --------
     >>> as_rgb8(white((2, 3))).shape
@@ -218,10 +325,27 @@ def as_rgb8(pattern) -> np.ndarray:
 def place(pattern, shape, at) -> np.ndarray:
     """The pattern put on a black screen of ``shape`` with its top-left pixel at ``at = (row, column)``.
 
+    Parameters
+    ----------
+    pattern : array_like
+        The pattern.
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    at : (int, int)
+        Where its top-left pixel goes, ``(row, column)``.
+
+    Returns
+    -------
+    ndarray uint8
+
     Raises
     ------
     InputError
         It does not fit there (nothing is cropped).
+
+    See Also
+    --------
+    black : the screen around it.
 
     Examples
     --------
@@ -247,6 +371,21 @@ def parse_pattern(spec: str, shape) -> np.ndarray:
     ``white``, ``black``, ``comb:K:J`` (every ``K``-th row from ``J``), ``row:R``,
     ``rows:A:B`` (rows ``A`` to ``B``, both included), ``card`` or ``card:STEP``;
     anything else is read as an image file.
+
+    Parameters
+    ----------
+    spec : str
+        A pattern's name (``white``, ``black``, ``card``, ``rows:A-B``, ``comb:K:P``...) or an image file.
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    load_pattern : an image file.
 
     Examples
     --------

@@ -28,6 +28,14 @@ LIST_TIMEOUT_S = 20.0
 def window_library_available() -> bool:
     """Whether pyglet, the windowing library of the projector window, is installed.
 
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    list_screens : needs it.
+
     Examples
     --------
     >>> isinstance(window_library_available(), bool)
@@ -65,6 +73,10 @@ class Screen:
         The RandR output's name (``HDMI-1``), when the server names it.
     refresh_hz : float or None
         Its refresh rate, when the server knows it.
+
+    See Also
+    --------
+    list_screens : the screens of a display.
 
     Examples
     --------
@@ -110,10 +122,23 @@ class Screen:
 def display_name(display: str | None = None) -> str:
     """The X display to use, without its screen number: ``display``, else ``$DISPLAY``.
 
+    Parameters
+    ----------
+    display : str, optional
+        ``:N`` or ``:N.S`` (default ``$DISPLAY``).
+
+    Returns
+    -------
+    str
+
     Raises
     ------
     InputError
         Neither is set.
+
+    See Also
+    --------
+    list_screens : its screens.
 
     Examples
     --------
@@ -166,10 +191,18 @@ def list_screens(display: str | None = None, *, refresh: bool = False) -> list[S
     refresh : bool
         Ask the X server again (the list is kept per display for the process).
 
+    Returns
+    -------
+    list of Screen
+
     Raises
     ------
     InputError
         No display, no pyglet, or the display cannot be reached.
+
+    See Also
+    --------
+    get_screen : one by number.
 
     Examples
     --------
@@ -193,6 +226,21 @@ def list_screens(display: str | None = None, *, refresh: bool = False) -> list[S
 def get_screen(index: int, display: str | None = None) -> Screen:
     """Screen ``index`` of the display, or a one-line refusal naming the screens there are.
 
+    Parameters
+    ----------
+    index : int
+        The screen's number (as ``--screen`` takes it).
+    display : str, optional
+        The X display.
+
+    Returns
+    -------
+    Screen
+
+    See Also
+    --------
+    list_screens : every screen.
+
     Examples
     --------
     >>> get_screen(1).height  # doctest: +SKIP
@@ -212,10 +260,23 @@ def grab_screen(screen: Screen) -> np.ndarray:
     screen, cut to the head), not of any window's buffer: what the projector's
     input receives.
 
+    Parameters
+    ----------
+    screen : Screen
+        The screen.
+
+    Returns
+    -------
+    ndarray (height, width, 3) uint8
+
     Raises
     ------
     DeviceError
         The X server cannot be read.
+
+    See Also
+    --------
+    get_screen : a screen by number.
 
     Examples
     --------

@@ -91,6 +91,10 @@ def capture_comb(
     InputError
         The device has no global shutter, or the comb does not fit the screen.
 
+    See Also
+    --------
+    planeray.calibrate_lines_per_second : reads what it captures.
+
     Examples
     --------
     On a rig, the line-velocity calibration's comb captured through the projector window (the

@@ -59,6 +59,10 @@ class Check:
     details : dict
         The measured numbers.
 
+    See Also
+    --------
+    check_rig : returns them.
+
     Examples
     --------
     >>> check = Check("trigger", "pass", "one frame per VSYNC")
@@ -149,6 +153,14 @@ def check_rig(
         Called with each check as it completes.
     window : ProjectorWindow, optional
         An open window on ``screen`` to use (and leave open); default: one opened and closed here.
+
+    Returns
+    -------
+    list of Check
+
+    See Also
+    --------
+    capture_comb : the comb capture it includes.
 
     Examples
     --------

@@ -98,6 +98,10 @@ class ViewSettings:
         Scenes only: camera noise (shot, read, quantization, row jitter) and ambient
         light in the band image.
 
+    See Also
+    --------
+    ViewSource.render : renders them.
+
     Examples
     --------
     >>> settings = ViewSettings(mode="band", delay_us=375.0, exposure_us=600.0)
@@ -196,6 +200,10 @@ class ViewSource:
         What the command line named (a scene name or the path).
     shape : (int, int)
         Image ``(H, W)``.
+
+    See Also
+    --------
+    open_source : the source of a path or scene name.
 
     Examples
     --------
@@ -339,6 +347,10 @@ class TransportSource(ViewSource):
         Extra relighting patterns by name (rows of the projector).
     attrs : dict, optional
         The store's attributes (``epipolar_resolution_rows`` is shown).
+
+    See Also
+    --------
+    StackSource : a stack.
 
     Examples
     --------
@@ -599,6 +611,10 @@ class StackSource(ViewSource):
         Ground truth: its continuous delay profiles (noise-free bands of every delay
         at each captured exposure) are overlaid on the measured ones.
 
+    See Also
+    --------
+    TransportSource : a transport.
+
     Examples
     --------
     >>> import planeray as pr
@@ -793,6 +809,14 @@ def open_source(
         Relighting pattern files (:func:`planeray.synthesis.load_pattern`), named by their stem.
     camera : CameraModel, optional
         Scenes: the virtual camera (default :class:`~planeray.camera.CameraModel`).
+
+    Returns
+    -------
+    ViewSource
+
+    See Also
+    --------
+    TransportSource, StackSource
 
     Examples
     --------
