@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out
 
-.PHONY: demo test docs lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba bench-pulse-memory browser llvm xvfb aravis clean venv
+.PHONY: demo test docs wheel-check lint format bytecode kernels bench bench-demux bench-mc bench-viewer bench-mitsuba bench-pulse-memory browser llvm xvfb aravis clean venv
 
 venv: $(VENV)/.installed
 
@@ -107,6 +107,7 @@ SPHINXOPTS ?= -j 2
 docs: venv browser $(MATHJAX)
 	$(VENV)/bin/sphinx-build -W --keep-going -q $(SPHINXOPTS) -b html docs docs/_build/html
 	PLANERAY_DOCS_SITE=docs/_build/html $(PY) -m pytest -q -p no:cacheprovider tests/test_docs_site.py
+	@$(PY) tools/gallery_times.py docs/_build/html
 
 $(MATHJAX):
 	@if ! command -v npm >/dev/null 2>&1 && [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
@@ -117,6 +118,20 @@ $(MATHJAX):
 	@npm install --prefix docs/_build/mathjax --no-audit --no-fund --no-save --loglevel=error --fetch-retries=1 \
 		--fetch-timeout=60000 mathjax@$(MATHJAX_VERSION) >docs/_build/mathjax/npm.log 2>&1 \
 		|| { echo "make docs: could not install MathJax $(MATHJAX_VERSION) from the npm registry (offline? see docs/_build/mathjax/npm.log)"; exit 1; }
+
+# What a user of the package index gets: the wheel and the sdist built as an index would (python -m build, in an
+# isolated environment), the wheel installed alone (no extras) into a fresh venv, and the newcomer's commands run
+# from it outside the source tree: planeray --version, python -m planeray demo.
+WHEEL_CHECK := build/wheel-check
+wheel-check: venv
+	rm -rf $(WHEEL_CHECK) && mkdir -p $(WHEEL_CHECK)
+	$(PY) -m build --sdist --wheel --outdir $(WHEEL_CHECK)/dist . >$(WHEEL_CHECK)/build.log 2>&1 \
+		|| { tail -20 $(WHEEL_CHECK)/build.log; exit 1; }
+	$(PYTHON) -m venv $(WHEEL_CHECK)/venv
+	$(WHEEL_CHECK)/venv/bin/python -m pip install --quiet $(WHEEL_CHECK)/dist/planeray-*.whl
+	cd $(WHEEL_CHECK) && venv/bin/planeray --version && venv/bin/python -m planeray demo --out d
+	@tar -tzf $(WHEEL_CHECK)/dist/planeray-*.tar.gz | grep -q '/LICENSE$$' || { echo "the sdist lacks LICENSE"; exit 1; }
+	@echo "wheel-check: $$(ls $(WHEEL_CHECK)/dist) install and run from a fresh venv"
 
 lint: venv
 	$(VENV)/bin/ruff check conftest.py src tests benchmarks tools docs/conf.py docs/_ext docs/_plots docs/examples
@@ -147,5 +162,5 @@ bench-pulse-memory: venv
 	$(PY) benchmarks/bench_pulse_memory.py
 
 clean:
-	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache docs/_build docs/auto_examples docs/reference/api/generated \
+	rm -rf $(VENV) $(OUT) build dist src/*.egg-info .pytest_cache docs/_build docs/auto_examples docs/reference/api/generated \
 		docs/reference/api/backreferences docs/reference/api/index.rst docs/reference/cli_commands.rst docs/sg_execution_times.rst

@@ -115,7 +115,6 @@ sphinx_gallery_conf = {
     "reference_url": {"planeray": None},
     "doc_module": ("planeray",),
     "backreferences_dir": "reference/api/backreferences",
-    "default_thumb_file": str(HERE / "_static" / "thumb.png"),
     "thumbnail_size": (320, 224),
     "capture_repr": ("_repr_html_", "__repr__"),
     "matplotlib_animations": False,

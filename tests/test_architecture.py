@@ -21,7 +21,9 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "planeray"
 #: Top-level units, lowest first.  A unit may import only units before it.
 LAYERS = [
     "errors",
+    "_extras",
     "_validate",
+    "_progress",
     "goodness",
     "timing",
     "medium",
@@ -60,6 +62,7 @@ LAYERS = [
     "_console",
     "demo",
     "cli",
+    "__main__",  # python -m planeray: the command line
     "_jit",  # compiles the kernels of every engine (make kernels): above them all, imported by none
 ]
 
@@ -193,3 +196,44 @@ def test_the_checker_sees_imports_inside_functions(module, dep, tmp_path):
     src = tmp_path / "m.py"
     src.write_text(f"def f():\n    from {dep} import x\n")
     assert _resolve(dep) in _imports(module, src)
+
+
+#: Units that analyse captures: they may not import the scenes (the ground truth a simulation knows and a
+#: capture never has). What they compare against is passed in (``device.scene``, ``Scene.effect_masks``)
+#: or the comparison lives above them (``experiments``).
+GROUND_TRUTH_FREE = {"demux", "synthesis", "profiles", "classify", "materials", "baselines"}
+
+
+def test_analysis_does_not_reach_for_the_scenes_ground_truth(graph):
+    bad = sorted(
+        f"{mod} -> {dep}"
+        for mod, deps in graph.items()
+        if _unit(mod) in GROUND_TRUTH_FREE
+        for dep in deps
+        if _unit(dep) == "scenes"
+    )
+    assert not bad, "analysis importing the scenes (pass the ground truth in):\n" + "\n".join(bad)
+
+
+#: Longest function body (lines, its docstring and its signature's option declarations aside) in ``cli/``:
+#: a command parses its options, calls one library function and prints; the work lives in the library.
+MAX_CLI_BODY_LINES = 60
+
+
+def _body_lines(fn: ast.FunctionDef) -> int:
+    body = fn.body
+    if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant):
+        body = body[1:]  # the docstring
+    return body[-1].end_lineno - body[0].lineno + 1 if body else 0
+
+
+def test_the_command_line_is_thin():
+    long = sorted(
+        (n, f"{path.relative_to(SRC)}:{fn.lineno} {fn.name}")
+        for path in sorted((SRC / "cli").glob("*.py"))
+        for fn in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef) and (n := _body_lines(fn)) > MAX_CLI_BODY_LINES
+    )
+    assert not long, "command-line functions doing a library's work (move it to the library):\n" + "\n".join(
+        f"{n} lines: {where}" for n, where in long
+    )

@@ -155,8 +155,11 @@ def test_the_site_has_every_part(site):
     assert [name for name in commands if f"planeray {name}" not in cli_text] == []
 
 
-def test_every_gallery_example_ran_within_30_s(site):
-    """Each example of the gallery ran at build time (its pictures are on its page) in at most 30 s."""
+def test_every_gallery_example_ran(site):
+    """Each example of the gallery ran at build time (its running time and its pictures are on its page).
+
+    How long they took is reported by ``make docs`` (tools/gallery_times.py), never asserted: a busy
+    machine is no failure of the docs."""
     times = {}
     for page in sorted((site / "auto_examples").glob("plot_*.html")):
         text = " ".join(parse(page).text)
@@ -166,7 +169,28 @@ def test_every_gallery_example_ran_within_30_s(site):
         pictures = [u for t, u in parse(page).resources if t == "img" and "sphx_glr_" + page.stem in u]
         assert pictures, f"{page.name}: no picture"
     assert len(times) >= 12
-    assert {k: v for k, v in times.items() if v > 30.0} == {}
+
+
+def test_the_docs_configuration_names_only_files_that_exist():
+    """Every file docs/conf.py names beside itself (``HERE / "a" / "b"``) exists (a thumbnail once did not)."""
+    conf = (ROOT / "docs" / "conf.py").read_text(encoding="utf-8")
+    named = [re.findall(r'"([^"]+)"', m) for m in re.findall(r'HERE((?:\s*/\s*"[^"]+")+)', conf)]
+    named = [parts for parts in named if parts[0] != "_build"]  # what the build itself writes
+    assert named
+    assert [parts for parts in named if not (ROOT / "docs").joinpath(*parts).exists()] == []
+
+
+def test_no_two_files_differ_only_by_case(site):
+    """On a case-insensitive file system (macOS, Windows) ``planeray.Stack.html`` and ``planeray.stack.html``
+    would be one file: no two paths of the site may differ only by case."""
+    by_case: dict[str, list[str]] = {}
+    for path in site.rglob("*"):
+        rel = path.relative_to(site).as_posix()
+        by_case.setdefault(rel.lower(), []).append(rel)
+    assert len(by_case) > 200
+    assert [v for v in by_case.values() if len(v) > 1] == []
+    generated = site / "reference" / "api" / "generated"
+    assert (generated / "planeray.Stack.html").is_file() and (generated / "planeray.stack-module.html").is_file()
 
 
 def test_every_internal_link_and_image_resolves(site):

@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from planeray.cli import app
 from planeray.experiments import paper, reproduce
-from planeray.experiments.paper_report import FIGURE_ORDER, PAPER, WHERE
+from planeray.experiments.paper_report import FIGURE_ORDER, PAPER, WHERE, math_html
 from planeray.io.marks import mark_text
 
 runner = CliRunner()
@@ -123,6 +123,14 @@ def _check_files(run):
     # offline: nothing fetched from elsewhere, every image relative and inside the folder
     assert not re.search(r"(src|href)=\"(https?:)?//", page)
     assert "<script" not in page
+    # the summary first: every comparison of the page, in its order, each linked to its row; no raw TeX
+    summary = page[page.index('<table class="summary">') : page.index("</table>")]
+    assert page.index('<table class="summary">') < page.index("<p>") < page.index("<h2")
+    linked = re.findall(r'<td><a href="#(\w+-\d+)">', summary)
+    rows = re.findall(r'<tr id="(\w+-\d+)">', page)
+    assert linked == rows and len(rows) >= 30
+    assert [r.split("-")[0] for r in rows][:1] == ["fig4"]
+    assert not re.search(r"\$[^$]*\\", page) and "\\mu" not in page and "\\alpha" not in page
 
 
 def _rerun(command: str, out: Path):
@@ -202,7 +210,7 @@ def _check_report_quotes(run):
     for key, entry in PAPER.items():
         assert entry["section"] in md
         for name, q in entry["quotes"].items():
-            cell = q.replace("|", "\\|")  # a pipe in a Markdown table cell is escaped
+            cell = math_html(q).replace("|", "\\|")  # its TeX as text; a pipe in a Markdown table cell is escaped
             assert f'"{cell}" ({WHERE[key][name]})' in md, (key, q)
 
 

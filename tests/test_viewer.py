@@ -530,7 +530,7 @@ def test_cli_video_and_errors(tmp_path):
 
     runner = CliRunner()
     out = tmp_path / "v.mp4"
-    res = runner.invoke(app, ["video", "diffuse_plane", "--size", "16", "--projector-rows", "64", "--frames", "4",
+    res = runner.invoke(app, ["video", "diffuse_plane", "--size", "16", "24", "--projector-rows", "64", "--frames", "4",
                               "--out", str(out)])  # fmt: skip
     assert res.exit_code == 0, res.output
     assert out.is_file()
@@ -538,7 +538,7 @@ def test_cli_video_and_errors(tmp_path):
         (["video", "diffuse_plane", "--out", str(out)], "already exists"),
         (["video", "no_such_scene", "--out", str(tmp_path / "x.mp4")], "not a scene name"),
         (
-            ["video", "diffuse_plane", "--size", "16", "--sweep", "gain", "--out", str(tmp_path / "y.mp4")],
+            ["video", "diffuse_plane", "--size", "16", "16", "--sweep", "gain", "--out", str(tmp_path / "y.mp4")],
             "delay or exposure",
         ),
         (["view", str(tmp_path / "missing.zarr"), "--no-browser"], "not a scene name"),

@@ -72,7 +72,7 @@ def copy_mathjax(app, exception):
             shutil.copy2(src, dst)
 
 
-# The groups of the front door, in the order of ``planeray.__init__._EXPORTS``.
+# The groups of the front door, in the order of ``planeray/__init__.pyi`` (read into ``planeray._EXPORTS``).
 _GROUPS = {
     "timing": "The imaging model (Eqs. 1-3)",
     "transport": "Light transport (Eqs. 4-6)",
@@ -106,6 +106,36 @@ def public_modules():
     )
 
 
+def case_distinct_pages() -> dict[str, str]:
+    """``autosummary_filename_map``: a page name for each module whose name differs only by case from a name
+    documented beside it (``planeray.stack`` the module, ``planeray.Stack`` the class of the front door).
+
+    On a case-insensitive file system (macOS, Windows) ``planeray.stack.html`` and ``planeray.Stack.html``
+    are one file; the module's page becomes ``planeray.stack-module.html`` (links follow, by name).
+    """
+    import importlib
+    import pkgutil
+
+    import planeray
+
+    modules = ["planeray"] + [
+        m.name
+        for m in pkgutil.walk_packages(planeray.__path__, "planeray.", onerror=lambda name: None)
+        if not any(part.startswith("_") for part in m.name.split(".")[1:]) and not m.name.startswith("planeray.cli")
+    ]
+    names = {f"planeray.{n}" for n in planeray._EXPORTS} | set(modules)
+    for name in modules:
+        try:
+            module = importlib.import_module(name)
+        except Exception:  # an optional dependency missing: autosummary reports it itself
+            continue
+        names |= {f"{name}.{member}" for member in getattr(module, "__all__", ())}
+    by_case: dict[str, set[str]] = {}
+    for name in names:
+        by_case.setdefault(name.lower(), set()).add(name)
+    return {m: f"{m}-module" for m in modules if len(by_case[m.lower()]) > 1}
+
+
 def write_api_index(app, config=None):
     """Write ``reference/api/index.rst`` from ``planeray._EXPORTS`` and the package's modules.
 
@@ -114,6 +144,7 @@ def write_api_index(app, config=None):
     """
     import planeray
 
+    app.config.autosummary_filename_map = {**app.config.autosummary_filename_map, **case_distinct_pages()}
     groups: dict[str, list[str]] = {}
     for name, module in planeray._EXPORTS.items():
         groups.setdefault(_GROUPS.get(module, "Other"), []).append(name)
@@ -124,7 +155,7 @@ def write_api_index(app, config=None):
         "==========",
         "",
         "Generated from the numpydoc docstrings. The front door, ``import planeray as pr``, holds the",
-        "names a notebook needs (``planeray.__init__._EXPORTS``: each name and the module that defines",
+        "names a notebook needs (``planeray/__init__.pyi``: each name and the module that defines",
         "it); every module of the package follows, with a page per function and class.",
         "",
         ".. currentmodule:: planeray",
@@ -136,6 +167,16 @@ def write_api_index(app, config=None):
     for title, names in groups.items():
         lines += [title, "~" * len(title), "", ".. autosummary::", "   :toctree: generated/", "   :nosignatures:", ""]
         lines += [f"   {n}" for n in names] + [""]
+    lines += [
+        "Subpackages: ``pr.materials``, ``pr.skin``, ...",
+        "~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~",
+        "",
+        "Every public module and subpackage is an attribute of the front door too, loaded when first used",
+        "(``planeray/__init__.pyi`` is the one list: lazy loading, ``__all__`` and type checkers):",
+        "",
+        ", ".join(f":mod:`pr.{m} <planeray.{m}>`" for m in planeray._SUBMODULES if m != "cli") + ".",
+        "",
+    ]
     lines += [
         "Modules",
         "-------",

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import PurePath
 
 from rich.console import Console
 from rich.progress import (
@@ -45,18 +44,11 @@ def progress_bar() -> Progress:
     )
 
 
-def _jsonable(value):
-    """``json.dumps`` fallback for NumPy scalars and arrays and paths."""
-    if isinstance(value, PurePath):
-        return str(value)
-    if hasattr(value, "tolist"):  # NumPy scalar or array
-        return value.tolist()
-    raise TypeError(f"{type(value).__name__} is not JSON serializable")
-
-
 def print_json(obj, *, indent: int | None = None) -> None:
-    """Write ``obj`` as JSON to stdout verbatim (one line unless ``indent``)."""
-    sys.stdout.write(json.dumps(obj, indent=indent, default=_jsonable) + "\n")
+    """Write ``obj`` as JSON to stdout verbatim (one line unless ``indent``; NumPy values and paths as plain JSON)."""
+    from .io import jsonable
+
+    sys.stdout.write(json.dumps(jsonable(obj, finite=False), indent=indent) + "\n")
     sys.stdout.flush()
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from .devices.base import Device, apply_timing
 from .io.lock import writes_output
+from .resumable import _killable, _stop_after_units
 from .stack import Stack
 from .timing import Sweep
 
@@ -97,8 +98,10 @@ def simulate_stack(
         Seed of the noise; the same seed gives the same images.
     noise : bool
         False: the noise-free expected images.
-    progress : callable, optional
-        Called with the index of each finished image.
+    progress : callable, bool or None
+        A callable is called with the index of each finished image; None (default) shows a
+        progress display in a Jupyter notebook and nothing elsewhere, True anywhere, False never
+        (:func:`planeray._progress.progress_reporter`).
 
     Returns
     -------
@@ -125,13 +128,17 @@ def simulate_stack(
     >>> stack.images.shape, float(stack.exposure_us[0])
     ((27, 8, 8), 600.0)
     """
+    from ._progress import progress_reporter
     from .devices.simulated import SimulatedEpiscan
     from .timing import PAPER_LINES_PER_SECOND
 
     device = SimulatedEpiscan(
         scene, camera, lines_per_second=lines_per_second or PAPER_LINES_PER_SECOND, seed=seed, noise=noise
     )
-    return acquire_sweep(device, sweep, progress=progress)
+    if callable(progress):
+        return acquire_sweep(device, sweep, progress=progress)
+    with progress_reporter(progress, len(sweep), f"simulating {len(sweep)} images") as advance:
+        return acquire_sweep(device, sweep, progress=None if advance is None else (lambda i: advance(1)))
 
 
 def _capture_metadata(device: Device, sweep: Sweep) -> dict:
@@ -143,6 +150,7 @@ def _capture_metadata(device: Device, sweep: Sweep) -> dict:
     return meta
 
 
+@_killable
 @writes_output("out")
 def acquire_to_store(
     device: Device,
@@ -153,7 +161,6 @@ def acquire_to_store(
     restart: bool = False,
     progress: Callable[[int], None] | None = None,
     on_resume: Callable[[int, int], None] | None = None,
-    _stop_after: int | None = None,
 ) -> Path:
     """Capture a sweep straight into a native stack store; resumable.
 
@@ -236,6 +243,7 @@ def acquire_to_store(
     done = resumable.done_units(group)
     if on_resume is not None and done.any():
         on_resume(int(done.sum()), len(sweep))
+    _stop_after = _stop_after_units()  # the tests' hook: a capture killed midway
     try:
         taken = 0
         for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
@@ -243,7 +251,7 @@ def acquire_to_store(
                 if progress is not None:
                     progress(i)
                 continue
-            if _stop_after is not None and taken >= _stop_after:  # testing hook: a capture killed midway
+            if _stop_after is not None and taken >= _stop_after:
                 return partial
             if i == 0 and first is not None:
                 img, sat = first

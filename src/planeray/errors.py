@@ -6,7 +6,46 @@ as a single line and exit non-zero instead of showing a traceback.
 
 from __future__ import annotations
 
-__all__ = ["PlanerayError", "InputError", "StackError", "TransportError", "DeviceError", "StorageError"]
+from contextlib import contextmanager
+from contextvars import ContextVar
+
+__all__ = [
+    "PlanerayError",
+    "InputError",
+    "StackError",
+    "TransportError",
+    "DeviceError",
+    "StorageError",
+    "parameter_name",
+    "parameter_names",
+]
+
+#: How messages name a function's parameters (``{"white_reference": "--white-reference"}``); empty:
+#: by the keyword itself.  The command line sets it while a command runs, so one message reads
+#: right in a notebook (``white_reference``) and on the command line (``--white-reference``).
+_PARAMETER_NAMES: ContextVar[dict | None] = ContextVar("planeray_parameter_names", default=None)
+
+
+def parameter_name(name: str) -> str:
+    """How a message names the parameter ``name``: its keyword, or the command-line option that set it.
+
+    >>> parameter_name("white_reference")
+    'white_reference'
+    >>> with parameter_names({"white_reference": "--white-reference"}):
+    ...     parameter_name("white_reference")
+    '--white-reference'
+    """
+    return (_PARAMETER_NAMES.get() or {}).get(name, name)
+
+
+@contextmanager
+def parameter_names(names: dict):
+    """Within the block, messages name parameters as ``names`` says (:func:`parameter_name`)."""
+    token = _PARAMETER_NAMES.set({**(_PARAMETER_NAMES.get() or {}), **names})
+    try:
+        yield
+    finally:
+        _PARAMETER_NAMES.reset(token)
 
 
 class PlanerayError(Exception):

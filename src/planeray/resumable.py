@@ -12,6 +12,8 @@ sweep runner (:func:`planeray.acquire.acquire_to_store`) and the demultiplexer
 
 from __future__ import annotations
 
+import contextvars
+import functools
 import os
 import shutil
 from collections.abc import Callable
@@ -22,6 +24,30 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["partial_path", "open_partial", "mark_done", "done_units", "discard_if_empty", "promote"]
+
+_STOP_AFTER: contextvars.ContextVar[int | None] = contextvars.ContextVar("planeray_stop_after", default=None)
+
+
+def _killable(fn):
+    """Give a resumable run the tests' hook ``_stop_after=k`` (end as if killed after ``k`` units) without
+    showing it in ``fn``'s public signature (:func:`inspect.signature` follows ``__wrapped__``); ``fn`` reads
+    it with :func:`_stop_after_units`."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, _stop_after: int | None = None, **kwargs):
+        token = _STOP_AFTER.set(_stop_after)
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            _STOP_AFTER.reset(token)
+
+    return wrapper
+
+
+def _stop_after_units() -> int | None:
+    """The ``_stop_after`` of the running :func:`_killable` call (None: run to the end)."""
+    return _STOP_AFTER.get()
+
 
 _DONE = "done_units"
 _FINGERPRINT = "run_fingerprint"

@@ -105,6 +105,23 @@ class Stack:
     def __len__(self) -> int:
         return len(self.images)
 
+    def __repr__(self) -> str:
+        """A summary, never the arrays: shape, dtype, sweep, geometry.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> Stack(np.zeros((3, 8, 6), np.float32), [0.0, 300.0, 600.0], [200.0, 200.0, 400.0], 54000.0)
+        Stack(images=(3, 8, 6) float32, delay_us=[0 .. 600] (3 images), exposure_us=[200 .. 400], excluded=0, lines_per_second=54000, projector_rows=8, sweep='custom')
+        """
+        kind = "" if isinstance(self.images, np.ndarray) else " lazy"  # read from its store on demand
+        return (
+            f"Stack(images={tuple(self.images.shape)} {np.dtype(self.images.dtype)}{kind}, "
+            f"delay_us={_span(self.delay_us)} ({len(self)} images), exposure_us={_span(self.exposure_us)}, "
+            f"excluded={int(np.count_nonzero(self.excluded))}, lines_per_second={self.lines_per_second:g}, "
+            f"projector_rows={self.projector_rows}, sweep={self.metadata.get('sweep', 'custom')!r})"
+        )
+
     @property
     def shape(self) -> tuple[int, int]:
         """Image shape ``(H, W)``."""
@@ -297,3 +314,8 @@ def recorded_mm_per_row(metadata) -> tuple[float | None, str | None]:
             if value is not None:
                 return value, source
     return None, None
+
+
+def _span(values: np.ndarray) -> str:
+    """``[min .. max]`` of a sweep's values (``[]`` for none)."""
+    return f"[{np.min(values):g} .. {np.max(values):g}]" if np.size(values) else "[]"

@@ -225,6 +225,23 @@ class Transport:
         if not np.all(np.isfinite(self.dense)):
             raise ValueError("transport contains NaN or infinite values")
 
+    def __repr__(self) -> str:
+        """A summary, never the arrays: shape, dtype, offsets, geometry, sparse entries.
+
+        Examples
+        --------
+        >>> Transport.zeros((8, 6), range(-4, 5))
+        Transport(dense=(8, 6, 9) float32, offsets_rows=[-4 .. 4], geometry=8 camera rows, 8 projector rows, sparse=0 entries)
+        """
+        offsets = self.offsets_rows
+        span = f"[{offsets[0]} .. {offsets[-1]}]" if offsets.size else "[]"
+        g = self.geometry
+        return (
+            f"Transport(dense={self.dense.shape} {self.dense.dtype}, offsets_rows={span}, "
+            f"geometry={g.camera_rows} camera rows, {g.projector_rows} projector rows, "
+            f"sparse={self.sparse.row.size} entries)"
+        )
+
     # ------------------------------------------------------------------ shape
     @property
     def shape(self) -> tuple[int, int]:

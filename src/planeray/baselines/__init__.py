@@ -60,7 +60,7 @@ References
    synchronized epipolar imaging).
 """
 
-from ._device import DEFAULT_FRAME_PERIOD_US, PatternDevice, simulated_device
+from ._device import DEFAULT_FRAME_PERIOD_US, PatternDevice
 from .compare import (
     compare_direct_global,
     compare_emulation,
@@ -78,7 +78,6 @@ from .nayar import (
 
 __all__ = [
     "PatternDevice",
-    "simulated_device",
     "DEFAULT_FRAME_PERIOD_US",
     "default_period_rows",
     "stripe_patterns",

@@ -130,16 +130,6 @@ def _errors(estimate, truth, masks: dict, reference=None, valid=None) -> dict:
     return out
 
 
-def _label_masks(scene) -> dict:
-    from ..scenes import EFFECTS
-
-    masks = {"all": np.ones(scene.shape, bool)}
-    for label in np.unique(scene.labels):
-        if label != 0:
-            masks[EFFECTS[int(label)]] = scene.labels == label
-    return masks
-
-
 def compare_direct_global(
     device,
     *,
@@ -154,9 +144,9 @@ def compare_direct_global(
 
     Runs :func:`capture_direct_global` and one synchronized epipolar capture
     (:func:`synchronized_delay_image` at delay 0, ``epipolar_exposure_us``) on
-    the same device.  When the device has a ground-truth scene, errors are
+    the same device.  When the device has a ground-truth scene (``device.scene``), errors are
     measured against :func:`deliverable_direct` and the global light under full
-    illumination, over all pixels and per effect label, leaving out saturated
+    illumination, over all pixels and per effect label (the scene's ``effect_masks()``), leaving out saturated
     pixels; ``relative_rmse`` is relative to the region's mean brightness under
     full illumination.
 
@@ -232,7 +222,7 @@ def compare_direct_global(
         direct = deliverable_direct(scene)
         full = scene.transport.render(RowPattern(np.ones(scene.geometry.projector_rows)))
         global_ = full - direct
-        masks = _label_masks(scene)
+        masks = scene.effect_masks()
         numbers["errors"] = {
             "nayar_direct": _errors(nayar.direct, direct, masks, full, ~nayar.saturated),
             "nayar_global": _errors(nayar.global_, global_, masks, full, ~nayar.saturated),

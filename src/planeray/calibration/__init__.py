@@ -70,6 +70,7 @@ from .lines import LineCalibration, LineCount, calibrate_lines_per_second, count
 from .trigger import (
     PROJECTOR_FRAME_PERIOD_US,
     calibrate_base_trigger_delay,
+    calibrate_delay_zero_from_stack,
     required_base_trigger_delay_us,
     search_delay_zero,
     with_base_trigger_delay,
@@ -84,6 +85,7 @@ __all__ = [
     "count_lines",
     "calibrate_lines_per_second",
     "calibrate_delay_zero",
+    "calibrate_delay_zero_from_stack",
     "delay_zero_sweep",
     "device_capture",
     "PROJECTOR_FRAME_PERIOD_US",

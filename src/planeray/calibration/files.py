@@ -68,7 +68,7 @@ def write_line_sweep(sweep: LineSweep, path, *, overwrite: bool = False) -> Path
         "phases": None if sweep.phases is None else list(sweep.phases),
         "flat_exposure_us": sweep.flat_exposure_us,
         "timing_jitter_us": sweep.timing_jitter_us,
-        "metadata": jsonable(sweep.metadata, "metadata", InputError),
+        "metadata": jsonable(sweep.metadata, finite=False, where="metadata", error=InputError),
     }
     arrays = {
         "images": np.asarray(sweep.images, np.float32),
@@ -315,7 +315,7 @@ def write_calibration(
     if replaced:
         cal["replaced"] = {**(cal.get("replaced") if isinstance(cal.get("replaced"), dict) else {}), **replaced}
     acq["calibration"] = cal
-    acq = jsonable(acq, "acquisition.json", InputError)
+    acq = jsonable(acq, finite=False, where="acquisition.json", error=InputError)
     with atomic_file(path) as tmp:
         tmp.write_text(json.dumps(acq, indent=2) + "\n", encoding="utf-8")
     return acq

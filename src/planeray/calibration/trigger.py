@@ -41,6 +41,7 @@ from ._stats import MAD_TO_SIGMA
 from .delay_zero import DelayZeroCalibration, calibrate_delay_zero, delay_zero_sweep, device_capture
 
 __all__ = [
+    "calibrate_delay_zero_from_stack",
     "PROJECTOR_FRAME_PERIOD_US",
     "required_base_trigger_delay_us",
     "search_delay_zero",
@@ -329,4 +330,47 @@ def calibrate_base_trigger_delay(
     if search is not None:
         result.details["search"] = search
     device.base_trigger_delay_us = result.base_trigger_delay_us
+    return result
+
+
+def calibrate_delay_zero_from_stack(stack, *, exposure_us: float = 600.0, source=None):
+    """:func:`calibrate_delay_zero` on a captured fine delay sweep around 0 (``planeray calibrate delay-zero STACK``).
+
+    Uses the stack's images at ``exposure_us``; a stack captured by the uEye driver records the
+    base trigger delay it was captured with, and the result then holds the camera's base too
+    (:func:`~planeray.calibration.with_base_trigger_delay`).
+
+    Parameters
+    ----------
+    stack : Stack
+        The capture (at least 5 images at ``exposure_us``).
+    exposure_us : float
+        Exposure of the sweep's images to use, us.
+    source : str or os.PathLike, optional
+        The stack's file, named in messages.
+
+    Returns
+    -------
+    DelayZeroCalibration
+    """
+    from ..errors import parameter_name
+
+    where = "the stack" if source is None else str(source)
+    idx = np.flatnonzero(np.isclose(stack.exposure_us, exposure_us))
+    if idx.size < 5:
+        have = ", ".join(f"{e:g}" for e in stack.exposures())
+        raise InputError(
+            f"{where}: needs at least 5 images at {parameter_name('exposure_us')} {exposure_us:g}, found {idx.size} "
+            f"(its exposures: {have} us)"
+        )
+    images = np.stack([stack.image(int(i)) for i in idx])
+    try:
+        result = calibrate_delay_zero(
+            images, stack.delay_us[idx], exposure_us=exposure_us, lines_per_second=stack.lines_per_second
+        )
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+    base_used = (stack.metadata or {}).get("base_trigger_delay_us")
+    if isinstance(base_used, (int, float)) and not isinstance(base_used, bool):
+        result = with_base_trigger_delay(result, float(base_used))
     return result

@@ -55,21 +55,35 @@ from . import (
     sweep,
     view,
 )
-from ._common import DEBUG, _friendly_errors, _join_pixel_args
+from ._common import DEBUG, PlanerayGroup, _friendly_errors, _join_pixel_args
 
 __all__ = ["app", "main"]
 
 app = typer.Typer(
     help="planeray: programmable plane-to-ray light transport (simulate, capture, analyse delay-exposure stacks).",
+    cls=PlanerayGroup,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # help as wide as the terminal, up to 120 columns (click's own cap is 80)
+    context_settings={"max_content_width": 120},
 )
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from ..io._common import planeray_version
+
+        typer.echo(f"planeray {planeray_version()}")
+        raise typer.Exit()
 
 
 @app.callback()
 def _options(
     debug: bool = typer.Option(False, "--debug", help="Show the traceback of an error instead of one line."),
+    version: bool = typer.Option(
+        False, "--version", "-V", is_eager=True, callback=_print_version, help="Print the version and exit."
+    ),
 ):
     """planeray: programmable plane-to-ray light transport (simulate, capture, analyse delay-exposure stacks)."""
     DEBUG["enabled"] = debug
@@ -109,6 +123,35 @@ app.add_typer(skin.skin_app, name="skin")
 skin.skin_app.command("pulse")(_friendly_errors(pulse.pulse))
 skin.skin_app.command("video")(_friendly_errors(pulse.video))
 skin.skin_app.command("pulse-report")(_friendly_errors(pulse.pulse_report))
+
+
+def _first_sentence(doc: str) -> str:
+    """The first sentence of a docstring (click's own short help stops at any word ending in a dot: "Figs.")."""
+    import inspect
+    import re
+
+    paragraph = " ".join(inspect.cleandoc(doc).split("\n\n")[0].split())
+    return re.split(r"(?<=[.!?])\s+(?=[A-Z`])", paragraph, maxsplit=1)[0]
+
+
+def _plain_help(typer_app: typer.Typer) -> None:
+    """Click's own help layout for ``typer_app`` and its groups: at 80 columns it wraps the help text under
+    whole option names (rich's panels cut long names, ``--lines-per-seco…``, and print ``<bool>`` on flags)."""
+    typer_app.rich_markup_mode = None
+    for info in typer_app.registered_commands:
+        if info.short_help is None and info.help is None and info.callback is not None:
+            info.short_help = _first_sentence(info.callback.__doc__ or "")
+    for group in typer_app.registered_groups:
+        info = group.typer_instance.info
+        callback = group.callback or info.callback
+        docs = [group.help, info.help, getattr(callback, "__doc__", None)]
+        doc = next((d for d in docs if isinstance(d, str) and d.strip()), None)
+        if not isinstance(group.short_help, str) and not isinstance(info.short_help, str) and doc:
+            group.short_help = _first_sentence(doc)
+        _plain_help(group.typer_instance)
+
+
+_plain_help(app)
 
 
 def main(argv: list[str] | None = None):

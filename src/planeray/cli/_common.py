@@ -13,12 +13,14 @@ import os
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.text import Text
+from typer.core import TyperGroup
 
 from .._console import console
-from ..errors import InputError, PlanerayError
+from ..errors import InputError, PlanerayError, parameter_names
+from ..io.atomic import check_not_an_input
+from ..io.atomic import same_place as _same_place  # noqa: F401 - the commands' import
 
 #: The positional argument of every command that reads a stack.
 StackArg = Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")]
@@ -98,7 +100,8 @@ def _friendly_errors(fn=None, *, options: dict | None = None):
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
-            with contextlib.ExitStack() as held:  # the locks of the command's outputs, until it returns
+            # the locks of the command's outputs, until it returns; the library's messages name its options
+            with contextlib.ExitStack() as held, parameter_names({**option_spellings(fn), **(options or {})}):
                 _HELD.append(held)
                 try:
                     return fn(*args, **kwargs)
@@ -184,53 +187,45 @@ def _note(text: str) -> None:
     console.print(Text("note: ", style="yellow") + Text(text), highlight=False, soft_wrap=True)
 
 
-def _same_place(a: Path, b: Path) -> bool:
-    """``a`` and ``b`` name the same file or folder (resolved; the same inode where both exist)."""
-    try:
-        if a.resolve() == b.resolve():
-            return True
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
+def note(text: str) -> None:
+    """A library workflow's note on the console: ``note: TEXT``, printed as it is (no markup)."""
+    console.print(f"note: {text}", highlight=False, markup=False)
 
 
-def _inside(inner: Path, outer: Path) -> bool:
-    """``inner`` lies inside the folder ``outer`` (resolved paths)."""
-    try:
-        return inner.resolve().is_relative_to(outer.resolve()) and inner.resolve() != outer.resolve()
-    except OSError:
-        return False
+@contextlib.contextmanager
+def stage_bars():
+    """``progress(stage, done, total)`` for a library workflow: one progress bar per stage (total None: a status
+    line, shown while the stage runs).
 
-
-def _is_store(path: Path) -> bool:
-    """A Zarr store or a planeray result folder: a folder whose content a format defines (nothing may be added)."""
-    return (path / "zarr.json").is_file() or (path / "planeray.json").is_file()
-
-
-def _not_an_input(out, inputs, *, option: str = "--out") -> None:
-    """Refuse an output that is or holds one of the command's inputs, or lies inside an input store.
-
-    ``inputs``: ``(option, path)`` pairs (``("STACK", path)`` for a positional argument); None
-    paths are skipped; ``option`` names the output in the message.  Compared resolved (``./T.zarr``, ``T.zarr/``, an absolute path or a
-    symbolic link to it are the same) and by inode where both exist (hard links, bind mounts).
+    The bars stop when the block ends: print results after it (while a bar is live, stdout goes to its console).
     """
-    out = Path(out)
-    for name, path in inputs:
-        if path is None:
-            continue
-        path = Path(path)
-        if _same_place(out, path):
-            problem = "is also an input"
-        elif _inside(path, out):
-            problem = "holds an input"
-        elif _inside(out, path) and _is_store(path):
-            problem = "lies inside an input store"
-        else:
-            continue
-        which = name if problem == "is also an input" else f"{name} {path}"
-        raise InputError(
-            f"{option} {out} {problem} ({which}): planeray never writes over its inputs; choose another output"
-        )
+    from .._console import progress_bar
+
+    with progress_bar() as bar:
+        tasks, spinners = {}, []
+
+        def stop_spinners() -> None:  # an uncounted stage shows while it runs, like a status line, then goes
+            for task in spinners:
+                bar.remove_task(task)
+            spinners.clear()
+
+        def progress(stage: str, done: int, total: int | None = None) -> None:
+            if stage not in tasks:
+                stop_spinners()
+                tasks[stage] = bar.add_task(stage, total=total)
+                if total is None:
+                    spinners.append(tasks[stage])
+            if tasks[stage] in bar.task_ids:
+                bar.update(tasks[stage], completed=done, total=total)
+
+        try:
+            yield progress
+        finally:
+            stop_spinners()
+
+
+#: Refuse an output that is or holds an input (:func:`planeray.io.atomic.check_not_an_input`), named ``--out``.
+_not_an_input = functools.partial(check_not_an_input, option="--out")
 
 
 def _load_stack(path: Path):
@@ -248,16 +243,19 @@ def _parse_pixel(text: str) -> tuple[int, int]:
     return int(parts[0]), int(parts[1])
 
 
+#: Commands whose ``--size H W`` also takes one number for a square image (``view``, ``video``: a scene).
+SQUARE_SIZE_COMMANDS = ("view", "video")
+
+
+def _is_int(word: str) -> bool:
+    return word.lstrip("-").isdigit()
+
+
 def _join_pixel_args(argv: list[str]) -> list[str]:
     """Let ``--pixel ROW COL`` (two words) through typer, which takes one value per option."""
     joined, i = [], 0
     while i < len(argv):
-        if (
-            argv[i] == "--pixel"
-            and i + 2 < len(argv)
-            and argv[i + 1].lstrip("-").isdigit()
-            and argv[i + 2].lstrip("-").isdigit()
-        ):
+        if argv[i] == "--pixel" and i + 2 < len(argv) and _is_int(argv[i + 1]) and _is_int(argv[i + 2]):
             joined += ["--pixel", f"{argv[i + 1]},{argv[i + 2]}"]
             i += 3
         else:
@@ -266,23 +264,32 @@ def _join_pixel_args(argv: list[str]) -> list[str]:
     return joined
 
 
+def _square_size_args(argv: list[str]) -> list[str]:
+    """``view``/``video --size N`` (one number) is the square ``--size N N``."""
+    words = [a for a in argv if not a.startswith("-")]
+    if not words or words[0] not in SQUARE_SIZE_COMMANDS:
+        return list(argv)
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--size" and i + 1 < len(argv) and _is_int(argv[i + 1]):
+            two = i + 2 < len(argv) and _is_int(argv[i + 2])
+            out += argv[i : i + 3] if two else ["--size", argv[i + 1], argv[i + 1]]
+            i += 3 if two else 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
+class PlanerayGroup(TyperGroup):
+    """The root command: reads ``view``/``video --size N`` as ``--size N N`` (:func:`_square_size_args`)."""
+
+    def parse_args(self, ctx, args):
+        return super().parse_args(ctx, _square_size_args([str(a) for a in args]))
+
+
 def _save_image(image, path: Path, scale_to: float | None = None) -> Path:
-    """PNG: display-scaled 8-bit preview; TIFF: the values as 16-bit codes (0..1 -> 0..65535)."""
-    from ..io import write_image
+    """PNG: display-scaled 8-bit preview; TIFF: the values as 16-bit codes (:func:`planeray.figures.save_image`)."""
+    from ..figures._common import save_image
 
-    if path.suffix.lower() == ".png":
-        from PIL import Image
-
-        from ..figures._common import display_scale
-        from ..io import atomic_file
-        from ..io.marks import png_mark_info
-
-        shown = np.clip(image * (scale_to or display_scale([image], percentile=99.5)), 0, 1)
-        with atomic_file(path) as tmp:
-            Image.fromarray((shown * 255 + 0.5).astype(np.uint8)).save(
-                tmp, format="PNG", pnginfo=png_mark_info("image")
-            )
-        return path
-    if path.suffix.lower() in (".tif", ".tiff"):
-        return write_image(path, image, bit_depth=16)
-    raise ValueError(f"--out must end in .png, .tif or .tiff, got {path.name}")
+    return save_image(image, path, scale_to=scale_to)

@@ -14,11 +14,11 @@ command needs against what the machine has (:func:`check_memory`).
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 
 from .._validate import check_integer, check_number
 from ..errors import InputError
+from ..io.atomic import written_together  # noqa: F401 - the commands' lim.written_together
 
 #: Largest camera side (pixels): the dense transport of a 2048 x 2048 scene alone is 4.3 GB.
 MAX_SIDE = 2048
@@ -148,24 +148,3 @@ def check_memory(nbytes: float, what: str) -> None:
     from .._validate import check_memory as check
 
     check(nbytes, what, advice="choose smaller values", available=available_memory())
-
-
-@contextlib.contextmanager
-def written_together(*paths):
-    """Files a command writes as one result: if the block fails (an error, Ctrl-C), the ones it created go.
-
-    Each file is written atomically by itself; this removes those of the set that did not
-    exist before the block, so a failed run leaves no partial set behind (a file it
-    replaced with ``--overwrite`` stays replaced, whole).
-    """
-    paths = [Path(p) for p in paths if p is not None]
-    existed = {p: p.exists() for p in paths}
-    try:
-        yield
-    except BaseException:
-        for p in paths:
-            if not existed[p]:
-                with contextlib.suppress(OSError):
-                    if p.is_file() and not p.is_symlink():
-                        p.unlink()
-        raise

@@ -109,6 +109,36 @@ def profiles(
         overwrite=overwrite,
         inputs=[("STACK", stack_path), ("--transport", transport), ("--direct-reference", direct_reference)],
     )
+    st, pixels, T, attrs, white = _profiles_inputs(stack_path, pixel, exposure_us, transport, direct_reference)
+    with lim.written_together(out_png if pixel else None, csv, classify):  # all of them, or none
+        if pixel:
+            prof = measured_delay_profiles(st, pixels)
+            continuous = None
+            if T is not None:
+                e = exposure_us if exposure_us is not None else float(prof.exposure_us.min())
+                continuous = transport_delay_profiles(
+                    T, pixels=prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second
+                )
+            delay_profiles_figure(st, prof, out=out_png, exposure_us=exposure_us, continuous=continuous)
+            if csv is not None:
+                write_profiles_csv(prof, csv)
+                _print(f"profiles CSV: {csv}")
+            _print(f"delay profiles: {out_png}")
+        if classify is not None:
+            from ..scenes import EFFECTS
+
+            labels = classify_transport(
+                T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0), direct_reference=white
+            )
+            ref = st.image(st.index_of(delay_us=0.0, exposure_us=float(st.exposures().min())) or 0)
+            label_map_figure(labels, out=classify, reference=ref)
+            counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
+            summary = ", ".join(f"{EFFECTS[k]} {counts[k] / labels.size * 100:.1f} %" for k in EFFECTS if counts[k])
+            _print(f"label map: {classify}  ({summary})")
+
+
+def _profiles_inputs(stack_path, pixel, exposure_us, transport, direct_reference):
+    """What ``profiles`` reads, checked before anything is written: ``(stack, pixels, T, attrs, white)``."""
     lim.optional(lim.positive, exposure_us, "--exposure-us", maximum=lim.MAX_TIME_US)
     pixels = [_parse_pixel(p) for p in pixel or ()]
     st = _load_stack(stack_path)
@@ -142,31 +172,7 @@ def profiles(
                 f"transport has {T.geometry.camera_rows} of {T.geometry.projector_rows} and "
                 f"{T.offsets_rows.size}: demultiplex the white target from the same sweep and size"
             )
-    with lim.written_together(out_png if pixel else None, csv, classify):  # all of them, or none
-        if pixel:
-            prof = measured_delay_profiles(st, pixels)
-            continuous = None
-            if T is not None:
-                e = exposure_us if exposure_us is not None else float(prof.exposure_us.min())
-                continuous = transport_delay_profiles(
-                    T, pixels=prof.pixels, exposure_us=e, lines_per_second=st.lines_per_second
-                )
-            delay_profiles_figure(st, prof, out=out_png, exposure_us=exposure_us, continuous=continuous)
-            if csv is not None:
-                write_profiles_csv(prof, csv)
-                _print(f"profiles CSV: {csv}")
-            _print(f"delay profiles: {out_png}")
-        if classify is not None:
-            from ..scenes import EFFECTS
-
-            labels = classify_transport(
-                T, resolution_rows=float(attrs.get("epipolar_resolution_rows") or 0.0), direct_reference=white
-            )
-            ref = st.image(st.index_of(delay_us=0.0, exposure_us=float(st.exposures().min())) or 0)
-            label_map_figure(labels, out=classify, reference=ref)
-            counts = np.bincount(labels.ravel(), minlength=len(EFFECTS))
-            summary = ", ".join(f"{EFFECTS[k]} {counts[k] / labels.size * 100:.1f} %" for k in EFFECTS if counts[k])
-            _print(f"label map: {classify}  ({summary})")
+    return st, pixels, T, attrs, white
 
 
 @_friendly_errors
@@ -193,7 +199,6 @@ def synth(
     overwrite: OverwriteArg = False,
 ):
     """Synthesize an image from a transport: epipolar, non-epipolar, sharpened, relit, banded, short/long range."""
-    from .. import synthesis as syn
     from ..io import read_transport
 
     chosen = [
@@ -226,6 +231,19 @@ def synth(
         lim.optional(lim.positive, rows, option, maximum=P)  # in projector rows: at most the projector
     if relight is not None and relight.lstrip("-").isdigit() and not 0 <= int(relight) < P:
         raise InputError(f"--relight {relight}: projector row outside 0..{P - 1}")
+    image, what = _synthesized(
+        T, attrs, epipolar=epipolar, non_epipolar=non_epipolar, sharpen=sharpen, relight=relight, band=band,
+        short_range=short_range, long_range=long_range,
+    )  # fmt: skip
+    path = _save_image(image, out_path)
+    _print(f"{what}: {path}  (min {image.min():.3g}, max {image.max():.3g})")
+
+
+def _synthesized(T, attrs, *, epipolar, non_epipolar, sharpen, relight, band, short_range, long_range):
+    """The image ``synth`` makes of the transport, and what it is called: ``(image, what)``."""
+    from .. import synthesis as syn
+
+    P = T.geometry.projector_rows
     lps = attrs.get("lines_per_second") or PAPER_LINES_PER_SECOND
     if epipolar:
         image, what = syn.epipolar_image(T), "epipolar image"
@@ -258,8 +276,7 @@ def synth(
         image, what = (
             (short, "short-range indirect image") if short_range is not None else (long, "long-range indirect image")
         )
-    path = _save_image(image, out_path)
-    _print(f"{what}: {path}  (min {image.min():.3g}, max {image.max():.3g})")
+    return image, what
 
 
 @_friendly_errors

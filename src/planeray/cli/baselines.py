@@ -6,21 +6,20 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
-from .._console import console, out
+from .._console import out
 from ..errors import InputError
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
 from . import _limits as lim
-from ._common import _check_outputs, _friendly_errors, _save_image
+from ._common import _check_outputs, _friendly_errors, stage_bars
 
-#: The images each command writes (a .png preview and a .tif of the values each) and its numbers file.
+#: The images each command writes (a .png preview and a .tif of the values each) and its numbers file
+#: (:data:`planeray.experiments.baselines.EMULATION_IMAGES`, ``DIRECT_GLOBAL_IMAGES``).
 EMULATE_IMAGES = ("emulated", "synchronized", "truth")
 SEPARATE_IMAGES = ("nayar_direct", "nayar_global", "epipolar", "truth_direct", "truth_global")
 
@@ -59,7 +58,7 @@ def _sim_device(
     noise: bool,
     lines_per_second: float = PAPER_LINES_PER_SECOND,
 ):
-    from ..baselines import simulated_device
+    from ..devices import simulated_device
 
     return simulated_device(
         scene,
@@ -72,29 +71,8 @@ def _sim_device(
     )
 
 
-def _write_results(out_dir: Path, images: dict, numbers: dict, name: str):
-    from ..figures._common import display_scale
-    from ..io import atomic_file
-    from ..io.marks import MARK_KEY, mark_text
-
-    created = not out_dir.exists()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    valid = [im for im in images.values() if im is not None]
-    scale = display_scale(valid, percentile=99.5)  # one brightening for all, so they compare
-    files = [path for path, _ in _outputs(out_dir, images, name)]
-    try:
-        with lim.written_together(*files):  # all of them, or none of those this run creates
-            for key, image in images.items():
-                if image is not None:
-                    _save_image(np.nan_to_num(image), out_dir / f"{key}.png", scale_to=scale)
-                    _save_image(np.clip(np.nan_to_num(image), 0, 1), out_dir / f"{key}.tif")
-            with atomic_file(out_dir / f"{name}.json") as tmp:
-                tmp.write_text(json.dumps({MARK_KEY: mark_text("record"), **numbers}, indent=2, default=float))
-    except BaseException:
-        if created:
-            with contextlib.suppress(OSError):
-                out_dir.rmdir()  # the folder this run made, if nothing else is in it
-        raise
+def _print_results(out_dir: Path, numbers: dict, name: str) -> None:
+    """What a comparison wrote: its captures, and each error's relative RMSE and MAE."""
     out.print(f"{name}: {out_dir}  {json.dumps(numbers.get('n_captures', {}))}", markup=False, highlight=False)
     errors = numbers.get("errors", {})
     for key, value in errors.items():
@@ -156,7 +134,7 @@ def separate_direct_global(
     ``truth_global`` (.png preview, .tif values) and ``direct_global.json`` into
     ``--out``, a folder that may hold other files; each is checked before any work.
     """
-    from ..baselines import compare_direct_global
+    from ..experiments.baselines import direct_global_folder
 
     size = _check_common(
         out_dir,
@@ -178,22 +156,12 @@ def separate_direct_global(
     lim.number(contrast_b, "--contrast-b", minimum=0.0, maximum=1.0, max_inclusive=False)
     lim.positive(epipolar_exposure_us, "--epipolar-exposure-us", maximum=_scan_time_us(P))
     dev = _sim_device(scene, size, projector_rows, seed, ambient_e_per_us, noise)
-    with console.status("capturing stripe patterns and the epipolar image"):
-        res = compare_direct_global(
-            dev,
-            epipolar_exposure_us=epipolar_exposure_us,
-            period_rows=period_rows,
-            n_shifts=shifts,
-            pattern_contrast_b=contrast_b,
-        )
-    images = {
-        "nayar_direct": res["nayar"].direct,
-        "nayar_global": res["nayar"].global_,
-        "epipolar": res["epipolar"],
-        "truth_direct": res["truth_direct"],
-        "truth_global": res["truth_global"],
-    }
-    _write_results(out_dir, images, res["numbers"], "direct_global")
+    with stage_bars() as progress:
+        numbers = direct_global_folder(
+            dev, out_dir, epipolar_exposure_us=epipolar_exposure_us, period_rows=period_rows, n_shifts=shifts,
+            pattern_contrast_b=contrast_b, progress=progress,
+        )  # fmt: skip
+    _print_results(out_dir, numbers, "direct_global")
 
 
 @_friendly_errors(options={"shape": "--size"})
@@ -222,7 +190,7 @@ def emulate(
     ``emulation.json`` into ``--out``, a folder that may hold other files; each is
     checked before any work.
     """
-    from ..baselines import compare_emulation
+    from ..experiments.baselines import emulation_folder
 
     size = _check_common(
         out_dir,
@@ -239,7 +207,8 @@ def emulate(
     lim.positive(exposure_us, "--exposure-us", maximum=scan)
     lim.optional(lim.integer, spacing_rows, "--spacing-rows", minimum=1, maximum=size[0])
     dev = _sim_device(scene, size, projector_rows, seed, ambient_e_per_us, noise)
-    with console.status("sweeping the band one row at a time"):
-        res = compare_emulation(dev, delay_us=delay_us, exposure_us=exposure_us, spacing_rows=spacing_rows)
-    images = {"emulated": res["emulated"].image, "synchronized": res["synchronized"], "truth": res["truth"]}
-    _write_results(out_dir, images, res["numbers"], "emulation")
+    with stage_bars() as progress:
+        numbers = emulation_folder(
+            dev, out_dir, delay_us=delay_us, exposure_us=exposure_us, spacing_rows=spacing_rows, progress=progress
+        )
+    _print_results(out_dir, numbers, "emulation")

@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from .._console import out
@@ -293,15 +292,49 @@ def calibrate_delay_zero_cmd(
     it was captured with).  ``--write`` keeps every other field of the file (a
     value it changes or removes is kept under ``calibration.replaced``).
     """
-    from ..calibration import (
-        PROJECTOR_FRAME_PERIOD_US,
-        calibrate_base_trigger_delay,
-        calibrate_delay_zero,
-        delay_zero_sweep,
-        device_capture,
-        with_base_trigger_delay,
-    )
+    from ..calibration import calibrate_delay_zero, calibrate_delay_zero_from_stack, delay_zero_sweep, device_capture
 
+    _delay_zero_options(
+        stack_path, device, simulate, exposure_us=exposure_us, base_trigger_delay_us=base_trigger_delay_us,
+        sweep=sweep, frame_period_us=frame_period_us, device_option=device_option, calibration=calibration,
+        screen=screen, display=display, delay_error_us=delay_error_us, seed=seed,
+    )  # fmt: skip
+    seed = lim.seed(0 if seed is None else seed)
+    delay_error_us = lim.number(0.0 if delay_error_us is None else delay_error_us, "--delay-error-us")
+    reach = max(0.5 * exposure_us, 250.0)  # the fine sweep brackets the plateau by this much on each side
+    if abs(delay_error_us) > reach:
+        raise InputError(
+            f"--delay-error-us must be within +-{reach:g} us at --exposure-us {exposure_us:g} (the fine delay sweep "
+            f"brackets the epipolar plateau by that much), got {delay_error_us:g}"
+        )
+    _check_write_target(write)
+    if device is not None:
+        result = _delay_zero_on_device(
+            device, exposure_us=exposure_us, device_option=device_option, calibration=calibration, screen=screen,
+            display=display, sweep=sweep, base_trigger_delay_us=base_trigger_delay_us, frame_period_us=frame_period_us,
+        )  # fmt: skip
+    elif simulate:
+        from ..devices import SimulatedEpiscan
+        from ..scenes import make_scene
+
+        dev = SimulatedEpiscan(make_scene("diffuse_plane", (64, 64), projector_rows=360, seed=seed), seed=seed)
+        capture = device_capture(dev, exposure_us=exposure_us, delay_error_us=delay_error_us)
+        result = calibrate_delay_zero(
+            capture, delay_zero_sweep(exposure_us=exposure_us).delay_us, exposure_us=exposure_us,
+            lines_per_second=dev.lines_per_second,
+        )  # fmt: skip
+    else:
+        if stack_path is None:
+            raise ValueError("give a STACK (a delay sweep around 0), --device DEVICE or --simulate")
+        result = calibrate_delay_zero_from_stack(_load_stack(stack_path), exposure_us=exposure_us, source=stack_path)
+    _report_calibration(result, write, as_json, "delay_zero")
+    if not as_json:
+        _print_delay_zero(result, write, sweep)
+
+
+def _delay_zero_options(stack_path, device, simulate, *, exposure_us, base_trigger_delay_us, sweep, frame_period_us,
+                        device_option, calibration, screen, display, delay_error_us, seed) -> None:  # fmt: skip
+    """The options of ``calibrate delay-zero``: one source, each option where it applies, in its range."""
     if sum((stack_path is not None, simulate, device is not None)) > 1:
         raise ValueError("give one of STACK, --device or --simulate")
     given = {
@@ -328,96 +361,66 @@ def calibrate_delay_zero_cmd(
         minimum=FRAME_PERIOD_RANGE_US[0],
         maximum=FRAME_PERIOD_RANGE_US[1],
     )
-    seed = lim.seed(0 if seed is None else seed)
-    delay_error_us = lim.number(0.0 if delay_error_us is None else delay_error_us, "--delay-error-us")
-    reach = max(0.5 * exposure_us, 250.0)  # the fine sweep brackets the plateau by this much on each side
-    if abs(delay_error_us) > reach:
-        raise InputError(
-            f"--delay-error-us must be within +-{reach:g} us at --exposure-us {exposure_us:g} (the fine delay sweep "
-            f"brackets the epipolar plateau by that much), got {delay_error_us:g}"
-        )
-    _check_write_target(write)
-    if device is not None:
-        if sweep is not None:
-            lim.sweep(sweep)
-        window = None
+
+
+def _delay_zero_on_device(device, *, exposure_us, device_option, calibration, screen, display, sweep,
+                          base_trigger_delay_us, frame_period_us):  # fmt: skip
+    """Delay zero measured live (with white on ``screen``): the base trigger delay of a VSYNC-triggered camera."""
+    from ..calibration import (
+        PROJECTOR_FRAME_PERIOD_US,
+        calibrate_base_trigger_delay,
+        calibrate_delay_zero,
+        delay_zero_sweep,
+        device_capture,
+    )
+
+    if sweep is not None:
+        lim.sweep(sweep)
+    window = None
+    if screen is not None:
+        from ..projector import ProjectorWindow, get_screen, white
+
+        target = get_screen(screen, display)  # an unknown screen: one line, before the camera opens
+    explicit = screen_options(device, screen, display, device_option)
+    dev = open_device_from_cli(device, explicit, device_option, calibration)
+    try:
         if screen is not None:
-            from ..projector import ProjectorWindow, get_screen, white
-
-            target = get_screen(screen, display)  # an unknown screen: one line, before the camera opens
-        explicit = screen_options(device, screen, display, device_option)
-        dev = open_device_from_cli(device, explicit, device_option, calibration)
-        try:
-            if screen is not None:
-                window = ProjectorWindow(target)
-                window.show(white(window.shape))
-            if hasattr(dev, "base_trigger_delay_us"):  # a camera triggered by VSYNC: find its base
-                result = calibrate_base_trigger_delay(
-                    dev,
-                    exposure_us=exposure_us,
-                    sweeps=[lim.sweep(sweep or "paper")],
-                    base_trigger_delay_us=base_trigger_delay_us,
-                    frame_period_us=PROJECTOR_FRAME_PERIOD_US if frame_period_us is None else frame_period_us,
-                )
-            else:
-                sw = delay_zero_sweep(exposure_us=exposure_us)
-                result = calibrate_delay_zero(
-                    device_capture(dev, exposure_us=exposure_us),
-                    sw.delay_us,
-                    exposure_us=exposure_us,
-                    lines_per_second=dev.lines_per_second,
-                )
-        finally:
-            if window is not None:
-                window.close()
-            close_device(dev)
-    elif simulate:
-        from ..devices import SimulatedEpiscan
-        from ..scenes import make_scene
-
-        dev = SimulatedEpiscan(make_scene("diffuse_plane", (64, 64), projector_rows=360, seed=seed), seed=seed)
-        sweep_ = delay_zero_sweep(exposure_us=exposure_us)
-        capture = device_capture(dev, exposure_us=exposure_us, delay_error_us=delay_error_us)
-        result = calibrate_delay_zero(
-            capture, sweep_.delay_us, exposure_us=exposure_us, lines_per_second=dev.lines_per_second
-        )
-    else:
-        if stack_path is None:
-            raise ValueError("give a STACK (a delay sweep around 0), --device DEVICE or --simulate")
-        st = _load_stack(stack_path)
-        idx = np.flatnonzero(np.isclose(st.exposure_us, exposure_us))
-        if idx.size < 5:
-            have = ", ".join(f"{e:g}" for e in st.exposures())
-            raise InputError(
-                f"{stack_path}: needs at least 5 images at --exposure-us {exposure_us:g}, found {idx.size} "
-                f"(its exposures: {have} us)"
+            window = ProjectorWindow(target)
+            window.show(white(window.shape))
+        if hasattr(dev, "base_trigger_delay_us"):  # a camera triggered by VSYNC: find its base
+            return calibrate_base_trigger_delay(
+                dev,
+                exposure_us=exposure_us,
+                sweeps=[lim.sweep(sweep or "paper")],
+                base_trigger_delay_us=base_trigger_delay_us,
+                frame_period_us=PROJECTOR_FRAME_PERIOD_US if frame_period_us is None else frame_period_us,
             )
-        images = np.stack([st.image(int(i)) for i in idx])
-        try:
-            result = calibrate_delay_zero(
-                images, st.delay_us[idx], exposure_us=exposure_us, lines_per_second=st.lines_per_second
-            )
-        except InputError as exc:
-            raise InputError(f"{stack_path}: {exc}") from None
-        base_used = st.metadata.get("base_trigger_delay_us")
-        if isinstance(base_used, (int, float)) and not isinstance(base_used, bool):
-            result = with_base_trigger_delay(result, float(base_used))
-    _report_calibration(result, write, as_json, "delay_zero")
-    if not as_json:
-        base = result.base_trigger_delay_us
+        sw = delay_zero_sweep(exposure_us=exposure_us)
+        return calibrate_delay_zero(
+            device_capture(dev, exposure_us=exposure_us), sw.delay_us, exposure_us=exposure_us,
+            lines_per_second=dev.lines_per_second,
+        )  # fmt: skip
+    finally:
+        if window is not None:
+            window.close()
+        close_device(dev)
+
+
+def _print_delay_zero(result, write, sweep) -> None:
+    base = result.base_trigger_delay_us
+    out.print(
+        f"delay zero = {result.delay_zero_us:+.2f} +- {result.uncertainty_us:.2f} us (commanded delay of the true "
+        f"epipolar centre); sync offset t'_o = {result.sync_offset_us:.2f} us"
+        + (f"; base trigger delay = {base:.2f} us" if base is not None else "")
+        + (f"; written to {write}" if write else ""),
+        markup=False,
+        highlight=False,
+    )
+    if base is not None and result.details.get("fits_sweeps") is False:
         out.print(
-            f"delay zero = {result.delay_zero_us:+.2f} +- {result.uncertainty_us:.2f} us (commanded delay of the true "
-            f"epipolar centre); sync offset t'_o = {result.sync_offset_us:.2f} us"
-            + (f"; base trigger delay = {base:.2f} us" if base is not None else "")
-            + (f"; written to {write}" if write else ""),
+            f"note: the base is below {result.details['required_base_us']:.1f} us, the least the "
+            f"{sweep or 'paper'!r} sweep needs: its earliest points will be refused. Calibrate again without "
+            "--base-trigger-delay-us (the search picks a base that fits).",
             markup=False,
             highlight=False,
         )
-        if base is not None and result.details.get("fits_sweeps") is False:
-            out.print(
-                f"note: the base is below {result.details['required_base_us']:.1f} us, the least the "
-                f"{sweep or 'paper'!r} sweep needs: its earliest points will be refused. Calibrate again without "
-                "--base-trigger-delay-us (the search picks a base that fits).",
-                markup=False,
-                highlight=False,
-            )

@@ -85,14 +85,58 @@ def demux(
     import time
 
     from ..demux import demultiplex_to_store
+
+    alpha, beta, ambient, figure = _demux_options(
+        stack_path, out_path, alpha=alpha, beta=beta, ambient=ambient, method=method, workers=workers,
+        scheduler=scheduler, chunk_rows=chunk_rows, tol=tol, report=report, overwrite=overwrite,
+    )  # fmt: skip
+    chosen_sweep = None if sweep is None else lim.sweep(sweep)
+    st = _load_stack(stack_path)
+    if chosen_sweep is not None:
+        try:
+            st = st.restricted_to(chosen_sweep)
+        except InputError as exc:
+            raise InputError(f"--sweep {sweep}: {exc}", stack_path) from None
+    t0 = time.perf_counter()
+    chosen = {}
+
+    def on_choice(choice, resumed):
+        chosen["choice"] = choice
+        note = " (taken from the unfinished run)" if resumed else f" ({time.perf_counter() - t0:.1f} s)"
+        out.print(choice.summary() + note, markup=False, highlight=False)
+        warning = choice.edge_warning()
+        if warning:  # the best lies on an end of what was searched: said, not silent
+            console.print(warning, style="yellow", markup=False, highlight=False)
+
+    if "auto" in (alpha, beta):
+        console.print("choosing the weights from the images ...", markup=False, highlight=False)
+    with progress_bar() as bar:
+        task = bar.add_task(f"demultiplexing ({method})", total=st.shape[0])
+        path = demultiplex_to_store(
+            st, out_path, alpha=alpha, beta=beta, ambient=ambient, method=method, chunk_rows=chunk_rows, tol=tol,
+            workers=workers, scheduler=scheduler, overwrite=overwrite, restart=restart,
+            progress=lambda rows: bar.advance(task, rows),
+            on_resume=lambda done, total: console.print(
+                f"resuming an unfinished run of {out_path}: {done} of {total} chunks already done "
+                "(same stack content and parameters)",
+                markup=False,
+                highlight=False,
+            ),
+            on_choice=on_choice,
+            source=str(stack_path),
+        )  # fmt: skip
+    _print_demux(path, st.shape, time.perf_counter() - t0, figure, chosen.get("choice"))
+
+
+def _demux_options(stack_path, out_path, *, alpha, beta, ambient, method, workers, scheduler, chunk_rows, tol,
+                   report, overwrite):  # fmt: skip
+    """Every option of ``demux`` checked before any work (the outputs locked): ``(alpha, beta, ambient, figure)``."""
     from ..demux.auto import resolve_ambient
-    from ..io import read_transport_maps
 
     if workers is not None and scheduler is not None:
         raise ValueError("give --workers or --scheduler, not both")
     alpha, beta = _weight(alpha, "--alpha"), _weight(beta, "--beta")
-    auto = "auto" in (alpha, beta)
-    if report is not None and not auto:
+    if report is not None and "auto" not in (alpha, beta):
         raise InputError("--report draws the choice of --alpha auto / --beta auto; give one of them")
     figure = None if report is None else Path(report) / "weights_cv.png"
     if figure is not None and Path(report).exists() and not Path(report).is_dir():
@@ -118,57 +162,18 @@ def demux(
     lim.optional(lim.integer, workers, "--workers", minimum=1, maximum=MAX_WORKERS)
     lim.integer(chunk_rows, "--chunk-rows", minimum=1, maximum=lim.MAX_SIDE)
     lim.optional(lim.number, tol, "--tol", minimum=0.0, maximum=1.0, min_inclusive=False, max_inclusive=False)
-    chosen_sweep = None if sweep is None else lim.sweep(sweep)
-    st = _load_stack(stack_path)
-    if chosen_sweep is not None:
-        try:
-            st = st.restricted_to(chosen_sweep)
-        except InputError as exc:
-            raise InputError(f"--sweep {sweep}: {exc}", stack_path) from None
-    t0 = time.perf_counter()
-    chosen = {}
+    return alpha, beta, ambient, figure
 
-    def on_choice(choice, resumed):
-        chosen["choice"] = choice
-        note = " (taken from the unfinished run)" if resumed else f" ({time.perf_counter() - t0:.1f} s)"
-        out.print(choice.summary() + note, markup=False, highlight=False)
-        warning = choice.edge_warning()
-        if warning:  # the best lies on an end of what was searched: said, not silent
-            console.print(warning, style="yellow", markup=False, highlight=False)
 
-    if auto:
-        console.print("choosing the weights from the images ...", markup=False, highlight=False)
-    with progress_bar() as bar:
-        task = bar.add_task(f"demultiplexing ({method})", total=st.shape[0])
-        path = demultiplex_to_store(
-            st,
-            out_path,
-            alpha=alpha,
-            beta=beta,
-            ambient=ambient,
-            method=method,
-            chunk_rows=chunk_rows,
-            tol=tol,
-            workers=workers,
-            scheduler=scheduler,
-            overwrite=overwrite,
-            restart=restart,
-            progress=lambda rows: bar.advance(task, rows),
-            on_resume=lambda done, total: console.print(
-                f"resuming an unfinished run of {out_path}: {done} of {total} chunks already done "
-                "(same stack content and parameters)",
-                markup=False,
-                highlight=False,
-            ),
-            on_choice=on_choice,
-            source=str(stack_path),
-        )
-    elapsed = time.perf_counter() - t0
+def _print_demux(path, shape, elapsed: float, figure, choice) -> None:
+    """What ``demux`` wrote: the transport's convergence and residuals, the criterion's curve, pixels with no data."""
+    from ..io import read_transport_maps
+
     maps = read_transport_maps(path)
     conv = maps["converged"]
     amb = "" if "ambient" not in maps else f", median ambient {np.median(maps['ambient']):.2e} per row of exposure"
     out.print(
-        f"transport: {path}  ({st.shape[0]}x{st.shape[1]} pixels in {elapsed:.1f} s; "
+        f"transport: {path}  ({shape[0]}x{shape[1]} pixels in {elapsed:.1f} s; "
         f"converged {conv.mean() * 100:.2f} %, median residual RMS {np.median(maps['residual_rms']):.2e}{amb})",
         markup=False,
         highlight=False,
@@ -176,8 +181,8 @@ def demux(
     if figure is not None:
         from ..figures.demux import weights_cv_figure
 
-        Path(report).mkdir(parents=True, exist_ok=True)
-        weights_cv_figure(chosen["choice"], out=figure)
+        figure.parent.mkdir(parents=True, exist_ok=True)
+        weights_cv_figure(choice, out=figure)
         out.print(f"criterion curve: {figure}", markup=False, highlight=False)
     empty = int((maps["n_observations"] == 0).sum())
     if empty:

@@ -88,18 +88,11 @@ def mc_profile(
     _check_outputs(
         (out_path, "table"), (out_path.with_suffix(".json"), "record"), (plot, "figure"), overwrite=overwrite
     )
-    for option, value in (("--sigma-s", sigma_s), ("--sigma-a", sigma_a)):
-        lim.nonnegative(value, option, maximum=MAX_COEFFICIENT)
-    lim.number(n, "--n", minimum=0.1, maximum=10.0)
-    if thickness_mm is not None and thickness_mm != float("inf"):
-        lim.positive(thickness_mm, "--thickness-mm", maximum=MAX_MM)
-    lim.integer(photons, "--photons", minimum=1, maximum=MAX_PHOTONS)
-    lim.integer(rows, "--rows", minimum=0, maximum=100_000)
-    lim.positive(mm_per_row, "--mm-per-row", maximum=1_000.0)
-    lim.nonnegative(source_width_mm, "--source-width-mm", maximum=1_000.0)
-    lim.optional(lim.positive, cutoff_mm, "--cutoff-mm", maximum=MAX_MM)
-    lim.nonnegative(diffusion_depth_mfp, "--diffusion-depth-mfp", maximum=1e6)
-    lim.seed(seed)
+    _check_mc_options(
+        sigma_s=sigma_s, sigma_a=sigma_a, n=n, thickness_mm=thickness_mm, photons=photons, rows=rows,
+        mm_per_row=mm_per_row, source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
+        diffusion_depth_mfp=diffusion_depth_mfp, seed=seed,
+    )  # fmt: skip
     t0 = time.perf_counter()
     thickness = np.inf if thickness_mm is None else thickness_mm
     medium = Medium(sigma_s=sigma_s, sigma_a=sigma_a, g=g, n=n, thickness_mm=thickness)
@@ -108,28 +101,15 @@ def mc_profile(
         advance = partial(bar.advance, task)
         if point:
             prof = mc_point_profile(
-                medium,
-                n_photons=photons,
-                radius_bins=np.arange(0, rows + 1),
-                mm_per_bin=mm_per_row,
-                seed=seed,
-                cache=cache,
-                cutoff_mm=cutoff_mm,
-                progress=advance,
-            )
+                medium, n_photons=photons, radius_bins=np.arange(0, rows + 1), mm_per_bin=mm_per_row, seed=seed,
+                cache=cache, cutoff_mm=cutoff_mm, progress=advance,
+            )  # fmt: skip
         else:
             prof = mc_line_profile(
-                medium,
-                n_photons=photons,
-                offsets_rows=np.arange(-rows, rows + 1),
-                mm_per_row=mm_per_row,
-                seed=seed,
-                cache=cache,
-                source_width_mm=source_width_mm,
-                cutoff_mm=cutoff_mm,
-                diffusion_depth_mfp=diffusion_depth_mfp or None,
-                progress=advance,
-            )
+                medium, n_photons=photons, offsets_rows=np.arange(-rows, rows + 1), mm_per_row=mm_per_row, seed=seed,
+                cache=cache, source_width_mm=source_width_mm, cutoff_mm=cutoff_mm,
+                diffusion_depth_mfp=diffusion_depth_mfp or None, progress=advance,
+            )  # fmt: skip
     dt = time.perf_counter() - t0
     with lim.written_together(out_path, out_path.with_suffix(".json"), plot):  # the three, or none of them
         csv_path, json_path = write_profile(prof, out_path)
@@ -146,3 +126,20 @@ def mc_profile(
     print_verbatim(f"  {csv_path}\n  {json_path}")
     if plot is not None:
         print_verbatim(f"  {plot}")
+
+
+def _check_mc_options(*, sigma_s, sigma_a, n, thickness_mm, photons, rows, mm_per_row, source_width_mm, cutoff_mm,
+                      diffusion_depth_mfp, seed) -> None:  # fmt: skip
+    """The medium's and the run's options of ``mc profile``, each in its range (one line naming it)."""
+    for option, value in (("--sigma-s", sigma_s), ("--sigma-a", sigma_a)):
+        lim.nonnegative(value, option, maximum=MAX_COEFFICIENT)
+    lim.number(n, "--n", minimum=0.1, maximum=10.0)
+    if thickness_mm is not None and thickness_mm != float("inf"):
+        lim.positive(thickness_mm, "--thickness-mm", maximum=MAX_MM)
+    lim.integer(photons, "--photons", minimum=1, maximum=MAX_PHOTONS)
+    lim.integer(rows, "--rows", minimum=0, maximum=100_000)
+    lim.positive(mm_per_row, "--mm-per-row", maximum=1_000.0)
+    lim.nonnegative(source_width_mm, "--source-width-mm", maximum=1_000.0)
+    lim.optional(lim.positive, cutoff_mm, "--cutoff-mm", maximum=MAX_MM)
+    lim.nonnegative(diffusion_depth_mfp, "--diffusion-depth-mfp", maximum=1e6)
+    lim.seed(seed)

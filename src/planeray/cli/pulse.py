@@ -148,10 +148,58 @@ def pulse(
     The video is read frame by frame, in bounded memory: what must be kept of a long or large video
     (the magnified video for the automatic region search) goes to temporary files beside --out.
     """
+    from ..experiments.pulse import write_pulse_analysis
+
+    video, opts = _pulse_inputs(
+        video_path, out_dir, fps=fps, band=band, rate_band=rate_band, alpha=alpha, levels=levels, pyramid=pyramid,
+        method=method, channel=channel, magnified=magnified, mask=mask, region=region, overwrite=overwrite,
+    )  # fmt: skip
+    passes = 2 if region is not None else 3
+    with progress_bar() as bar:
+        task = bar.add_task(
+            f"{video.n_frames} frames of {video.shape[0]}x{video.shape[1]}", total=passes * video.n_frames
+        )
+        done_before = {"stage": None, "frames": 0, "last": 0}
+
+        def progress(stage, done, total):
+            if stage != done_before["stage"]:
+                done_before["frames"] += done_before["last"]
+                done_before["stage"] = stage
+            done_before["last"] = done
+            bar.update(task, completed=done_before["frames"] + done, description=stage)
+
+        res = write_pulse_analysis(
+            video,
+            out_dir,
+            overwrite=overwrite,
+            magnified=magnified,
+            progress=progress,
+            **opts,
+        )
+    if json_out:
+        print_json(res.to_dict())
+        return
+    est = res.estimate
+    if est.detected:
+        out.print(
+            f"heart rate {est.rate_bpm:.2f} bpm  (SNR {est.snr_db:.1f} dB, peak SNR {est.band_snr_db:.1f} dB; "
+            f"{video.n_frames} frames at {video.fps:g} fps; {out_dir})",
+            highlight=False,
+        )
+    else:
+        out.print(
+            f"no pulse found  (highest peak {est.peak_bpm:.1f} bpm at peak SNR {est.band_snr_db:.1f} dB < "
+            f"{est.settings['min_band_snr_db']:g} dB; {out_dir})",
+            highlight=False,
+        )
+
+
+def _pulse_inputs(video_path, out_dir, *, fps, band, rate_band, alpha, levels, pyramid, method, channel, magnified,
+                  mask, region, overwrite):  # fmt: skip
+    """Every option and output of ``pulse`` checked before any work, the video opened: ``(video, options)``."""
     import numpy as np
 
     from .._validate import check_number, check_positive
-    from ..experiments.pulse import write_pulse_analysis
     from ..pulse.rate import parse_region
     from ..pulse.video_io import VIDEO_KIND, check_video_path, open_video
 
@@ -206,44 +254,7 @@ def pulse(
         except InputError as exc:
             raise InputError(f"--mask {str(exc).replace('vein mask', 'mask')}") from None
     _check_pulse_resources(video, out_dir, opts)
-    passes = 2 if region is not None else 3
-    with progress_bar() as bar:
-        task = bar.add_task(
-            f"{video.n_frames} frames of {video.shape[0]}x{video.shape[1]}", total=passes * video.n_frames
-        )
-        done_before = {"stage": None, "frames": 0, "last": 0}
-
-        def progress(stage, done, total):
-            if stage != done_before["stage"]:
-                done_before["frames"] += done_before["last"]
-                done_before["stage"] = stage
-            done_before["last"] = done
-            bar.update(task, completed=done_before["frames"] + done, description=stage)
-
-        res = write_pulse_analysis(
-            video,
-            out_dir,
-            overwrite=overwrite,
-            magnified=magnified,
-            progress=progress,
-            **opts,
-        )
-    if json_out:
-        print_json(res.to_dict())
-        return
-    est = res.estimate
-    if est.detected:
-        out.print(
-            f"heart rate {est.rate_bpm:.2f} bpm  (SNR {est.snr_db:.1f} dB, peak SNR {est.band_snr_db:.1f} dB; "
-            f"{video.n_frames} frames at {video.fps:g} fps; {out_dir})",
-            highlight=False,
-        )
-    else:
-        out.print(
-            f"no pulse found  (highest peak {est.peak_bpm:.1f} bpm at peak SNR {est.band_snr_db:.1f} dB < "
-            f"{est.settings['min_band_snr_db']:g} dB; {out_dir})",
-            highlight=False,
-        )
+    return video, opts
 
 
 def video_outputs(out_path: Path, method: str, methods) -> tuple[dict, Path]:
@@ -312,11 +323,8 @@ def video(
 
     Also writes STEM_video_vein_mask.png, the scene's vein mask (for ``planeray skin pulse --mask``).
     """
-    from .._validate import check_memory
-    from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes, simulate_live, skin_builder
+    from ..pulse.simulate import METHODS, LiveSettings, simulate_live, skin_builder
     from ..pulse.video_io import VIDEO_KIND, check_video_path
-    from ..scenes.skin import SKIN_BAND_ROWS
-    from ..timing import PAPER_LINES_PER_SECOND
 
     # every option and output before any work
     methods = METHODS if method == "all" else (method,)
@@ -340,24 +348,7 @@ def video(
         noise=noise,
         **({} if motion else {"breathing_px": 0.0, "breathing_gain": 0.0, "motion_px": 0.0}),
     )
-    reach_us = SKIN_BAND_ROWS / PAPER_LINES_PER_SECOND * 1e6 + exposure_us / 2.0
-    if abs(delay_us) >= reach_us:
-        raise ValueError(
-            f"--delay-us must put the band on the skin's kernel (|delay| < {reach_us:.0f} us at --exposure-us "
-            f"{exposure_us:g}: 64 rows + half the band), got {delay_us:g}"
-        )
-    _bounds.scene_memory(shape, copies=4)
-    fr = settings.frame_rate()
-    n = int(round(seconds * fr))
-    if n < 8:
-        raise ValueError(f"--seconds {seconds:g} at {fr:g} fps is {n} frames; a pulse video needs at least 8")
-    check_memory(
-        _bounds.BASE_BYTES
-        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
-        + live_capture_bytes(settings, shape, methods),
-        f"--seconds {seconds:g} at {fr:g} fps ({n:,} frames of {shape[0]}x{shape[1]}, {len(methods)} method(s))",
-        advice="shorten --seconds, lower --fps or --size",
-    )
+    _check_live_settings(settings, shape, methods, seconds=seconds, delay_us=delay_us, exposure_us=exposure_us)
     paths, mask_path = video_outputs(out_path, method, methods)
     _check_outputs(*((p, VIDEO_KIND) for p in paths.values()), (mask_path, VIDEO_MASK_KIND), overwrite=overwrite)
     with progress_bar() as bar:
@@ -380,6 +371,42 @@ def video(
         )
     if mask_path.exists():
         out.print(f"{mask_path}  (vein mask)", highlight=False)
+
+
+def _check_live_settings(settings, shape, methods, *, seconds, delay_us, exposure_us) -> None:
+    """The simulated capture's band, memory and length checked before any work (one line naming the option)."""
+    from ..scenes.skin import SKIN_BAND_ROWS
+    from ..timing import PAPER_LINES_PER_SECOND
+
+    reach_us = SKIN_BAND_ROWS / PAPER_LINES_PER_SECOND * 1e6 + exposure_us / 2.0
+    if abs(delay_us) >= reach_us:
+        raise ValueError(
+            f"--delay-us must put the band on the skin's kernel (|delay| < {reach_us:.0f} us at --exposure-us "
+            f"{exposure_us:g}: 64 rows + half the band), got {delay_us:g}"
+        )
+    _bounds.scene_memory(shape, copies=4)
+    fr = settings.frame_rate()
+    n = int(round(seconds * fr))
+    if n < 8:
+        raise ValueError(f"--seconds {seconds:g} at {fr:g} fps is {n} frames; a pulse video needs at least 8")
+    _check_live_memory(
+        settings, shape, methods, f"--seconds {seconds:g} at {fr:g} fps ({n:,} frames of {shape[0]}x{shape[1]}, "
+        f"{len(methods)} method(s))",
+    )  # fmt: skip
+
+
+def _check_live_memory(settings, shape, methods, what: str) -> None:
+    """A simulated live capture of ``methods`` at ``shape`` fits in memory (else one line: ``what`` needs more)."""
+    from .._validate import check_memory
+    from ..pulse.simulate import live_capture_bytes
+
+    check_memory(
+        _bounds.BASE_BYTES
+        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
+        + live_capture_bytes(settings, shape, methods),
+        what,
+        advice="shorten --seconds, lower --fps or --size",
+    )
 
 
 def _write_videos(cap, paths: dict, mask_path: Path, *, overwrite: bool, progress) -> None:
@@ -432,11 +459,10 @@ def pulse_report(
     overwrite: Annotated[bool, typer.Option(help="Replace a report folder planeray wrote.")] = False,
 ):
     """The simulated pulse study: Fig. 15a/b, rate accuracy over rates and seeds, SNR per method, false alarms."""
-    from .._validate import check_memory
     from ..experiments.pulse import QUICK_REPORT, REPORT_RATES_BPM, pulse_report_steps, run_pulse_report
     from ..pulse.evm import DEFAULT_LEVELS, _pyramid_sizes
     from ..pulse.rate import RATE_BAND_HZ
-    from ..pulse.simulate import METHODS, LiveSettings, live_capture_bytes
+    from ..pulse.simulate import METHODS, LiveSettings
 
     shape = _bounds.image_size(size)
     try:  # the report magnifies with the paper's pyramid levels
@@ -458,12 +484,11 @@ def pulse_report(
         )
     _bounds.scene_memory(shape, copies=4)
     n = int(round(seconds * fps))
-    check_memory(
-        _bounds.BASE_BYTES
-        + _bounds.SCENE_BYTES_PER_PIXEL * shape[0] * shape[1] * 4
-        + live_capture_bytes(settings, shape, METHODS),
+    _check_live_memory(
+        settings,
+        shape,
+        METHODS,
         f"--seconds {seconds:g} at --fps {fps:g} ({n:,} frames of {shape[0]}x{shape[1]}, 4 methods)",
-        advice="shorten --seconds, lower --fps or --size",
     )
     _check_outputs((out_dir, "pulse report"), overwrite=overwrite)
     with progress_bar() as bar:

@@ -156,16 +156,7 @@ def render(
         overwrite=overwrite,
         inputs=[("SCENE_FILE", Path(scene_file) if Path(scene_file).exists() else None)],
     )
-    if (look_from is None) != (look_at is None):
-        raise ValueError("--look-from and --look-at go together")
-    if look_from is None:
-        for option, value in (("--up", up), ("--vfov", vfov)):
-            if value is not None:
-                raise InputError(f"{option} places the camera with --look-from and --look-at; give them too")
-    else:
-        up = (0.0, 0.0, 1.0) if up is None else up
-        vfov = 40.0 if vfov is None else vfov
-        _check_camera(look_from, look_at, up, vfov)
+    up, vfov = _camera_placement(look_from, look_at, up, vfov)
     check_render_options(
         size=size,
         rows=rows,
@@ -185,25 +176,12 @@ def render(
     )
     path = resolve_scene_file(scene_file)
     kwargs = dict(
-        shape=size,
-        projector_rows=rows,
-        spp=spp,
-        batch_spp=batch_spp,
-        max_depth=max_depth,
-        caustics=caustics,
-        caustic_paths=caustic_paths,
-        seed=seed,
-        band_rows=band_rows,
-        max_sparse=max_sparse,
-        rgb=rgb,
-        baseline=baseline,
-        projector_aspect=projector_aspect,
-        projector_columns=projector_columns,
-        projector_vfov_deg=projector_vfov,
-        variant=variant,
-        camera=None if look_from is None else (look_from, look_at, up),
+        shape=size, projector_rows=rows, spp=spp, batch_spp=batch_spp, max_depth=max_depth, caustics=caustics,
+        caustic_paths=caustic_paths, seed=seed, band_rows=band_rows, max_sparse=max_sparse, rgb=rgb, baseline=baseline,
+        projector_aspect=projector_aspect, projector_columns=projector_columns, projector_vfov_deg=projector_vfov,
+        variant=variant, camera=None if look_from is None else (look_from, look_at, up),
         vfov_deg=None if look_from is None else vfov,
-    )
+    )  # fmt: skip
     with _render_warnings():
         with console.status(f"loading {path.name}"):
             total = render_work(path, **kwargs)
@@ -227,6 +205,21 @@ def render(
         markup=False,
         highlight=False,
     )
+
+
+def _camera_placement(look_from, look_at, up, vfov):
+    """``--look-from``/``--look-at`` (with ``--up``, ``--vfov``) checked: ``(up, vfov)``, their defaults filled in."""
+    if (look_from is None) != (look_at is None):
+        raise ValueError("--look-from and --look-at go together")
+    if look_from is None:
+        for option, value in (("--up", up), ("--vfov", vfov)):
+            if value is not None:
+                raise InputError(f"{option} places the camera with --look-from and --look-at; give them too")
+        return up, vfov
+    up = (0.0, 0.0, 1.0) if up is None else up
+    vfov = 40.0 if vfov is None else vfov
+    _check_camera(look_from, look_at, up, vfov)
+    return up, vfov
 
 
 @contextlib.contextmanager

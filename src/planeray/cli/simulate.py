@@ -8,10 +8,10 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from .._console import console, out, progress_bar
+from .._console import out
 from ..timing import PAPER_LINES_PER_SECOND
 from . import _limits as lim
-from ._common import _check_outputs, _friendly_errors
+from ._common import _check_outputs, _friendly_errors, stage_bars
 
 #: Most electrons a camera model takes (full well, laser, per microsecond of ambient light x 1e3).
 MAX_ELECTRONS = 1e9
@@ -128,12 +128,8 @@ def simulate(
     overwrite: Annotated[bool, typer.Option(help="Replace existing outputs.")] = False,
 ):
     """Simulate a delay-exposure sweep of a scene (built-in, Mitsuba 3 file or transport store) on the simulated Episcan."""
-    from ..acquire import acquire_sweep
     from ..camera import CameraModel
-    from ..devices import SimulatedEpiscan
-    from ..io import store_format, write_stack, write_transport
-    from ..scenes import make_scene
-    from ..scenes.store_scene import scene_from_transport_store
+    from ..experiments.simulate import simulate_to_store
 
     scene_file = Path(scene.removeprefix("mitsuba:")) if scene.startswith("mitsuba:") else Path(scene)
     _check_outputs(
@@ -142,34 +138,47 @@ def simulate(
         overwrite=overwrite,
         inputs=[("SCENE", scene_file if scene_file.exists() else None)],
     )
+    camera_options = dict(
+        frames_averaged=frames, full_well_e=full_well_e, read_noise_e=read_noise_e, laser_electrons=laser_electrons,
+        ambient_e_per_us=ambient_e_per_us, jitter_us=jitter_us, row_jitter_us=row_jitter_us,
+    )  # fmt: skip
+    render_options = {
+        "--spp": ("spp", spp), "--batch-spp": ("batch_spp", batch_spp), "--max-depth": ("max_depth", max_depth),
+        "--caustics": ("caustics", caustics), "--band-rows": ("band_rows", band_rows),
+        "--baseline": ("baseline", baseline), "--projector-aspect": ("projector_aspect", projector_aspect),
+        "--projector-columns": ("projector_columns", projector_columns),
+        "--projector-vfov": ("projector_vfov_deg", projector_vfov), "--variant": ("variant", variant),
+    }  # fmt: skip
+    given = {option: pair for option, pair in render_options.items() if pair[1] is not None}
+    size, sw = _simulate_options(scene, size, projector_rows, seed, lines_per_second, sweep, camera_options, given)
+    camera = CameraModel(bit_depth=bit_depth, black_level=black_level, **camera_options)
+    with stage_bars() as progress:
+        stack, sc = simulate_to_store(
+            scene, out_path, sweep=sw, size=size, projector_rows=projector_rows, seed=seed,
+            lines_per_second=lines_per_second, camera=camera, noise=noise, render_options=dict(given.values()),
+            truth=truth, overwrite=overwrite, progress=progress,
+        )  # fmt: skip
+    if truth is not None:
+        out.print(f"ground-truth transport: {truth}", markup=False, highlight=False)
+    H, W = sc.shape
+    out.print(
+        f"stack: {out_path}  ({len(stack)} images, {H}x{W}, {int((~stack.excluded).sum())} used for demultiplexing)",
+        markup=False,
+        highlight=False,
+    )
+
+
+def _simulate_options(scene: str, size, projector_rows, seed, lines_per_second, sweep, camera_options, given):
+    """Every option of ``simulate`` checked before any work: ``(size, sweep)``."""
+    from ..io import store_format
+
     if size is not None:
         size = lim.size(size, minimum=1)
     lim.projector_rows(projector_rows)
     lim.seed(seed)
     lim.lines_per_second(lines_per_second)
     sw = lim.sweep(sweep)
-    check_camera_options(
-        frames=frames,
-        full_well_e=full_well_e,
-        read_noise_e=read_noise_e,
-        laser_electrons=laser_electrons,
-        ambient_e_per_us=ambient_e_per_us,
-        jitter_us=jitter_us,
-        row_jitter_us=row_jitter_us,
-    )
-    render_options = {
-        "--spp": ("spp", spp),
-        "--batch-spp": ("batch_spp", batch_spp),
-        "--max-depth": ("max_depth", max_depth),
-        "--caustics": ("caustics", caustics),
-        "--band-rows": ("band_rows", band_rows),
-        "--baseline": ("baseline", baseline),
-        "--projector-aspect": ("projector_aspect", projector_aspect),
-        "--projector-columns": ("projector_columns", projector_columns),
-        "--projector-vfov": ("projector_vfov_deg", projector_vfov),
-        "--variant": ("variant", variant),
-    }
-    given = {option: pair for option, pair in render_options.items() if pair[1] is not None}
+    check_camera_options(**{"frames" if k == "frames_averaged" else k: v for k, v in camera_options.items()})
     is_store = store_format(Path(scene)) is not None
     if given and not scene.startswith("mitsuba:"):
         first = next(iter(given))
@@ -184,54 +193,16 @@ def simulate(
     if scene.startswith("mitsuba:"):
         from .render import check_render_options
 
+        options = dict(given.values())
         check_render_options(
-            size=size or (128, 128),
-            rows=projector_rows or (size or (128, 128))[0],
-            spp=spp,
-            batch_spp=batch_spp,
-            caustics=caustics,
-            band_rows=band_rows,
-            max_depth=max_depth,
-            baseline=baseline,
-            projector_aspect=projector_aspect,
-            projector_columns=projector_columns,
-            projector_vfov=projector_vfov,
+            size=size or (128, 128), rows=projector_rows or (size or (128, 128))[0], spp=options.get("spp"),
+            batch_spp=options.get("batch_spp"), caustics=options.get("caustics"),
+            band_rows=options.get("band_rows"), max_depth=options.get("max_depth"),
+            baseline=options.get("baseline"), projector_aspect=options.get("projector_aspect"),
+            projector_columns=options.get("projector_columns"), projector_vfov=options.get("projector_vfov_deg"),
             names={"rows": "--projector-rows"},
-        )
+        )  # fmt: skip
     elif not is_store:
         h, w = size or (128, 128)
         lim.check_memory(h * w * (257 * 4 * 3 + 85 * 8), f"--size {h} {w}")
-    camera = CameraModel(
-        bit_depth=bit_depth,
-        black_level=black_level,
-        full_well_e=full_well_e,
-        read_noise_e=read_noise_e,
-        laser_electrons=laser_electrons,
-        ambient_e_per_us=ambient_e_per_us,
-        frames_averaged=frames,
-        jitter_us=jitter_us,
-        row_jitter_us=row_jitter_us,
-    )
-    if is_store:
-        with console.status(f"reading transport store {scene}"):
-            sc = scene_from_transport_store(scene, shape=size, projector_rows=projector_rows)
-    else:
-        shape = size or (128, 128)
-        with console.status(f"building scene {scene} {shape[0]}x{shape[1]}"):
-            sc = make_scene(scene, shape, projector_rows=projector_rows, seed=seed, **dict(given.values()))
-    H, W = sc.shape
-    device = SimulatedEpiscan(sc, camera=camera, lines_per_second=lines_per_second, seed=seed, noise=noise)
-    with progress_bar() as bar:
-        task = bar.add_task(f"capturing {len(sw)} images", total=len(sw))
-        stack = acquire_sweep(device, sw, progress=lambda i: bar.advance(task))
-        task = bar.add_task("writing stack", total=len(sw))
-        write_stack(stack, out_path, overwrite=overwrite, progress=lambda i: bar.advance(task))
-    if truth is not None:
-        attrs = {"lines_per_second": lines_per_second, "method": "ground_truth", "scene": sc.params}
-        write_transport(sc.transport, truth, attrs=attrs, overwrite=overwrite)
-        out.print(f"ground-truth transport: {truth}", markup=False, highlight=False)
-    out.print(
-        f"stack: {out_path}  ({len(stack)} images, {H}x{W}, {int((~stack.excluded).sum())} used for demultiplexing)",
-        markup=False,
-        highlight=False,
-    )
+    return size, sw

@@ -130,30 +130,15 @@ def design(
     same sweep."""
     import time
 
-    from ..design import CRITERIA, candidate_settings, design_sweep, transport_prior
-    from ..design.candidates import DEFAULT_EXPOSURE_RANGE_US
+    from ..design import candidate_settings, design_sweep, transport_prior
     from ..io import write_sweep
-    from . import _bounds
 
-    if out_path.suffix.lower() != ".json":
-        raise InputError(f"--out must end in .json, got {out_path.name}")
-    k = lim.integer(images, "--images", minimum=4, maximum=MAX_IMAGES)
-    if criterion not in CRITERIA:
-        raise InputError(f"--criterion {criterion}: choose one of {', '.join(CRITERIA)}")
-    lim.positive(alpha, "--alpha", maximum=1e6)
-    lim.nonnegative(beta, "--beta", maximum=1e6)
-    lim.optional(lim.integer, frames, "--frames", minimum=1, maximum=10_000)
-    _bounds.image_size((size, size))
-    _bounds.projector_rows(projector_rows)
-    lim.integer(support_rows, "--support-rows", minimum=4, maximum=lim.MAX_PROJECTOR_ROWS)
-    lim.integer(pixels, "--pixels", minimum=10, maximum=1_000_000)
-    lim.nonnegative(boundary_margin_us, "--boundary-margin-us", maximum=lim.MAX_TIME_US)
-    lim.nonnegative(smooth_weight, "--smooth-weight", maximum=100.0)
-    lim.seed(seed)
-    e_range = _range(exposures_us, "--exposures-us", minimum=0.0) or DEFAULT_EXPOSURE_RANGE_US
-    d_range = _range(delays_us, "--delays-us", minimum=-lim.MAX_TIME_US)
-    lim.optional(lim.positive, exposure_step_us, "--exposure-step-us", maximum=lim.MAX_TIME_US)
-    lim.optional(lim.positive, delay_step_us, "--delay-step-us", maximum=lim.MAX_TIME_US)
+    k, e_range, d_range = _design_options(
+        out_path, images=images, criterion=criterion, alpha=alpha, beta=beta, frames=frames, size=size,
+        projector_rows=projector_rows, support_rows=support_rows, pixels=pixels,
+        boundary_margin_us=boundary_margin_us, smooth_weight=smooth_weight, seed=seed, exposures_us=exposures_us,
+        delays_us=delays_us, exposure_step_us=exposure_step_us, delay_step_us=delay_step_us,
+    )  # fmt: skip
     sources = list(prior or ["scenes"])
     _check_outputs(
         (out_path, "sweep"), overwrite=overwrite, inputs=[("--prior", p) for p in sources if Path(p).exists()]
@@ -198,6 +183,36 @@ def design(
         markup=False,
         highlight=False,
     )
+
+
+def _design_options(out_path, *, images, criterion, alpha, beta, frames, size, projector_rows, support_rows, pixels,
+                    boundary_margin_us, smooth_weight, seed, exposures_us, delays_us, exposure_step_us,
+                    delay_step_us):  # fmt: skip
+    """The options of ``sweep design`` in their ranges: ``(images, exposure range, delay range)``."""
+    from ..design import CRITERIA
+    from ..design.candidates import DEFAULT_EXPOSURE_RANGE_US
+    from . import _bounds
+
+    if out_path.suffix.lower() != ".json":
+        raise InputError(f"--out must end in .json, got {out_path.name}")
+    k = lim.integer(images, "--images", minimum=4, maximum=MAX_IMAGES)
+    if criterion not in CRITERIA:
+        raise InputError(f"--criterion {criterion}: choose one of {', '.join(CRITERIA)}")
+    lim.positive(alpha, "--alpha", maximum=1e6)
+    lim.nonnegative(beta, "--beta", maximum=1e6)
+    lim.optional(lim.integer, frames, "--frames", minimum=1, maximum=10_000)
+    _bounds.image_size((size, size))
+    _bounds.projector_rows(projector_rows)
+    lim.integer(support_rows, "--support-rows", minimum=4, maximum=lim.MAX_PROJECTOR_ROWS)
+    lim.integer(pixels, "--pixels", minimum=10, maximum=1_000_000)
+    lim.nonnegative(boundary_margin_us, "--boundary-margin-us", maximum=lim.MAX_TIME_US)
+    lim.nonnegative(smooth_weight, "--smooth-weight", maximum=100.0)
+    lim.seed(seed)
+    e_range = _range(exposures_us, "--exposures-us", minimum=0.0) or DEFAULT_EXPOSURE_RANGE_US
+    d_range = _range(delays_us, "--delays-us", minimum=-lim.MAX_TIME_US)
+    lim.optional(lim.positive, exposure_step_us, "--exposure-step-us", maximum=lim.MAX_TIME_US)
+    lim.optional(lim.positive, delay_step_us, "--delay-step-us", maximum=lim.MAX_TIME_US)
+    return k, e_range, d_range
 
 
 @sweep_app.command("show")

@@ -25,7 +25,10 @@ ViewPathArg = Annotated[
     ),
 ]
 SizeOpt = Annotated[
-    int, typer.Option(help="Scenes: image size (square, camera pixels; at least 8, at most what memory holds).")
+    tuple[int, int],
+    typer.Option(
+        help="Scenes: image size H W (camera pixels; at least 8, at most what memory holds; one number: a square)."
+    ),
 ]
 ProjectorRowsOpt = Annotated[
     int, typer.Option(help="Scenes: projector rows spanned by the image (1-720: the projector has 720).")
@@ -48,8 +51,8 @@ def _check_scene_options(path, *, size, projector_rows, seed) -> None:
     _bounds.seed(seed)
     _bounds.projector_rows(projector_rows)
     if not Path(str(path)).exists():
-        shape = _bounds.image_size((size, size))
-        _bounds.scene_memory(shape, square=True)
+        shape = _bounds.image_size(size)
+        _bounds.scene_memory(shape)
 
 
 PatternOpt = Annotated[
@@ -165,7 +168,7 @@ def view(
     browser: Annotated[
         bool, typer.Option(help="Open the page in the default browser (--no-browser: only print its URL).")
     ] = True,
-    size: SizeOpt = 128,
+    size: SizeOpt = (128, 128),
     projector_rows: ProjectorRowsOpt = 720,
     seed: SeedOpt = 0,
     truth: TruthOpt = None,
@@ -268,12 +271,13 @@ def video(
     gamma: Annotated[float, typer.Option(help="Display gamma (0.05-20).")] = 1.0,
     colormap: Annotated[str, typer.Option(help="gray, magma, inferno, viridis, cividis or turbo.")] = "gray",
     scale: Annotated[int | None, typer.Option(help="Whole-pixel upscaling (1-64; default: at least 512 rows).")] = None,
-    size: SizeOpt = 128,
+    size: SizeOpt = (128, 128),
     projector_rows: ProjectorRowsOpt = 720,
     seed: SeedOpt = 0,
     overwrite: Annotated[bool, typer.Option(help="Replace a video planeray wrote.")] = False,
 ):
     """Write a delay (or exposure) sweep as a video: the paper's "sweeping the band"."""
+    from .._extras import import_extra
     from .._validate import check_integer, check_number, check_positive
     from ..viewer.display import check_display
     from ..viewer.session import ViewSettings
@@ -288,6 +292,7 @@ def video(
     )
 
     # every option and the output before anything is built or rendered
+    import_extra("imageio_ffmpeg", "planeray video")
     if out_path.suffix.lower() not in CODECS:
         raise ValueError(f"--out must end in {', '.join(CODECS)}, got {out_path.name!r}")
     if sweep not in ("delay", "exposure"):

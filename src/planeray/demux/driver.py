@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import resumable
+from .._progress import progress_reporter
 from .._validate import check_integer, check_number
 from ..errors import InputError, TransportError
 from ..io import create_array, transport_attrs, writable
@@ -420,7 +421,7 @@ def demultiplex(
     method: str = "fast",
     chunk_rows: int = DEFAULT_CHUNK_ROWS,
     tol: float | None = None,
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int], None] | bool | None = None,
 ) -> DemuxResult:
     """Demultiplex a stack in memory (Sec. 4).
 
@@ -445,8 +446,10 @@ def demultiplex(
         Camera rows per chunk (bounds memory).
     tol : float, optional
         Solver tolerance (method-specific default).
-    progress : callable, optional
-        Called with the number of rows finished after each chunk.
+    progress : callable or bool, optional
+        Called with the number of rows finished after each chunk.  None (default): a progress display
+        in a Jupyter notebook, nothing elsewhere; True: the display anywhere; False: nothing
+        (:func:`planeray._progress.progress_reporter`).
 
     Returns
     -------
@@ -491,12 +494,13 @@ def demultiplex(
         T[res.rows] = res.T
         for name in maps:
             maps[name][res.rows] = res.maps[name]
-        if progress is not None:
-            progress(res.rows.stop - res.rows.start)
+        if advance is not None:
+            advance(res.rows.stop - res.rows.start)
 
     chunks = list(enumerate(_chunks(H, chunk_rows)))
     reader = _RowReader(stack, problem)
-    _solve_in_order(problem, lambda i: reader(chunks[i][1]), chunks, method, tol, done)
+    with progress_reporter(progress, H, f"demultiplexing {H} rows") as advance:
+        _solve_in_order(problem, lambda i: reader(chunks[i][1]), chunks, method, tol, done)
     transport = Transport(T, problem.offsets_rows, RowGeometry(H, stack.projector_rows))
     return DemuxResult(transport, maps, _attrs(problem, method, tol, choice))
 
@@ -569,6 +573,7 @@ def _write_chunk(group, res: ChunkResult, index: int) -> None:
     resumable.mark_done(group, index)  # only after the data: a killed run redoes this chunk
 
 
+@resumable._killable
 @writes_output("out")
 def demultiplex_to_store(
     stack: Stack,
@@ -588,7 +593,6 @@ def demultiplex_to_store(
     on_resume: Callable[[int, int], None] | None = None,
     on_choice: Callable[[WeightChoice, bool], None] | None = None,
     source=None,
-    _stop_after: int | None = None,
 ) -> Path:
     """Demultiplex a stack chunk by chunk into a transport store (resumable).
 
@@ -690,8 +694,9 @@ def demultiplex_to_store(
     todo = [i for i in range(len(chunks)) if not done[i]]
     if progress is not None and done.any():
         progress(sum(chunks[i].stop - chunks[i].start for i in range(len(chunks)) if done[i]))
+    _stop_after = resumable._stop_after_units()  # the tests' hook: a run killed after k chunks
     try:
-        if _stop_after is not None:  # testing hook: simulate a run killed after k chunks
+        if _stop_after is not None:
             todo = todo[:_stop_after]
         if workers or scheduler:
             _run_dask(stack, problem, chunks, todo, method, tol, group, workers, scheduler, progress, source)

@@ -17,7 +17,7 @@ from .base import (
 )
 from .genicam import GenICamEpiscan, aravis_available
 from .replay import ReplayDevice
-from .simulated import SimulatedEpiscan
+from .simulated import SimulatedEpiscan, simulated_device
 from .ueye import UEyeEpiscan, pyueye_available
 
 #: The built-in devices by name (every registered one: :func:`list_devices`).
@@ -38,5 +38,6 @@ __all__ = [
     "list_devices",
     "open_device",
     "pyueye_available",
+    "simulated_device",
     "register_device",
 ]

@@ -62,7 +62,7 @@ RIG_DEFAULTS = dict(
     trigger_timeout_s=1.0,
 )
 
-__all__ = ["SimulatedEpiscan", "open_simulated"]
+__all__ = ["SimulatedEpiscan", "open_simulated", "simulated_device"]
 
 
 class SimulatedEpiscan(DeviceBase):
@@ -708,4 +708,45 @@ def open_simulated(
         camera = binned_camera(camera, (rows / shape[0]) ** 2)
     return SimulatedEpiscan(
         built, camera, lines_per_second=lines_per_second, seed=seed, noise=noise, rig=rig, pulse=pulse
+    )
+
+
+def simulated_device(
+    scene: str,
+    size,
+    *,
+    projector_rows=None,
+    seed: int = 0,
+    ambient_e_per_us: float = 0.01,
+    noise: bool = True,
+    lines_per_second: float | None = None,
+):
+    """The simulated Episcan on built-in ``scene`` in a dim room, as ``planeray emulate`` and ``separate`` use it.
+
+    Parameters
+    ----------
+    scene : str
+        Built-in scene name.
+    size : tuple of int
+        Image size ``(H, W)`` (camera pixels).
+    projector_rows : int, optional
+        Projector rows spanned by the image height (default: ``H``, as :func:`planeray.scenes.make_scene`).
+    seed : int
+        Scene and noise seed.
+    ambient_e_per_us : float
+        Room light, electrons per microsecond (a dim room by default: conventional
+        frames integrate 16.7 ms).
+    noise : bool
+        Simulate noise.
+    lines_per_second : float, optional
+        Projector line rate (default: the paper's 54,000 lines/s).
+    """
+    from ..scenes import make_scene
+
+    return SimulatedEpiscan(
+        make_scene(scene, tuple(size), projector_rows=projector_rows, seed=seed),
+        camera=CameraModel(ambient_e_per_us=ambient_e_per_us),
+        lines_per_second=lines_per_second or PAPER_LINES_PER_SECOND,
+        seed=seed,
+        noise=noise,
     )

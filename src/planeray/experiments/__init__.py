@@ -7,5 +7,16 @@
 * :mod:`planeray.experiments.reproduce`: every figure at once, resumable (``planeray paper``), and
   :mod:`planeray.experiments.paper_report`, its report beside the paper's quoted numbers.
 
+* the commands' documented outputs as functions (each command's whole work; the command line
+  parses its options, calls one of them and prints):
+  :mod:`planeray.experiments.materials_folders` (``materials fit``),
+  :mod:`planeray.experiments.materials_recognize` (``materials recognize``, ``library-add``,
+  ``predict``), :mod:`planeray.experiments.skin_folders` (``skin veins``, ``enhance``),
+  :mod:`planeray.experiments.skin_depth_folder` (``skin depth``),
+  :mod:`planeray.experiments.simulate` (``simulate``) and :mod:`planeray.experiments.baselines`
+  (``separate direct-global``, ``emulate``).  They live here, not in the domain
+  packages, because their folders hold figures: ``experiments`` is the lowest layer that may
+  draw them.
+
 Experiments sit above analysis and figures: they compose them, nothing below imports them.
 """

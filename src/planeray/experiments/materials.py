@@ -26,7 +26,7 @@ from ..acquire import simulate_stack
 from ..camera import CameraModel
 from ..errors import InputError
 from ..figures import materials as figs
-from ..io import atomic_directory, atomic_file, write_stack
+from ..io import atomic_directory, atomic_file, jsonable, write_stack
 from ..io.atomic import MARKER
 from ..materials import (
     BACKGROUND_CLASS,
@@ -41,7 +41,6 @@ from ..materials import (
 from ..scenes import make_scene
 from ..stack import Stack
 from ..timing import PAPER_PROJECTOR_ROWS, make_sweep
-from ._report import jsonable
 
 __all__ = [
     "CAPTURE_FORMAT",

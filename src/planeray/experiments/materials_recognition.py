@@ -24,7 +24,7 @@ from scipy import ndimage
 
 from ..errors import InputError
 from ..figures import materials as figs
-from ..io import atomic_directory
+from ..io import atomic_directory, jsonable
 from ..io.atomic import MARKER
 from ..materials import CLASS_NAMES, MATERIAL_CLASSES, capture_transport, optical_table, train_model
 from ..materials.library import MediaLibrary
@@ -40,7 +40,6 @@ from ..materials.recognize import (
     recognize_image,
     recognize_regions,
 )
-from ._report import jsonable
 from .materials import TEST_SETTINGS, TRAIN_SETTINGS, simulate_capture
 
 __all__ = [

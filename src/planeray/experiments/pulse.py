@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_directory
+from ..io import atomic_directory, jsonable
 from ..io.atomic import MARKER
 from ..pulse.analysis import analyze_pulse
 from ..pulse.rate import estimate_heart_rate, pulse_spectrum
@@ -490,7 +490,7 @@ def run_pulse_report(
             {"indirect, magnified": [np.nan if r["rate_bpm"] is None else r["rate_bpm"] for r in rows]},
             out=tmp / "rate_accuracy.png",
         )
-        (tmp / "report.json").write_text(json.dumps(report, indent=1, default=_json_default))
+        (tmp / "report.json").write_text(json.dumps(jsonable(report, finite=False, default=str), indent=1))
         (tmp / MARKER).write_text(json.dumps({"format": REPORT_FORMAT, "format_version": 1, "kind": "report"}))
     step("figures written")
     return report
@@ -505,11 +505,3 @@ def _pulsatile_pct(model, method, region, amplitude) -> float:
         image, deriv = model.images[method], model.derivatives[method]
     level = float(image[region].mean())
     return 100.0 * amplitude * float(deriv[region].mean()) / level if level else 0.0
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    return str(value)

@@ -30,12 +30,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from .._extras import import_extra
 from .._validate import check_integer
 from ..errors import InputError
-from ..io import atomic_directory, atomic_file
+from ..io import atomic_directory, atomic_file, jsonable
 from ..io.atomic import MARKER, check_replaceable, planeray_output_kind, storage_error
 from ..io.lock import writes_output
-from ._report import jsonable
 
 __all__ = [
     "FORMAT",
@@ -142,7 +142,8 @@ def _rel(folder: Path, path) -> str:
 
 
 def _fig4(folder: Path, s: dict, advance) -> dict:
-    from ..baselines import compare_emulation, simulated_device
+    from ..baselines import compare_emulation
+    from ..devices import simulated_device
     from ..figures.baselines import emulation_figure
 
     n = s["size"]
@@ -273,6 +274,15 @@ def _figure_measured(name: str, numbers: dict) -> dict:
             "michelson_sharpened_resolution": narrow["michelson_scan_line"],
             "michelson_sharpened_1_row": one_row["michelson_scan_line"],
             "michelson_truth_direct": imgs["ground-truth direct"]["michelson_scan_line"],
+            "michelson_seeds": {
+                short: next(v for k, v in numbers.get("michelson_noise_seeds", {}).items() if match(k))
+                for short, match in (
+                    ("captured_600us", lambda k: k.startswith("captured")),
+                    ("sharpened_resolution", lambda k: k.startswith("sharpened") and k != "sharpened, 1 row"),
+                    ("sharpened_1_row", lambda k: k == "sharpened, 1 row"),
+                )
+                if numbers.get("michelson_noise_seeds")
+            },
         }
     if name == "fig12":
         imgs = numbers["images"]
@@ -281,6 +291,15 @@ def _figure_measured(name: str, numbers: dict) -> dict:
             "relative_rmse_synthesized": imgs["synthesized from the stack"]["relative_rmse"],
             "relative_rmse_16ms": imgs["single line, 16 ms"]["relative_rmse"],
             "relative_rmse_800ms": imgs["single line, 800 ms"]["relative_rmse"],
+            "relative_rmse_seeds": {
+                short: numbers["relative_rmse_noise_seeds"][name]
+                for short, name in (
+                    ("synthesized", "synthesized from the stack"),
+                    ("16ms", "single line, 16 ms"),
+                    ("800ms", "single line, 800 ms"),
+                )
+                if name in numbers.get("relative_rmse_noise_seeds", {})
+            },
         }
     if name == "effects":
         return {
@@ -317,6 +336,7 @@ def _fig10(folder: Path, s: dict, advance) -> dict:
     test = r["stack_profiles"]["floor_edge"]["test"]
     measured = {
         "accuracy": test["accuracy"],
+        "pixels": test["pixels"],  # per material: its test pixels, behind the accuracy's interval
         "overall": test["overall"],
         "min_material_accuracy": test["min_material_accuracy"],
         "misclassified": test["errors"]["misclassified"],
@@ -427,6 +447,10 @@ def _fig15(folder: Path, s: dict, advance) -> dict:
         "snr_db_without_magnification": {m: v["snr_db_without_magnification"] for m, v in r["methods"].items()},
         "rate_bpm": {m: v["rate_bpm"] for m, v in r["methods"].items()},
         "accuracy": {k: r["accuracy"][k] for k in ("detected", "total", "mean_abs_error_bpm", "max_abs_error_bpm")},
+        # one video's error each, over rates and seeds: the spread the paper's one error is set against
+        "abs_errors_bpm": [
+            abs(x["rate_bpm"] - x["true_bpm"]) for x in r["accuracy"]["runs"] if x["rate_bpm"] is not None
+        ],
         "false_alarms": r["pulse_free"]["false_alarms"],
         "pulse_free_videos": len(r["pulse_free"]["runs"]),
     }
@@ -599,6 +623,7 @@ def plan_paper_run(out_dir, *, quick: bool = False, size: int | None = None, see
     check_integer(seed, "seed", minimum=0, maximum=2**32 - 1)
     if size is not None:
         check_integer(size, "size", minimum=MIN_SIZE, maximum=MAX_SIZE)
+    import_extra("cv2", "planeray paper (Figs. 13-16: Eq. 7's bilateral filter, Eulerian magnification)")
     out = Path(out_dir)
     header = _header(quick=quick, size=size, seed=seed)
     fresh = {**header, "steps": {}}

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import CameraModel
-from ..io import atomic_directory
+from ..io import atomic_directory, jsonable
 from ..io.atomic import MARKER, check_replaceable
 from ..skin.ambient import AMBIENT_LEVELS, ambient_e_per_us, ambient_table
 from ..skin.enhance import enhance_contrast
@@ -58,7 +58,6 @@ from ..skin.imaging import (
 )
 from ..skin.metrics import band_definition, vein_metrics
 from ..timing import PAPER_LINES_PER_SECOND, PAPER_PROJECTOR_ROWS
-from ._report import jsonable
 from .skin_depth import DEPTH_CONDITION, depth_summary, depth_validation
 
 __all__ = [

@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from ..figures.skin_physics import vein_validation_figure
+from ..io import jsonable
 from ..mc.layered import mc_layered_profile, mc_vein_kernel_brute
 from ..optical_data_skin import skin_layers
 from ..scenes.skin import _table_slice, _vein_ratio, skin_tables
 from ..timing import PAPER_LINES_PER_SECOND, band_bin_weights, band_centre_rows, band_width_rows
-from ._report import jsonable
 
 __all__ = [
     "VALIDATION_CASES",

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from ..io import atomic_file
 
-__all__ = ["new_figure", "figure_for", "finish", "save_png", "display_scale"]
+__all__ = ["new_figure", "figure_for", "finish", "save_png", "display_scale", "save_image"]
 
 
 def display_scale(images, percentile=99.5):
@@ -66,3 +66,31 @@ def save_png(fig, path, dpi=100) -> Path:
         # the mark (PNG Software text) lets a later --overwrite recognize the file as planeray's
         root.savefig(tmp, format="png", dpi=dpi, metadata={"Software": mark_text("figure")})
     return path
+
+
+def save_image(image, path, scale_to: float | None = None) -> Path:
+    """An image as a file: PNG, a display-scaled 8-bit preview; TIFF, the values as 16-bit codes (0..1 -> 0..65535).
+
+    ``scale_to``: the PNG's brightening (default: its 99.5th percentile to white; give one value to
+    several images so they compare).  Written atomically, with planeray's mark.
+    """
+    import numpy as np
+
+    from ..errors import InputError, parameter_name
+    from ..io import write_image
+
+    path = Path(path)
+    if path.suffix.lower() == ".png":
+        from PIL import Image
+
+        from ..io.marks import png_mark_info
+
+        shown = np.clip(image * (scale_to or display_scale([image], percentile=99.5)), 0, 1)
+        with atomic_file(path) as tmp:
+            Image.fromarray((shown * 255 + 0.5).astype(np.uint8)).save(
+                tmp, format="PNG", pnginfo=png_mark_info("image")
+            )
+        return path
+    if path.suffix.lower() in (".tif", ".tiff"):
+        return write_image(path, image, bit_depth=16)
+    raise InputError(f"{parameter_name('out_path')} must end in .png, .tif or .tiff, got {path.name}")

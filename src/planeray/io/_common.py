@@ -26,6 +26,7 @@ wrong numbers; every decoding failure becomes one :class:`StackError` or
 
 from __future__ import annotations
 
+import math
 import os
 from importlib import metadata as _importlib_metadata
 from pathlib import Path
@@ -64,28 +65,6 @@ def store_format(path) -> str | None:
 
     Read from the Zarr group's ``format`` attribute (``zarr.json``) without opening
     the arrays; a folder with a ``manifest.csv`` is a stack import folder.
-
-    Parameters
-    ----------
-    path : str or path
-        A folder.
-
-    Returns
-    -------
-    {"stack", "transport"} or None
-
-    See Also
-    --------
-    planeray.read_stack, planeray.read_transport
-
-    Examples
-    --------
-    >>> import pathlib, tempfile
-    >>> import planeray as pr
-    >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     path = pr.write_transport(pr.make_scene("corner", (8, 8), seed=0).transport, pathlib.Path(tmp) / "T.zarr")
-    ...     store_format(path), store_format(tmp)
-    ('transport', None)
     """
     import json
 
@@ -114,57 +93,62 @@ def planeray_version() -> str:
 
 
 # ----------------------------------------------------------------------------
-def jsonable(value, where: str = "metadata", error=StackError):
-    """Convert numpy scalars/arrays, tuples and paths to plain JSON types (recursively).
+def jsonable(value, *, finite: bool = True, default=None, where: str = "metadata", error=None):
+    """``value`` as plain JSON types, for :func:`json.dumps`: the one conversion of every file planeray writes.
+
+    Dicts (keys as ``str``), lists and tuples (as lists) are converted element by element; NumPy
+    arrays and scalars become Python lists and numbers; paths become text.
 
     Parameters
     ----------
     value : object
-        Numbers, strings, lists, tuples, dicts, numpy scalars and arrays, paths.
-    where : str
-        What the value is, for the error message.
-    error : type
-        The exception raised for a value that has no JSON form.
-
-    Returns
-    -------
-    object
-        The value in plain JSON types (lists, dicts, floats, ints, strings, None).
-
-    See Also
-    --------
-    planeray.write_stack : its metadata passes through it.
+        What to convert.
+    finite : bool
+        ``True`` (records and reports): a non-finite float (NaN, +-inf) becomes ``None`` (JSON
+        ``null``), so the text is strict JSON. ``False``: kept (written ``NaN`` / ``Infinity``).
+    default : callable, optional
+        Applied to any other object (e.g. ``str``).
+    where, error : str, exception class, optional
+        With ``error`` (e.g. :class:`~planeray.errors.StackError`), any other object, or a dict key
+        that is not text or a number, raises ``error`` naming ``where`` (``"metadata['a'][2]"``);
+        without ``error`` or ``default`` such an object is returned as it is (and
+        :func:`json.dumps` refuses it).
 
     Examples
     --------
-    >>> import numpy as np
-    >>> jsonable({"delay_us": np.array([0.0, 375.0]), "frames": np.int64(8), "size": (128, 128)})
-    {'delay_us': [0.0, 375.0], 'frames': 8, 'size': [128, 128]}
+    >>> jsonable({"a": np.float32(0.5), 1: [np.int64(2), float("nan")], "m": np.eye(2, dtype=bool)})
+    {'a': 0.5, '1': [2, None], 'm': [[True, False], [False, True]]}
+    >>> jsonable([np.inf], finite=False)
+    [inf]
     """
-    if value is None or isinstance(value, (bool, str)):
+
+    def convert(value, where):
+        if isinstance(value, dict):
+            out = {}
+            for key, item in value.items():
+                if error is not None and not isinstance(key, (str, int, float, bool, np.integer)):
+                    raise error(f"{where} key {key!r} is not a string")
+                out[str(key)] = convert(item, f"{where}[{str(key)!r}]")
+            return out
+        if isinstance(value, (list, tuple)):
+            return [convert(item, f"{where}[{i}]") for i, item in enumerate(value)]
+        if isinstance(value, np.ndarray):
+            return convert(value.tolist(), where)
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, float):
+            return None if finite and not math.isfinite(value) else value
+        if value is None or isinstance(value, (str, int)):
+            return value
+        if isinstance(value, os.PathLike):
+            return os.fspath(value)
+        if default is not None:
+            return default(value)
+        if error is not None:
+            raise error(f"{where} is not JSON-serializable (type {type(value).__name__})")
         return value
-    if isinstance(value, (int, float)):
-        return value
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating):
-        return float(value)
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist(), where, error)
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    if isinstance(value, dict):
-        out = {}
-        for key, item in value.items():
-            if not isinstance(key, (str, int, float, bool, np.integer)):
-                raise error(f"{where} key {key!r} is not a string")
-            out[str(key)] = jsonable(item, f"{where}[{str(key)!r}]", error)
-        return out
-    if isinstance(value, (list, tuple)):
-        return [jsonable(item, f"{where}[{i}]", error) for i, item in enumerate(value)]
-    raise error(f"{where} is not JSON-serializable (type {type(value).__name__})")
+
+    return convert(value, where)
 
 
 def open_group(path: Path, error):
@@ -210,30 +194,6 @@ def create_array(group, name: str, **kwargs):
 
     The returned array has ``write_empty_chunks`` on; an array reopened later
     does not (see :func:`writable`).
-
-    Parameters
-    ----------
-    group : zarr.Group
-        The store's group.
-    name : str
-        The array's name.
-    **kwargs
-        ``shape``, ``chunks``, ``dtype``, ``fill_value``... as for ``zarr.Group.create_array``.
-
-    Returns
-    -------
-    zarr.Array
-
-    See Also
-    --------
-    writable : the same setting for an array opened again.
-
-    Examples
-    --------
-    >>> import zarr
-    >>> group = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
-    >>> create_array(group, "T", shape=(4, 4), chunks=(2, 4), dtype="float32").shape
-    (4, 4)
     """
     kwargs.setdefault("compressors", COMPRESSORS)
     return group.create_array(name, config=WRITE_CONFIG, **kwargs)
@@ -246,29 +206,6 @@ def writable(group, name: str):
     store: a writer that reopens a store (a resumed run) must get its arrays
     through this function, or the chunks it writes that equal the fill value are
     skipped and the store, marked :data:`ALL_CHUNKS_ATTR`, is refused on reading.
-
-    Parameters
-    ----------
-    group : zarr.Group
-        The store's group, opened for writing.
-    name : str
-        The array's name.
-
-    Returns
-    -------
-    zarr.Array
-
-    See Also
-    --------
-    create_array : a new array so set.
-
-    Examples
-    --------
-    >>> import zarr
-    >>> group = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
-    >>> _ = create_array(group, "done", shape=(3,), chunks=(3,), dtype="bool", fill_value=False)
-    >>> writable(group, "done").shape
-    (3,)
     """
     return group[name].with_config(WRITE_CONFIG)
 
@@ -460,20 +397,6 @@ class LazyArray:
         :class:`~planeray.errors.TransportError`).
     name : str, optional
         The array's name in messages (default: its name in the store).
-
-    See Also
-    --------
-    planeray.read_stack : gives its images as one.
-
-    Examples
-    --------
-    >>> import pathlib, tempfile
-    >>> import planeray as pr
-    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
-    >>> with tempfile.TemporaryDirectory() as tmp:
-    ...     lazy = pr.read_stack(pr.write_stack(stack, pathlib.Path(tmp) / "s.zarr")).images
-    ...     type(lazy).__name__, lazy.shape, lazy[0].shape
-    ('LazyArray', (27, 8, 8), (8, 8))
     """
 
     def __init__(self, array, *, path=None, error=StackError, name: str | None = None):

@@ -24,6 +24,9 @@ from ..errors import InputError
 from ._storage import storage_error
 
 __all__ = [
+    "written_together",
+    "check_not_an_input",
+    "same_place",
     "ALREADY_EXISTS",
     "atomic_directory",
     "atomic_file",
@@ -150,6 +153,76 @@ def check_replaceable(path, *, overwrite: bool, kind: str | None = None, error=I
 
 #: Bytes the write probe of :func:`check_writable` writes (a full disk refuses its first block).
 _PROBE_BYTES = 4096
+
+
+def same_place(a: Path, b: Path) -> bool:
+    """``a`` and ``b`` name the same file or folder (resolved; the same inode where both exist)."""
+    try:
+        if a.resolve() == b.resolve():
+            return True
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _inside(inner: Path, outer: Path) -> bool:
+    """``inner`` lies inside the folder ``outer`` (resolved paths)."""
+    try:
+        return inner.resolve().is_relative_to(outer.resolve()) and inner.resolve() != outer.resolve()
+    except OSError:
+        return False
+
+
+def _is_store(path: Path) -> bool:
+    """A Zarr store or a planeray result folder: a folder whose content a format defines (nothing may be added)."""
+    return (path / "zarr.json").is_file() or (path / "planeray.json").is_file()
+
+
+def check_not_an_input(out, inputs, *, option: str = "out") -> None:
+    """Refuse an output that is or holds one of the command's inputs, or lies inside an input store.
+
+    ``inputs``: ``(option, path)`` pairs (``("STACK", path)`` for a positional argument); None
+    paths are skipped; ``option`` names the output in the message.  Compared resolved (``./T.zarr``, ``T.zarr/``, an absolute path or a
+    symbolic link to it are the same) and by inode where both exist (hard links, bind mounts).
+    """
+    out = Path(out)
+    for name, path in inputs:
+        if path is None:
+            continue
+        path = Path(path)
+        if same_place(out, path):
+            problem = "is also an input"
+        elif _inside(path, out):
+            problem = "holds an input"
+        elif _inside(out, path) and _is_store(path):
+            problem = "lies inside an input store"
+        else:
+            continue
+        which = name if problem == "is also an input" else f"{name} {path}"
+        raise InputError(
+            f"{option} {out} {problem} ({which}): planeray never writes over its inputs; choose another output"
+        )
+
+
+@contextlib.contextmanager
+def written_together(*paths):
+    """Files a command writes as one result: if the block fails (an error, Ctrl-C), the ones it created go.
+
+    Each file is written atomically by itself; this removes those of the set that did not
+    exist before the block, so a failed run leaves no partial set behind (a file it
+    replaced with ``--overwrite`` stays replaced, whole).
+    """
+    paths = [Path(p) for p in paths if p is not None]
+    existed = {p: p.exists() for p in paths}
+    try:
+        yield
+    except BaseException:
+        for p in paths:
+            if not existed[p]:
+                with contextlib.suppress(OSError):
+                    if p.is_file() and not p.is_symlink():
+                        p.unlink()
+        raise
 
 
 def check_writable(path) -> None:

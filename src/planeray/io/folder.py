@@ -386,7 +386,7 @@ def export_folder(
         "black_level": black_level.item() if isinstance(black_level, np.generic) else black_level,
         "projector_rows": int(stack.projector_rows),
         "planeray_version": planeray_version(),
-        "planeray_metadata": jsonable(stack.metadata, "metadata", StackError),
+        "planeray_metadata": jsonable(stack.metadata, finite=False, where="metadata", error=StackError),
     }
     with atomic_directory(folder, overwrite=overwrite, kind="export folder", error=StackError) as tmp:
         rows = []

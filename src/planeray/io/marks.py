@@ -62,8 +62,10 @@ def png_mark_info(kind: str):
 def _video_title(path: Path) -> str | None:
     import subprocess
 
-    import imageio_ffmpeg
-
+    try:
+        import imageio_ffmpeg
+    except ImportError:  # the `video` extra is not installed: no video can be read, so none is planeray's
+        return None
     try:
         run = subprocess.run(
             [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)],

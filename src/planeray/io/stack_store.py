@@ -177,7 +177,7 @@ def create_stack_group(
             "format_version": FORMAT_VERSION,
             "lines_per_second": float(lines_per_second),
             "projector_rows": int(projector_rows),
-            "metadata": jsonable(metadata, "metadata", StackError),
+            "metadata": jsonable(metadata, finite=False, where="metadata", error=StackError),
             "planeray_version": planeray_version(),
             ALL_CHUNKS_ATTR: True,
         }

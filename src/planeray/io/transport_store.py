@@ -68,7 +68,7 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
     >>> attrs["projector_rows"], attrs["note"]
     (720, 'example')
     """
-    out = jsonable(dict(attrs or {}), "attrs", TransportError)
+    out = jsonable(dict(attrs or {}), finite=False, where="attrs", error=TransportError)
     out.update(
         {
             "format": TRANSPORT_FORMAT,

@@ -51,7 +51,7 @@ import numpy as np
 
 from .._validate import check_integer, check_number
 from ..errors import InputError
-from ..io import atomic_file
+from ..io import atomic_file, jsonable
 from ..io.atomic import ALREADY_EXISTS
 from ..optical_data import CLASS_NAMES, UNLABELLED
 from ..stack import Stack
@@ -368,28 +368,13 @@ class MaterialModel:
         path = Path(path)
         check_model_output(path, overwrite=overwrite)
         blob = sio.dumps(self.pipeline)
-        meta = _plain({**self.record(), "estimator_sha256": hashlib.sha256(blob).hexdigest()})
+        meta = jsonable({**self.record(), "estimator_sha256": hashlib.sha256(blob).hexdigest()})
         meta["record_sha256"] = record_digest(meta)
         with atomic_file(path, overwrite=True) as tmp:
             with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as z:
                 z.writestr(_META, json.dumps(meta, indent=1, sort_keys=True))
                 z.writestr(_BLOB, blob)
         return path
-
-
-def _plain(value):
-    """``value`` as plain JSON types: NumPy arrays and scalars as Python, non-finite floats as None."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
 
 
 def _typicality_space(model: dict, Z, area) -> np.ndarray:

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._extras import import_extra
 from .._validate import check_integer, check_nonnegative, check_positive
 from ..errors import InputError
 
@@ -117,7 +118,7 @@ def ideal_bandpass(x, fps: float, band_hz=DEFAULT_BAND_HZ, *, axis: int = 0) -> 
 
 
 def _down_chain(image, levels: int):
-    import cv2
+    cv2 = import_extra("cv2", "Eulerian video magnification (its pyramids)")
 
     for _ in range(levels):
         image = cv2.pyrDown(image)
@@ -125,7 +126,7 @@ def _down_chain(image, levels: int):
 
 
 def _up_chain(image, sizes):
-    import cv2
+    cv2 = import_extra("cv2", "Eulerian video magnification (its pyramids)")
 
     for h, w in reversed(sizes[:-1]):
         image = cv2.pyrUp(image, dstsize=(w, h))
@@ -184,7 +185,7 @@ def laplacian_pyramid(frames, levels: int) -> list[np.ndarray]:
 
 def _laplacian_frame(frame, sizes) -> list[np.ndarray]:
     """One frame's Laplacian pyramid: ``len(sizes) - 1`` band-pass levels (finest first) and the residual."""
-    import cv2
+    cv2 = import_extra("cv2", "Eulerian video magnification (its pyramids)")
 
     out, cur = [], frame
     for level in range(len(sizes) - 1):
@@ -200,7 +201,7 @@ def _collapse(levels: dict, sizes) -> np.ndarray | None:
     """Sum pyramid levels ``{level: (h_l, w_l) image}`` into the finest size, coarse to fine (``cv2.pyrUp``
     the running sum, add the level); None when no level is given.  With only the coarsest level this is
     the up-sampling of a Gaussian level (:func:`pyramid_up`), with the band levels the Laplacian collapse."""
-    import cv2
+    cv2 = import_extra("cv2", "Eulerian video magnification (its pyramids)")
 
     acc = None
     for level in range(len(sizes) - 1, -1, -1):

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._extras import import_extra
 from .._validate import check_positive
 from ..errors import InputError
 from ..io import atomic_file
@@ -208,7 +209,7 @@ def _frame_to_float(raw, channel: str, path, *, bgr: bool = False) -> np.ndarray
 def _lookup(table: np.ndarray, raw: np.ndarray, channel: int | None = None) -> np.ndarray:
     """``table[raw]`` (of one channel of ``raw``): OpenCV's ``LUT`` for 8 bits, ``numpy.take`` beyond."""
     if raw.dtype == np.uint8:
-        import cv2
+        cv2 = import_extra("cv2", "reading 8-bit video frames")
 
         plane = raw if channel is None else cv2.extractChannel(np.ascontiguousarray(raw), channel)
         return cv2.LUT(plane, table)
@@ -427,7 +428,7 @@ class _OpenCVSource:
 
         # FFmpeg inside OpenCV would print its own complaints about a bad file; the error says it in one line
         os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
-        import cv2
+        cv2 = import_extra("cv2", "decoding a video")
 
         self._cv2 = cv2
         cap = cv2.VideoCapture(str(self.path))
@@ -686,7 +687,7 @@ def encode_frames(
             metadata={"axes": "TYX", "finterval": 1.0 / fps, "Info": info},
         )
         return path
-    import imageio_ffmpeg
+    imageio_ffmpeg = import_extra("imageio_ffmpeg", f"writing a {suffix} video")
 
     top = float(white)
     scale = 255.0 / top if top > 0 else 1.0

@@ -100,6 +100,18 @@ class Scene:
     def geometry(self) -> RowGeometry:
         return self.transport.geometry
 
+    def effect_masks(self) -> dict[str, np.ndarray]:
+        """``{"all": every pixel, effect name: its pixels}`` for each effect label present (:data:`EFFECTS`).
+
+        The regions that analysis reports errors over (e.g.
+        :func:`planeray.baselines.compare_direct_global`), without importing the scenes.
+        """
+        masks = {"all": np.ones(self.shape, bool)}
+        for label in np.unique(self.labels):
+            if label != 0:
+                masks[EFFECTS[int(label)]] = self.labels == label
+        return masks
+
 
 @dataclass(frozen=True)
 class _Entry:

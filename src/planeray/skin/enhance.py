@@ -54,6 +54,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
+from .._extras import import_extra
+
 __all__ = [
     "PAPER_PATCH_PX",
     "paper_patch_px",
@@ -110,7 +112,7 @@ def local_normalize(image, sigma_px: float) -> np.ndarray:
 
 def bilateral(image, *, sigma_range: float = 0.05, sigma_px: float = 1.5) -> np.ndarray:
     """Edge-preserving smoothing (Tomasi & Manduchi 1998) with OpenCV's ``bilateralFilter``."""
-    import cv2
+    cv2 = import_extra("cv2", "Eq. 7's bilateral filter")
 
     img = np.ascontiguousarray(image, np.float32)
     d = int(2 * np.ceil(2 * sigma_px) + 1)

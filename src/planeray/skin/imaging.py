@@ -49,6 +49,7 @@ import dataclasses
 
 import numpy as np
 
+from .._extras import import_extra
 from ..errors import InputError
 from ..scenes.base import DEFAULT_MM_PER_ROW
 from ..timing import PAPER_LINES_PER_SECOND, band_centre_rows, band_width_rows
@@ -148,7 +149,7 @@ def contrast_stretch(image, *, clip_limit: float = 2.0, tiles: int = 8) -> np.nd
     OpenCV's ``createCLAHE`` on 16-bit codes, ``tiles x tiles`` tiles, clip limit ``clip_limit``
     (OpenCV's units: multiples of the mean histogram bin).  Returns values in [0, 1].
     """
-    import cv2
+    cv2 = import_extra("cv2", "the vein viewer's contrast stretch (CLAHE)")
 
     img = np.asarray(image, np.float64)
     lo, hi = np.percentile(img[np.isfinite(img)], [0.5, 99.5])

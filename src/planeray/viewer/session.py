@@ -776,7 +776,7 @@ def pixel_band_profile(
 def open_source(
     path,
     *,
-    size: int = 128,
+    size: int | tuple[int, int] = 128,
     projector_rows: int | None = PAPER_PROJECTOR_ROWS,
     seed: int = 0,
     lines_per_second: float = PAPER_LINES_PER_SECOND,
@@ -792,8 +792,8 @@ def open_source(
     path : str or os.PathLike
         A native stack, an import folder or a transport store; else the name of a
         built-in scene (:func:`planeray.scenes.list_scenes`).
-    size : int
-        Scenes: image size (square, camera pixels).
+    size : int or (int, int)
+        Scenes: image size ``(H, W)`` in camera pixels (one integer: a square).
     projector_rows : int, optional
         Scenes: projector rows spanned by the image (the paper's 720).
     seed : int
@@ -859,7 +859,8 @@ def open_source(
         )
     if not is_scene_name(text):
         raise InputError(f"no such file or folder, and not a scene name (scenes: {', '.join(scenes)})", text)
-    scene = make_scene(text, (int(size), int(size)), projector_rows=projector_rows, seed=int(seed))
+    h, w = (size, size) if np.ndim(size) == 0 else size
+    scene = make_scene(text, (int(h), int(w)), projector_rows=projector_rows, seed=int(seed))
     pats = {Path(v).stem: syn.load_pattern(v, scene.geometry.projector_rows) for v in patterns}
     return TransportSource(
         scene.transport,

@@ -170,10 +170,11 @@ def write_sweep_video(
     -------
     pathlib.Path
     """
-    import imageio_ffmpeg
-
+    from .._extras import import_extra
     from ..io.atomic import check_replaceable
     from ..io.marks import mark_text
+
+    imageio_ffmpeg = import_extra("imageio_ffmpeg", "writing a video")
 
     out = Path(out)
     codec = CODECS.get(out.suffix.lower())
