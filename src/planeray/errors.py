@@ -29,6 +29,22 @@ _PARAMETER_NAMES: ContextVar[dict | None] = ContextVar("planeray_parameter_names
 def parameter_name(name: str) -> str:
     """How a message names the parameter ``name``: its keyword, or the command-line option that set it.
 
+    Parameters
+    ----------
+    name : str
+        The parameter's keyword.
+
+    Returns
+    -------
+    str
+        The keyword, or the command-line option :func:`parameter_names` set for it.
+
+    See Also
+    --------
+    parameter_names : sets the names.
+
+    Examples
+    --------
     >>> parameter_name("white_reference")
     'white_reference'
     >>> with parameter_names({"white_reference": "--white-reference"}):
@@ -40,7 +56,29 @@ def parameter_name(name: str) -> str:
 
 @contextmanager
 def parameter_names(names: dict):
-    """Within the block, messages name parameters as ``names`` says (:func:`parameter_name`)."""
+    """Within the block, messages name parameters as ``names`` says (:func:`parameter_name`).
+
+    Parameters
+    ----------
+    names : dict of str to str
+        Keyword -> how messages name it (``{"white_reference": "--white-reference"}``).
+
+    Returns
+    -------
+    context manager
+
+    See Also
+    --------
+    parameter_name : reads them.
+
+    Examples
+    --------
+    >>> with parameter_names({"mm_per_row": "--mm-per-row"}):
+    ...     parameter_name("mm_per_row")
+    '--mm-per-row'
+    >>> parameter_name("mm_per_row")
+    'mm_per_row'
+    """
     token = _PARAMETER_NAMES.set({**(_PARAMETER_NAMES.get() or {}), **names})
     try:
         yield

@@ -21,7 +21,7 @@ def synchronized_delay_image(device, delay_us: float, exposure_us: float, *, sub
     Parameters
     ----------
     device : PatternDevice
-        A projector-camera (the simulated Episcan is one, :func:`simulated_device`).
+        A projector-camera (the simulated Episcan is one, :func:`planeray.devices.simulated_device`).
     delay_us, exposure_us : float
         The setting, microseconds.
     subtract_dark : bool
@@ -40,7 +40,7 @@ def synchronized_delay_image(device, delay_us: float, exposure_us: float, *, sub
 
     Examples
     --------
-    >>> from planeray.baselines import simulated_device
+    >>> from planeray.devices import simulated_device
     >>> device = simulated_device("corner", (16, 16), seed=0)
     >>> image, saturated, n_captures = synchronized_delay_image(device, 0.0, 200.0)
     >>> image.shape, n_captures
@@ -160,7 +160,7 @@ def compare_direct_global(
     Parameters
     ----------
     device : PatternDevice
-        A projector-camera (the simulated Episcan is one, :func:`simulated_device`).
+        A projector-camera (the simulated Episcan is one, :func:`planeray.devices.simulated_device`).
     epipolar_exposure_us : float
         Exposure of the synchronized epipolar capture, microseconds.
     period_rows, n_shifts : int, optional
@@ -190,7 +190,7 @@ def compare_direct_global(
 
     Examples
     --------
-    >>> from planeray.baselines import simulated_device
+    >>> from planeray.devices import simulated_device
     >>> device = simulated_device("corner", (16, 16), seed=0)
     >>> out = compare_direct_global(device, epipolar_exposure_us=200.0)
     >>> out["numbers"]["n_captures"]
@@ -246,7 +246,7 @@ def compare_emulation(
     Parameters
     ----------
     device : PatternDevice
-        A projector-camera (the simulated Episcan is one, :func:`simulated_device`).
+        A projector-camera (the simulated Episcan is one, :func:`planeray.devices.simulated_device`).
     delay_us, exposure_us : float
         The setting, microseconds.
     capture_exposure_us, frame_period_us : float
@@ -276,7 +276,7 @@ def compare_emulation(
 
     Examples
     --------
-    >>> from planeray.baselines import simulated_device
+    >>> from planeray.devices import simulated_device
     >>> device = simulated_device("corner", (16, 16), seed=0)
     >>> out = compare_emulation(device, 0.0, 200.0)
     >>> out["numbers"]["n_captures"]

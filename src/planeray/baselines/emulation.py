@@ -94,7 +94,7 @@ class EmulationResult:
 
     Examples
     --------
-    >>> from planeray.baselines import simulated_device
+    >>> from planeray.devices import simulated_device
     >>> device = simulated_device("corner", (16, 16), seed=0)
     >>> result = emulate_delay_image(device, 0.0, 200.0)
     >>> type(result).__name__, result.image.shape
@@ -174,7 +174,7 @@ def emulate_delay_image(
 
     Examples
     --------
-    >>> from planeray.baselines import simulated_device
+    >>> from planeray.devices import simulated_device
     >>> device = simulated_device("corner", (16, 16), seed=0)
     >>> result = emulate_delay_image(device, 0.0, 200.0)
     >>> result.n_captures > result.n_captures_synchronized

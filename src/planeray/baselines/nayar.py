@@ -195,7 +195,7 @@ class DirectGlobalResult:
 
     Examples
     --------
-    >>> from planeray.baselines import simulated_device
+    >>> from planeray.devices import simulated_device
     >>> device = simulated_device("corner", (16, 16), seed=0)
     >>> result = capture_direct_global(device)
     >>> type(result).__name__, result.direct.shape, result.n_captures
@@ -266,7 +266,7 @@ def capture_direct_global(
 
     Examples
     --------
-    >>> from planeray.baselines import simulated_device
+    >>> from planeray.devices import simulated_device
     >>> device = simulated_device("corner", (16, 16), seed=0)
     >>> result = capture_direct_global(device)
     >>> result.direct.shape, result.global_.shape

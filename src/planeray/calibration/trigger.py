@@ -352,6 +352,21 @@ def calibrate_delay_zero_from_stack(stack, *, exposure_us: float = 600.0, source
     Returns
     -------
     DelayZeroCalibration
+
+    See Also
+    --------
+    planeray.calibrate_delay_zero : the calibration itself.
+
+    Examples
+    --------
+    A fine delay sweep around 0 captured on the simulated device:
+
+    >>> import planeray as pr
+    >>> from planeray.calibration import delay_zero_sweep
+    >>> scene = pr.make_scene("diffuse_plane", (16, 16), projector_rows=90, seed=0)
+    >>> stack = pr.simulate_stack(scene, delay_zero_sweep(600.0, step_us=20.0), seed=1)
+    >>> abs(calibrate_delay_zero_from_stack(stack).delay_zero_us) < 10.0
+    True
     """
     from ..errors import parameter_name
 

@@ -740,6 +740,20 @@ def simulated_device(
         Simulate noise.
     lines_per_second : float, optional
         Projector line rate (default: the paper's 54,000 lines/s).
+
+    Returns
+    -------
+    SimulatedEpiscan
+
+    See Also
+    --------
+    planeray.baselines.compare_direct_global, planeray.baselines.compare_emulation : the comparisons it serves.
+
+    Examples
+    --------
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> device.lines_per_second, device.scene.name
+    (54000.0, 'corner')
     """
     from ..scenes import make_scene
 
