@@ -239,6 +239,33 @@ def view(
         server.stop()
 
 
+def _check_video_options(out_path, sweep, delay_us, exposure_us, start_us, stop_us, frames, fps, white, gamma,
+                         colormap, scale) -> None:  # fmt: skip
+    """``planeray video``'s options, each refused in one line naming it."""
+    from .._validate import check_integer, check_number, check_positive
+    from ..viewer.display import check_display
+    from ..viewer.video import CODECS, FPS_RANGE, MAX_FRAMES, check_sweep_value
+
+    if out_path.suffix.lower() not in CODECS:
+        raise ValueError(f"--out must end in {', '.join(CODECS)}, got {out_path.name!r}")
+    if sweep not in ("delay", "exposure"):
+        raise ValueError(f"--sweep must be delay or exposure, got {sweep!r}")
+    check_sweep_value(delay_us, "delay", "--delay-us")
+    check_sweep_value(exposure_us, "exposure", "--exposure-us")
+    for name, value in (("--from", start_us), ("--to", stop_us)):
+        if value is not None:
+            check_sweep_value(value, sweep, name)
+    if frames is not None:
+        check_integer(frames, "--frames", minimum=2, maximum=MAX_FRAMES)
+    if fps is not None:
+        check_number(fps, "--fps", minimum=FPS_RANGE[0], maximum=FPS_RANGE[1])
+    if white is not None:
+        check_positive(white, "--white")
+    check_display(white=1.0 if white is None else white, gamma=gamma, colormap=colormap)
+    if scale is not None:
+        check_integer(scale, "--scale", minimum=1, maximum=64)
+
+
 @_friendly_errors
 def video(
     path: PathArg,
@@ -278,39 +305,17 @@ def video(
 ):
     """Write a delay (or exposure) sweep as a video: the paper's "sweeping the band"."""
     from .._extras import import_extra
-    from .._validate import check_integer, check_number, check_positive
-    from ..viewer.display import check_display
     from ..viewer.session import ViewSettings
     from ..viewer.video import (
-        CODECS,
-        FPS_RANGE,
-        MAX_FRAMES,
         VIDEO_KIND,
-        check_sweep_value,
         sweep_values,
         write_sweep_video,
     )
 
     # every option and the output before anything is built or rendered
     import_extra("imageio_ffmpeg", "planeray video")
-    if out_path.suffix.lower() not in CODECS:
-        raise ValueError(f"--out must end in {', '.join(CODECS)}, got {out_path.name!r}")
-    if sweep not in ("delay", "exposure"):
-        raise ValueError(f"--sweep must be delay or exposure, got {sweep!r}")
-    check_sweep_value(delay_us, "delay", "--delay-us")
-    check_sweep_value(exposure_us, "exposure", "--exposure-us")
-    for name, value in (("--from", start_us), ("--to", stop_us)):
-        if value is not None:
-            check_sweep_value(value, sweep, name)
-    if frames is not None:
-        check_integer(frames, "--frames", minimum=2, maximum=MAX_FRAMES)
-    if fps is not None:
-        check_number(fps, "--fps", minimum=FPS_RANGE[0], maximum=FPS_RANGE[1])
-    if white is not None:
-        check_positive(white, "--white")
-    check_display(white=1.0 if white is None else white, gamma=gamma, colormap=colormap)
-    if scale is not None:
-        check_integer(scale, "--scale", minimum=1, maximum=64)
+    _check_video_options(out_path, sweep, delay_us, exposure_us, start_us, stop_us, frames, fps, white, gamma,
+                         colormap, scale)  # fmt: skip
     _check_scene_options(path, size=size, projector_rows=projector_rows, seed=seed)
     _check_outputs(
         (out_path, VIDEO_KIND), overwrite=overwrite, inputs=[("PATH", path if Path(path).exists() else None)]
