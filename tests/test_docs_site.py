@@ -359,3 +359,185 @@ def test_browser_gallery_page(browser, site):
         assert offline(requests) == []
     finally:
         page.close()
+
+
+# ---------------------------------------------------------------------------------------------------
+# A newcomer's pages: a task fits one screen before its first command, no "issue N", every name an Example
+
+#: The user guide's task pages: each fits about one screen of prose before its first command or picture.
+TASK_PAGES = (
+    "simulate",
+    "import",
+    "demultiplex",
+    "sweep_design",
+    "synthesis",
+    "profiles",
+    "materials",
+    "materials_fit",
+    "subsurface",
+    "skin",
+    "skin_depth",
+    "pulse",
+    "mitsuba",
+    "explorer",
+    "camera",
+    "rig",
+    "paper",
+)
+#: The pages that explain how a task works or how well it works (linked from the task pages): no limit.
+EXPLANATION_PAGES = (
+    "index",
+    "demultiplex_how",
+    "demux_weights",
+    "materials_how",
+    "materials_library",
+    "trust",
+    "skin_scene",
+    "skin_veins",
+    "pulse_how",
+    "camera_how",
+)
+#: About one screen of prose.
+SCREEN_WORDS = 400
+
+# The words of the article before its first code block or picture, as the browser lays the page out
+# (the navigation, the sidebar and the page's title bar are not the article).
+_WORDS_BEFORE_FIRST_COMMAND = """() => {
+  const article = document.querySelector('article.bd-article');
+  const walker = document.createTreeWalker(article, NodeFilter.SHOW_ELEMENT | NodeFilter.SHOW_TEXT);
+  let words = 0;
+  for (let node = walker.nextNode(); node; node = walker.nextNode()) {
+    if (node.nodeType === Node.ELEMENT_NODE) {
+      if (node.matches('pre, img, figure, svg')) return [words, node.tagName.toLowerCase()];
+      if (node.matches('script, style, .headerlink')) { walker.currentNode = node.lastChild || node; }
+      continue;
+    }
+    const inSkipped = node.parentElement && node.parentElement.closest('script, style, .headerlink');
+    if (!inSkipped) words += (node.textContent.match(/\\S+/g) || []).length;
+  }
+  return [words, null];
+}"""
+
+
+def test_every_user_guide_page_is_a_task_or_explains_one(site):
+    """A new page of the user guide is classified: a task page (one screen before its command) or an explanation."""
+    pages = sorted(p.stem for p in (site / "user_guide").glob("*.html"))
+    assert sorted(set(pages) - set(TASK_PAGES) - set(EXPLANATION_PAGES)) == []
+    assert sorted((set(TASK_PAGES) | set(EXPLANATION_PAGES)) - set(pages)) == []
+
+
+def test_browser_task_pages_fit_one_screen_before_their_first_command(browser, site):
+    """In chromium: each task page shows its first command or picture after at most ~400 words of prose."""
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    too_long, without = {}, []
+    try:
+        for name in TASK_PAGES:
+            page.goto((site / "user_guide" / f"{name}.html").as_uri(), wait_until="load")
+            words, first = page.evaluate(_WORDS_BEFORE_FIRST_COMMAND)
+            if first is None:
+                without.append(name)
+            elif words > SCREEN_WORDS:
+                too_long[name] = words
+    finally:
+        page.close()
+    assert without == []
+    assert too_long == {}
+
+
+def test_task_pages_have_a_picture(site):
+    """Each task page shows a picture of what the task makes (a figure from the gallery or the docs)."""
+    bare = [
+        name
+        for name in TASK_PAGES
+        if not [u for t, u in parse(site / "user_guide" / f"{name}.html").resources if t == "img"]
+    ]
+    assert bare == []
+
+
+_ISSUE = re.compile(r"\bissues?[\s#-]*\d+", re.IGNORECASE)
+
+
+def test_no_page_a_user_reads_names_an_issue_number(site):
+    """No page says "issue 27": a reader has no issue tracker; the page says what the thing is.
+    (The changelog may name what changed, and does without numbers too.)"""
+    found = []
+    for page in html_pages(site):
+        if page.name in ("search.html", "genindex.html", "py-modindex.html", "changelog.html"):
+            continue
+        text = " ".join(parse(page).text)
+        found += [
+            f"{page.relative_to(site)}: ...{text[max(0, m.start() - 40) : m.end() + 20]}..."
+            for m in _ISSUE.finditer(text)
+        ]
+    assert found == []
+
+
+def _public_names():
+    """The public functions and classes (of ``pr.`` and of each module's ``__all__``), from tools/missing_examples.py."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("missing_examples", ROOT / "tools" / "missing_examples.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_public_name_has_an_example():
+    """Every public function and class has a numpydoc Examples section with a doctest (run by --doctest-modules)."""
+    tool = _public_names()
+    assert len(tool.public_names()) > 250
+    assert tool.missing() == []
+
+
+def test_browser_front_door_api_pages_show_their_example(browser, site):
+    """In chromium: the API page of every name of ``import planeray as pr`` shows an Examples section with code."""
+    import inspect
+
+    import planeray
+
+    names = [
+        n for n in planeray.__all__ if inspect.isfunction(getattr(planeray, n)) or inspect.isclass(getattr(planeray, n))
+    ]
+    assert len(names) > 30
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    lacking = []
+    try:
+        for name in names:
+            page.goto((site / "reference/api/generated" / f"planeray.{name}.html").as_uri(), wait_until="load")
+            shown = page.evaluate(
+                """() => Array.from(document.querySelectorAll('article p.rubric'))
+                       .some(r => r.textContent.trim() === 'Examples'
+                                  && Array.from(document.querySelectorAll('article pre'))
+                                       .some(p => p.textContent.includes('>>>')))"""
+            )
+            if not shown:
+                lacking.append(name)
+    finally:
+        page.close()
+    assert lacking == []
+
+
+def test_browser_code_blocks_are_not_clipped(browser, site):
+    """In chromium at a laptop's 1280 x 900: no code block of a task page, the getting-started page or the
+    command overview runs off the article's right edge (long lines wrap; a reader saw every comment cut off)."""
+    names = ["getting_started", "reference/cli"] + [f"user_guide/{n}" for n in TASK_PAGES]
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    clipped = {}
+    try:
+        for name in names:
+            page.goto((site / f"{name}.html").as_uri(), wait_until="load")
+            n = page.evaluate(
+                "() => Array.from(document.querySelectorAll('article pre'))"
+                ".filter(p => p.scrollWidth > p.clientWidth + 1).length"
+            )
+            if n:
+                clipped[name] = n
+    finally:
+        page.close()
+    assert clipped == {}
+
+
+def test_every_public_name_has_parameters_returns_and_see_also():
+    """Every public function and class documents its Parameters (a class may give Attributes), a function its
+    Returns, and each points to its neighbours (See Also): the API reference reads as numpydoc throughout."""
+    assert _public_names().missing_sections() == {}

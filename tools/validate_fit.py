@@ -1,4 +1,4 @@
-"""Validation of ``planeray.materials.fit`` (issue 27): the numbers of docs/user_guide/materials.md, "Measuring the medium".
+"""Validation of ``planeray.materials.fit``: the numbers of docs/user_guide/materials_fit.md.
 
 1. **Known media, independent forward model.**  For a grid of ``mu_s'`` 0.3-5 /mm x ``mu_a``
    0.001-0.1 /mm, a direct Monte Carlo kernel (:func:`planeray.mc.mc_line_profile`, other seed

@@ -1,5 +1,5 @@
-"""Validation of ``planeray.materials.stackfit.fit_stack`` (issue 27): the numbers of docs/user_guide/materials.md,
-"Measuring the medium", "From the stack images".
+"""Validation of ``planeray.materials.stackfit.fit_stack``: the numbers of docs/user_guide/materials_fit.md,
+"From the stack images".
 
 (a) **Known homogeneous media, independent forward model.**  Every pixel of a small image sees one
     medium whose transport is a *direct* Monte Carlo line kernel (:func:`planeray.mc.mc_line_profile`,

@@ -46,7 +46,7 @@ fig = depth_fit_figure([{**f.to_json(), "curves": f.curves} for f in fits], trut
 
 # %%
 # A vein whose depth or diameter lies at the vein tables' edge (1 mm deep: it may be shallower; 4 mm
-# wide) is flagged and not reported (issue 41); the standard errors hold the model's own error (its
+# wide) is flagged and not reported; the standard errors hold the model's own error (its
 # contrast scaled by a factor with a prior of 0.15) and each fit says whether the skin model fits
 # (``model_fits``: the contrast's chi-square and the images' backgrounds against the skin's kernel).
 for f in fits:

@@ -40,6 +40,18 @@ def acquire_sweep(device: Device, sweep: Sweep, *, progress: Callable[[int], Non
     -------
     Stack
         In-memory stack with the device's description as metadata.
+
+    See Also
+    --------
+    simulate_stack : the same on the simulated Episcan.
+    acquire_to_store : into a resumable store on disk.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("corner", (8, 8), seed=0), seed=0)
+    >>> pr.acquire_sweep(device, pr.quick_sweep()).images.shape
+    (27, 8, 8)
     """
     images, saturated = [], []
     for i, (d, e) in enumerate(zip(sweep.delay_us, sweep.exposure_us)):
@@ -66,11 +78,55 @@ def acquire_sweep(device: Device, sweep: Sweep, *, progress: Callable[[int], Non
 def simulate_stack(
     scene, sweep: Sweep, *, camera=None, lines_per_second=None, seed=0, noise=True, progress=None
 ) -> Stack:
-    """Simulate a sweep of a scene on the simulated Episcan (convenience for notebooks).
+    """Simulate a sweep of a scene on the simulated Episcan (the paper's prototype).
 
-    ``progress``: a callable is called with the index of each image; None (default) shows a progress
-    display in a Jupyter notebook and nothing elsewhere, True anywhere, False never
-    (:func:`planeray._progress.progress_reporter`).
+    Builds a :class:`~planeray.devices.SimulatedEpiscan` -- a laser raster
+    projector synchronized with a rolling-shutter camera, with the camera's
+    noise -- and captures one averaged image per (delay, exposure) of the sweep.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a ground-truth transport (:func:`planeray.scenes.make_scene`).
+    sweep : Sweep
+        The (delay, exposure) settings, in microseconds (:func:`planeray.timing.paper_sweep`).
+    camera : CameraModel, optional
+        Noise model (default: the paper's camera, :class:`planeray.camera.CameraModel`).
+    lines_per_second : float, optional
+        Projector scan rate in rows per second (default: 54,000, the PicoPro's).
+    seed : int
+        Seed of the noise; the same seed gives the same images.
+    noise : bool
+        False: the noise-free expected images.
+    progress : callable, bool or None
+        A callable is called with the index of each finished image; None (default) shows a
+        progress display in a Jupyter notebook and nothing elsewhere, True anywhere, False never
+        (:func:`planeray._progress.progress_reporter`).
+
+    Returns
+    -------
+    Stack
+        Normalized images (N, H, W) in [0, 1] with their delays, exposures and
+        the simulation's record as metadata.
+
+    See Also
+    --------
+    acquire_sweep : the same with any device.
+    acquire_to_store : straight into a resumable store on disk.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Secs. 3, 6.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> stack.images.shape, float(stack.exposure_us[0])
+    ((27, 8, 8), 600.0)
     """
     from ._progress import progress_reporter
     from .devices.simulated import SimulatedEpiscan
@@ -133,6 +189,21 @@ def acquire_to_store(
     Returns
     -------
     pathlib.Path
+
+    See Also
+    --------
+    planeray.acquire_sweep : the same in memory.
+    planeray.read_stack : read the store back.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("corner", (8, 8), seed=0), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.acquire_to_store(device, pr.quick_sweep(), pathlib.Path(tmp) / "stack.zarr")
+    ...     pr.read_stack(path).images.shape
+    (27, 8, 8)
     """
     from . import resumable
     from .errors import StackError

@@ -63,6 +63,17 @@ class CameraModel:
         Gaussian sigma of laser-to-shutter timing jitter (blurs band edges).
     row_jitter_us : float
         Gaussian sigma of the per-frame, per-row trigger offset (row artifacts).
+
+    See Also
+    --------
+    planeray.SimulatedEpiscan : the simulated device that uses it.
+    planeray.simulate_stack : a simulated sweep.
+
+    Examples
+    --------
+    >>> cam = CameraModel(read_noise_e=2.0)
+    >>> cam.max_code, cam.frames_averaged
+    (4095, 8)
     """
 
     bit_depth: int = 12
@@ -296,6 +307,37 @@ def row_shifts_rows(
     """Realized per-frame, per-row trigger offsets ``(n_frames, H)`` in projector rows.
 
     Returns None when ``row_jitter_us`` is 0 (no artifacts).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The source of the jitter.
+    n_frames : int
+        Frames averaged into one image.
+    camera_rows : int
+        Camera rows ``H``.
+    row_jitter_us : float
+        Standard deviation of the per-row trigger offset, microseconds.
+    lines_per_second : float
+        Projector scan rate in rows per second (turns microseconds into rows).
+
+    Returns
+    -------
+    ndarray (n_frames, H) or None
+        Offsets in projector rows; None when ``row_jitter_us`` is 0.
+
+    See Also
+    --------
+    planeray.timing.Band : takes them as ``row_shifts_rows``.
+
+    Examples
+    --------
+    10 us of row jitter at 54,000 rows/s is about half a projector row:
+
+    >>> import numpy as np
+    >>> shifts = row_shifts_rows(np.random.default_rng(0), 200, 64, 10.0, 54000.0)
+    >>> shifts.shape, round(float(shifts.std()), 1)
+    ((200, 64), 0.5)
     """
     if row_jitter_us <= 0:
         return None
@@ -309,6 +351,22 @@ def binned_camera(camera: CameraModel, pixels: float) -> CameraModel:
     well, laser and ambient electrons add up (times ``pixels``), their read noise in quadrature
     (times ``sqrt(pixels)``), and the ADC gains the bits the sum gains (up to 16), so that shot noise
     per unit of scene is the real camera's whatever the simulated size.  ``pixels <= 1``: ``camera``.
+
+    Parameters
+    ----------
+    camera : CameraModel
+        The real sensor's model.
+    pixels : float
+        Sensor pixels summed into one simulated pixel (1 or less: ``camera`` unchanged).
+
+    Returns
+    -------
+    CameraModel
+        The binned camera.
+
+    See Also
+    --------
+    CameraModel : the noise model.
 
     Examples
     --------

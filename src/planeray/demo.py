@@ -85,7 +85,41 @@ def _skin_headline(out_dir, size, seed, console):
 
 
 def run_demo(out_dir, size: int = 128, seed: int = 0, console=None, progress=None):
-    """Run the demo and return the paths it wrote."""
+    """Run the demo and return the paths it wrote.
+
+    Parameters
+    ----------
+    out_dir : str or path
+        The folder to write (created).
+    size : int
+        Image size in pixels (square).
+    seed : int
+        Seed of the simulated noise.
+    console : rich.console.Console, optional
+        Where messages and progress bars go (default: the terminal).
+    progress : optional
+        A rich Progress to show the steps in.
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        What it wrote, by name (``stack_disco_ball``, ``fig8_contact_sheet``, ...).
+
+    See Also
+    --------
+    planeray.simulate_stack, planeray.demultiplex : the steps it runs.
+
+    Examples
+    --------
+    The demo at 8 x 8 pixels, its messages kept out of the way:
+
+    >>> import io, pathlib, tempfile
+    >>> from rich.console import Console
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     paths = run_demo(pathlib.Path(tmp) / "out", size=8, console=Console(file=io.StringIO()))
+    >>> sorted(paths)[:3]
+    ['fig8_contact_sheet', 'fig9_delay_profiles', 'fig9_profiles_csv']
+    """
     from rich.console import Console
     from rich.text import Text
 

@@ -29,6 +29,22 @@ _PARAMETER_NAMES: ContextVar[dict | None] = ContextVar("planeray_parameter_names
 def parameter_name(name: str) -> str:
     """How a message names the parameter ``name``: its keyword, or the command-line option that set it.
 
+    Parameters
+    ----------
+    name : str
+        The parameter's keyword.
+
+    Returns
+    -------
+    str
+        The keyword, or the command-line option :func:`parameter_names` set for it.
+
+    See Also
+    --------
+    parameter_names : sets the names.
+
+    Examples
+    --------
     >>> parameter_name("white_reference")
     'white_reference'
     >>> with parameter_names({"white_reference": "--white-reference"}):
@@ -40,7 +56,29 @@ def parameter_name(name: str) -> str:
 
 @contextmanager
 def parameter_names(names: dict):
-    """Within the block, messages name parameters as ``names`` says (:func:`parameter_name`)."""
+    """Within the block, messages name parameters as ``names`` says (:func:`parameter_name`).
+
+    Parameters
+    ----------
+    names : dict of str to str
+        Keyword -> how messages name it (``{"white_reference": "--white-reference"}``).
+
+    Returns
+    -------
+    context manager
+
+    See Also
+    --------
+    parameter_name : reads them.
+
+    Examples
+    --------
+    >>> with parameter_names({"mm_per_row": "--mm-per-row"}):
+    ...     parameter_name("mm_per_row")
+    '--mm-per-row'
+    >>> parameter_name("mm_per_row")
+    'mm_per_row'
+    """
     token = _PARAMETER_NAMES.set({**(_PARAMETER_NAMES.get() or {}), **names})
     try:
         yield
@@ -49,7 +87,19 @@ def parameter_names(names: dict):
 
 
 class PlanerayError(Exception):
-    """Base class of every error planeray raises on purpose."""
+    """Base class of every error planeray raises on purpose.
+
+    See Also
+    --------
+    InputError, StackError, TransportError, DeviceError, StorageError
+
+    Examples
+    --------
+    Every error planeray raises on purpose is one; the command line prints its message in one line:
+
+    >>> issubclass(InputError, PlanerayError), issubclass(DeviceError, PlanerayError)
+    (True, True)
+    """
 
 
 class InputError(PlanerayError, ValueError):
@@ -61,6 +111,18 @@ class InputError(PlanerayError, ValueError):
         What is wrong, in words.
     path : str or os.PathLike, optional
         The file or folder concerned; prefixed to the message.
+
+    See Also
+    --------
+    StackError, TransportError : malformed stores.
+
+    Examples
+    --------
+    >>> err = InputError("manifest.csv has no delay_us column", "capture/manifest.csv")
+    >>> str(err)
+    'capture/manifest.csv: manifest.csv has no delay_us column'
+    >>> isinstance(err, ValueError)
+    True
     """
 
     def __init__(self, problem: str, path=None):
@@ -70,15 +132,71 @@ class InputError(PlanerayError, ValueError):
 
 
 class StackError(InputError):
-    """A delay-exposure stack (native store or import folder) is malformed."""
+    """A delay-exposure stack (native store or import folder) is malformed.
+
+    Parameters
+    ----------
+    problem : str
+        What is wrong, in words.
+    path : str or os.PathLike, optional
+        The file or folder concerned; prefixed to the message.
+
+    See Also
+    --------
+    planeray.read_stack, planeray.import_folder : raise it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> try:
+    ...     pr.Stack(np.zeros((2, 4, 4)), [0.0], [600.0, 600.0], 54000.0)
+    ... except StackError as err:
+    ...     print(err)
+    2 images but 1 delays and 2 exposures
+    """
 
 
 class TransportError(InputError):
-    """A transport store is malformed."""
+    """A transport store is malformed.
+
+    Parameters
+    ----------
+    problem : str
+        What is wrong, in words.
+    path : str or os.PathLike, optional
+        The file or folder concerned; prefixed to the message.
+
+    See Also
+    --------
+    planeray.read_transport : raises it.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     try:
+    ...         pr.read_transport(pathlib.Path(tmp) / "missing.zarr")
+    ...     except TransportError:
+    ...         print("refused")
+    refused
+    """
 
 
 class DeviceError(PlanerayError, RuntimeError):
-    """A device cannot be opened or refused a setting (missing SDK, no camera, bad timing)."""
+    """A device cannot be opened or refused a setting (missing SDK, no camera, bad timing).
+
+    See Also
+    --------
+    planeray.devices.open_device : raises it.
+
+    Examples
+    --------
+    >>> err = DeviceError("no uEye camera found (camera_id 0)")
+    >>> isinstance(err, RuntimeError), str(err)
+    (True, 'no uEye camera found (camera_id 0)')
+    """
 
 
 class StorageError(PlanerayError, OSError):
@@ -93,6 +211,16 @@ class StorageError(PlanerayError, OSError):
         What failed and why.
     path : str or os.PathLike, optional
         The output (or input) concerned; prefixed to the message.
+
+    See Also
+    --------
+    planeray.io.atomic_directory, planeray.io.atomic_file : the writes behind it.
+
+    Examples
+    --------
+    >>> err = StorageError("disk full while writing images", "out/stack.zarr")
+    >>> isinstance(err, OSError), err.path
+    (True, 'out/stack.zarr')
     """
 
     def __init__(self, problem: str, path=None):

@@ -1,4 +1,4 @@
-"""Goodness of fit: when a measurement cannot be trusted (issue 41).
+"""Goodness of fit: when a measurement cannot be trusted.
 
 Every inverse method of planeray (``materials fit`` per region and per block, the stack fit,
 ``skin depth``, recognition) fits a forward model to data whose noise it knows (the camera's
@@ -76,6 +76,22 @@ def _check_p(p_misfit) -> float:
 def misfit_threshold(dof: int, *, p_misfit=DEFAULT_P_MISFIT) -> float:
     """The reduced chi-square above which a fit of ``dof`` degrees of freedom is flagged.
 
+    Parameters
+    ----------
+    dof : int
+        Degrees of freedom.
+    p_misfit : float
+        The probability that a right model is flagged.
+
+    Returns
+    -------
+    float
+        The reduced chi-square threshold.
+
+    See Also
+    --------
+    fit_quality : applies it.
+
     Examples
     --------
     >>> round(misfit_threshold(75), 2), round(misfit_threshold(10_000), 3)
@@ -97,6 +113,19 @@ class FitQuality:
         Degrees of freedom: samples minus fitted parameters (at least 1).
     p_misfit : float
         The p-value below which the model is said not to fit.
+
+    See Also
+    --------
+    fit_quality : builds it.
+    misfit_threshold : the flag's threshold.
+
+    Examples
+    --------
+    >>> q = FitQuality(chi2=12.0, dof=10)
+    >>> round(q.reduced_chi2, 2), q.fits
+    (1.2, True)
+    >>> FitQuality(chi2=60.0, dof=10).fits
+    False
     """
 
     chi2: float
@@ -156,6 +185,23 @@ class FitQuality:
 def fit_quality(chi2, dof, *, p_misfit=DEFAULT_P_MISFIT) -> FitQuality:
     """:class:`FitQuality` of a fit: ``chi2`` of its whitened residuals at ``dof`` degrees of freedom.
 
+    Parameters
+    ----------
+    chi2 : float
+        Sum of the squared whitened residuals (noise model and model-error floor included).
+    dof : int
+        Degrees of freedom (observations minus fitted parameters).
+    p_misfit : float
+        The false-alarm probability of the misfit flag for a right model.
+
+    Returns
+    -------
+    FitQuality
+
+    See Also
+    --------
+    misfit_threshold : the threshold it applies.
+
     Examples
     --------
     >>> q = fit_quality(80.0, 75)
@@ -168,5 +214,27 @@ def fit_quality(chi2, dof, *, p_misfit=DEFAULT_P_MISFIT) -> FitQuality:
 
 
 def describe_flags(bits: int) -> list[str]:
-    """The texts of :data:`FLAGS` set in ``bits``."""
+    """The texts of :data:`FLAGS` set in ``bits``.
+
+    Parameters
+    ----------
+    bits : int
+        An OR of :data:`FLAG_MISFIT`, :data:`FLAG_EDGE`, :data:`FLAG_NOT_FITTED`, :data:`FLAG_RANGE`.
+
+    Returns
+    -------
+    list of str
+        One sentence per flag set.
+
+    See Also
+    --------
+    FitQuality : a fit's verdict.
+
+    Examples
+    --------
+    >>> describe_flags(FLAG_EDGE)
+    ['a parameter at the edge of the forward model (not reported as a fit)']
+    >>> describe_flags(0)
+    []
+    """
     return [text for bit, text in FLAGS.items() if int(bits) & bit]

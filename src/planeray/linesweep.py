@@ -52,6 +52,19 @@ class LineSweep:
         image, e.g. trigger jitter / sqrt(frames averaged); enters the uncertainty.
     metadata : dict
         Free-form, JSON-serializable (device description, truth of a simulation).
+
+    See Also
+    --------
+    planeray.calibrate_lines_per_second : reads it.
+    planeray.calibration.write_line_sweep : stores it.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> target = pr.make_scene("diffuse_plane", (288, 32), projector_rows=96, seed=0)
+    >>> sweep = pr.SimulatedEpiscan(target, seed=5).capture_line_sweep(500.0)
+    >>> type(sweep).__name__, sweep.images.shape, sweep.exposure_us, sweep.line_step_rows
+    ('LineSweep', (2, 288, 32), 500.0, 2)
     """
 
     images: np.ndarray

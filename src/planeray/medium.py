@@ -204,7 +204,28 @@ class Medium:
 
 
 def as_medium(value) -> Medium:
-    """``value`` if it is a :class:`Medium`; otherwise a ``TypeError`` saying how to build one."""
+    """``value`` if it is a :class:`Medium`; otherwise a ``TypeError`` saying how to build one.
+
+    Parameters
+    ----------
+    value : Medium
+        The medium (anything else is refused with a message saying how to build one).
+
+    Returns
+    -------
+    Medium
+        ``value`` itself.
+
+    See Also
+    --------
+    Medium : the optical constants.
+
+    Examples
+    --------
+    >>> m = Medium(sigma_s=1.0, sigma_a=0.01, g=0.9)
+    >>> as_medium(m) is m
+    True
+    """
     if isinstance(value, Medium):
         return value
     raise TypeError(

@@ -158,6 +158,14 @@ def material_medium(material, *, source: str = "narasimhan", channel: str = "red
     channel : {"red", "green", "blue"}
         Colour of the projector's line.
 
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    material_media : all five.
+
     Examples
     --------
     >>> m = material_medium("fat_free_milk")
@@ -190,7 +198,31 @@ def material_medium(material, *, source: str = "narasimhan", channel: str = "red
 
 
 def material_media(*, source: str = "narasimhan", channel: str = "red") -> dict[int, Medium]:
-    """The five media by class id (:func:`material_medium` for each)."""
+    """The five media by class id (:func:`material_medium` for each).
+
+    Parameters
+    ----------
+    source : {"narasimhan", "jensen"}
+        The published constants of the milks (Narasimhan et al. 2006 or Jensen et al. 2001).
+    channel : {"red", "green", "blue"}
+        The laser line.
+
+    Returns
+    -------
+    dict of int to Medium
+        Class id -> medium (1/mm coefficients).
+
+    See Also
+    --------
+    material_medium : one material.
+    optical_table : as table rows.
+
+    Examples
+    --------
+    >>> media = material_media()
+    >>> sorted(media), round(media[3].sigma_s_prime, 2)  # whole milk's reduced scattering, 1/mm
+    ([1, 2, 3, 4, 5], 4.6)
+    """
     return {cid: material_medium(cid, source=source, channel=channel) for cid in MATERIAL_CLASSES}
 
 
@@ -200,6 +232,28 @@ def optical_table(*, source: str = "narasimhan", channel: str = "red") -> list[d
     Each row: ``class_id``, ``name``, the medium's fields, ``sigma_s_prime``,
     ``transport_mfp_mm`` and the diffusion length ``1 / sigma_tr`` in mm
     (``sigma_tr = sqrt(3 sigma_a (sigma_a + sigma_s'))``).
+
+    Parameters
+    ----------
+    source : {"narasimhan", "jensen"}
+        The published constants of the milks.
+    channel : {"red", "green", "blue"}
+        The laser line.
+
+    Returns
+    -------
+    list of dict
+        One row per medium.
+
+    See Also
+    --------
+    material_media : the media themselves.
+
+    Examples
+    --------
+    >>> rows = optical_table()
+    >>> len(rows), "name" in rows[0]
+    (5, True)
     """
     rows = []
     for cid, m in material_media(source=source, channel=channel).items():

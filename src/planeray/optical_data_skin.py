@@ -17,25 +17,25 @@ dermis
     saturation ``S = 0.7``, water ``W = 0.65``.
 blood
     ``mu_a,blood(S) = S mu_a,oxy + (1 - S) mu_a,deoxy`` of whole blood (150 g/L Hb).  The
-    venous value (``S = 0.7``) at each line is the one issue 13 quotes from [1]_ (0.892 and
+    venous value (``S = 0.7``) at each line is the one quoted from [1]_ (0.892 and
     0.512 mm^-1); the split into oxy and deoxy follows the ratio of Prahl's tabulated molar
     extinction coefficients [2]_ (Gratzer/Kollias, 640 nm: 442 / 4345.2 cm^-1/M; 850 nm:
     1058 / 691.32 cm^-1/M), so changing ``S`` moves ``mu_a`` as the haemoglobin spectra do.
-    Blood scattering: ``mu_s`` 7.84 / 5.88 mm^-1 (issue 13 after [1]_), ``g = 0.9``.
+    Blood scattering: ``mu_s`` 7.84 / 5.88 mm^-1 (after [1]_), ``g = 0.9``.
 water
     Hale & Querry 1973 [4]_: 0.00031 mm^-1 at 638 nm, 0.0043 mm^-1 at 850 nm.
 scattering of epidermis and dermis
-    ``mu_s`` of the issue (31.4 / 23.5 and 22.5 / 12.6 mm^-1 at 638 / 850 nm, ``g = 0.9``),
+    ``mu_s`` (31.4 / 23.5 and 22.5 / 12.6 mm^-1 at 638 / 850 nm, ``g = 0.9``),
     the values of the generic-skin scattering power laws of [1]_.
 subcutaneous fat
     Bashkatov et al. 2005 [5]_: ``mu_s' = 2.7 mm^-1`` and ``mu_a = 0.19 mm^-1`` at 600 nm
-    (the values issue 13 quotes).  ``mu_s'`` is scaled as ``lambda^-0.68``; ``mu_a`` at 600 nm
+    (the values quoted there).  ``mu_s'`` is scaled as ``lambda^-0.68``; ``mu_a`` at 600 nm
     is mostly the blood in the fat, so it is carried to 638 and 850 nm with the absorption
     spectrum of blood at ``S = 0.7`` (Prahl [2]_, 600 nm: 3200 / 14677.2 cm^-1/M; a factor
     0.24 at 638 nm and 0.14 at 850 nm) plus water (``W = 0.2``): 0.046 and 0.028 mm^-1.
     This transfer is our modelling step, not a published value at those lines.
 
-The numbers the issue gives are checked in ``tests/test_skin.py``
+The published numbers these constants reproduce are checked in ``tests/test_skin.py``
 (``test_optical_constants_match_issue``).
 
 References
@@ -94,7 +94,7 @@ SKIN_G = 0.9
 SKIN_N = 1.4
 
 _WATER_MU_A = {638: 0.00031, 850: 0.0043}  # Hale & Querry 1973 [4]
-_VENOUS_MU_A = {638: 0.892, 850: 0.512}  # S = 0.7 whole blood, issue 13 after Jacques 2013 [1]
+_VENOUS_MU_A = {638: 0.892, 850: 0.512}  # S = 0.7 whole blood, after Jacques 2013 [1]
 _VENOUS_S = 0.7
 _HB_EPSILON = {638: (442.0, 4345.2), 850: (1058.0, 691.32)}  # Prahl [2]: (HbO2, Hb), cm^-1/M
 _BLOOD_MU_S = {638: 7.84, 850: 5.88}
@@ -120,7 +120,27 @@ def _line(wavelength_nm) -> int:
 
 
 def tone_fraction(tone) -> float:
-    """Melanosome volume fraction of a tone: a name of :data:`SKIN_TONES` or a fraction in ``[0, 0.5]``."""
+    """Melanosome volume fraction of a tone: a name of :data:`SKIN_TONES` or a fraction in ``[0, 0.5]``.
+
+    Parameters
+    ----------
+    tone : str or float
+        ``"very_fair"``, ``"fair"``, ``"medium"``, ``"olive"``, ``"brown"``, ``"dark"`` or a fraction.
+
+    Returns
+    -------
+    float
+        Melanosome volume fraction.
+
+    See Also
+    --------
+    epidermis_medium : uses it.
+
+    Examples
+    --------
+    >>> tone_fraction("fair"), tone_fraction(0.05)
+    (0.03, 0.05)
+    """
     if isinstance(tone, str):
         if tone not in SKIN_TONES:
             raise InputError(f"unknown skin tone {tone!r}; choose one of {', '.join(SKIN_TONES)} or a fraction")
@@ -132,14 +152,55 @@ def tone_fraction(tone) -> float:
 
 
 def melanosome_mu_a(wavelength_nm) -> float:
-    """Absorption of a melanosome, ``6.6e11 lambda^-3.33 cm^-1`` (Jacques [3]_), in mm^-1."""
+    """Absorption of a melanosome, ``6.6e11 lambda^-3.33 cm^-1`` (Jacques [3]_), in mm^-1.
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+
+    Returns
+    -------
+    float
+        Absorption coefficient, 1/mm.
+
+    See Also
+    --------
+    epidermis_medium : uses it.
+
+    Examples
+    --------
+    >>> round(melanosome_mu_a(638), 1)  # 1/mm
+    30.2
+    """
     return 6.6e11 * float(wavelength_nm) ** -3.33 / 10.0
 
 
 def blood_mu_a(wavelength_nm, saturation=_VENOUS_S) -> float:
     """Absorption of whole blood (150 g/L) at oxygen saturation ``saturation``, mm^-1.
 
-    ``S mu_oxy + (1 - S) mu_deoxy``, scaled so ``S = 0.7`` gives the issue's venous value.
+    ``S mu_oxy + (1 - S) mu_deoxy``, scaled so ``S = 0.7`` gives the published venous value (Jacques 2013 [1]_).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    saturation : float
+        Oxygen saturation, 0 to 1.
+
+    Returns
+    -------
+    float
+        Absorption coefficient, 1/mm.
+
+    See Also
+    --------
+    blood_medium : the blood as a medium.
+
+    Examples
+    --------
+    >>> round(blood_mu_a(638), 3), round(blood_mu_a(850), 3)  # 1/mm, venous (saturation 0.7)
+    (0.892, 0.512)
     """
     line = _line(wavelength_nm)
     s = float(saturation)
@@ -151,13 +212,59 @@ def blood_mu_a(wavelength_nm, saturation=_VENOUS_S) -> float:
 
 
 def blood_medium(wavelength_nm, saturation=_VENOUS_S) -> Medium:
-    """Venous blood as a :class:`Medium` (index matched to the tissue around it)."""
+    """Venous blood as a :class:`Medium` (index matched to the tissue around it).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    saturation : float
+        Oxygen saturation, 0 to 1.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    blood_mu_a : its absorption.
+
+    Examples
+    --------
+    >>> m = blood_medium(850)
+    >>> round(m.sigma_a, 3), m.g
+    (0.512, 0.9)
+    """
     line = _line(wavelength_nm)
     return Medium(sigma_s=_BLOOD_MU_S[line], sigma_a=blood_mu_a(line, saturation), g=SKIN_G, n=SKIN_N)
 
 
 def epidermis_medium(wavelength_nm, melanin_fraction, thickness_mm=0.1) -> Medium:
-    """Epidermis with melanosome fraction ``melanin_fraction`` (Jacques 2013 [1]_)."""
+    """Epidermis with melanosome fraction ``melanin_fraction`` (Jacques 2013 [1]_).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    melanin_fraction : float
+        Melanosome volume fraction (:func:`tone_fraction`).
+    thickness_mm : float
+        Thickness, mm.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    skin_layers : the whole skin.
+
+    Examples
+    --------
+    >>> m = epidermis_medium(638, tone_fraction("fair"))
+    >>> round(m.sigma_a, 3)  # 1/mm
+    0.905
+    """
     line = _line(wavelength_nm)
     m = tone_fraction(melanin_fraction)
     mu_a = m * melanosome_mu_a(line) + _EPIDERMIS_WATER * _WATER_MU_A[line]
@@ -165,14 +272,61 @@ def epidermis_medium(wavelength_nm, melanin_fraction, thickness_mm=0.1) -> Mediu
 
 
 def dermis_medium(wavelength_nm, thickness_mm=1.5, *, blood_fraction=_DERMIS_BLOOD, saturation=_DERMIS_S) -> Medium:
-    """Dermis with blood fraction ``blood_fraction`` at saturation ``saturation`` (Jacques 2013 [1]_)."""
+    """Dermis with blood fraction ``blood_fraction`` at saturation ``saturation`` (Jacques 2013 [1]_).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    thickness_mm : float
+        Thickness, mm.
+    blood_fraction : float
+        Blood volume fraction.
+    saturation : float
+        The blood's oxygen saturation.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    skin_layers : the whole skin.
+
+    Examples
+    --------
+    >>> round(dermis_medium(638).sigma_a, 4)  # 1/mm
+    0.002
+    """
     line = _line(wavelength_nm)
     mu_a = float(blood_fraction) * blood_mu_a(line, saturation) + _DERMIS_WATER * _WATER_MU_A[line]
     return Medium(sigma_s=_DERMIS_MU_S[line], sigma_a=mu_a, g=SKIN_G, n=SKIN_N, thickness_mm=thickness_mm)
 
 
 def fat_medium(wavelength_nm, thickness_mm=8.0) -> Medium:
-    """Subcutaneous fat (Bashkatov et al. 2005 [5]_)."""
+    """Subcutaneous fat (Bashkatov et al. 2005 [5]_).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    thickness_mm : float
+        Thickness, mm.
+
+    Returns
+    -------
+    Medium
+
+    See Also
+    --------
+    skin_layers : the whole skin.
+
+    Examples
+    --------
+    >>> m = fat_medium(638)
+    >>> m.thickness_mm
+    8.0
+    """
     line = _line(wavelength_nm)
     mu_s_prime = _FAT_MU_S_PRIME_600 * (line / 600.0) ** -_FAT_B
     eo, ed = _HB_EPSILON[line]
@@ -184,7 +338,27 @@ def fat_medium(wavelength_nm, thickness_mm=8.0) -> Medium:
 
 @dataclass(frozen=True)
 class SkinLayers:
-    """The layer stack of the skin, top first, and the blood of its veins."""
+    """The layer stack of the skin, top first, and the blood of its veins.
+
+    Parameters
+    ----------
+    wavelength_nm : int
+        The wavelength, nm.
+    layers : tuple of Medium
+        Epidermis, dermis, fat, top first (``thickness_mm`` each).
+    blood : Medium
+        The veins' blood.
+
+    See Also
+    --------
+    skin_layers : builds one.
+
+    Examples
+    --------
+    >>> layers = skin_layers(638, "fair")
+    >>> [round(layer.thickness_mm, 2) for layer in layers.layers][:2], layers.wavelength_nm
+    ([0.1, 1.5], 638)
+    """
 
     wavelength_nm: int
     layers: tuple  # of Medium, each with its thickness
@@ -215,6 +389,25 @@ def skin_layers(
     blood_saturation=_VENOUS_S,
 ) -> SkinLayers:
     """Epidermis, dermis and fat at ``wavelength_nm`` for a skin ``tone``, and venous blood.
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The laser line, nm (638 or 850 in the paper's experiments).
+    tone : str or float
+        A name of :data:`SKIN_TONES` or a melanosome fraction.
+    epidermis_mm, dermis_mm, fat_mm : float
+        Layer thicknesses, mm.
+    blood_saturation : float
+        The blood's oxygen saturation.
+
+    Returns
+    -------
+    SkinLayers
+
+    See Also
+    --------
+    skin_model : with any constant replaced.
 
     Examples
     --------
@@ -277,6 +470,10 @@ def skin_model(
     Returns
     -------
     SkinLayers
+
+    See Also
+    --------
+    skin_layers : the published model.
 
     Examples
     --------

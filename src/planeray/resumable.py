@@ -54,7 +54,27 @@ _FINGERPRINT = "run_fingerprint"
 
 
 def partial_path(out) -> Path:
-    """The hidden partial store next to ``out``."""
+    """The hidden partial store next to ``out``.
+
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+
+    Returns
+    -------
+    pathlib.Path
+        ``.NAME.partial`` beside ``out``.
+
+    See Also
+    --------
+    open_partial : opens it.
+
+    Examples
+    --------
+    >>> partial_path("out/T.zarr").as_posix()
+    'out/.T.zarr.partial'
+    """
     out = Path(out)
     return out.parent / f".{out.name}.partial"
 
@@ -65,6 +85,40 @@ def open_partial(out, fingerprint: str, n_units: int, create: Callable[[Path], o
     ``create`` lays out the store's arrays and attributes in an empty directory
     and returns the Zarr group.  Raises :class:`InputError` when an unfinished
     run with another fingerprint is in the way (unless ``restart``).
+
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+    fingerprint : str
+        What identifies the run's inputs and parameters.
+    n_units : int
+        Units of work (images, chunks of rows).
+    create : callable
+        ``create(directory) -> zarr.Group``: lays out the store in an empty folder.
+    restart : bool
+        Discard an unfinished run of another fingerprint instead of refusing.
+
+    Returns
+    -------
+    zarr.Group
+        The partial store, opened for writing.
+
+    See Also
+    --------
+    mark_done, done_units, promote
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> mark_done(group, 0)
+    >>> open_partial(out, "inputs-v1", 3, None) is not None  # the same run resumes
+    True
+    >>> tmp.cleanup()
     """
     import zarr
 
@@ -100,6 +154,31 @@ def discard_if_empty(out) -> bool:
 
     Called when a run fails: a partial store with finished units is kept (the next run
     resumes it), one without any holds nothing worth keeping and is not left behind.
+
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+
+    Returns
+    -------
+    bool
+        True if the partial store was removed.
+
+    See Also
+    --------
+    open_partial : creates it.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> discard_if_empty(out), partial_path(out).exists()
+    (True, False)
+    >>> tmp.cleanup()
     """
     import zarr
 
@@ -115,12 +194,65 @@ def discard_if_empty(out) -> bool:
 
 
 def mark_done(group, index: int) -> None:
-    """Mark unit ``index`` done (call after its data is written)."""
+    """Mark unit ``index`` done (call after its data is written).
+
+    Parameters
+    ----------
+    group : zarr.Group
+        The partial store.
+    index : int
+        The unit finished.
+
+    Returns
+    -------
+    None
+
+    See Also
+    --------
+    done_units : the units marked.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> mark_done(group, 1)
+    >>> done_units(group).tolist()
+    [False, True, False]
+    >>> tmp.cleanup()
+    """
     group[_DONE][index] = True
 
 
 def done_units(group) -> np.ndarray:
-    """Boolean mask of the finished units."""
+    """Boolean mask of the finished units.
+
+    Parameters
+    ----------
+    group : zarr.Group
+        The partial store.
+
+    Returns
+    -------
+    ndarray of bool (n_units,)
+
+    See Also
+    --------
+    mark_done : marks one.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> done_units(group).tolist()
+    [False, False, False]
+    >>> tmp.cleanup()
+    """
     return np.asarray(group[_DONE][:], dtype=bool)
 
 
@@ -132,6 +264,39 @@ def promote(out, *, overwrite: bool, kind: str | None = None, error=InputError) 
     ``out`` may not be replaced (for instance it appeared while the run was going),
     the finished partial store is kept as it is: a re-run with the same inputs
     finds every unit done and finishes without recomputing.
+
+    Parameters
+    ----------
+    out : str or path
+        The output store.
+    overwrite : bool
+        Replace an existing ``out`` (only a planeray result of the same ``kind``).
+    kind : str, optional
+        What the store is (``"stack"``, ``"transport"``).
+    error : type
+        The exception raised when ``out`` may not be replaced.
+
+    Returns
+    -------
+    pathlib.Path
+        ``out``.
+
+    See Also
+    --------
+    open_partial : the run's start.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import zarr
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> out = pathlib.Path(tmp.name) / "result.zarr"
+    >>> group = open_partial(out, "inputs-v1", 3, lambda d: zarr.open_group(str(d), mode="w"))
+    >>> for unit in range(3):
+    ...     mark_done(group, unit)
+    >>> promote(out, overwrite=False).name, partial_path(out).exists()
+    ('result.zarr', False)
+    >>> tmp.cleanup()
     """
     import zarr
 

@@ -43,6 +43,27 @@ class Stack:
     metadata : dict
         JSON-serializable acquisition record: ``camera``, ``sync``, ``scene``,
         ``seed``, ``source``, ``sweep`` ... (free-form, kept verbatim).
+
+    See Also
+    --------
+    planeray.simulate_stack, planeray.acquire_sweep : stacks from a device.
+    planeray.read_stack, planeray.import_folder : stacks from disk.
+    planeray.demultiplex : the transport of a stack.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    Three images of a 2 x 2 camera:
+
+    >>> import numpy as np
+    >>> stack = Stack(np.zeros((3, 2, 2), np.float32), [-750.0, 0.0, 750.0], [600.0] * 3, 54000.0)
+    >>> stack.shape, stack.excluded.tolist()
+    ((2, 2), [False, False, False])
     """
 
     images: object
@@ -271,6 +292,10 @@ def recorded_mm_per_row(metadata) -> tuple[float | None, str | None]:
     (float or None, str or None)
         The row size and ``"acquisition.json"``, ``"the capture's record"`` or ``"the scene's record"``;
         ``(None, None)`` when nothing records it.
+
+    See Also
+    --------
+    Stack : its ``metadata``.
 
     Examples
     --------

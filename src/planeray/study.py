@@ -83,7 +83,34 @@ Provider = Callable[[float, float, float], np.ndarray]
 # ---------------------------------------------------------------------------- setup
 @dataclass
 class StudySetup:
-    """Offsets ``u`` (U,), the band matrix ``A`` (N, U) and its :class:`RowGroup`."""
+    """Offsets ``u`` (U,), the band matrix ``A`` (N, U) and its :class:`RowGroup`.
+
+    Parameters
+    ----------
+    offsets : ndarray (U,) of int
+        Offsets ``u``, projector rows.
+    A : ndarray (N, U)
+        The used images' bands.
+    group : RowGroup
+        ``A`` as the solvers take it.
+
+    See Also
+    --------
+    study_setup : builds it.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 5.2.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> setup.A.shape, setup.offsets.size  # 23 used images x 229 offsets
+    ((23, 229), 229)
+    """
 
     offsets: np.ndarray
     A: np.ndarray
@@ -91,7 +118,35 @@ class StudySetup:
 
 
 def study_setup(sweep=None, lines_per_second: float = PAPER_LINES_PER_SECOND) -> StudySetup:
-    """The paper sweep's used bands over ``u = -K..K`` (75 x 229 for the paper sweep)."""
+    """The paper sweep's used bands over ``u = -K..K`` (75 x 229 for the paper sweep).
+
+    Parameters
+    ----------
+    sweep : Sweep, optional
+        Default: the paper's.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+
+    Returns
+    -------
+    StudySetup
+
+    See Also
+    --------
+    reconstruct : solves with it.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 5.2.
+
+    Examples
+    --------
+    >>> setup = study_setup()  # the paper's sweep
+    >>> setup.A.shape
+    (75, 229)
+    """
     sweep = paper_sweep() if sweep is None else sweep
     K = sweep_support_rows(sweep, lines_per_second)
     u = np.arange(-K, K + 1)
@@ -106,6 +161,32 @@ def dipole_provider(offsets, mm_per_row: float = DEFAULT_MM_PER_ROW, eta: float 
 
     ``g`` enters only through the similarity relation.  ``eta = 1`` (index-matched
     boundary) matches the Monte Carlo engine's default ``n = 1``.
+
+    Parameters
+    ----------
+    offsets : array_like of int
+        Offsets ``u``, projector rows.
+    mm_per_row : float
+        Size of a projector row on the surface, mm.
+    eta : float
+        Relative refractive index of the medium.
+
+    Returns
+    -------
+    callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) -> ndarray (U,).
+
+    See Also
+    --------
+    mc_provider : by Monte Carlo.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> profile = dipole_provider(setup.offsets, mm_per_row=1.0)
+    >>> profile(1.0, 0.01, 0.9).shape  # sigma_s, sigma_a (1/mm), g
+    (229,)
     """
     from .mc.diffusion import dipole_line_kernel
 
@@ -133,6 +214,38 @@ def mc_provider(
     with ``sigma_a = 0`` a photon scatters until it leaves or is handed to
     diffusion theory 10 transport mean free paths deep (~250 collisions at the
     defaults; see :func:`planeray.mc.mc_line_profile`).
+
+    Parameters
+    ----------
+    offsets : array_like of int
+        Offsets ``u``, projector rows.
+    mm_per_row : float
+        Size of a projector row on the surface, mm.
+    n_photons : int
+        Photons per profile.
+    seed : int
+        Seed of the tracing.
+    n : float
+        Relative refractive index of the medium.
+    cache : bool
+        Keep profiles on disk.
+
+    Returns
+    -------
+    callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) -> ndarray (U,).
+
+    See Also
+    --------
+    dipole_provider : the diffusion dipole.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> profile = mc_provider(setup.offsets, n_photons=2_000, cache=False)
+    >>> profile(1.0, 0.1, 0.9).shape
+    (229,)
     """
     from .mc import mc_line_profile
 
@@ -163,6 +276,32 @@ def default_provider(
     (what the paper's Mitsuba profiles had); the full study's 33 profiles take
     ~50 s on 2 cores the first time, then come from the disk cache.  The dipole
     is instant and smooth.
+
+    Parameters
+    ----------
+    offsets : array_like of int
+        Offsets ``u``, projector rows.
+    mm_per_row : float
+        Size of a projector row on the surface, mm.
+    n_photons : int
+        Photons per profile (Monte Carlo).
+    use_mc : bool
+        Monte Carlo (True) or the dipole.
+
+    Returns
+    -------
+    callable
+
+    See Also
+    --------
+    resolve_provider : by name.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> default_provider(setup.offsets, use_mc=False).name.startswith("dipole")
+    True
     """
     if use_mc:
         return mc_provider(offsets, mm_per_row, n_photons)
@@ -170,6 +309,31 @@ def default_provider(
 
 
 def resolve_provider(provider, offsets) -> Provider:
+    """The provider named by ``provider``: None or ``"mc"`` (Monte Carlo), ``"dipole"``, or a callable as it is.
+
+    Parameters
+    ----------
+    provider : None, {"mc", "dipole"} or callable
+        ``profile(sigma_s, sigma_a, g) -> T`` over ``offsets`` (1/mm; T per projector row).
+    offsets : ndarray of int
+        Offsets ``u`` of the profiles, projector rows.
+
+    Returns
+    -------
+    callable
+        ``profile(sigma_s, sigma_a, g)``.
+
+    See Also
+    --------
+    default_provider : the default.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> resolve_provider("dipole", setup.offsets).name.startswith("dipole")
+    True
+    """
     if provider is None or provider in ("mc", "dipole"):
         return default_provider(offsets, use_mc=provider != "dipole")
     if callable(provider):
@@ -178,6 +342,30 @@ def resolve_provider(provider, offsets) -> Provider:
 
 
 def cached_provider(provider: Provider) -> Provider:
+    """``provider`` remembering each profile it made (the sweeps ask for the same profiles again).
+
+    Parameters
+    ----------
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm).
+
+    Returns
+    -------
+    callable
+        The same profiles, each computed once.
+
+    See Also
+    --------
+    resolve_provider : a provider by name.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> profile = cached_provider(dipole_provider(setup.offsets))
+    >>> profile(1.0, 0.01, 0.9) is profile(1.0, 0.01, 0.9)  # computed once
+    True
+    """
     cache = {}
 
     def profile(sigma_s, sigma_a, g):
@@ -191,7 +379,31 @@ def cached_provider(provider: Provider) -> Provider:
 
 
 def scaled_truth(A, T) -> np.ndarray:
-    """``T`` scaled so that ``max(A T) = 1`` (normalized images)."""
+    """``T`` scaled so that ``max(A T) = 1`` (normalized images).
+
+    Parameters
+    ----------
+    A : ndarray (N, U)
+        The bands.
+    T : array_like (U,)
+        A profile.
+
+    Returns
+    -------
+    ndarray (U,)
+
+    See Also
+    --------
+    mse_trials : uses it.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> round(float((setup.A @ T).max()), 6)
+    1.0
+    """
     T = np.clip(np.asarray(T, np.float64), 0.0, None)
     peak = float(np.max(A @ T))
     if not peak > 0:
@@ -201,7 +413,36 @@ def scaled_truth(A, T) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- core
 def reconstruct(setup: StudySetup, B, methods=METHODS, alpha=0.01, beta=0.01) -> dict:
-    """Reconstructions ``{method: X (P, U)}`` of observations ``B`` (P, N)."""
+    """Reconstructions ``{method: X (P, U)}`` of observations ``B`` (P, N).
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+    B : array_like (P, N)
+        Observations.
+    methods : tuple of {"pinv", "nnls", "full"}
+        The reconstructions.
+    alpha, beta : float
+        Weights of the full method.
+
+    Returns
+    -------
+    dict of str to ndarray (P, U)
+
+    See Also
+    --------
+    mse_trials : their errors.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> X = reconstruct(setup, setup.A @ T, methods=("pinv", "full"))
+    >>> sorted(X), X["full"].shape
+    (['full', 'pinv'], (1, 229))
+    """
     B = np.atleast_2d(np.asarray(B, np.float64))
     out = {}
     for m in methods:
@@ -223,7 +464,45 @@ def _observations(setup: StudySetup, T, noise, seeds, point=0):
 
 
 def mse_trials(setup: StudySetup, T, noise, seeds=5, methods=METHODS, alpha=0.01, beta=0.01, point=0, return_x=False):
-    """MSE against ``T`` of each method for ``seeds`` noise realizations: ``{method: (seeds,)}``."""
+    """MSE against ``T`` of each method for ``seeds`` noise realizations: ``{method: (seeds,)}``.
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+    T : ndarray (U,)
+        The true profile (:func:`scaled_truth`).
+    noise : float
+        Standard deviation of the image noise, normalized units.
+    seeds : int
+        Noise realizations.
+    methods : tuple of str
+        The reconstructions.
+    alpha, beta : float
+        Weights of the full method.
+    point : int
+        Seeds the noise per grid point.
+    return_x : bool
+        Also return the reconstructions.
+
+    Returns
+    -------
+    dict of str to ndarray (seeds,)
+        (and the reconstructions with ``return_x``).
+
+    See Also
+    --------
+    reconstruct : one reconstruction.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> mse = mse_trials(setup, T, noise=0.05, seeds=2, methods=("nnls", "full"))
+    >>> mse["full"].shape, bool(mse["full"].mean() < mse["nnls"].mean())
+    ((2,), True)
+    """
     B = _observations(setup, T, noise, seeds, point)
     X = reconstruct(setup, B, methods, alpha, beta)
     mse = {m: ((x - T[None]) ** 2).mean(axis=1) for m, x in X.items()}
@@ -235,7 +514,39 @@ def _truth(setup, provider, sigma_s, sigma_a, g):
 
 
 def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_NOISE, seed=0, **params) -> dict:
-    """Fig. 5a/b: truth and one reconstruction per method (noise realization ``seed``)."""
+    """Fig. 5a/b: truth and one reconstruction per method (noise realization ``seed``).
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    noise : float
+        Image noise, normalized units.
+    seed : int
+        The noise realization.
+    **params
+        ``sigma_s``, ``sigma_a``, ``g`` (1/mm), ``alpha``, ``beta``.
+
+    Returns
+    -------
+    dict
+        ``truth`` and each method's reconstruction, with their MSE.
+
+    See Also
+    --------
+    noise_sweep : over noise levels.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> example = reconstruction_example(setup, dipole_provider(setup.offsets))
+    >>> example["full"].shape == example["truth"].shape
+    True
+    """
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
     B = _observations(setup, T, noise, seed + 1)[seed : seed + 1]
@@ -249,7 +560,41 @@ def reconstruction_example(setup: StudySetup, provider: Provider, noise=DEFAULT_
 
 
 def noise_sweep(setup: StudySetup, provider: Provider, noises, seeds=5, *, progress=None, **params) -> dict:
-    """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``; ``progress(1)`` after each noise level."""
+    """Fig. 5c: ``mse[method]`` of shape ``(len(noises), seeds)``; ``progress(1)`` after each noise level.
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    noises : array_like
+        Noise levels, normalized units.
+    seeds : int
+        Realizations per level.
+    progress : callable, optional
+        ``progress(1)`` after each level.
+    **params
+        ``sigma_s``, ``sigma_a``, ``g`` (1/mm), ``alpha``, ``beta``.
+
+    Returns
+    -------
+    dict
+        ``mse[method]`` (len(noises), seeds).
+
+    See Also
+    --------
+    parameter_sweep : over the medium.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> out = noise_sweep(setup, dipole_provider(setup.offsets), [0.01, 0.1], seeds=2)
+    >>> out["mse"]["full"].shape
+    (2, 2)
+    """
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
     mse = {m: np.zeros((len(noises), seeds)) for m in METHODS}
@@ -274,6 +619,34 @@ def auto_weights(setup: StudySetup, B, *, criterion: str | None = None) -> tuple
     ``criterion="cv-images"``: 5-fold cross-validation over the images, seed 0), the
     observations of the ``P`` noise realizations pooled like the pixels of a stack, weighted
     alike (the study's noise is the same for every image).
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+    B : array_like (P, N)
+        Observations (noise realizations pooled).
+    criterion : str, optional
+        ``"gcv"`` (default) or ``"cv-images"``.
+
+    Returns
+    -------
+    alpha, beta : float
+
+    See Also
+    --------
+    planeray.demux.choose_weights : the same for a stack.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> import numpy as np
+    >>> B = setup.A @ T + 0.02 * np.random.default_rng(0).standard_normal((20, setup.A.shape[0]))
+    >>> alpha, beta = auto_weights(setup, B)
+    >>> alpha > 0 and beta > 0
+    True
     """
     from .demux.auto import (
         CV_CRITERION,
@@ -343,7 +716,47 @@ def parameter_sweep(
     ``mse`` ``(len(values), seeds)``) and ``best_fixed`` (the pair of
     :data:`FIXED_ALPHAS` x :data:`FIXED_BETAS` with the lowest mean MSE for that profile,
     found with knowledge of the truth: ``alpha``, ``beta``, ``mse`` ``(len(values),)``),
-    on the same noise realizations."""
+    on the same noise realizations.
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    name : {"sigma_s", "sigma_a", "g"}
+        The parameter swept.
+    values : array_like
+        Its values.
+    seeds : int
+        Realizations per value.
+    noise : float
+        Image noise, normalized units.
+    progress : callable, optional
+        ``progress(1)`` after each value.
+    auto : bool
+        Also the automatic weights and the best fixed pair.
+    **params
+        The other parameters.
+
+    Returns
+    -------
+    dict
+        ``mse[method]`` (len(values), seeds), and with ``auto`` ``auto`` and ``best_fixed``.
+
+    See Also
+    --------
+    regularization_sweep : over the weights.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> out = parameter_sweep(setup, dipole_provider(setup.offsets), "sigma_a", [0.0, 0.1], seeds=2)
+    >>> out["mse"]["full"].shape
+    (2, 2)
+    """
     if name not in DEFAULT_PARAMS:
         raise ValueError(f"unknown parameter {name!r}")
     mse = {m: np.zeros((len(values), seeds)) for m in METHODS}
@@ -378,6 +791,41 @@ def regularization_sweep(
     seeds) and ``variance`` (``mse - bias2``), each ``(len(alphas), len(betas))``;
     the same noise realizations are used at every grid point.  ``progress(1)``
     after each grid point.
+
+    Parameters
+    ----------
+    setup : StudySetup
+        The band matrix (:func:`study_setup`).
+
+    provider : callable
+        ``profile(sigma_s, sigma_a, g)`` (1/mm) over ``setup.offsets``.
+    alphas, betas : array_like
+        The grid of weights.
+    seeds : int
+        Realizations.
+    noise : float
+        Image noise, normalized units.
+    progress : callable, optional
+        ``progress(1)`` after each grid point.
+    **params
+        ``sigma_s``, ``sigma_a``, ``g`` (1/mm).
+
+    Returns
+    -------
+    dict
+        ``mse``, ``bias2`` and ``variance``, each (len(alphas), len(betas)).
+
+    See Also
+    --------
+    auto_weights : the weights chosen from the data.
+
+    Examples
+    --------
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())
+    >>> out = regularization_sweep(setup, dipole_provider(setup.offsets), [0.01, 0.1], [0.01], seeds=2)
+    >>> out["mse"].shape, out["variance"].shape
+    ((2, 1), (2, 1))
     """
     p = {**DEFAULT_PARAMS, **params}
     T = _truth(setup, provider, p["sigma_s"], p["sigma_a"], p["g"])
@@ -402,7 +850,27 @@ def regularization_sweep(
 
 
 def grids(quick: bool = False) -> dict:
-    """The swept values (full, or reduced for tests)."""
+    """The swept values (full, or reduced for tests).
+
+    Parameters
+    ----------
+    quick : bool
+        The reduced grids of the tests and ``--quick``.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``noise``, ``sigma_s``, ``sigma_a``, ``g``, ``alpha``, ``beta``.
+
+    See Also
+    --------
+    noise_sweep, parameter_sweep, regularization_sweep : sweep them.
+
+    Examples
+    --------
+    >>> sorted(grids(quick=True))
+    ['alpha', 'beta', 'g', 'noise', 'sigma_a', 'sigma_s']
+    """
     if quick:
         return {
             "noise": np.array([0.005, 0.05, 0.3]),

@@ -105,6 +105,11 @@ def delay_from_sync_offset(sync_offset_us, exposure_us, *, line_time_us=None, li
     delay_us : float or ndarray
         Delay ``t_d`` between the centre of exposure and the centre of illumination.
 
+    See Also
+    --------
+    sync_offset_from_delay : the inverse.
+    band_centre_rows : the delay in projector rows (Eq. 2).
+
     Examples
     --------
     The paper's line time at 54,000 lines/s is 18.5 us; a sync offset of 0 with a
@@ -120,18 +125,94 @@ def delay_from_sync_offset(sync_offset_us, exposure_us, *, line_time_us=None, li
 
 
 def sync_offset_from_delay(delay_us, exposure_us, *, line_time_us=None, lines_per_second=None):
-    """Inverse of Eq. 1: ``t'_o = t_e/2 - t_p/2 - t_d`` (see :func:`delay_from_sync_offset`)."""
+    """Inverse of Eq. 1: ``t'_o = t_e/2 - t_p/2 - t_d`` (see :func:`delay_from_sync_offset`).
+
+    Parameters
+    ----------
+    delay_us : float or array_like
+        Delay ``t_d`` in microseconds.
+    exposure_us : float or array_like
+        Row exposure ``t_e`` in microseconds.
+    line_time_us : float, optional
+        ``t_p``, the time the projector lights one scanline, in microseconds (default
+        ``1e6 / lines_per_second``).
+    lines_per_second : float, optional
+        Projector scan rate ``v_p`` in rows per second; used only when ``line_time_us`` is None.
+
+    Returns
+    -------
+    sync_offset_us : float or ndarray
+        ``t'_o`` in microseconds: the time from the start of a row's exposure to the moment the projector
+        lights that row.
+
+    See Also
+    --------
+    delay_from_sync_offset : Eq. 1.
+
+    Examples
+    --------
+    The inverse of :func:`delay_from_sync_offset`:
+
+    >>> t_o = sync_offset_from_delay(375.0, 600.0, lines_per_second=PAPER_LINES_PER_SECOND)
+    >>> float(delay_from_sync_offset(t_o, 600.0, lines_per_second=PAPER_LINES_PER_SECOND))
+    375.0
+    """
     t_p = _line_time_us(line_time_us, lines_per_second)
     return 0.5 * np.asarray(exposure_us, dtype=float) - 0.5 * t_p - np.asarray(delay_us, dtype=float)
 
 
 def band_centre_rows(delay_us, lines_per_second):
-    """Band centre ``I_d = v_p t_d`` in projector rows, Eq. 2 (``v_p`` in lines per second)."""
+    """Band centre ``I_d = v_p t_d`` in projector rows, Eq. 2 (``v_p`` in lines per second).
+
+    Parameters
+    ----------
+    delay_us : float or array_like
+        Delay ``t_d`` in microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+
+    Returns
+    -------
+    float or ndarray
+        ``I_d`` in projector rows (positive: below the camera row's epipolar plane).
+
+    See Also
+    --------
+    band_width_rows : the band's width.
+    Band : a band as an illumination.
+
+    Examples
+    --------
+    >>> float(band_centre_rows(375.0, PAPER_LINES_PER_SECOND))  # 375 us at 54,000 rows/s
+    20.25
+    """
     return np.asarray(delay_us, dtype=float) * 1e-6 * float(lines_per_second)
 
 
 def band_width_rows(exposure_us, lines_per_second):
-    """Band width ``I_w = v_p t_e`` in projector rows, Eq. 2 (``v_p`` in lines per second)."""
+    """Band width ``I_w = v_p t_e`` in projector rows, Eq. 2 (``v_p`` in lines per second).
+
+    Parameters
+    ----------
+    exposure_us : float or array_like
+        Row exposure ``t_e`` in microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+
+    Returns
+    -------
+    float or ndarray
+        ``I_w`` in projector rows.
+
+    See Also
+    --------
+    band_centre_rows : the band's centre.
+
+    Examples
+    --------
+    >>> float(band_width_rows(600.0, PAPER_LINES_PER_SECOND))  # the paper's shortest exposure
+    32.4
+    """
     return np.asarray(exposure_us, dtype=float) * 1e-6 * float(lines_per_second)
 
 
@@ -141,6 +222,33 @@ def illumination(offset_rows, delay_us, exposure_us, lines_per_second):
     ``L(u) = 1`` where ``|u - I_d| < I_w / 2`` and 0 elsewhere, with ``u = v - t``
     the projector-row offset.  Use :func:`band_bin_weights` for its exact
     discretization on 1-row bins.
+
+    Parameters
+    ----------
+    offset_rows : float or array_like
+        Offsets ``u = v - t`` in projector rows.
+    delay_us, exposure_us : float
+        Delay ``t_d`` and exposure ``t_e`` in microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+
+    Returns
+    -------
+    ndarray of float
+        1 inside the band, 0 outside (the projector's full intensity is 1).
+
+    See Also
+    --------
+    band_bin_weights : its exact discretization on 1-row bins.
+    Band : the band with jitter and the projector's ends.
+
+    Examples
+    --------
+    A 600 us band centred 375 us away lights offsets 4 to 36 (Eq. 3):
+
+    >>> import numpy as np
+    >>> illumination(np.array([0.0, 10.0, 40.0]), 375.0, 600.0, PAPER_LINES_PER_SECOND).tolist()
+    [0.0, 1.0, 0.0]
     """
     centre = band_centre_rows(delay_us, lines_per_second)
     half = 0.5 * band_width_rows(exposure_us, lines_per_second)
@@ -206,6 +314,11 @@ def band_bin_weights(offset_rows, centre_rows, width_rows, *, blur_sigma_rows=0.
     weights : ndarray of float64
         Fraction of each bin lit by the band; they sum to ``width_rows`` over all bins.
 
+    See Also
+    --------
+    illumination : the continuous band (Eq. 3).
+    band_interval_weights : the same over any intervals.
+
     Examples
     --------
     A 600 us band at 54,000 lines/s is 32.4 rows wide; its bin weights add up to that
@@ -242,6 +355,10 @@ def band_interval_weights(lo_rows, hi_rows, centre_rows, width_rows, *, blur_sig
     -------
     weights : ndarray of float64
         Length of each interval lit by the band (rows); 0 below ``1e-10``.
+
+    See Also
+    --------
+    band_bin_weights : over 1-row bins.
 
     Examples
     --------
@@ -281,6 +398,15 @@ class RowGeometry:
         Number of projector rows ``P`` seen by the camera; defaults to ``H``
         (one camera row per projector row).  ``P = 720, H = 128`` models the
         paper's 128x128 images of a 720-row PicoPro.
+
+    See Also
+    --------
+    planeray.Transport : a transport over this geometry.
+
+    Examples
+    --------
+    >>> RowGeometry(128, 720).rows_per_camera_row
+    5.625
     """
 
     camera_rows: int
@@ -393,6 +519,40 @@ class Band:
     a realized per-frame, per-row trigger offset in projector rows; the weights are
     then the average over the ``F`` frames -- this is what produces horizontal row
     artifacts when a band edge sits on the epipolar plane (``|t_d| ~ t_e/2``).
+
+    Parameters
+    ----------
+    delay_us : float
+        Synchronization delay ``t_d`` in microseconds.
+    exposure_us : float
+        Row exposure ``t_e`` in microseconds (> 0).
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second (Eq. 2).
+    jitter_us : float
+        Standard deviation of the synchronization jitter, microseconds.
+    line_width_us : float
+        Width of the laser line in scan time, microseconds.
+    row_shifts_rows : ndarray (F, H), optional
+        Realized per-frame, per-row trigger offsets in projector rows.
+
+    See Also
+    --------
+    planeray.band_image : the image of a band.
+    Sweep : one band per image.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Eqs. 2-3.
+
+    Examples
+    --------
+    The paper's scan rate turns microseconds into projector rows (Eq. 2):
+
+    >>> band = Band(delay_us=375.0, exposure_us=600.0)
+    >>> band.centre_rows, band.width_rows
+    (20.25, 32.4)
     """
 
     delay_us: float
@@ -558,6 +718,17 @@ def band_weights_at_row(bands, geometry: RowGeometry, camera_row: int, offsets_r
     Returns
     -------
     weights : ndarray (N, U) float64
+
+    See Also
+    --------
+    Band.weights : one band at many rows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> bands = quick_sweep().bands(PAPER_LINES_PER_SECOND)
+    >>> band_weights_at_row(bands, RowGeometry(64, 720), 32, np.arange(-114, 115)).shape
+    (27, 229)
     """
     bands = list(bands)
     offsets = np.asarray(offsets_rows)
@@ -592,6 +763,23 @@ class RowPattern:
     ``pattern`` has one value per projector row ``v = 0 .. P-1``; the weight of an
     offset bin is the exact average of the piecewise-constant pattern over the
     bin's part inside the projector (:meth:`RowGeometry.bin_parts`).
+
+    Parameters
+    ----------
+    pattern : ndarray (P,)
+        Intensity of each projector row (1 = full intensity).
+
+    See Also
+    --------
+    planeray.relight : the image under a pattern.
+    Band : a (delay, exposure) illumination.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = RowPattern(np.ones(4)).weights(RowGeometry(4), np.arange(4)[:, None], np.array([-1, 0, 1]))
+    >>> w.tolist()[0]  # the row above row 0 is off the projector
+    [0.0, 1.0, 1.0]
     """
 
     pattern: np.ndarray
@@ -621,6 +809,34 @@ class Sweep:
     left out of demultiplexing (Sec. 4).  ``record`` holds what a sweep file says about
     where the sweep came from (a designed sweep: its prior, camera and criterion;
     :func:`planeray.io.read_sweep`), or None.
+
+    Parameters
+    ----------
+    delay_us, exposure_us : ndarray (N,)
+        Delay ``t_d`` and exposure ``t_e`` of each image, microseconds.
+    excluded : ndarray of bool (N,)
+        Images left out of demultiplexing.
+    name : str
+        A name for the record (``"paper"``, ``"quick"``, ``"custom"``).
+    record : dict, optional
+        Where the sweep came from (a sweep file's record).
+
+    See Also
+    --------
+    paper_sweep, quick_sweep, make_sweep
+    Sweep.grid : every delay at every exposure.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    >>> sweep = Sweep.grid([-750.0, 0.0, 750.0], [600.0])
+    >>> len(sweep), sweep.excluded.tolist()
+    (3, [False, False, False])
     """
 
     delay_us: np.ndarray
@@ -660,7 +876,31 @@ class Sweep:
 
 
 def boundary_images(delay_us, exposure_us, *, margin_us=PAPER_BOUNDARY_MARGIN_US):
-    """Flag images whose band edge sits on the epipolar plane: ``||t_d| - t_e/2| <= margin``."""
+    """Flag images whose band edge sits on the epipolar plane: ``||t_d| - t_e/2| <= margin``.
+
+    Parameters
+    ----------
+    delay_us, exposure_us : array_like
+        Delay ``t_d`` and exposure ``t_e`` of each image, microseconds.
+    margin_us : float
+        How close (microseconds) a band edge may come to the epipolar plane (the paper: 75).
+
+    Returns
+    -------
+    ndarray of bool
+        True for the images left out of demultiplexing.
+
+    See Also
+    --------
+    Sweep : its ``excluded`` flags.
+
+    Examples
+    --------
+    A band whose edge is on the epipolar plane (``|t_d| = t_e / 2``) is a boundary image:
+
+    >>> boundary_images([0.0, 300.0, 750.0], [600.0, 600.0, 600.0]).tolist()
+    [False, True, False]
+    """
     d = np.asarray(delay_us, dtype=float)
     e = np.asarray(exposure_us, dtype=float)
     return np.abs(np.abs(d) - 0.5 * e) <= margin_us + 1e-9
@@ -669,6 +909,22 @@ def boundary_images(delay_us, exposure_us, *, margin_us=PAPER_BOUNDARY_MARGIN_US
 def paper_sweep() -> Sweep:
     """The paper's sweep (Sec. 6): delays -1500..1500 us step 187.5 (17) x exposures
     600..1200 us step 150 (5) = 85 images, 10 boundary images flagged -> N = 75.
+
+    Returns
+    -------
+    Sweep
+        85 (delay, exposure) settings in microseconds, exposure-major (the rows of Fig. 8).
+
+    See Also
+    --------
+    quick_sweep : 27 images for quick looks.
+    Sweep.grid : any grid of delays and exposures.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6.
 
     Examples
     --------
@@ -682,7 +938,28 @@ def paper_sweep() -> Sweep:
 
 
 def quick_sweep() -> Sweep:
-    """A small sweep for quick looks and tests: 9 delays x 3 exposures."""
+    """A small sweep for quick looks and tests: 9 delays x 3 exposures.
+
+    Delays -1500..1500 us in steps of 375 us, exposures 600, 900 and 1200 us; the
+    boundary images (band edge on the epipolar plane) are flagged as in
+    :func:`paper_sweep`.
+
+    Returns
+    -------
+    Sweep
+        27 (delay, exposure) settings in microseconds.
+
+    See Also
+    --------
+    paper_sweep : the paper's 85-image sweep.
+    make_sweep : a named sweep.
+
+    Examples
+    --------
+    >>> sweep = quick_sweep()
+    >>> len(sweep), int(sweep.excluded.sum()), sweep.name
+    (27, 4, 'quick')
+    """
     return Sweep.grid(np.arange(-4, 5) * 375.0, np.array([600.0, 900.0, 1200.0]), name="quick")
 
 
@@ -691,7 +968,33 @@ SWEEPS = {"paper": paper_sweep, "quick": quick_sweep}
 
 
 def make_sweep(name: str) -> Sweep:
-    """Look up a named sweep in :data:`SWEEPS`."""
+    """A named sweep of :data:`SWEEPS` (what ``--sweep NAME`` of the command line takes).
+
+    Parameters
+    ----------
+    name : {'paper', 'quick'}
+        ``"paper"``: the paper's 85 images (Sec. 6); ``"quick"``: 27 images.
+
+    Returns
+    -------
+    Sweep
+        The (delay, exposure) settings in microseconds.
+
+    Raises
+    ------
+    ValueError
+        An unknown name (the message lists the known ones).
+
+    See Also
+    --------
+    paper_sweep, quick_sweep
+    planeray.io.read_sweep : a sweep from a file.
+
+    Examples
+    --------
+    >>> len(make_sweep("paper")), len(make_sweep("quick"))
+    (85, 27)
+    """
     try:
         return SWEEPS[name]()
     except KeyError:
@@ -700,7 +1003,31 @@ def make_sweep(name: str) -> Sweep:
 
 def sweep_support_rows(sweep: Sweep, lines_per_second, *, include_excluded=False) -> int:
     """Half-width ``K`` of the offset support ``-K..K`` reached by a sweep's bands:
-    ``max |I_d| + I_w / 2`` rounded up (114 rows -> 229 offsets for the paper's sweep)."""
+    ``max |I_d| + I_w / 2`` rounded up (114 rows -> 229 offsets for the paper's sweep).
+
+    Parameters
+    ----------
+    sweep : Sweep
+        The (delay, exposure) settings, microseconds.
+    lines_per_second : float
+        Projector scan rate ``v_p`` in rows per second.
+    include_excluded : bool
+        Count the boundary images too (default: only the images demultiplexing uses).
+
+    Returns
+    -------
+    int
+        ``K``: the demultiplexer's unknowns are the offsets ``-K..K`` (projector rows).
+
+    See Also
+    --------
+    paper_sweep : 114 rows for the paper's sweep.
+
+    Examples
+    --------
+    >>> sweep_support_rows(quick_sweep(), PAPER_LINES_PER_SECOND)
+    114
+    """
     keep = np.ones(len(sweep), bool) if include_excluded else ~sweep.excluded
     reach = np.abs(band_centre_rows(sweep.delay_us[keep], lines_per_second)) + 0.5 * band_width_rows(
         sweep.exposure_us[keep], lines_per_second

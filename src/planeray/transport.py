@@ -43,6 +43,24 @@ class SparseEntries:
 
     ``row``/``col`` are camera pixel indices, ``offset`` the integer offset bin
     ``u = v - t`` in projector rows, ``value`` the transport (float32).
+
+    Parameters
+    ----------
+    row, col : ndarray of int (K,)
+        Camera pixel of each entry.
+    offset : ndarray of int (K,)
+        Offset ``u = v - t`` of each entry, projector rows.
+    value : ndarray of float32 (K,)
+        Transport of each entry (normalized image value per projector row).
+
+    See Also
+    --------
+    Transport : the dense band these entries extend.
+
+    Examples
+    --------
+    >>> len(SparseEntries.empty().value)
+    0
     """
 
     row: np.ndarray
@@ -93,6 +111,11 @@ def bin_projector_rows(per_row, geometry: RowGeometry, offsets_rows, *, far: boo
     dense : ndarray of float32, shape (H, W, U)
     entries : tuple of ndarray ``(row, col, offset, value)``
         Nonzero light outside the band (empty arrays when ``far`` is False).
+
+    See Also
+    --------
+    Transport : the offset bins.
+    planeray.timing.RowGeometry.row_bins : the overlap rule.
 
     Examples
     --------
@@ -152,6 +175,29 @@ class Transport:
         Camera/projector rows; defaults to one projector row per camera row.
     sparse : SparseEntries, optional
         Long-range entries outside the dense band.
+
+    See Also
+    --------
+    planeray.demultiplex : a transport from a stack.
+    planeray.read_transport, planeray.write_transport : the transport store.
+    planeray.epipolar_image, planeray.band_image, planeray.relight : images from it.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Eq. 4, Fig. 2.
+
+    Examples
+    --------
+    A transport that keeps all light in the epipolar plane (a mirror-free, direct-only scene):
+
+    >>> import numpy as np
+    >>> dense = np.zeros((4, 4, 3), np.float32)
+    >>> dense[:, :, 1] = 0.5  # offset u = 0
+    >>> T = Transport(dense, offsets_rows=np.array([-1, 0, 1]))
+    >>> float(T.epipolar_image()[0, 0]), float(T.non_epipolar_image()[0, 0])
+    (0.5, 0.0)
     """
 
     dense: np.ndarray

@@ -14,7 +14,24 @@ DEFAULT_FRAME_PERIOD_US = 1e6 / 60.0
 
 @runtime_checkable
 class PatternDevice(Protocol):
-    """A projector-camera that can project a row pattern for a full-frame exposure."""
+    """A projector-camera that can project a row pattern for a full-frame exposure.
+
+    See Also
+    --------
+    planeray.devices.simulated_device : one.
+    capture_direct_global, emulate_delay_image : use it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> isinstance(device, PatternDevice)
+    True
+    >>> image, saturated = device.capture_pattern(np.ones(16), exposure_us=16_666.7)
+    >>> image.shape
+    (16, 16)
+    """
 
     def capture_pattern(self, pattern, exposure_us: float, frame_period_us: float = DEFAULT_FRAME_PERIOD_US):
         """Return ``(normalized image (H, W), saturation mask (H, W))``."""

@@ -18,12 +18,33 @@ def synchronized_delay_image(device, delay_us: float, exposure_us: float, *, sub
     same exposure (projector off: ``capture_pattern`` of zeros), so that it is
     comparable with :func:`emulate_delay_image` and with ``Transport.render``.
 
+    Parameters
+    ----------
+    device : PatternDevice
+        A projector-camera (the simulated Episcan is one, :func:`planeray.devices.simulated_device`).
+    delay_us, exposure_us : float
+        The setting, microseconds.
+    subtract_dark : bool
+        Subtract a dark frame (ambient light) at the same exposure.
+
     Returns
     -------
     image : ndarray (H, W) float32
     saturated : ndarray (H, W) bool
     n_captures : int
         1, or 2 with the dark frame.
+
+    See Also
+    --------
+    emulate_delay_image : the same without synchronization.
+
+    Examples
+    --------
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> image, saturated, n_captures = synchronized_delay_image(device, 0.0, 200.0)
+    >>> image.shape, n_captures
+    ((16, 16), 2)
     """
     check_number(delay_us, "delay_us")
     check_positive(exposure_us, "exposure_us")
@@ -55,6 +76,26 @@ def deliverable_direct(scene) -> np.ndarray:
     (``[-1/2, P - 1/2)``), and by the edge rule (:meth:`planeray.timing.RowGeometry.bin_parts`)
     a bin straddling the projector's end holds only light from its part on the
     projector, so all of ``Scene.direct`` is deliverable, top and bottom rows included.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with ground truth.
+
+    Returns
+    -------
+    ndarray (H, W)
+        In transport units.
+
+    See Also
+    --------
+    compare_direct_global : scores against it.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> deliverable_direct(pr.make_scene("corner", (16, 16), seed=0)).shape
+    (16, 16)
     """
     return np.asarray(scene.direct, np.float32).copy()
 
@@ -116,6 +157,19 @@ def compare_direct_global(
     (``CameraModel(ambient_e_per_us=0.01)``) for a fair comparison of the
     separations themselves.
 
+    Parameters
+    ----------
+    device : PatternDevice
+        A projector-camera (the simulated Episcan is one, :func:`planeray.devices.simulated_device`).
+    epipolar_exposure_us : float
+        Exposure of the synchronized epipolar capture, microseconds.
+    period_rows, n_shifts : int, optional
+        The stripes (default :func:`default_period_rows`).
+    capture_exposure_us, frame_period_us : float
+        The conventional captures' exposure and frame period, microseconds.
+    pattern_contrast_b : float
+        Nayar's ``b``: the dark stripes' fraction of the lit ones.
+
     Returns
     -------
     dict
@@ -123,6 +177,24 @@ def compare_direct_global(
         and ``truth_global`` (or None), and ``numbers``: a JSON-serializable dict with
         capture counts, settings and ``errors`` -> ``nayar_direct`` / ``nayar_global`` /
         ``epipolar_direct`` -> region -> ``mae, median_abs, rmse, bias, relative_rmse``.
+
+    See Also
+    --------
+    capture_direct_global : the separation.
+    synchronized_delay_image : the epipolar capture.
+
+    References
+    ----------
+    .. [1] S. K. Nayar, G. Krishnan, M. D. Grossberg, R. Raskar, "Fast separation of direct and global
+       components of a scene using high frequency illumination", ACM SIGGRAPH 2006.
+
+    Examples
+    --------
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> out = compare_direct_global(device, epipolar_exposure_us=200.0)
+    >>> out["numbers"]["n_captures"]
+    {'nayar': 7, 'epipolar_synchronized': 2}
     """
     nayar = capture_direct_global(
         device,
@@ -171,6 +243,17 @@ def compare_emulation(
 ) -> dict:
     """Digitally emulated delay image against the synchronized one (Sec. 5.1, Fig. 4).
 
+    Parameters
+    ----------
+    device : PatternDevice
+        A projector-camera (the simulated Episcan is one, :func:`planeray.devices.simulated_device`).
+    delay_us, exposure_us : float
+        The setting, microseconds.
+    capture_exposure_us, frame_period_us : float
+        The conventional captures' exposure and frame period, microseconds.
+    spacing_rows : int, optional
+        Camera rows between the bands of one capture.
+
     Returns
     -------
     dict
@@ -180,6 +263,24 @@ def compare_emulation(
         ``spacing_rows`` + 1; ``synchronized``: 1 + dark frame) and errors
         (``emulated_vs_truth``, ``synchronized_vs_truth``,
         ``emulated_vs_synchronized``: ``mae, median_abs, rmse, bias, relative_rmse``).
+
+    See Also
+    --------
+    emulate_delay_image, synchronized_delay_image : the two images.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 5.1, Fig. 4.
+
+    Examples
+    --------
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> out = compare_emulation(device, 0.0, 200.0)
+    >>> out["numbers"]["n_captures"]
+    {'emulated': 17, 'synchronized': 2}
     """
     emulated = emulate_delay_image(
         device,

@@ -28,9 +28,34 @@ def band_pattern(
     as on the synchronized device).  The bands of several rows are added; they
     must not overlap.
 
+    Parameters
+    ----------
+    geometry : RowGeometry
+        Camera and projector rows.
+    camera_rows : int or array_like of int
+        The camera rows the pattern serves.
+    delay_us, exposure_us : float
+        The (delay, exposure) emulated, microseconds.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+
     Returns
     -------
     pattern : ndarray (P,) float64, values in [0, 1]
+
+    See Also
+    --------
+    emulate_delay_image : captures under such patterns.
+
+    Examples
+    --------
+    The projector rows that emulate ``t_d = 0``, ``t_e = 200 us`` (10.8 rows) for camera row 8 of 16:
+
+    >>> import numpy as np
+    >>> from planeray.timing import RowGeometry
+    >>> p = band_pattern(RowGeometry(16), [8], 0.0, 200.0, 54000.0)
+    >>> round(float(p.sum()), 1), float(p[8])
+    (10.8, 1.0)
     """
     rows = np.atleast_1d(np.asarray(camera_rows))
     centre = geometry.projector_row_of(rows) + float(band_centre_rows(delay_us, lines_per_second))
@@ -62,6 +87,18 @@ class EmulationResult:
     delay_us, exposure_us, capture_exposure_us : float
         The emulated delay and exposure (band centre and width), and the
         conventional exposure of each capture.
+
+    See Also
+    --------
+    emulate_delay_image : returns it.
+
+    Examples
+    --------
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> result = emulate_delay_image(device, 0.0, 200.0)
+    >>> type(result).__name__, result.image.shape
+    ('EmulationResult', (16, 16))
     """
 
     image: np.ndarray
@@ -126,10 +163,22 @@ def emulate_delay_image(
     -------
     EmulationResult
 
+    See Also
+    --------
+    compare_emulation : against the synchronized capture.
+
     References
     ----------
     .. [1] Kubo et al., "Programmable Non-Epipolar Indirect Light Transport",
        TVCG 2019, Sec. 5.1 and Fig. 4.
+
+    Examples
+    --------
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> result = emulate_delay_image(device, 0.0, 200.0)
+    >>> result.n_captures > result.n_captures_synchronized
+    True
     """
     check_number(delay_us, "delay_us")
     check_positive(exposure_us, "exposure_us")

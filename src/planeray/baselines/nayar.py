@@ -30,6 +30,26 @@ def default_period_rows(geometry: RowGeometry) -> int:
     rows; see the module notes), so one of the shifts lights a row's whole
     footprint and another darkens it.  6 rows for ``P = H``, 16 rows for 128
     camera rows of a 720-row projector.
+
+    Parameters
+    ----------
+    geometry : RowGeometry
+        Camera and projector rows.
+
+    Returns
+    -------
+    int
+        The stripe period, projector rows.
+
+    See Also
+    --------
+    stripe_patterns : the patterns.
+
+    Examples
+    --------
+    >>> from planeray.timing import RowGeometry
+    >>> default_period_rows(RowGeometry(128, 720))  # 2 (ceil(720 / 128) + 2)
+    16
     """
     return int(2 * (np.ceil(geometry.rows_per_camera_row - 1e-9) + 2))
 
@@ -64,10 +84,19 @@ def stripe_patterns(
     patterns : ndarray (n_shifts, projector_rows) float64
         Values ``1`` (bright) and ``low`` (dark).
 
+    See Also
+    --------
+    separate_direct_global : separates their captures.
+
     References
     ----------
     .. [1] Nayar et al., "Fast separation of direct and global components of a
        scene using high frequency illumination", SIGGRAPH 2006.
+
+    Examples
+    --------
+    >>> stripe_patterns(8, period_rows=4).tolist()
+    [[1.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0], [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0], [1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0]]
     """
     P, period = int(projector_rows), int(period_rows)
     if period < 2 or period % 2:
@@ -109,11 +138,25 @@ def separate_direct_global(images, *, pattern_contrast_b: float = 0.0):
     -------
     direct, global : ndarray (H, W) float64
 
+    See Also
+    --------
+    capture_direct_global : captures and separates.
+
     References
     ----------
     .. [1] S. K. Nayar, G. Krishnan, M. D. Grossberg, R. Raskar, "Fast separation
        of direct and global components of a scene using high frequency
        illumination", SIGGRAPH 2006, Sec. 3.
+
+    Examples
+    --------
+    Nayar's model: a pixel sees all its direct light when lit, none when dark, half its global light always:
+
+    >>> import numpy as np
+    >>> images = np.array([[[1.0 + 0.5]], [[0.5]]])  # max 1.5, min 0.5 over the shifted patterns
+    >>> direct, global_ = separate_direct_global(images)
+    >>> float(direct[0, 0]), float(global_[0, 0])
+    (1.0, 1.0)
     """
     stack = np.asarray(images, dtype=np.float64)
     if stack.ndim != 3 or stack.shape[0] < 2:
@@ -145,6 +188,18 @@ class DirectGlobalResult:
         Captures taken, the dark frame included.
     period_rows, n_shifts : int
     pattern_contrast_b : float
+
+    See Also
+    --------
+    capture_direct_global : returns it.
+
+    Examples
+    --------
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> result = capture_direct_global(device)
+    >>> type(result).__name__, result.direct.shape, result.n_captures
+    ('DirectGlobalResult', (16, 16), 7)
     """
 
     direct: np.ndarray
@@ -200,10 +255,22 @@ def capture_direct_global(
     -------
     DirectGlobalResult
 
+    See Also
+    --------
+    compare_direct_global : against the synchronized epipolar image.
+
     References
     ----------
     .. [1] Nayar et al., "Fast separation of direct and global components of a
        scene using high frequency illumination", SIGGRAPH 2006.
+
+    Examples
+    --------
+    >>> from planeray.devices import simulated_device
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> result = capture_direct_global(device)
+    >>> result.direct.shape, result.global_.shape
+    ((16, 16), (16, 16))
     """
     geometry = device_geometry(device, projector_rows)
     period = default_period_rows(geometry) if period_rows is None else int(period_rows)

@@ -42,6 +42,20 @@ class DelayZeroCalibration:
         ``delay_zero_us`` -- what the camera driver needs
         (:func:`planeray.calibration.calibrate_base_trigger_delay`).  None when
         the sweep's base is unknown (a simulated device, a stack without it).
+
+    See Also
+    --------
+    planeray.calibrate_delay_zero : returns it.
+    write_calibration : stores it.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> from planeray.calibration import delay_zero_sweep, device_capture
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("diffuse_plane", (16, 16), projector_rows=90, seed=0), seed=1)
+    >>> cal = pr.calibrate_delay_zero(device_capture(device), delay_zero_sweep(600.0, step_us=20.0).delay_us)
+    >>> type(cal).__name__, abs(cal.delay_zero_us) < 10.0, round(cal.width_us, -2)
+    ('DelayZeroCalibration', True, 600.0)
     """
 
     delay_zero_us: float
@@ -73,6 +87,30 @@ def delay_zero_sweep(exposure_us: float = 600.0, *, step_us: float = 10.0, half_
     The default range, ``+-(t_e/2 + max(t_e/2, 250 us))``, brackets the epipolar
     plateau (``|t_d| < t_e/2``) with baseline on both sides even for a sync error
     of a few hundred microseconds.  No image is flagged: every one is used.
+
+    Parameters
+    ----------
+    exposure_us : float
+        The exposure of every image, microseconds.
+    step_us : float
+        Delay step, microseconds.
+    half_range_us : float, optional
+        The sweep covers ``-half_range_us .. half_range_us`` (default: see above).
+
+    Returns
+    -------
+    Sweep
+        No image flagged.
+
+    See Also
+    --------
+    planeray.calibrate_delay_zero : reads its images.
+
+    Examples
+    --------
+    >>> sweep = delay_zero_sweep(600.0, step_us=10.0)
+    >>> len(sweep), float(sweep.delay_us[0]), float(sweep.delay_us[-1])
+    (121, -600.0, 600.0)
     """
     if not (exposure_us > 0 and step_us > 0):
         raise InputError("exposure_us and step_us must be positive")
@@ -88,6 +126,32 @@ def device_capture(device, *, exposure_us: float = 600.0, delay_error_us: float 
     ``delay_error_us`` simulates an unknown synchronization error: the device
     really runs at ``commanded - delay_error_us`` (so the calibration should
     return ``delay_zero_us = delay_error_us``).  Leave it 0 for a real device.
+
+    Parameters
+    ----------
+    device : Device
+        An open device.
+    exposure_us : float
+        The exposure of every image, microseconds.
+    delay_error_us : float
+        A synchronization error to simulate, microseconds (0 for a real device).
+
+    Returns
+    -------
+    callable
+        ``capture(delay_us) -> image`` (H, W).
+
+    See Also
+    --------
+    planeray.calibrate_delay_zero : takes it.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("diffuse_plane", (16, 16), projector_rows=90, seed=0), seed=1)
+    >>> capture = device_capture(device, exposure_us=600.0)
+    >>> capture(0.0).shape  # the image at delay 0
+    (16, 16)
     """
     device.set_exposure(exposure_us)
 
@@ -225,6 +289,30 @@ def calibrate_delay_zero(
     InputError
         Non-finite or blank images, a sweep that does not bracket the peak, fewer
         than 5 delays.
+
+    See Also
+    --------
+    delay_zero_sweep : the fine sweep it reads.
+    device_capture : a ``capture(delay_us)`` from any device.
+    calibrate_lines_per_second : the scan rate.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6 (calibration).
+
+    Examples
+    --------
+    A device whose synchronization is 40 us late:
+
+    >>> import planeray as pr
+    >>> from planeray.calibration import delay_zero_sweep, device_capture
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("diffuse_plane", (16, 16), projector_rows=90, seed=0), seed=1)
+    >>> sweep = delay_zero_sweep(600.0, step_us=20.0)
+    >>> cal = pr.calibrate_delay_zero(device_capture(device, delay_error_us=40.0), sweep.delay_us)
+    >>> abs(cal.delay_zero_us - 40.0) < 10.0
+    True
     """
     d = np.asarray(delays_us, dtype=np.float64).ravel()
     if d.size < 5 or not np.all(np.isfinite(d)):

@@ -24,6 +24,34 @@ def write_line_sweep(sweep: LineSweep, path, *, overwrite: bool = False) -> Path
     :mod:`planeray.io.marks`); an existing file is replaced only with ``overwrite``
     and only if it is a line sweep planeray wrote
     (:func:`planeray.io.atomic.check_replaceable`).
+
+    Parameters
+    ----------
+    sweep : LineSweep
+        The images and their record.
+    path : str or path
+        The ``.npz`` file.
+    overwrite : bool
+        Replace a file planeray wrote.
+
+    Returns
+    -------
+    pathlib.Path
+
+    See Also
+    --------
+    read_line_sweep : reads it back.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> target = pr.make_scene("diffuse_plane", (288, 32), projector_rows=96, seed=0)
+    >>> sweep = pr.SimulatedEpiscan(target, seed=5).capture_line_sweep(500.0)
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = write_line_sweep(sweep, pathlib.Path(tmp) / "lines.npz")
+    ...     read_line_sweep(path).images.shape
+    (2, 288, 32)
     """
     from ..io.atomic import check_replaceable
     from ..io.marks import MARK_KEY, mark_text
@@ -69,6 +97,25 @@ def read_line_sweep(path, *, exposure_us: float | None = None, rows_per_line: in
     exposure_us, rows_per_line : optional
         Override (or, for image files, give) the exposure and comb step;
         image files default to the paper's 500 us and ``k = 1``.
+
+    Returns
+    -------
+    LineSweep
+
+    See Also
+    --------
+    write_line_sweep : writes one.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> target = pr.make_scene("diffuse_plane", (288, 32), projector_rows=96, seed=0)
+    >>> sweep = pr.SimulatedEpiscan(target, seed=5).capture_line_sweep(500.0)
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     back = read_line_sweep(write_line_sweep(sweep, pathlib.Path(tmp) / "lines.npz"))
+    >>> back.exposure_us, back.line_step_rows
+    (500.0, 2)
     """
     path = Path(path)
     if not path.exists():
@@ -209,6 +256,15 @@ def write_calibration(
     crash leaves the old file or the new one, never half of either); see
     :func:`calibration_target` for what is refused.
 
+    Parameters
+    ----------
+    path : str or path
+        An ``acquisition.json`` (or the folder holding it).
+    lines : LineCalibration, optional
+        The line velocity.
+    delay_zero : DelayZeroCalibration, optional
+        The delay zero (and base trigger delay).
+
     Returns
     -------
     dict
@@ -218,6 +274,23 @@ def write_calibration(
     ------
     InputError
         Nothing to write, or a file that cannot be updated (:func:`calibration_target`).
+
+    See Also
+    --------
+    planeray.import_folder : reads the file.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> target = pr.make_scene("diffuse_plane", (288, 32), projector_rows=96, seed=0)
+    >>> sweep = pr.SimulatedEpiscan(target, seed=5).capture_line_sweep(500.0)
+    >>> import json, pathlib, tempfile
+    >>> cal = pr.calibrate_lines_per_second(sweep)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     _ = write_calibration(pathlib.Path(tmp) / "acquisition.json", lines=cal)
+    ...     record = json.loads((pathlib.Path(tmp) / "acquisition.json").read_text())
+    >>> abs(record["lines_per_second"] - 54000) < 1000
+    True
     """
 
     if lines is None and delay_zero is None:

@@ -58,6 +58,24 @@ def required_base_trigger_delay_us(
 ) -> float:
     """The least base trigger delay that realizes every point of ``sweeps``: ``max t'_o + min delay``.
 
+    Parameters
+    ----------
+    sweeps : iterable of Sweep
+        The sweeps the base must serve.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    min_trigger_delay_us : float
+        The camera's least trigger delay, microseconds.
+
+    Returns
+    -------
+    float
+        Microseconds.
+
+    See Also
+    --------
+    calibrate_base_trigger_delay : finds the base.
+
     Examples
     --------
     >>> from planeray.timing import paper_sweep
@@ -112,6 +130,21 @@ def search_delay_zero(
     ------
     InputError
         No response over the frame (nothing changes with delay).
+
+    See Also
+    --------
+    calibrate_base_trigger_delay : then refines it.
+
+    Examples
+    --------
+    A camera whose epipolar response comes 5000 us after its trigger, once per 60 Hz frame:
+
+    >>> import numpy as np
+    >>> def capture(delay_us):
+    ...     phase = (delay_us - 5000.0 + 8333.3) % 16666.7 - 8333.3
+    ...     return np.full((4, 4), 1.0 if abs(phase) < 300.0 else 0.1)
+    >>> search_delay_zero(capture, exposure_us=600.0)["centre_us"]
+    5000.0
     """
     if not (exposure_us > 0 and frame_period_us > 0):
         raise InputError("exposure_us and frame_period_us must be positive")
@@ -176,6 +209,21 @@ def with_base_trigger_delay(result: DelayZeroCalibration, base_used_us: float) -
     ``t_d = 0``, so that base plus ``delay_zero_us`` is the trigger delay at
     ``t'_o = 0``.
 
+    Parameters
+    ----------
+    result : DelayZeroCalibration
+        The fine delay zero, measured with ``base_used_us``.
+    base_used_us : float
+        The base trigger delay of that sweep, microseconds.
+
+    Returns
+    -------
+    DelayZeroCalibration
+
+    See Also
+    --------
+    calibrate_base_trigger_delay : uses it.
+
     Examples
     --------
     >>> from planeray.calibration import DelayZeroCalibration
@@ -224,6 +272,22 @@ def calibrate_base_trigger_delay(
         The fine calibration with ``base_trigger_delay_us`` set; ``details``
         hold ``base_used_us``, ``required_base_us``, ``fits_sweeps`` and the
         coarse ``search``.  The device is left at the calibrated base.
+
+    See Also
+    --------
+    search_delay_zero : the coarse search.
+    planeray.calibrate_delay_zero : the fine delay zero.
+
+    Examples
+    --------
+    On a camera whose trigger delay is settable (here the uEye driver; tests/test_ueye.py runs it on a
+    stand-in SDK):
+
+    >>> import planeray as pr
+    >>> from planeray.timing import paper_sweep
+    >>> with pr.devices.open_device("ueye", parameter_file="rig/episcan.ini") as cam:  # doctest: +SKIP
+    ...     cal = calibrate_base_trigger_delay(cam, sweeps=[paper_sweep()])
+    ...     cal.base_trigger_delay_us
     """
     v_p = float(device.lines_per_second)
     t_p = 1e6 / v_p
@@ -288,6 +352,21 @@ def calibrate_delay_zero_from_stack(stack, *, exposure_us: float = 600.0, source
     Returns
     -------
     DelayZeroCalibration
+
+    See Also
+    --------
+    planeray.calibrate_delay_zero : the calibration itself.
+
+    Examples
+    --------
+    A fine delay sweep around 0 captured on the simulated device:
+
+    >>> import planeray as pr
+    >>> from planeray.calibration import delay_zero_sweep
+    >>> scene = pr.make_scene("diffuse_plane", (16, 16), projector_rows=90, seed=0)
+    >>> stack = pr.simulate_stack(scene, delay_zero_sweep(600.0, step_us=20.0), seed=1)
+    >>> abs(calibrate_delay_zero_from_stack(stack).delay_zero_us) < 10.0
+    True
     """
     from ..errors import parameter_name
 

@@ -155,7 +155,36 @@ _plain_help(app)
 
 
 def main(argv: list[str] | None = None):
-    """Console entry point (``planeray``)."""
+    """Console entry point (``planeray``).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``planeray`` (default: the process's own).
+
+    Returns
+    -------
+    None
+        Ends with ``SystemExit``: status 0, or 1 after a one-line error.
+
+    See Also
+    --------
+    planeray.demo.run_demo : the demo's workflow as a function.
+
+    Examples
+    --------
+    The command line from Python (what the ``planeray`` command runs); it ends with the exit status:
+
+    >>> import contextlib, io
+    >>> out = io.StringIO()
+    >>> with contextlib.redirect_stdout(out):
+    ...     try:
+    ...         main(["scenes"])
+    ...     except SystemExit as done:
+    ...         status = done.code
+    >>> status, "translucent wax object" in out.getvalue()
+    (0, True)
+    """
     import sys
 
     args = _join_pixel_args(list(sys.argv[1:] if argv is None else argv))

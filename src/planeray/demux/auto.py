@@ -4,7 +4,7 @@ The weights ``alpha`` (smoothness) and ``beta`` (sparsity) of the Sec. 4 problem
 (:mod:`planeray.demux.problem`) decide the recovered transport, and no pair serves
 every scene (the paper's 0.01 / 0.01 is ~24x worse than alpha ~ 300 on smooth
 subsurface profiles, and alpha ~ 300 is 4x worse than 0.01 on mirrors).  Every image of a
-stack is a measurement the transport must predict; the default criterion (issue 42) scores
+stack is a measurement the transport must predict; the default criterion scores
 each pair of weights by **generalized cross-validation** of every sampled pixel's fit,
 
 .. math::
@@ -22,7 +22,7 @@ matrix on its free unknowns (:mod:`planeray.demux.risk`).  GCV estimates the err
 a new image at the same settings with the noise *level* taken from the residuals: the camera
 model gives the observations' relative noise, but not the row jitter and other unmodelled noise
 that scale it by 1.5-4x.  ``"sure"`` (Stein's unbiased risk estimate at the camera model's
-level) and ``"cv-images"`` (K-fold cross-validation over images, issue 26's criterion) remain
+level) and ``"cv-images"`` (K-fold cross-validation over images, the earlier criterion) remain
 as options; all three were measured on 46 transports nobody tuned them on (the demultiplexing
 guide), where K-fold CV chose too much smoothing on mirrors (a fold left out makes the
 underdetermined problem more so) and SURE too little on wax (the unmodelled noise).  Among the
@@ -97,7 +97,7 @@ CV_TOL = CRITERION_TOL
 #: Weight of the paper (the start of a scan when the other weight is automatic).
 PAPER_WEIGHT = 0.01
 #: The criteria: generalized cross-validation (noise-weighted; the default), Stein's unbiased risk
-#: estimate with the camera's noise level, K-fold cross-validation over images (issue 26's).
+#: estimate with the camera's noise level, K-fold cross-validation over images (the earlier criterion).
 CV_CRITERION = "cv-images"
 CRITERIA = ("gcv", "sure", CV_CRITERION)
 DEFAULT_CRITERION = "gcv"
@@ -190,6 +190,18 @@ class WeightChoice:
     lowest : tuple of float
         The pair with the lowest score; the chosen pair is the one nearest the paper's 0.01 /
         0.01 among those within one standard error of it (:func:`summarize`).
+
+    See Also
+    --------
+    choose_weights : returns it.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> choice = choose_weights(stack)
+    >>> type(choice).__name__, choice.criterion, choice.alpha > 0
+    ('WeightChoice', 'gcv', True)
     """
 
     alpha: float
@@ -808,7 +820,7 @@ def choose_weights(
         (:mod:`planeray.demux.risk`: the camera model's relative noise, its level estimated
         from the residuals); ``"sure"``: Stein's unbiased risk estimate at the camera model's
         noise level (needs one); ``"cv-images"``: K-fold cross-validation over the images
-        (issue 26's criterion).  All three were measured on the same transports (the
+        (the earlier criterion).  All three were measured on the same transports (the
         demultiplexing guide); the other two are kept for comparison.
     folds : int, optional
         Folds of images of ``"cv-images"`` (default :data:`DEFAULT_FOLDS`, 5).
@@ -827,6 +839,25 @@ def choose_weights(
     Returns
     -------
     WeightChoice
+
+    See Also
+    --------
+    demultiplex : ``alpha="auto"``, ``beta="auto"`` call it.
+    WeightChoice : what it returns.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4 (alpha = beta = 0.01 there).
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> choice = choose_weights(stack)
+    >>> choice.alpha > 0 and choice.beta > 0
+    True
     """
     requested = {
         "alpha": AUTO if is_auto(alpha) else float(_weight(alpha, "alpha")),

@@ -83,6 +83,27 @@ class DemuxResult:
 
     ``maps`` holds the per-pixel maps of :data:`MAP_NAMES` and, when the ambient was
     estimated, :data:`AMBIENT_MAP` (also :attr:`ambient`).
+
+    Parameters
+    ----------
+    transport : Transport
+        ``T`` over ``offsets_rows`` (normalized image value per projector row).
+    maps : dict of str to ndarray (H, W)
+        Per-pixel diagnostics: ``converged``, ``iterations``, ``objective``, ``residual_rms``, ...
+    attrs : dict
+        The run's record (weights, method, the sweep's epipolar resolution, ...).
+
+    See Also
+    --------
+    demultiplex : returns it.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> result = pr.demultiplex(stack)
+    >>> type(result).__name__, result.transport.dense.shape, "converged" in result.maps
+    ('DemuxResult', (8, 8, 229), True)
     """
 
     transport: Transport
@@ -161,6 +182,25 @@ def solve_chunk(
         The camera rows (absolute).
     method : str
         A key of :data:`planeray.demux.SOLVERS`.
+
+    Returns
+    -------
+    ChunkResult
+        ``T`` (rows, W, U) and the chunk's per-pixel maps.
+
+    See Also
+    --------
+    demultiplex : every chunk of a stack.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> import numpy as np
+    >>> problem = pr.DemuxProblem.from_stack(stack)
+    >>> chunk = solve_chunk(problem, np.asarray(stack.images)[problem.image_index], None, slice(0, 2))
+    >>> chunk.T.shape  # 2 camera rows x 8 columns x 229 offsets
+    (2, 8, 229)
     """
     tasks = _plan(problem, observations, saturated, rows)
     threads = solver_threads() if "threads" in options(get_solver(method)) and len(tasks) > 1 else 1
@@ -416,6 +456,18 @@ def demultiplex(
     DemuxResult
         ``transport`` (``T`` over ``offsets_rows``), per-pixel ``maps`` and ``attrs``.
 
+    See Also
+    --------
+    demultiplex_to_store : the same into a resumable store on disk.
+    DemuxProblem : the problem it solves.
+    planeray.demux.choose_weights : the ``"auto"`` weights.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4, the optimization below Eq. 6.
+
     Examples
     --------
     >>> from planeray.acquire import simulate_stack
@@ -587,6 +639,28 @@ def demultiplex_to_store(
     -------
     pathlib.Path
         The finished store.
+
+    See Also
+    --------
+    planeray.demultiplex : the same in memory.
+    planeray.read_transport : read the store back.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.demultiplex_to_store(stack, pathlib.Path(tmp) / "T.zarr")
+    ...     T, attrs = pr.read_transport(path)
+    >>> T.dense.shape, attrs["alpha"]
+    ((8, 8, 229), 0.01)
     """
     out = Path(out)
     check_replaceable(out, overwrite=overwrite, kind="transport", error=TransportError)

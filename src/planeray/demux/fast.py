@@ -697,6 +697,31 @@ def solve_fast(
     SolveResult
         ``converged`` is True where the certificate proved the gap ``<= tol``; ``gap`` is
         each pixel's certified relative gap.
+
+    See Also
+    --------
+    solve_cvxpy : the reference solver of the same problem.
+    get_solver : solvers by name.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.study import scaled_truth, study_setup, dipole_provider
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())  # one camera row's band matrix A: 23 images x 229 offsets
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> B = (setup.A @ T)[None] + 0.01 * np.random.default_rng(0).standard_normal((2, 23))  # 2 noisy pixels
+    >>> from planeray.demux import solve_cvxpy
+    >>> fast = solve_fast(setup.group, B[:1]).X
+    >>> ref = solve_cvxpy(setup.group, B[:1]).X
+    >>> bool(np.abs(setup.A @ (fast - ref)[0]).max() < 1e-3)  # the same images predicted
+    True
     """
     tol = DEFAULT_TOL if tol is None else float(tol)
     B = np.asarray(B, np.float64)

@@ -69,7 +69,27 @@ MIN_IMAGES = 4
 
 
 def difference_matrix(n: int) -> np.ndarray:
-    """Forward difference ``D`` (``(n-1, n)``): the discrete ``d/dv`` of the smoothness term."""
+    """Forward difference ``D`` (``(n-1, n)``): the discrete ``d/dv`` of the smoothness term.
+
+    Parameters
+    ----------
+    n : int
+        Number of offsets.
+
+    Returns
+    -------
+    ndarray (n - 1, n) float64
+        ``D`` with ``(D x)_i = x_{i+1} - x_i``.
+
+    See Also
+    --------
+    DemuxProblem : its smoothness term ``alpha ||D T||^2``.
+
+    Examples
+    --------
+    >>> difference_matrix(3).tolist()
+    [[-1.0, 1.0, 0.0], [0.0, -1.0, 1.0]]
+    """
     D = np.zeros((max(n - 1, 0), n))
     idx = np.arange(n - 1)
     D[idx, idx] = -1.0
@@ -96,6 +116,18 @@ class RowGroup:
         ``x`` are the light *per projector row* of each bin, so that smoothness and
         sparsity weigh every bin alike; the transport is ``T = x * on_projector``
         (a bin the projector's end cuts to a sliver holds the light of the sliver).
+
+    See Also
+    --------
+    DemuxProblem : its groups.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> group = pr.DemuxProblem.from_stack(stack).groups[0]
+    >>> type(group).__name__, group.A.shape
+    ('RowGroup', (23, 8))
     """
 
     rows: np.ndarray
@@ -145,6 +177,25 @@ class DemuxProblem:
     exposure_rows : ndarray (N,) float64
         Row exposure of each used image in projector rows (``I_w``, Eq. 2): the
         ambient column.
+
+    See Also
+    --------
+    planeray.demultiplex : solve it for a whole stack.
+    planeray.demux.SOLVERS : the solvers by name.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4, the optimization below Eq. 6.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> problem = pr.DemuxProblem.from_stack(stack, alpha=0.01, beta=0.01)
+    >>> problem.n_offsets, len(problem.image_index)  # offsets u = -114..114; 4 boundary images left out
+    (229, 23)
     """
 
     def __init__(

@@ -22,7 +22,39 @@ __all__ = ["solve_pinv", "solve_nnls", "solve_cvxpy"]
 
 
 def solve_pinv(group: RowGroup, B, alpha=0.0, beta=0.0, tol=None) -> SolveResult:
-    """Pseudo-inverse ``x = A^+ b`` for all pixels at once (ignores alpha, beta)."""
+    """Pseudo-inverse ``x = A^+ b`` for all pixels at once (ignores alpha, beta).
+
+    Parameters
+    ----------
+    group : RowGroup
+        Camera rows sharing one illumination matrix ``A`` (N, V).
+    B : ndarray (P, N)
+        Observations of ``P`` pixels: normalized image values of the ``N`` used images.
+    alpha, beta, tol
+        Ignored (the signature every solver shares).
+
+    Returns
+    -------
+    SolveResult
+        ``X = A^+ B`` (P, V), negative values included.
+
+    See Also
+    --------
+    solve_nnls : non-negative.
+    solve_fast : with the paper's regularization.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.study import scaled_truth, study_setup, dipole_provider
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())  # one camera row's band matrix A: 23 images x 229 offsets
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> B = (setup.A @ T)[None] + 0.01 * np.random.default_rng(0).standard_normal((2, 23))  # 2 noisy pixels
+    >>> X = solve_pinv(setup.group, B).X
+    >>> X.shape, bool((X < 0).any())  # unconstrained: negative light
+    ((2, 229), True)
+    """
     P = np.linalg.pinv(group.A)
     X = np.asarray(B, np.float64) @ P.T
     n = X.shape[0]
@@ -30,7 +62,39 @@ def solve_pinv(group: RowGroup, B, alpha=0.0, beta=0.0, tol=None) -> SolveResult
 
 
 def solve_nnls(group: RowGroup, B, alpha=0.0, beta=0.0, tol=None) -> SolveResult:
-    """Unregularized NNLS per pixel (Lawson-Hanson active set; ignores alpha, beta)."""
+    """Unregularized NNLS per pixel (Lawson-Hanson active set; ignores alpha, beta).
+
+    Parameters
+    ----------
+    group : RowGroup
+        Camera rows sharing one illumination matrix ``A`` (N, V).
+    B : ndarray (P, N)
+        Observations of ``P`` pixels: normalized image values of the ``N`` used images.
+    alpha, beta, tol
+        Ignored (the signature every solver shares).
+
+    Returns
+    -------
+    SolveResult
+        ``X`` (P, V) >= 0.
+
+    See Also
+    --------
+    solve_pinv : no constraint at all.
+    solve_fast : with the paper's regularization.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.study import scaled_truth, study_setup, dipole_provider
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())  # one camera row's band matrix A: 23 images x 229 offsets
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> B = (setup.A @ T)[None] + 0.01 * np.random.default_rng(0).standard_normal((2, 23))  # 2 noisy pixels
+    >>> X = solve_nnls(setup.group, B).X
+    >>> X.shape, bool((X >= 0).all())
+    ((2, 229), True)
+    """
     from scipy.optimize import nnls
 
     B = np.asarray(B, np.float64)
@@ -77,6 +141,46 @@ def solve_cvxpy(group: RowGroup, B, alpha=0.01, beta=0.01, tol=None, *, ambient=
 
     ``ambient``: the ambient column ``I_w`` (N,) of Eq. 6a (each pixel's ambient in
     ``SolveResult.ambient``); None: the paper's problem.
+
+    Parameters
+    ----------
+    group : RowGroup
+        Camera rows sharing one illumination matrix ``A`` (N, V).
+    B : ndarray (P, N)
+        Observations of ``P`` pixels: normalized image values of the ``N`` used images.
+    alpha, beta : float
+        Smoothness and sparsity weights (the paper: 0.01 each).
+    tol : float, optional
+        The solver's tolerance.
+    ambient : ndarray (N,), optional
+        The ambient column ``I_w`` of Eq. 6a (projector rows of exposure); None: the paper's problem.
+
+    Returns
+    -------
+    SolveResult
+        ``X`` (P, V) and the per-pixel diagnostics.
+
+    See Also
+    --------
+    solve_fast : the same problem, fast.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.study import scaled_truth, study_setup, dipole_provider
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())  # one camera row's band matrix A: 23 images x 229 offsets
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> B = (setup.A @ T)[None] + 0.01 * np.random.default_rng(0).standard_normal((2, 23))  # 2 noisy pixels
+    >>> X = solve_cvxpy(setup.group, B[:1]).X
+    >>> X.shape, bool((X >= -1e-9).all())
+    ((1, 229), True)
     """
     try:
         import cvxpy  # noqa: F401

@@ -31,6 +31,23 @@ class SolveResult:
     gap : ndarray (P,), optional
         The certified relative objective gap of each pixel (``(f - f*) / f*`` is at most
         this), when the solver certifies one (``fast``); inf where nothing was usable.
+
+    See Also
+    --------
+    solve_fast, solve_cvxpy, solve_nnls, solve_pinv : return it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.study import scaled_truth, study_setup, dipole_provider
+    >>> from planeray.timing import quick_sweep
+    >>> setup = study_setup(quick_sweep())  # one camera row's band matrix A: 23 images x 229 offsets
+    >>> T = scaled_truth(setup.A, dipole_provider(setup.offsets)(1.0, 0.01, 0.9))
+    >>> B = (setup.A @ T)[None] + 0.01 * np.random.default_rng(0).standard_normal((2, 23))  # 2 noisy pixels
+    >>> from planeray.demux import solve_fast
+    >>> result = solve_fast(setup.group, B)
+    >>> type(result).__name__, result.X.shape, bool(result.converged.all())
+    ('SolveResult', (2, 229), True)
     """
 
     X: np.ndarray

@@ -29,7 +29,7 @@ row jitter and other unmodelled noise scale it by 1.5-4x, and SURE at the model'
 charges too little for ``df`` and smooths too little (wax: 1.22x the best error); GCV takes the
 level from the residuals.  Both need only the fit to the pixel's own observations, which a
 certified objective gap pins down, and one solve per pair.  K-fold cross-validation over the
-images (issue 26's criterion) needs neither ``df`` nor a noise level, but a fold left out shrinks
+images (the earlier criterion) needs neither ``df`` nor a noise level, but a fold left out shrinks
 the sweep from 75 to 60 images of an underdetermined problem (229 offsets, rank of ``A`` ~ 40-70):
 it scores the weights a *smaller* sweep needs -- more smoothing (the mirror ball: 1.21x the best,
 13 % worse than 0.01 / 0.01) -- and its predictions of left-out images go through directions the

@@ -32,7 +32,27 @@ SOLVERS: dict[str, Callable] = {"fast": solve_fast, "pinv": solve_pinv, "nnls": 
 
 
 def get_solver(method: str) -> Callable:
-    """The solver registered as ``method``; an :class:`~planeray.errors.InputError` names the choices otherwise."""
+    """The solver registered as ``method``; an :class:`~planeray.errors.InputError` names the choices otherwise.
+
+    Parameters
+    ----------
+    method : {"fast", "pinv", "nnls", "cvxpy"}
+        A name of :data:`SOLVERS`.
+
+    Returns
+    -------
+    callable
+        ``solve(group, B, alpha, beta, tol, ...) -> SolveResult``.
+
+    See Also
+    --------
+    solve_fast, solve_cvxpy, solve_nnls, solve_pinv
+
+    Examples
+    --------
+    >>> get_solver("fast").__name__
+    'solve_fast'
+    """
     try:
         return SOLVERS[method]
     except KeyError:

@@ -39,6 +39,16 @@ class DesignCamera:
         The steps of the camera's exposure and trigger delay (us); 0: any value.
     source : str
         Where these came from (``"default"``, ``"device:NAME"``, ``"file:PATH"``).
+
+    See Also
+    --------
+    camera_from_device, camera_from_file : from a device or a file.
+
+    Examples
+    --------
+    >>> cam = DesignCamera()  # the default camera of the simulated Episcan
+    >>> cam.lines_per_second, cam.model.read_noise_e, cam.source
+    (54000.0, 7.0, 'default')
     """
 
     model: CameraModel = field(default_factory=CameraModel)
@@ -95,6 +105,28 @@ def camera_from_device(device, name: str) -> DesignCamera:
 
     A camera that does not describe its noise gets the default model, with its averaging where
     known.
+
+    Parameters
+    ----------
+    device : Device
+        An open device.
+    name : str
+        Its registered name (for the record).
+
+    Returns
+    -------
+    DesignCamera
+
+    See Also
+    --------
+    camera_from_file : from a file.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("corner", (8, 8), seed=0), seed=0)
+    >>> camera_from_device(device, "sim").lines_per_second
+    54000.0
     """
     from ..devices.capabilities import has
 
@@ -126,10 +158,33 @@ def camera_from_file(path) -> DesignCamera:
     ``camera`` object or top-level sensor fields, ``lines_per_second``, ``sync``), or a sweep file's
     camera record (``record.camera``).
 
+    Parameters
+    ----------
+    path : str or path
+        A native stack, an ``acquisition.json`` or a sweep file.
+
+    Returns
+    -------
+    DesignCamera
+
     Raises
     ------
     InputError
         One line naming the file: unreadable, or no camera in it.
+
+    See Also
+    --------
+    camera_from_device : from an open device.
+
+    Examples
+    --------
+    >>> import json, pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pathlib.Path(tmp) / "acquisition.json"
+    ...     _ = path.write_text(json.dumps({"lines_per_second": 52000.0, "camera": {"read_noise_e": 3.0}}))
+    ...     cam = camera_from_file(path)
+    >>> cam.lines_per_second, cam.model.read_noise_e
+    (52000.0, 3.0)
     """
     path = Path(path)
     if path.is_dir() and (path / "zarr.json").is_file():

@@ -43,6 +43,33 @@ def band_rows(delay_us, exposure_us, offsets_rows, *, lines_per_second, jitter_u
 
     The bands of an interior camera row (every offset bin whole on the projector): Eq. 3 on 1-row
     bins, the edges blurred by ``jitter_us`` (as the demultiplexer's matrix is).
+
+    Parameters
+    ----------
+    delay_us, exposure_us : array_like (C,)
+        The settings, microseconds.
+    offsets_rows : array_like (U,) of int
+        Offsets ``u``, projector rows.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    jitter_us : float
+        Synchronization jitter blurring the band edges, microseconds.
+
+    Returns
+    -------
+    ndarray (C, U)
+        The fraction of each offset bin each band lights.
+
+    See Also
+    --------
+    planeray.timing.band_bin_weights : Eq. 3 on bins.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rows = band_rows([0.0, 375.0], [600.0, 600.0], np.arange(-40, 41), lines_per_second=54000.0)
+    >>> rows.shape, round(float(rows[0].sum()), 1)  # each band 32.4 projector rows wide
+    ((2, 81), 32.4)
     """
     offsets = np.asarray(offsets_rows)
     K = int(np.abs(offsets).max(initial=0))
@@ -67,6 +94,17 @@ class Candidates:
         Each candidate's band over the offsets (:func:`band_rows`).
     description : dict
         JSON record: bounds, steps, margin, count.
+
+    See Also
+    --------
+    candidate_settings : builds them.
+
+    Examples
+    --------
+    >>> from planeray.design import candidate_settings
+    >>> cands = candidate_settings(support_rows=20, exposure_range_us=(300, 600))
+    >>> type(cands).__name__, cands.rows.shape[1], len(cands) == cands.rows.shape[0]
+    ('Candidates', 41, True)
     """
 
     delay_us: np.ndarray
@@ -129,6 +167,10 @@ def candidate_settings(
     Returns
     -------
     Candidates
+
+    See Also
+    --------
+    design_sweep : chooses among them.
 
     Examples
     --------

@@ -80,6 +80,23 @@ class ExpectedError:
     threads : int
         Python threads over which the candidates' forms are split (hold BLAS to one thread meanwhile:
         on a shared 2-core machine a two-thread OpenBLAS inverts a 229 x 229 matrix 40x slower).
+
+    See Also
+    --------
+    design_sweep : minimizes it.
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> from planeray.design import candidate_settings
+    >>> cands = candidate_settings(support_rows=20, exposure_range_us=(300, 600))
+    >>> from planeray.design import image_variance, DesignCamera
+    >>> variance = image_variance(cands.rows, cands.exposure_us, prior, DesignCamera())
+    >>> crit = ExpectedError(cands.rows, variance, prior.second_moment)
+    >>> few, more = crit.value([0, 50, 100]), crit.value([0, 50, 100, 150, 190])
+    >>> bool(more < few)  # more images, a smaller expected error
+    True
     """
 
     def __init__(self, rows, variance, second_moment, *, alpha: float = 0.01, criterion: str = "mse", threads: int = 1):

@@ -57,6 +57,17 @@ class TransportPrior:
         Pixels the moments were estimated from (0: the smoothness prior alone).
     description : dict
         JSON record: the sources, geometry, pixels, seed and smoothness mixed in.
+
+    See Also
+    --------
+    transport_prior : builds one.
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> type(prior).__name__, prior.offsets_rows.size, prior.second_moment.shape
+    ('TransportPrior', 41, (41, 41))
     """
 
     offsets_rows: np.ndarray
@@ -153,6 +164,10 @@ def transport_prior(
     Returns
     -------
     TransportPrior
+
+    See Also
+    --------
+    design_sweep : uses it.
 
     Examples
     --------

@@ -65,6 +65,18 @@ class SweepDesign:
     seconds : float
     record : dict
         What the sweep file records (``record``): prior, camera, criterion, candidates, seed.
+
+    See Also
+    --------
+    design_sweep : returns it.
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> d = design_sweep(4, prior=prior)
+    >>> type(d).__name__, len(d.sweep), d.expected_error > 0
+    ('SweepDesign', 4, True)
     """
 
     sweep: Sweep
@@ -76,7 +88,39 @@ class SweepDesign:
 
 
 def image_variance(rows, exposure_us, prior: TransportPrior, camera: DesignCamera) -> np.ndarray:
-    """The noise variance of images with illumination ``rows`` at the prior's mean transport (normalized units)."""
+    """The noise variance of images with illumination ``rows`` at the prior's mean transport (normalized units).
+
+    Parameters
+    ----------
+    rows : ndarray (C, U)
+        Rows of the illumination matrix.
+    exposure_us : array_like (C,)
+        Their exposures, microseconds.
+    prior : TransportPrior
+        Gives the mean transport.
+    camera : DesignCamera
+        The noise model.
+
+    Returns
+    -------
+    ndarray (C,)
+        Variances in normalized image units squared.
+
+    See Also
+    --------
+    planeray.CameraModel : its noise model.
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> from planeray.design import candidate_settings
+    >>> cands = candidate_settings(support_rows=20, exposure_range_us=(300, 600))
+    >>> from planeray.design import DesignCamera
+    >>> variance = image_variance(cands.rows, cands.exposure_us, prior, DesignCamera())
+    >>> variance.shape == (len(cands),), bool((variance > 0).all())
+    (True, True)
+    """
     model = camera.model
     signal = (np.asarray(rows) @ prior.mean) / model.signal_scale  # the mean in transport units (Eq. 4)
     return model.image_variance(signal, np.asarray(exposure_us, np.float64), ambient_albedo=prior.ambient_albedo)
@@ -187,6 +231,11 @@ def design_sweep(
     -------
     SweepDesign
 
+    See Also
+    --------
+    transport_prior : the prior.
+    planeray.io.write_sweep : store the result as a sweep file.
+
     Examples
     --------
     >>> from planeray.design import transport_prior
@@ -272,6 +321,34 @@ def expected_error(
     relative transport error ``sqrt(E / E||x||^2)``, for the Bayesian criteria their value.
 
     Bands beyond the prior's support are cut to it (that light is not in the prior).
+
+    Parameters
+    ----------
+    sweep : Sweep
+        Any sweep (its used images count).
+    prior : TransportPrior
+        The transports to expect.
+    camera : DesignCamera, optional
+        The camera's noise and timing (default: the simulated Episcan's).
+    alpha : float
+        The smoothness weight of the demultiplexing.
+    criterion : {"mse", "bayes-a", "bayes-d"}
+
+    Returns
+    -------
+    float
+
+    See Also
+    --------
+    design_sweep : a sweep that minimizes it.
+
+    Examples
+    --------
+    >>> from planeray.design import transport_prior
+    >>> prior = transport_prior(["diffuse_plane"], shape=(32, 32), projector_rows=180, support_rows=20, pixels=50)
+    >>> from planeray.timing import quick_sweep
+    >>> 0 < expected_error(quick_sweep(), prior=prior) < 1  # relative transport error of the quick sweep
+    True
     """
     camera = camera or DesignCamera()
     used = ~sweep.excluded

@@ -51,6 +51,22 @@ class Device(Protocol):
     ``t_e`` (Eq. 1).  A device may apply them when they are set or only at the
     next :meth:`grab` (a camera realizes the pair together: its trigger delay
     depends on both), so :meth:`set_timing` is the call that checks a pair.
+
+    See Also
+    --------
+    DeviceBase : its defaults.
+    open_device : a registered device.
+
+    Examples
+    --------
+    Any object with these methods is a device; the simulated Episcan is one:
+
+    >>> import planeray as pr
+    >>> with pr.devices.open_device("sim", scene="corner", size=[8, 8]) as device:
+    ...     device.set_timing(0.0, 600.0)
+    ...     image, saturated = device.grab()
+    >>> isinstance(device, Device), image.shape
+    (True, (8, 8))
     """
 
     #: Projector scanline velocity ``v_p`` (Eq. 2), from calibration.
@@ -87,6 +103,34 @@ class DeviceBase:
 
     Subclass it (or write the calls yourself) so that ``with open_device(...) as dev:``
     always releases the hardware.
+
+    See Also
+    --------
+    Device : the protocol.
+
+    Examples
+    --------
+    A minimal device of your own (here a constant image), usable by every command through the protocol:
+
+    >>> import numpy as np
+    >>> class Flat(DeviceBase):
+    ...     kind, lines_per_second = "flat", 54000.0
+    ...
+    ...     def set_delay(self, delay_us):
+    ...         self.delay_us = delay_us
+    ...
+    ...     def set_exposure(self, exposure_us):
+    ...         self.exposure_us = exposure_us
+    ...
+    ...     def grab(self):
+    ...         return np.full((4, 4), 0.5, np.float32), np.zeros((4, 4), bool)
+    ...
+    ...     def describe(self):
+    ...         return {"device": "flat", "image_shape": [4, 4]}
+    >>> with Flat() as device:
+    ...     device.set_timing(375.0, 600.0)
+    ...     float(device.grab()[0].mean()), device.delay_us
+    (0.5, 375.0)
     """
 
     def set_timing(self, delay_us: float, exposure_us: float) -> None:
@@ -104,7 +148,31 @@ class DeviceBase:
 
 
 def apply_timing(device, delay_us: float, exposure_us: float) -> None:
-    """Set one sweep point on any device (``set_timing``, or the two setters of an older device)."""
+    """Set one sweep point on any device (``set_timing``, or the two setters of an older device).
+
+    Parameters
+    ----------
+    device : Device
+        An open device.
+    delay_us, exposure_us : float
+        The sweep point, microseconds.
+
+    Returns
+    -------
+    None
+
+    See Also
+    --------
+    planeray.acquire_sweep : sets every point of a sweep.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("corner", (8, 8), seed=0), seed=0)
+    >>> apply_timing(device, 375.0, 600.0)
+    >>> device.grab()[0].shape
+    (8, 8)
+    """
     set_timing = getattr(device, "set_timing", None)
     if set_timing is not None:
         set_timing(float(delay_us), float(exposure_us))
@@ -133,6 +201,36 @@ def register_device(name: str, description: str, *, hardware: bool = False):
     required.  ``hardware`` marks devices that talk to a camera (the command line
     then asks for their calibration).  See ``devices/simulated.py`` for a
     factory function and ``devices/ueye.py`` for a registered class.
+
+    Parameters
+    ----------
+    name : str
+        The device's name (``--device NAME``).
+    description : str
+        One line for ``planeray devices``.
+    hardware : bool
+        Whether it talks to a camera.
+
+    Returns
+    -------
+    callable
+        The decorator; it returns the factory unchanged.
+
+    See Also
+    --------
+    open_device : opens a registered device.
+
+    Examples
+    --------
+    A device factory registered by name, then opened like the built-in ones:
+
+    >>> import planeray as pr
+    >>> @register_device("doc-sim", "the simulated Episcan on the corner scene (an example)")
+    ... def _open(*, seed: int = 0):
+    ...     return pr.SimulatedEpiscan(pr.make_scene("corner", (8, 8), seed=0), seed=seed)
+    >>> "doc-sim" in list_devices(), open_device("doc-sim").lines_per_second
+    (True, 54000.0)
+    >>> del _REGISTRY["doc-sim"]  # this example leaves the registry as it found it
     """
 
     def deco(factory):
@@ -163,7 +261,22 @@ def _discover() -> None:
 
 
 def list_devices() -> dict[str, str]:
-    """Names and one-line descriptions of all registered devices."""
+    """Names and one-line descriptions of all registered devices.
+
+    Returns
+    -------
+    dict of str to str
+        Name -> description.
+
+    See Also
+    --------
+    open_device : opens one.
+
+    Examples
+    --------
+    >>> sorted(list_devices())[:3]
+    ['genicam', 'replay', 'sim']
+    """
     _discover()
     return {k: v.description for k, v in sorted(_REGISTRY.items())}
 
@@ -177,7 +290,28 @@ def _entry(name: str) -> _Entry:
 
 
 def device_options(name: str) -> dict[str, object]:
-    """The options of device ``name`` and their defaults (``inspect.Parameter.empty`` when required)."""
+    """The options of device ``name`` and their defaults (``inspect.Parameter.empty`` when required).
+
+    Parameters
+    ----------
+    name : str
+        A registered device.
+
+    Returns
+    -------
+    dict of str to object
+        Option -> default.
+
+    See Also
+    --------
+    open_device : opens it with options.
+
+    Examples
+    --------
+    >>> options = device_options("sim")
+    >>> options["scene"], options["noise"]
+    ('wax', True)
+    """
     sig = inspect.signature(_entry(name).open)
     return {
         p.name: p.default
@@ -187,17 +321,52 @@ def device_options(name: str) -> dict[str, object]:
 
 
 def is_hardware(name: str) -> bool:
-    """Whether device ``name`` talks to a camera."""
+    """Whether device ``name`` talks to a camera.
+
+    Parameters
+    ----------
+    name : str
+        A registered device.
+
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    list_devices : every device.
+
+    Examples
+    --------
+    >>> is_hardware("sim"), is_hardware("ueye")
+    (False, True)
+    """
     return _entry(name).hardware
 
 
 def open_device(name: str, **options) -> Device:
     """Open a registered device by name with its keyword options.
 
+    Parameters
+    ----------
+    name : str
+        A registered device (:func:`list_devices`).
+    **options
+        Its keyword options (:func:`device_options`).
+
+    Returns
+    -------
+    Device
+        Open; close it (or use ``with``).
+
     Raises
     ------
     InputError
         Unknown device, an option the device does not take, or a required option missing.
+
+    See Also
+    --------
+    register_device : adds a device.
 
     Examples
     --------

@@ -89,7 +89,21 @@ def _load_aravis():
 
 
 def aravis_available() -> bool:
-    """Whether Aravis 0.8 can be loaded through PyGObject."""
+    """Whether Aravis 0.8 can be loaded through PyGObject.
+
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    GenICamEpiscan : the device it serves.
+
+    Examples
+    --------
+    >>> isinstance(aravis_available(), bool)
+    True
+    """
     try:
         _load_aravis()
     except DeviceError:
@@ -145,6 +159,26 @@ class GenICamEpiscan(TriggeredTiming, DeviceBase):
         Aravis's fake camera only: its GenICam file (default :data:`FAKE_GENICAM_XML`).
     fake_trigger_hz : float
         Aravis's fake camera only: the rate of its trigger clock (the projector's VSYNC).
+
+    See Also
+    --------
+    UEyeEpiscan : the paper's camera.
+    aravis_available : whether it can run here.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6.
+
+    Examples
+    --------
+    A GigE Vision or USB3 Vision camera through Aravis (a real camera, or Aravis's fake one):
+
+    >>> from planeray.devices import open_device
+    >>> with open_device("genicam", camera_id="Fake_1", base_trigger_delay_us=0.0) as cam:  # doctest: +SKIP
+    ...     cam.set_timing(0.0, 600.0)
+    ...     image, saturated = cam.grab()
     """
 
     kind = "genicam"

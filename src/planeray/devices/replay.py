@@ -24,6 +24,20 @@ class ReplayDevice(DeviceBase):
         The recording (native store or import folder, e.g. via :func:`planeray.io.read_stack`).
     source : str, optional
         Name of the recording, for metadata and error messages.
+
+    See Also
+    --------
+    planeray.SimulatedEpiscan : a simulated device.
+    planeray.acquire_sweep : capture a sweep from any device.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> again = pr.acquire_sweep(pr.ReplayDevice(stack), pr.quick_sweep())
+    >>> bool(np.array_equal(again.images, stack.images))
+    True
     """
 
     kind = "replay"

@@ -83,6 +83,28 @@ class SimulatedEpiscan(DeviceBase):
         The simulated rig (:data:`RIG_DEFAULTS`): ``screen`` (the X screen the
         projector shows, None: white), ``display``, and the rig's timing and faults
         (see the module's docstring).
+
+    See Also
+    --------
+    planeray.simulate_stack : a whole sweep in one call.
+    planeray.ReplayDevice : a recorded stack as a device.
+    planeray.devices.open_device : every device by name.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6 (the Episcan prototype).
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> device = pr.SimulatedEpiscan(pr.make_scene("wax", (8, 8), seed=0), seed=0)
+    >>> device.set_delay(0.0)
+    >>> device.set_exposure(600.0)
+    >>> image, saturated = device.grab()
+    >>> image.shape, image.dtype.name, bool(saturated.any())
+    ((8, 8), 'float32', False)
     """
 
     kind = "simulated"
@@ -718,6 +740,20 @@ def simulated_device(
         Simulate noise.
     lines_per_second : float, optional
         Projector line rate (default: the paper's 54,000 lines/s).
+
+    Returns
+    -------
+    SimulatedEpiscan
+
+    See Also
+    --------
+    planeray.baselines.compare_direct_global, planeray.baselines.compare_emulation : the comparisons it serves.
+
+    Examples
+    --------
+    >>> device = simulated_device("corner", (16, 16), seed=0)
+    >>> device.lines_per_second, device.scene.name
+    (54000.0, 'corner')
     """
     from ..scenes import make_scene
 

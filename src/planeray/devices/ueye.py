@@ -78,7 +78,21 @@ _AUTO_FEATURES = (
 
 
 def pyueye_available() -> bool:
-    """Whether IDS's Python binding (and the uEye library under it) can be imported."""
+    """Whether IDS's Python binding (and the uEye library under it) can be imported.
+
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    UEyeEpiscan : the device it serves.
+
+    Examples
+    --------
+    >>> isinstance(pyueye_available(), bool)
+    True
+    """
     try:
         from pyueye import ueye  # noqa: F401
     except Exception:
@@ -132,6 +146,26 @@ class UEyeEpiscan(TriggeredTiming, DeviceBase):
     exposure_tolerance_us : float, optional
         Largest accepted difference between requested and realized exposure
         (default: half the camera's exposure increment, plus 0.5 us).
+
+    See Also
+    --------
+    GenICamEpiscan : any GenICam camera.
+    pyueye_available : whether it can run here.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 6 (the paper's IDS UI-3250CP).
+
+    Examples
+    --------
+    The paper's camera (needs IDS's driver and a camera on the trigger of the projector's VSYNC):
+
+    >>> from planeray.devices import open_device
+    >>> with open_device("ueye", parameter_file="rig/episcan.ini") as cam:  # doctest: +SKIP
+    ...     cam.set_timing(0.0, 600.0)
+    ...     image, saturated = cam.grab()
     """
 
     kind = "ueye"

@@ -559,7 +559,7 @@ def check_report_options(*, size: int = 128, quick: bool = False) -> None:
 #: parameters lie (C 100, gamma_scale 1 at 128 x 128), a quarter of its fits.
 QUICK_PARAM_GRID = {"C": (10.0, 100.0), "gamma_scale": (0.3, 1.0)}
 
-#: Pixels at least this far from every wall of their container are measured (the issue's target region).
+#: Pixels at least this far from every wall of their container are measured (the region the fit's accuracy target is for).
 MEDIA_FIT_NEAR_WALL_MM = 3.0
 #: Blocks (pixels a side) whose spread gives each region's noise (as in the fit's validation, tools/validate_fit.py).
 MEDIA_FIT_BLOCK_PX = 8

@@ -1,4 +1,4 @@
-"""Recognition by fitted parameters against the SVM, by distance to the container wall (issue 27, part 2).
+"""Recognition by fitted parameters against the SVM, by distance to the container wall.
 
 * :func:`reference_library`: the library of the five Fig. 10 media as the fit returns them
   on a labelled reference capture (the shipped ``mc/tables/media-library.json`` is made by

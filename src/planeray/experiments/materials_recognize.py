@@ -79,7 +79,7 @@ def check_recognition_options(block_px, regions, pool_mm, p_unknown) -> None:
 
 
 def _recognize_by_containers(lib, capture, settings, reg, regions, p_unknown, stages) -> dict:
-    """Each container (``reg``, else found in the images) fitted from the stack's images (issue 41)."""
+    """Each container (``reg``, else found in the images) fitted from the stack's images."""
     from ..camera import CameraModel
     from ..materials.recognize import recognize_stack
 

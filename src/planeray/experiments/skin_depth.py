@@ -12,7 +12,7 @@ row jitter, ambient light 0.5 e-/us) and fitted from the ground truth's vein mas
 
 :func:`depth_validation` returns one row per vein and condition (tone, wavelength, seed): the
 true depth of the top and diameter, the estimate +- standard error, resolved or the reason.
-:func:`depth_summary` counts them against the issue's target (every resolved vein 1-3 mm deep
+:func:`depth_summary` counts them against the target (every resolved vein 1-3 mm deep
 within 0.5 mm).  ``tools/skin_depth_table.py`` prints the table.
 """
 
@@ -29,11 +29,11 @@ __all__ = ["STRAIGHT_VEINS", "CONDITIONS", "DEPTH_CONDITION", "depth_validation"
 
 #: (depth of the top, diameter) of the straight layout's veins, mm.
 STRAIGHT_VEINS = ((1.0, 2.0), (2.0, 3.0), (3.0, 1.5), (1.5, 4.0))
-#: The issue's conditions: (tone, wavelength in nm).
+#: The validation's conditions: (tone, wavelength in nm).
 CONDITIONS = (("fair", 638), ("fair", 850), ("dark", 638), ("dark", 850))
 #: The condition ``skin compare`` (full) and ``planeray paper`` measure the forearm's vein depths in.
 DEPTH_CONDITION = ("fair", 850)
-#: The issue's target: resolved veins this deep (mm, top) within TARGET_ERROR_MM.
+#: The target: resolved veins this deep (mm, top) within TARGET_ERROR_MM.
 TARGET_DEPTHS_MM = (1.0, 3.0)
 TARGET_ERROR_MM = 0.5
 

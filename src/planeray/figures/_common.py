@@ -19,7 +19,30 @@ __all__ = ["new_figure", "figure_for", "finish", "save_png", "display_scale", "s
 
 
 def display_scale(images, percentile=99.5):
-    """One brightening factor for many images (the paper: "all images equally brightened")."""
+    """One brightening factor for many images (the paper: "all images equally brightened").
+
+    Parameters
+    ----------
+    images : sequence of array_like
+        The images (any shapes), in the same units.
+    percentile : float
+        The percentile of all their pixels that the factor maps to 1 (white).
+
+    Returns
+    -------
+    float
+        ``1 / p`` for that percentile ``p`` of the pooled pixels (1 when ``p <= 0``).
+
+    See Also
+    --------
+    save_image : writes an image as a PNG brightened by such a factor.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> float(display_scale([np.full((2, 2), 0.5), np.full((2, 2), 0.25)], percentile=100))
+    2.0
+    """
     import numpy as np
 
     vals = np.concatenate([np.asarray(im, np.float32).ravel() for im in images])
@@ -28,7 +51,30 @@ def display_scale(images, percentile=99.5):
 
 
 def new_figure(figsize, **kwargs) -> Figure:
-    """A fresh :class:`~matplotlib.figure.Figure`, outside pyplot (nothing to close)."""
+    """A fresh :class:`~matplotlib.figure.Figure`, outside pyplot (nothing to close).
+
+    Parameters
+    ----------
+    figsize : tuple of float
+        Width and height, inches.
+    **kwargs
+        Passed to :class:`~matplotlib.figure.Figure` (``dpi``, ``layout``, ...).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    See Also
+    --------
+    save_png : writes it atomically, with planeray's mark.
+
+    Examples
+    --------
+    >>> fig = new_figure((4, 3))
+    >>> ax = fig.subplots()
+    >>> fig.get_size_inches().tolist()
+    [4.0, 3.0]
+    """
     return Figure(figsize=figsize, **kwargs)
 
 
@@ -57,6 +103,32 @@ def save_png(fig, path, dpi=100) -> Path:
     ``fig`` may be a :class:`~matplotlib.figure.SubFigure`; its whole figure is saved.
     The figure is not closed: figures built with :func:`new_figure` are not held by
     pyplot and go away with their last reference.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure or matplotlib.figure.SubFigure
+        The figure.
+    path : str or Path
+        The PNG to write (replaced atomically).
+    dpi : float
+        Dots per inch.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    See Also
+    --------
+    new_figure : a figure outside pyplot.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> fig = new_figure((2, 2))
+    >>> _ = fig.subplots().plot([0, 1], [1, 0])
+    >>> save_png(fig, pathlib.Path(tempfile.mkdtemp()) / "line.png").name
+    'line.png'
     """
     from ..io.marks import mark_text
 
@@ -73,6 +145,32 @@ def save_image(image, path, scale_to: float | None = None) -> Path:
 
     ``scale_to``: the PNG's brightening (default: its 99.5th percentile to white; give one value to
     several images so they compare).  Written atomically, with planeray's mark.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        The image (normalized units: 0..1 is the full range of a TIFF).
+    path : str or Path
+        ``.png``, ``.tif`` or ``.tiff``.
+    scale_to : float, optional
+        The PNG's brightening factor (:func:`display_scale`).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    See Also
+    --------
+    display_scale : one brightening factor for several images.
+    planeray.io.write_image : the 16-bit TIFF writer.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, pathlib
+    >>> folder = pathlib.Path(tempfile.mkdtemp())
+    >>> save_image(np.linspace(0, 1, 16).reshape(4, 4), folder / "ramp.png").suffix
+    '.png'
     """
     import numpy as np
 

@@ -1,4 +1,4 @@
-"""The criterion's curve of an automatic choice of the demultiplexing weights (issues 26, 42)."""
+"""The criterion's curve of an automatic choice of the demultiplexing weights."""
 
 from __future__ import annotations
 

@@ -36,6 +36,10 @@ def label_map_figure(labels, *, out=None, reference=None, title: str = "Light-tr
     matplotlib.figure.Figure
         The new figure (one Axes, two with ``reference``), or ``ax.figure``.
 
+    See Also
+    --------
+    planeray.classify_transport : labels to draw.
+
     Examples
     --------
     >>> import planeray as pr

@@ -397,7 +397,7 @@ def fit_figure(result, *, mm_per_row, names=None, max_profiles=4, out=None):
     mask = maps["mask"]
     state = np.where(mask == 255, 0, np.where(mask == 0, 1, np.where(np.isfinite(maps["mu_s_prime_per_mm"]), 2, 3)))
     flags = maps.get("flags")
-    if flags is not None:  # the flag layer (issue 41): the model does not fit, or a parameter at the model's edge
+    if flags is not None:  # the flag layer: the model does not fit, or a parameter at the model's edge
         state = np.where((flags != 255) & (flags & 11 > 0), 4, state)
     cmap = ListedColormap(["0.85", "#3b8f3b", "#e0a030", "#c03030", "#7b3fa0"])
     ax.imshow(state, cmap=cmap, vmin=-0.5, vmax=4.5, interpolation="nearest")

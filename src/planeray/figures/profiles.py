@@ -40,6 +40,10 @@ def delay_profiles_figure(
     matplotlib.figure.Figure
         Two Axes: the reference image with the pixels circled, and the profiles.
 
+    See Also
+    --------
+    planeray.measured_delay_profiles : the profiles.
+
     Examples
     --------
     >>> import planeray as pr

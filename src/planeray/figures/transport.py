@@ -52,6 +52,10 @@ def transport_profiles_figure(
     matplotlib.figure.Figure
         The new figure (one Axes per pixel, sharing the offset axis), or ``ax.figure``.
 
+    See Also
+    --------
+    planeray.demultiplex : the estimate.
+
     Examples
     --------
     >>> import planeray as pr

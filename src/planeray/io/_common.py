@@ -65,6 +65,28 @@ def store_format(path) -> str | None:
 
     Read from the Zarr group's ``format`` attribute (``zarr.json``) without opening
     the arrays; a folder with a ``manifest.csv`` is a stack import folder.
+
+    Parameters
+    ----------
+    path : str or path
+        A folder.
+
+    Returns
+    -------
+    {"stack", "transport"} or None
+
+    See Also
+    --------
+    planeray.read_stack, planeray.read_transport
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.write_transport(pr.make_scene("corner", (8, 8), seed=0).transport, pathlib.Path(tmp) / "T.zarr")
+    ...     store_format(path), store_format(tmp)
+    ('transport', None)
     """
     import json
 
@@ -85,7 +107,22 @@ def store_format(path) -> str | None:
 
 
 def planeray_version() -> str:
-    """The installed planeray version (``"unknown"`` in a bare source checkout)."""
+    """The installed planeray version (``"unknown"`` in a bare source checkout).
+
+    Returns
+    -------
+    str
+        The distribution's version, as ``planeray --version`` prints it.
+
+    See Also
+    --------
+    planeray.io.marks.mark_text : the mark planeray writes into its files, with this version.
+
+    Examples
+    --------
+    >>> isinstance(planeray_version(), str)
+    True
+    """
     try:
         return _importlib_metadata.version("planeray")
     except _importlib_metadata.PackageNotFoundError:  # pragma: no cover - source checkout
@@ -113,6 +150,15 @@ def jsonable(value, *, finite: bool = True, default=None, where: str = "metadata
         that is not text or a number, raises ``error`` naming ``where`` (``"metadata['a'][2]"``);
         without ``error`` or ``default`` such an object is returned as it is (and
         :func:`json.dumps` refuses it).
+
+    Returns
+    -------
+    object
+        The value in plain JSON types (dicts, lists, floats, ints, strings, booleans, None).
+
+    See Also
+    --------
+    planeray.write_stack : its metadata passes through it.
 
     Examples
     --------
@@ -194,6 +240,30 @@ def create_array(group, name: str, **kwargs):
 
     The returned array has ``write_empty_chunks`` on; an array reopened later
     does not (see :func:`writable`).
+
+    Parameters
+    ----------
+    group : zarr.Group
+        The store's group.
+    name : str
+        The array's name.
+    **kwargs
+        ``shape``, ``chunks``, ``dtype``, ``fill_value``... as for ``zarr.Group.create_array``.
+
+    Returns
+    -------
+    zarr.Array
+
+    See Also
+    --------
+    writable : the same setting for an array opened again.
+
+    Examples
+    --------
+    >>> import zarr
+    >>> group = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    >>> create_array(group, "T", shape=(4, 4), chunks=(2, 4), dtype="float32").shape
+    (4, 4)
     """
     kwargs.setdefault("compressors", COMPRESSORS)
     return group.create_array(name, config=WRITE_CONFIG, **kwargs)
@@ -206,6 +276,29 @@ def writable(group, name: str):
     store: a writer that reopens a store (a resumed run) must get its arrays
     through this function, or the chunks it writes that equal the fill value are
     skipped and the store, marked :data:`ALL_CHUNKS_ATTR`, is refused on reading.
+
+    Parameters
+    ----------
+    group : zarr.Group
+        The store's group, opened for writing.
+    name : str
+        The array's name.
+
+    Returns
+    -------
+    zarr.Array
+
+    See Also
+    --------
+    create_array : a new array so set.
+
+    Examples
+    --------
+    >>> import zarr
+    >>> group = zarr.open_group(zarr.storage.MemoryStore(), mode="w")
+    >>> _ = create_array(group, "done", shape=(3,), chunks=(3,), dtype="bool", fill_value=False)
+    >>> writable(group, "done").shape
+    (3,)
     """
     return group[name].with_config(WRITE_CONFIG)
 
@@ -397,6 +490,20 @@ class LazyArray:
         :class:`~planeray.errors.TransportError`).
     name : str, optional
         The array's name in messages (default: its name in the store).
+
+    See Also
+    --------
+    planeray.read_stack : gives its images as one.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     lazy = pr.read_stack(pr.write_stack(stack, pathlib.Path(tmp) / "s.zarr")).images
+    ...     type(lazy).__name__, lazy.shape, lazy[0].shape
+    ('LazyArray', (27, 8, 8), (8, 8))
     """
 
     def __init__(self, array, *, path=None, error=StackError, name: str | None = None):

@@ -348,6 +348,19 @@ def atomic_directory(path, *, overwrite: bool = False, kind: str | None = None, 
     StorageError
         The file system refused (read-only folder, disk full...): one line naming
         ``path`` and the cause; nothing is left behind.
+
+    See Also
+    --------
+    atomic_file : one file.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     with atomic_directory(pathlib.Path(tmp) / "result") as work:
+    ...         _ = (work / "a.txt").write_text("done")
+    ...     sorted(p.name for p in pathlib.Path(tmp).iterdir())
+    ['result']
     """
     from .lock import output_lock
 
@@ -412,6 +425,19 @@ def atomic_file(path, *, overwrite: bool = True, error=InputError):
     ------
     StorageError
         The file system refused (read-only folder, disk full...).
+
+    See Also
+    --------
+    atomic_directory : a whole folder.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     with atomic_file(pathlib.Path(tmp) / "table.csv") as work:
+    ...         _ = work.write_text("a,b")
+    ...     (pathlib.Path(tmp) / "table.csv").read_text()
+    'a,b'
     """
     path = Path(path)
     if path.is_dir():

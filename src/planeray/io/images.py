@@ -120,6 +120,20 @@ def write_image(path, image, *, bit_depth: int = 16, black_level: float = 0) -> 
     ------
     InputError
         Unknown extension, image not 2-D or not finite, invalid bit depth.
+
+    See Also
+    --------
+    planeray.export_folder : a stack's images so written.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> import tifffile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = write_image(pathlib.Path(tmp) / "img.tif", np.full((2, 2), 0.5))
+    ...     tifffile.imread(path).tolist()
+    [[32768, 32768], [32768, 32768]]
     """
     path = Path(path)
     kind = IMAGE_SUFFIXES.get(path.suffix.lower())

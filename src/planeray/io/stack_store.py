@@ -57,6 +57,21 @@ def write_stack(stack: Stack, path, *, overwrite: bool = False, progress=None) -
     StackError
         ``path`` exists and ``overwrite`` is False, an image is not finite or does
         not match the stack's shape, or the metadata is not JSON-serializable.
+
+    See Also
+    --------
+    read_stack : read it back.
+    planeray.export_folder : an import folder of image files instead.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.write_stack(stack, pathlib.Path(tmp) / "stack.zarr")
+    ...     path.name, pr.read_stack(path).images.shape
+    ('stack.zarr', (27, 8, 8))
     """
     path = Path(path)
     if not isinstance(stack, Stack):
@@ -101,6 +116,51 @@ def create_stack_group(
     image and mask, through arrays that store chunks equal to the fill value
     (the returned group's ``images``/``saturated`` after reopening:
     :func:`planeray.io.writable`), or :func:`read_stack` refuses the store.
+
+    Parameters
+    ----------
+    directory : str or path
+        An empty folder.
+    shape : (int, int, int)
+        ``(N, H, W)``: images and their size.
+    delay_us, exposure_us : array_like (N,)
+        Delay and exposure of each image, microseconds.
+    excluded : array_like of bool (N,)
+        Images left out of demultiplexing.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    projector_rows : int
+        Projector rows spanned by the image height.
+    metadata : dict
+        The acquisition record (JSON-serializable).
+    path : str or path, optional
+        The store's final name, for error messages.
+
+    Returns
+    -------
+    zarr.Group
+        The store's group with ``images``, ``saturated`` and the vectors, images at 0.
+
+    See Also
+    --------
+    planeray.write_stack : a whole stack at once.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     group = create_stack_group(
+    ...         pathlib.Path(tmp) / "s",
+    ...         (2, 8, 8),
+    ...         [0.0, 375.0],
+    ...         [600.0, 600.0],
+    ...         [False, False],
+    ...         54000.0,
+    ...         8,
+    ...         {"source": "example"},
+    ...     )
+    ...     group["images"].shape
+    (2, 8, 8)
     """
     n, h, w = (int(x) for x in shape)
     group = zarr.open_group(str(directory), mode="w", zarr_format=3)
@@ -152,6 +212,11 @@ def read_stack(path, *, lazy: bool = True) -> Stack:
         ``all_chunks_stored`` -- e.g. ``s.zarr: images: chunk (12, 2, 0) is missing
         (image 12, rows 64-95) -- the store is incomplete`` -- or that cannot be
         decoded...).
+
+    See Also
+    --------
+    write_stack : write one.
+    planeray.import_folder : a folder of image files.
 
     Notes
     -----
@@ -259,10 +324,31 @@ def validate_images(stack: Stack, path=None) -> None:
     path : str or os.PathLike, optional
         Named in the error message.
 
+    Returns
+    -------
+    None
+        Returns when every value is finite; raises otherwise.
+
     Raises
     ------
     StackError
         Naming the index of the first non-finite image.
+
+    See Also
+    --------
+    planeray.write_stack : validates before writing.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> images = np.zeros((1, 2, 2), np.float32)
+    >>> images[0, 0, 0] = np.nan
+    >>> try:
+    ...     validate_images(pr.Stack(images, [0.0], [600.0], 54000.0))
+    ... except pr.errors.StackError as err:
+    ...     print("refused:", "NaN" in str(err))
+    refused: True
     """
     try:
         _check_finite_images(stack.images, path)

@@ -71,6 +71,20 @@ def read_sweep(path) -> Sweep:
     InputError
         One line naming the file and the problem (not JSON, a missing or malformed field, a
         setting listed twice, another format).
+
+    See Also
+    --------
+    write_sweep : write one.
+    planeray.make_sweep : a named sweep.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.io.write_sweep(pr.quick_sweep(), pathlib.Path(tmp) / "quick.json")
+    ...     len(read_sweep(path))
+    27
     """
     path = Path(path)
     try:
@@ -158,6 +172,11 @@ def write_sweep(sweep: Sweep, path, *, overwrite: bool = False) -> Path:
     Returns
     -------
     pathlib.Path
+
+    See Also
+    --------
+    read_sweep : read it back.
+    planeray.design.design_sweep : a designed sweep to write.
 
     Examples
     --------

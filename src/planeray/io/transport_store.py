@@ -40,6 +40,33 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
     every chunk of every array, also those equal to the fill value (create them
     with :func:`planeray.io.create_array`, write through
     :func:`planeray.io.writable`), or :func:`read_transport` refuses the store.
+
+    Parameters
+    ----------
+    offsets_rows : array_like of int
+        The offsets ``u`` of the dense band, projector rows.
+    projector_rows : int
+        Projector rows spanned by the image height.
+    attrs : dict, optional
+        The caller's attributes (JSON-serializable).
+    path : str or path, optional
+        The store, for error messages.
+
+    Returns
+    -------
+    dict
+        ``attrs`` with the reserved format fields.
+
+    See Also
+    --------
+    planeray.write_transport : writes them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> attrs = transport_attrs(np.arange(-3, 4), 720, attrs={"note": "example"})
+    >>> attrs["projector_rows"], attrs["note"]
+    (720, 'example')
     """
     out = jsonable(dict(attrs or {}), finite=False, where="attrs", error=TransportError)
     out.update(
@@ -59,11 +86,35 @@ def transport_attrs(offsets_rows, projector_rows: int, *, attrs: dict | None = N
 def read_transport_maps(path) -> dict:
     """Per-pixel 2-D arrays stored beside ``T`` (e.g. demultiplexing diagnostics), by name.
 
+    Parameters
+    ----------
+    path : str or path
+        A transport store.
+
+    Returns
+    -------
+    dict of str to ndarray (H, W)
+        The maps by name (``converged``, ``iterations``, ``objective``, ...).
+
     Raises
     ------
     TransportError
         The store cannot be opened, a chunk of a map is absent from a store marked
         ``all_chunks_stored`` or cannot be decoded (naming the map and the rows).
+
+    See Also
+    --------
+    planeray.read_transport : the transport itself.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     maps = read_transport_maps(pr.demultiplex_to_store(stack, pathlib.Path(tmp) / "T.zarr"))
+    >>> maps["converged"].shape
+    (8, 8)
     """
     path = Path(path)
     group = open_group(path, TransportError)
@@ -111,6 +162,20 @@ def write_transport(
     TransportError
         ``path`` exists and ``overwrite`` is False, or ``attrs`` is not
         JSON-serializable.
+
+    See Also
+    --------
+    read_transport : read it back.
+    planeray.demultiplex_to_store : demultiplex straight into a store.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> T = pr.make_scene("corner", (8, 8), seed=0).transport
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     pr.write_transport(T, pathlib.Path(tmp) / "T.zarr").name
+    'T.zarr'
     """
     path = Path(path)
     if not isinstance(transport, Transport):
@@ -162,11 +227,27 @@ def read_transport(path) -> tuple[Transport, dict]:
         0) is missing (rows 64-127) -- the store is incomplete`` -- or a chunk that
         cannot be decoded).
 
+    See Also
+    --------
+    write_transport : write one.
+    planeray.demultiplex_to_store : demultiplex into one.
+
     Notes
     -----
     Stores written by this version of planeray store every chunk and carry the
     attribute ``all_chunks_stored = true``; older stores, which skipped chunks
     equal to the fill value, are read with absent chunks as 0.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> T = pr.make_scene("corner", (8, 8), seed=0).transport
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pr.write_transport(T, pathlib.Path(tmp) / "T.zarr", attrs={"note": "ground truth"})
+    ...     back, attrs = pr.read_transport(path)
+    >>> back.dense.shape == T.dense.shape, attrs["note"]
+    (True, 'ground truth')
     """
     path = Path(path)
     group = open_group(path, TransportError)

@@ -20,6 +20,30 @@ def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
 
     A camera row covers ``rows_per_camera_row`` projector rows; a Lambertian
     surface returns each of them in equal share.  Sums to 1.
+
+    Parameters
+    ----------
+    offsets_rows : array_like of int
+        Offsets ``u``, projector rows.
+    rows_per_camera_row : float
+        Projector rows one camera row spans (``P / H``).
+
+    Returns
+    -------
+    ndarray of float64
+        The kernel, summing to 1.
+
+    See Also
+    --------
+    planeray.timing.band_bin_weights : the same bin rule.
+
+    Examples
+    --------
+    A camera row of 2 projector rows returns light from the rows it spans:
+
+    >>> import numpy as np
+    >>> footprint_kernel(np.arange(-2, 3), 2.0).tolist()
+    [0.0, 0.25, 0.5, 0.25, 0.0]
     """
     k = band_bin_weights(offsets_rows, 0.0, rows_per_camera_row)
     return (k / k.sum()).astype(np.float64)

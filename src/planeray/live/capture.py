@@ -72,6 +72,32 @@ class Frame:
     generation : int
         The timing request it answers (a new :meth:`LiveCapture.set_timing` or ``set_cycle`` starts
         a new generation).
+
+    See Also
+    --------
+    LiveCapture : produces them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> from planeray.live import Frame
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> frames = [
+    ...     Frame(
+    ...         i,
+    ...         stack.images[i],
+    ...         stack.saturated[i],
+    ...         float(stack.delay_us[i]),
+    ...         float(stack.exposure_us[i]),
+    ...         time_s=i / 30,
+    ...         captured_at=i / 30,
+    ...         generation=0,
+    ...     )
+    ...     for i in range(len(stack))
+    ... ]
+    >>> frames[4].delay_us, frames[4].exposure_us, frames[4].image.shape
+    (0.0, 600.0, (8, 8))
     """
 
     index: int
@@ -100,6 +126,10 @@ class LiveCapture:
         core it gets; a camera is paced by its trigger).
     close_device : bool
         Close the device when the capture stops.
+
+    See Also
+    --------
+    LiveTransport : demultiplexes its frames.
 
     Examples
     --------

@@ -17,7 +17,33 @@ __all__ = ["write_snapshot", "snapshot_path"]
 
 
 def snapshot_path(folder, view: str, *, now: float | None = None) -> Path:
-    """A new name in ``folder`` for a snapshot of ``view``: ``snapshot-YYYYmmdd-HHMMSS-VIEW.zarr`` (``-2``... if taken)."""
+    """A new name in ``folder`` for a snapshot of ``view``: ``snapshot-YYYYmmdd-HHMMSS-VIEW.zarr`` (``-2``... if taken).
+
+    Parameters
+    ----------
+    folder : str or path
+        Where snapshots go.
+    view : str
+        The view's name.
+    now : float, optional
+        The time (seconds since the epoch; default: now).
+
+    Returns
+    -------
+    pathlib.Path
+
+    See Also
+    --------
+    write_snapshot : writes it.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = snapshot_path(tmp, "band", now=0.0)
+    >>> path.name.startswith("snapshot-"), path.name.endswith("-band.zarr")
+    (True, True)
+    """
     folder = Path(folder)
     stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))
     path = folder / f"snapshot-{stamp}-{view}.zarr"
@@ -49,6 +75,46 @@ def write_snapshot(
         The view it was taken in (recorded).
     excluded : ndarray of bool, optional
         The images left out of demultiplexing (default: the paper's boundary rule).
+
+    Returns
+    -------
+    pathlib.Path
+        The stack written.
+
+    See Also
+    --------
+    planeray.read_stack : reads it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> from planeray.live import Frame
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> frames = [
+    ...     Frame(
+    ...         i,
+    ...         stack.images[i],
+    ...         stack.saturated[i],
+    ...         float(stack.delay_us[i]),
+    ...         float(stack.exposure_us[i]),
+    ...         time_s=i / 30,
+    ...         captured_at=i / 30,
+    ...         generation=0,
+    ...     )
+    ...     for i in range(len(stack))
+    ... ]
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = write_snapshot(
+    ...         frames[:3],
+    ...         pathlib.Path(tmp) / "snap.zarr",
+    ...         device={"device": "sim"},
+    ...         lines_per_second=54000.0,
+    ...         projector_rows=8,
+    ...     )
+    ...     pr.read_stack(path).images.shape
+    (3, 8, 8)
     """
     frames = list(frames)
     if not frames:

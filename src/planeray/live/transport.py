@@ -53,7 +53,52 @@ def _used(sweep: Sweep) -> Sweep:
 
 def window_stack(frames, *, lines_per_second: float, projector_rows: int, jitter_us: float = 0.0, metadata=None):
     """The frames of a window as a :class:`~planeray.stack.Stack` (one image per frame, in order, all used):
-    what an offline ``planeray demux`` of the same images reads."""
+    what an offline ``planeray demux`` of the same images reads.
+
+    Parameters
+    ----------
+    frames : sequence of Frame
+        A window of frames.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    projector_rows : int
+        Projector rows spanned by the image height.
+    jitter_us : float
+        Synchronization jitter, microseconds (recorded).
+    metadata : dict, optional
+        More of the record.
+
+    Returns
+    -------
+    Stack
+
+    See Also
+    --------
+    WindowSolver : solves a window.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> from planeray.live import Frame
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> frames = [
+    ...     Frame(
+    ...         i,
+    ...         stack.images[i],
+    ...         stack.saturated[i],
+    ...         float(stack.delay_us[i]),
+    ...         float(stack.exposure_us[i]),
+    ...         time_s=i / 30,
+    ...         captured_at=i / 30,
+    ...         generation=0,
+    ...     )
+    ...     for i in range(len(stack))
+    ... ]
+    >>> window = window_stack(frames, lines_per_second=54000.0, projector_rows=8)
+    >>> window.images.shape, int(window.excluded.sum())  # every frame of a window is used
+    ((27, 8, 8), 0)
+    """
     frames = list(frames)
     meta = {"sync": {"jitter_us": float(jitter_us), "line_width_us": 0.0}} | dict(metadata or {})
     return Stack(
@@ -87,6 +132,45 @@ class WindowSolver:
         Certified relative objective gap (the fast solver's default, 1e-4).
     threads : int, optional
         Solver threads (default: Numba's count, at most two).
+
+    See Also
+    --------
+    planeray.demultiplex : the offline solve.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 4.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> from planeray.live import Frame
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> frames = [
+    ...     Frame(
+    ...         i,
+    ...         stack.images[i],
+    ...         stack.saturated[i],
+    ...         float(stack.delay_us[i]),
+    ...         float(stack.exposure_us[i]),
+    ...         time_s=i / 30,
+    ...         captured_at=i / 30,
+    ...         generation=0,
+    ...     )
+    ...     for i in range(len(stack))
+    ... ]
+    >>> sweep = pr.quick_sweep()
+    >>> solver = WindowSolver(sweep, (8, 8), lines_per_second=54000.0, projector_rows=8)
+    >>> used = ~sweep.excluded
+    >>> T, maps = solver.solve(stack.images[used])
+    >>> T.dense.shape, bool(maps["converged"].all())
+    ((8, 8, 229), True)
+    >>> T, maps = solver.solve(stack.images[used])  # the next window starts warm
+    >>> int(maps["iterations"].max()) <= 10
+    True
     """
 
     def __init__(
@@ -229,6 +313,36 @@ class LiveUpdate:
         Wall time of its solve.
     warm : bool
         Whether it was warm-started.
+
+    See Also
+    --------
+    LiveTransport : its updates.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> from planeray.live import Frame
+    >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> frames = [
+    ...     Frame(
+    ...         i,
+    ...         stack.images[i],
+    ...         stack.saturated[i],
+    ...         float(stack.delay_us[i]),
+    ...         float(stack.exposure_us[i]),
+    ...         time_s=i / 30,
+    ...         captured_at=i / 30,
+    ...         generation=0,
+    ...     )
+    ...     for i in range(len(stack))
+    ... ]
+    >>> solver = WindowSolver(pr.quick_sweep(), (8, 8), lines_per_second=54000.0, projector_rows=8)
+    >>> used = [f for f, x in zip(frames, pr.quick_sweep().excluded) if not x]
+    >>> T, maps = solver.solve(np.stack([f.image for f in used]))
+    >>> update = LiveUpdate(1, T, maps, used, solved_at=0.0, seconds=0.1, warm=False)
+    >>> update.number, update.transport.dense.shape
+    (1, (8, 8, 229))
     """
 
     number: int
@@ -271,6 +385,10 @@ class LiveTransport:
         Warm-start each window from the last (False: every window cold, for comparison).
     frame_timeout_s : float
         How long to wait for a new frame before the loop reports the device stalled.
+
+    See Also
+    --------
+    WindowSolver : the solver it runs.
 
     Examples
     --------

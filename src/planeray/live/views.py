@@ -49,6 +49,23 @@ def cycle_delays(exposure_us: float, delays_us=DEFAULT_CYCLE_DELAYS_US) -> tuple
     """The delays of Eq. 7's cycle at ``exposure_us``: those whose band is off the epipolar plane
     (``|t_d| > t_e/2``) and whose edge is not on it (the boundary images a stack leaves out, Sec. 4).
 
+    Parameters
+    ----------
+    exposure_us : float
+        The cycle's exposure, microseconds.
+    delays_us : tuple of float
+        The candidate delays, microseconds.
+
+    Returns
+    -------
+    tuple of float
+
+    See Also
+    --------
+    composite_view : the composite of a cycle.
+
+    Examples
+    --------
     >>> cycle_delays(600.0)
     (562.5, 750.0, 937.5, 1125.0)
     >>> cycle_delays(1200.0)
@@ -68,7 +85,28 @@ def cycle_delays(exposure_us: float, delays_us=DEFAULT_CYCLE_DELAYS_US) -> tuple
 
 
 def vein_view(image) -> np.ndarray:
-    """The vein view of a delay image: its contrast stretched (percentiles, then CLAHE), in [0, 1], float32."""
+    """The vein view of a delay image: its contrast stretched (percentiles, then CLAHE), in [0, 1], float32.
+
+    Parameters
+    ----------
+    image : array_like (H, W)
+        A delay image.
+
+    Returns
+    -------
+    ndarray (H, W) float32
+
+    See Also
+    --------
+    composite_view : Eq. 7's composite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> view = vein_view(np.linspace(0.1, 0.3, 256).reshape(16, 16))
+    >>> view.dtype.name, float(view.min()) >= 0.0, float(view.max()) <= 1.0
+    ('float32', True, True)
+    """
     from ..skin.imaging import contrast_stretch
 
     return contrast_stretch(np.asarray(image, np.float64)).astype(np.float32)
@@ -79,6 +117,39 @@ def composite_view(frames) -> tuple[np.ndarray, dict]:
 
     Returns the composite (float32, ~1 on skin: the locally normalized delay images) and
     ``{"delays_us": [...], "delay_map_us": [min, max]}``.
+
+    Parameters
+    ----------
+    frames : sequence of Frame
+        One frame per delay of :func:`cycle_delays`, one exposure.
+
+    Returns
+    -------
+    image : ndarray (H, W) float32
+    info : dict
+        ``delays_us`` used and the ``delay_map_us`` range.
+
+    See Also
+    --------
+    planeray.skin.enhance_contrast : Eq. 7.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Eq. 7, Sec. 10.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.live import Frame
+    >>> frames = [
+    ...     Frame(i, np.full((16, 16), 0.2 + 0.1 * i, np.float32), np.zeros((16, 16), bool), d, 600.0, i, i, 0)
+    ...     for i, d in enumerate(cycle_delays(600.0))
+    ... ]
+    >>> image, used = composite_view(frames)
+    >>> image.shape, used["delays_us"] == list(cycle_delays(600.0))
+    ((16, 16), True)
     """
     from ..skin.enhance import enhance_contrast
 
@@ -104,6 +175,33 @@ class PulseMonitor:
         The shortest window analysed (two periods of the rate band's slowest 0.7 Hz).
     spectrum_points : int
         Samples of the spectrum kept for display (the rate band and up to 3.3 Hz).
+
+    See Also
+    --------
+    planeray.pulse.analysis.analyze_pulse : the analysis.
+
+    References
+    ----------
+    .. [1] H.-Y. Wu, M. Rubinstein, E. Shih, J. Guttag, F. Durand, W. T. Freeman, "Eulerian Video
+       Magnification for Revealing Subtle Changes in the World", ACM SIGGRAPH 2012.
+
+    Examples
+    --------
+    Ten seconds of a skin patch whose brightness pulses at 72 beats a minute:
+
+    >>> import numpy as np
+    >>> from planeray.live import Frame
+    >>> rng = np.random.default_rng(0)
+    >>> frames = []
+    >>> for i in range(300):
+    ...     t = i / 30
+    ...     image = (0.5 + 0.005 * np.sin(2 * np.pi * 1.2 * t) + 0.001 * rng.standard_normal((16, 16))).astype(
+    ...         np.float32
+    ...     )
+    ...     frames.append(Frame(i, image, np.zeros((16, 16), bool), 500.0, 600.0, t, t, 0))
+    >>> result = PulseMonitor().analyze(frames)
+    >>> round(result["rate_bpm"]), result["detected"]
+    (72, True)
     """
 
     def __init__(

@@ -30,6 +30,47 @@ def capture_features(
     ``kind``, ``floor`` and ``demux`` (``alpha``, ``beta``, ``method``; default the
     paper's 0.01, 0.01, ``"fast"``) do.  A transport, if not given, is
     :func:`capture_transport` of the stack.  Returns ``(features, signal, definition)``.
+
+    Parameters
+    ----------
+    stack : Stack
+        The capture.
+    kind : {"stack", "transport"}
+        Measured profiles, or the profiles of the demultiplexed transport.
+    floor : {"edge", "min", "none"}
+        The floor removed before the area normalization.
+    definition : FeatureDefinition, optional
+        A model's definition: fixes kind, floor and demultiplexing.
+    transport : Transport, optional
+        The capture's transport, when already demultiplexed.
+    demux : dict, optional
+        Demultiplexing options (``alpha``, ``beta``, ``method``).
+    source : str, optional
+        Name of the capture, for messages.
+    progress : callable, optional
+        Called as the demultiplexing advances.
+
+    Returns
+    -------
+    features : ndarray (H * W, F) float32
+        One area-normalized profile per pixel (1/ms).
+    signal : ndarray (H, W)
+        Each pixel's profile area before normalization.
+    definition : FeatureDefinition
+
+    See Also
+    --------
+    train_model : learns from them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> features, signal, definition = capture_features(stack)
+    >>> features.shape, signal.shape  # one area-normalized profile per pixel
+    ((64, 27), (8, 8))
     """
     if definition is not None:
         kind = definition.kind
@@ -67,6 +108,34 @@ def capture_transport(stack: Stack, *, floor: str = "edge", demux: dict | None =
 
     :func:`~planeray.materials.features.remove_floor` then :func:`planeray.demux.demultiplex`
     with ``demux`` (default :data:`DEFAULT_DEMUX`).
+
+    Parameters
+    ----------
+    stack : Stack
+        The capture.
+    floor : {"edge", "min", "none"}
+        The floor removed before demultiplexing.
+    demux : dict, optional
+        Demultiplexing options (default :data:`DEFAULT_DEMUX`).
+    progress : callable, optional
+        Called as the demultiplexing advances.
+
+    Returns
+    -------
+    Transport
+
+    See Also
+    --------
+    transport_features : its features.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> capture_transport(stack).dense.shape
+    (8, 8, 229)
     """
     from ..demux import demultiplex
     from .features import remove_floor

@@ -82,6 +82,22 @@ class FeatureDefinition:
         A transport's offsets (empty for a stack).
     demux : dict
         A transport's demultiplexing options (``alpha``, ``beta``, ``method``), empty for a stack.
+
+    See Also
+    --------
+    capture_features : features so defined.
+    MaterialModel : keeps the definition it was trained on.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> from planeray.materials import capture_features
+    >>> features, signal, definition = capture_features(stack)
+    >>> type(definition).__name__, definition.kind, len(definition.delay_us) == features.shape[1]
+    ('FeatureDefinition', 'stack', True)
     """
 
     kind: str
@@ -221,6 +237,38 @@ def normalize_profiles(values, delay_us, *, floor="edge"):
     part over delay in ms; a profile with no positive area becomes 0.  ``floor``:
     ``"edge"`` subtracts the mean of the :data:`EDGE_SAMPLES` outermost samples at each
     end, ``"min"`` the minimum, ``"none"`` nothing.
+
+    Parameters
+    ----------
+    values : array_like (..., D)
+        Profiles over delay (last axis, delays sorted).
+    delay_us : array_like (D,)
+        The delays, microseconds.
+    floor : {"edge", "min", "none"}
+        The floor removed first.
+
+    Returns
+    -------
+    profiles : ndarray (..., D) float32
+        The profiles over their areas (1/ms).
+    area : ndarray (...)
+        The areas (input units times ms).
+
+    See Also
+    --------
+    planeray.profiles.area_normalize : the plain normalization.
+
+    Examples
+    --------
+    Returns the normalized profiles (float32) and the area each was divided by (1/ms units of the input).
+    The floor here is the mean of the two outermost samples at each end (0.35):
+
+    >>> import numpy as np
+    >>> p, area = normalize_profiles(
+    ...     np.array([[0.1, 0.6, 1.1, 0.6, 0.1]]), np.array([-1000.0, -500.0, 0.0, 500.0, 1000.0])
+    ... )
+    >>> p.round(2).tolist(), area.tolist()
+    ([[-0.4, 0.4, 1.2, 0.4, -0.4]], [0.625])
     """
     if floor not in FLOORS:
         raise InputError(f"unknown floor {floor!r}; choose one of {', '.join(FLOORS)}")
@@ -278,6 +326,10 @@ def stack_features(stack: Stack, *, floor="edge", definition: FeatureDefinition 
         Sum over exposures of the curves' areas (0: a pixel with no usable profile).
     definition : FeatureDefinition
 
+    See Also
+    --------
+    transport_features : from a transport.
+
     Examples
     --------
     >>> from planeray.acquire import simulate_stack
@@ -325,6 +377,44 @@ def transport_features(
     :func:`stack_features`; ``demux`` records the demultiplexing options and ``floor``
     the floor removed from the stack before demultiplexing (:func:`remove_floor`), both
     compared by a model.
+
+    Parameters
+    ----------
+    transport : Transport
+        A (demultiplexed) transport.
+    lines_per_second : float
+        Projector scan rate, rows per second.
+    floor : {"edge", "min", "none"}
+        The floor removed from the stack before demultiplexing (recorded).
+    demux : dict
+        The demultiplexing options (recorded, compared by a model).
+    definition : FeatureDefinition, optional
+        A model's definition.
+    source : str, optional
+        Name of the capture, for messages.
+
+    Returns
+    -------
+    features : ndarray (H * W, U) float32
+    signal : ndarray (H, W)
+    definition : FeatureDefinition
+
+    See Also
+    --------
+    capture_transport : the transport of a capture.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> from planeray.materials import capture_transport
+    >>> features, signal, definition = transport_features(
+    ...     capture_transport(stack), lines_per_second=54000.0, demux={"alpha": 0.01, "beta": 0.01, "method": "fast"}
+    ... )
+    >>> features.shape[0], definition.kind
+    (64, 'transport')
     """
     mine = transport_definition(
         transport,
@@ -347,6 +437,32 @@ def remove_floor(stack: Stack, *, floor="edge") -> Stack:
     delays at each end; ``"min"``: the minimum; ``"none"``: the stack itself), taken
     per pixel over the delays of each exposure and subtracted from all its images: what
     the ambient light adds (``ambient x t_e x albedo``) goes, exactly.
+
+    Parameters
+    ----------
+    stack : Stack
+        The capture.
+    floor : {"edge", "min", "none"}
+        The floor to subtract.
+
+    Returns
+    -------
+    Stack
+        A new stack; the input is left as it is.
+
+    See Also
+    --------
+    stack_features : the same floor.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> floored = remove_floor(stack)
+    >>> floored.images.shape == stack.images.shape, bool(floored.images.min() < stack.images.min())
+    (True, True)
     """
     if floor not in FLOORS:
         raise InputError(f"unknown floor {floor!r}; choose one of {', '.join(FLOORS)}")

@@ -1,4 +1,4 @@
-"""Measuring a medium: reduced scattering ``mu_s'`` and absorption ``mu_a`` from its line kernel (issue 27).
+"""Measuring a medium: reduced scattering ``mu_s'`` and absorption ``mu_a`` from its line kernel.
 
 The paper recognizes materials by the shape of their delay profiles (Sec. 8); this module
 *measures* them.  A pixel of a homogeneous, semi-infinite scattering medium seen from

@@ -54,6 +54,25 @@ def read_label_image(path, *, shape=None) -> np.ndarray:
         PNG (grayscale ``L``/``I;16``/``I`` or palette ``P``) or TIFF of integers.
     shape : (int, int), optional
         The stack's image size: a label image of another size is refused.
+
+    Returns
+    -------
+    ndarray (H, W) int64
+        Class ids.
+
+    See Also
+    --------
+    write_label_image : writes one.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> labels = np.array([[0, 1], [2, 6]])
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     back = read_label_image(write_label_image(pathlib.Path(tmp) / "labels.png", labels))
+    >>> back.tolist()
+    [[0, 1], [2, 6]]
     """
     path = Path(path)
     if not path.is_file():
@@ -113,6 +132,34 @@ def write_label_image(path, labels, *, overwrite: bool = True, kind: str = "segm
     TIFF tag ``Software``): ``"segmentation"`` for a predicted map, ``"labels"`` for the
     ground truth of a simulated capture.  Callers check that an existing ``path`` may be
     replaced (:func:`planeray.io.atomic.check_replaceable`) before any work.
+
+    Parameters
+    ----------
+    path : str or path
+        ``.png`` (palette) or ``.tif`` (16-bit).
+    labels : array_like (H, W) of int
+        Class ids.
+    overwrite : bool
+        Replace an existing file (only one planeray wrote).
+    kind : str
+        planeray's mark of the file (``"segmentation"``, ``"labels"``).
+
+    Returns
+    -------
+    pathlib.Path
+
+    See Also
+    --------
+    read_label_image : reads it back.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = write_label_image(pathlib.Path(tmp) / "seg.png", np.array([[1, 2], [3, 4]]))
+    ...     path.name
+    'seg.png'
     """
     from ..io.marks import mark_text, png_mark_info
 

@@ -1,4 +1,4 @@
-"""Recognizing a medium by its fitted parameters: a library of known media (issue 27, part 2).
+"""Recognizing a medium by its fitted parameters: a library of known media.
 
 :mod:`planeray.materials.fit` measures a pixel's (or a region's) reduced scattering
 ``mu_s'`` and absorption ``mu_a`` with standard errors.  This module names the medium
@@ -90,7 +90,7 @@ __all__ = [
 ]
 
 LIBRARY_FORMAT = "planeray-media-library"
-#: Version 2 (issue 41): entries are **physical** parameters -- ``mu_s'``, ``mu_a`` with their uncertainties,
+#: Version 2: entries are **physical** parameters -- ``mu_s'``, ``mu_a`` with their uncertainties,
 #: the index ``n`` (and a layer's depth) the fit assumed -- valid at any resolution and row size.  Version 1
 #: (entries: the distribution of block fits of one capture, bound to its ``conditions``) is still read.
 LIBRARY_VERSION = 2

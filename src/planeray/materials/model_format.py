@@ -141,6 +141,36 @@ class MaterialModel:
         ``area_center`` and ``area_scale`` of the log area, and per class id ``center``
         (K + 1), ``precision`` (K + 1, K + 1) and ``calibration`` (sorted squared
         distances of held-out training pixels).
+
+    See Also
+    --------
+    train_model : trains one.
+    load_model : reads a saved one.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 8, Fig. 10.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> from planeray.materials import train_model
+    >>> model = train_model(
+    ...     [stack],
+    ...     [scene.labels],
+    ...     class_names={1: "plane", 2: "wax"},
+    ...     param_grid={"C": (10.0,), "gamma_scale": (1.0,)},
+    ...     cv_folds=2,
+    ... )
+    >>> type(model).__name__, model.classes
+    ('MaterialModel', {1: 'plane', 2: 'wax'})
+    >>> float((model.predict(stack) == scene.labels).mean())
+    1.0
     """
 
     pipeline: object
@@ -431,6 +461,41 @@ def load_model(path) -> MaterialModel:
     reads, a record or an estimator whose bytes do not match their recorded SHA-256 (a
     damaged or altered file), one containing a type outside :data:`ALLOWED_TYPES`, or a
     record inconsistent with its estimator (feature count, classes).
+
+    Parameters
+    ----------
+    path : str or path
+        A ``.zip`` written by :meth:`MaterialModel.save`.
+
+    Returns
+    -------
+    MaterialModel
+
+    See Also
+    --------
+    MaterialModel.save : writes one.
+    train_model : trains one.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> from planeray.materials import train_model
+    >>> model = train_model(
+    ...     [stack],
+    ...     [scene.labels],
+    ...     class_names={1: "plane", 2: "wax"},
+    ...     param_grid={"C": (10.0,), "gamma_scale": (1.0,)},
+    ...     cv_folds=2,
+    ... )
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = model.save(pathlib.Path(tmp) / "model.zip")
+    ...     back = load_model(path)
+    >>> back.classes == model.classes, bool((back.predict(stack) == model.predict(stack)).all())
+    (True, True)
     """
     import skops.io as sio
     from sklearn.pipeline import Pipeline

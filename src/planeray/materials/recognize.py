@@ -1,4 +1,4 @@
-"""Recognition by fitted parameters over an image: fit, name, pool (issue 27, part 2).
+"""Recognition by fitted parameters over an image: fit, name, pool.
 
 * :func:`fit_image`: ``mu_s'`` and ``mu_a`` per block of pixels (within regions, when
   given) with :func:`planeray.materials.fit.fit_profiles`, and on which side of the forward
@@ -6,7 +6,7 @@
 * :func:`recognize_image`: those maps named against a :class:`~planeray.materials.library.MediaLibrary`,
   per pixel and, by default, with the log-likelihoods pooled over a disc
   (:data:`DEFAULT_POOL_MM`) -- the default that the recognition study measured best next to
-  container walls (docs/user_guide/materials.md, "Recognition by parameters");
+  container walls (docs/user_guide/materials_library.md);
 * :func:`accuracy_by_distance`: per-class accuracy in bins of distance to the nearest wall
   (:data:`WALL_BINS_MM`);
 * :func:`entries_from_capture`: library entries from labelled regions of a capture ("add
@@ -383,7 +383,7 @@ def accuracy_by_distance(pred, truth, wall_distance_mm, *, classes, bins_mm=WALL
     return out
 
 
-# ---------------------------------------------------------------- recognition that travels (issue 41)
+# ---------------------------------------------------------------- recognition that travels
 #: Chi-square gain that makes a pixel "a scattering medium": the best medium kernel (one more coefficient than
 #: a surface's direct light) must improve the chi-square by this much -- chi2.isf(1e-6, 1) = 24 for one kernel,
 #: rounded up for the choice among :data:`_GENERIC_MEDIA` and the library's (a look-elsewhere margin).

@@ -1,4 +1,4 @@
-"""Measuring a medium from the stack images themselves (issue 27): ``mu_s'`` and ``mu_a`` in 1/mm.
+"""Measuring a medium from the stack images themselves: ``mu_s'`` and ``mu_a`` in 1/mm.
 
 :func:`planeray.materials.fit.fit_transport` fits the *demultiplexed* transport; on a noisy
 capture the demultiplexer's sparsity spikes, the removal of the ambient floor and the camera
@@ -104,8 +104,8 @@ STACK_MODEL_RELATIVE_SD = MODEL_RELATIVE_SD
 #: over the offsets (table interpolation: 2-6 % against direct Monte Carlo, tests and tools/validate_stack_fit.py).
 STACK_MODEL_CORRELATED_SD = 0.03
 #: The walls' effect on the kernel (diffusion theory's method of images) is off by this share of itself: against
-#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect (issue 27;
-#: docs/user_guide/materials.md, "Container walls").
+#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect
+#: (docs/user_guide/materials_fit.md, "Container walls").
 WALL_EFFECT_SD = 0.2
 #: (and, both, their distances by a transport mean free path: ``_fit_region``'s ``effect_columns``)
 #: Diffusion theory's walls and bottom are trusted DIFFUSION_RANGE_MFP transport mean free paths (1 / mu_s') away
@@ -113,7 +113,7 @@ WALL_EFFECT_SD = 0.2
 #: is flagged (FLAG_RANGE).  The soap's 30 mm layer (6 mean free paths) already showed the bottom's model 80 % off.
 #: A layer's bottom's effect (the slab's image series) is off by this share of itself: against planeray's Monte
 #: Carlo of the soap's 30 mm layer (6 transport mean free paths) it removes 3.8 % of the kernel where the Monte
-#: Carlo removes 2.1 % (issue 27): 80 % too much, and diffusion theory errs more in thinner layers.
+#: Carlo removes 2.1 %: 80 % too much, and diffusion theory errs more in thinner layers.
 BOTTOM_EFFECT_SD = 1.0
 
 

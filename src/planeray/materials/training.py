@@ -103,6 +103,34 @@ def train_model(
     Returns
     -------
     MaterialModel
+
+    See Also
+    --------
+    MaterialModel : the model.
+    load_model : a saved model.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 8, Fig. 10.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import planeray as pr
+    >>> scene = pr.make_scene("wax", (8, 8), seed=0)  # a wax object (label 2) on a plane (label 1)
+    >>> stack = pr.simulate_stack(scene, pr.quick_sweep(), seed=0)
+    >>> from planeray.materials import train_model
+    >>> model = train_model(
+    ...     [stack],
+    ...     [scene.labels],
+    ...     class_names={1: "plane", 2: "wax"},
+    ...     param_grid={"C": (10.0,), "gamma_scale": (1.0,)},
+    ...     cv_folds=2,
+    ... )
+    >>> sorted(model.classes.values())
+    ['plane', 'wax']
     """
     from sklearn.model_selection import GridSearchCV, GroupKFold
     from sklearn.pipeline import Pipeline

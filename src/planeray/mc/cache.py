@@ -45,7 +45,23 @@ TABLES_DIR = Path(__file__).with_name("tables")
 
 
 def cache_dir() -> Path:
-    """Cache folder: ``$PLANERAY_CACHE/mc`` if set, else ``~/.cache/planeray/mc``."""
+    """Cache folder: ``$PLANERAY_CACHE/mc`` if set, else ``~/.cache/planeray/mc``.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder (not created).
+
+    See Also
+    --------
+    planeray.mc_line_profile : ``cache=True`` stores there.
+
+    Examples
+    --------
+    >>> import os
+    >>> os.environ.get("PLANERAY_CACHE") is None or cache_dir().name == "mc"
+    True
+    """
     root = os.environ.get("PLANERAY_CACHE")
     base = Path(root) if root else Path.home() / ".cache" / "planeray"
     return base / "mc"

@@ -90,7 +90,27 @@ def k1_line_law(rho_mm, z_mm, sigma_tr):
 def boundary_mismatch_A(eta):
     """Internal-reflection parameter ``A = (1 + F_dr) / (1 - F_dr)`` of the diffusion
     boundary condition, with Groenhuis' fit ``F_dr(eta)`` [1]_ (``A ~ 1`` for ``eta = 1``).
-    The extrapolated boundary sits ``2 A D`` above the surface."""
+    The extrapolated boundary sits ``2 A D`` above the surface.
+
+    Parameters
+    ----------
+    eta : float
+        Relative refractive index of the medium.
+
+    Returns
+    -------
+    float
+        ``A``.
+
+    See Also
+    --------
+    dipole_reflectance : uses it.
+
+    Examples
+    --------
+    >>> round(float(boundary_mismatch_A(1.0)), 2), round(float(boundary_mismatch_A(1.4)), 2)
+    (1.0, 3.25)
+    """
     f_dr = -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
     return (1.0 + f_dr) / (1.0 - f_dr)
 
@@ -137,6 +157,24 @@ def dipole_reflectance(medium: Medium, r_mm):
         A semi-infinite medium; the dipole uses ``sigma_a``, ``sigma_s_prime`` and ``n``.
     r_mm : array_like of float
         Distances from the entry point, mm.
+
+    Returns
+    -------
+    ndarray
+        ``R_d(r)`` per mm^2 (fraction of the incident power).
+
+    See Also
+    --------
+    dipole_total_reflectance : its integral.
+    dipole_line_kernel : a lit line.
+
+    Examples
+    --------
+    >>> from planeray.medium import Medium
+    >>> m = Medium(sigma_s=1.0, sigma_a=0.01, g=0.0)
+    >>> r = dipole_reflectance(m, [0.5, 5.0])  # per mm^2, at 0.5 and 5 mm
+    >>> bool(r[0] > r[1] > 0)
+    True
     """
     sigma_a, sigma_s_prime, eta = _dipole_medium(medium)
     return _reflectance(r_mm, sigma_a, sigma_s_prime, eta)
@@ -146,6 +184,26 @@ def dipole_total_reflectance(medium: Medium):
     """Total diffuse reflectance ``R_d = int R_d(r) 2 pi r dr`` of the dipole (closed form [1]_).
 
     ``medium`` is semi-infinite; only ``sigma_a``, ``sigma_s_prime`` and ``n`` matter.
+
+    Parameters
+    ----------
+    medium : Medium
+        The medium (1/mm coefficients, index ``n``).
+
+    Returns
+    -------
+    float
+        The fraction of the incident power that leaves the surface.
+
+    See Also
+    --------
+    dipole_reflectance : per distance.
+
+    Examples
+    --------
+    >>> from planeray.medium import Medium
+    >>> round(float(dipole_total_reflectance(Medium(sigma_s=1.0, sigma_a=0.01, g=0.0))), 3)
+    0.748
     """
     albedo, _, _, _, A = _dipole_constants(*_dipole_medium(medium))
     s = np.sqrt(3.0 * (1.0 - albedo))
@@ -176,6 +234,19 @@ def dipole_line_kernel(medium: Medium, offsets_rows, *, mm_per_row, subsamples=1
     kernel : ndarray of float64
         Light reaching each bin per unit of line illumination; sums to the total
         diffuse reflectance of the medium when the bins cover the whole profile.
+
+    See Also
+    --------
+    dipole_reflectance : the point source.
+    planeray.line_kernel : the kernel a scene uses.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.medium import Medium
+    >>> k = dipole_line_kernel(Medium(sigma_s=1.0, sigma_a=0.01, g=0.0), np.arange(-3, 4), mm_per_row=0.5)
+    >>> k.shape, bool(np.allclose(k, k[::-1]))
+    ((7,), True)
     """
     sigma_a, sigma_s_prime, eta = _dipole_medium(medium)
     k = np.asarray(offsets_rows, dtype=float)
@@ -228,6 +299,19 @@ def diffusion_exit(hist, hmin, out_bins, mm_per_row, z_mm, sigma_a, sigma_tp, n)
         Weight leaving through each output bin.
     exit_total : float
         Fraction of the continued weight that leaves the medium (anywhere).
+
+    See Also
+    --------
+    planeray.mc_line_profile : the engine that hands photons to it.
+
+    Examples
+    --------
+    A unit of weight handed to diffusion 2 mm deep under bin 0, leaving through bins -2..2 (1 mm each):
+
+    >>> import numpy as np
+    >>> exit_bins, total = diffusion_exit(np.array([[1.0]]), 0, np.arange(-2, 3), 1.0, 2.0, 0.01, 1.0, 1.0)
+    >>> exit_bins.shape, bool(np.allclose(exit_bins, exit_bins[:, ::-1])), bool(0 < total < 1)
+    ((1, 5), True, True)
     """
     sigma_tr = math.sqrt(3.0 * sigma_a * sigma_tp)
     z_b = 2.0 * boundary_mismatch_A(n) / (3.0 * sigma_tp)
@@ -258,6 +342,25 @@ def diffusion_normal_radiance_ratio(n):
     outside); outside, the normal radiance is ``L(1) (1 - R(1)) / n^2`` and the
     exitance ``2 pi int L(mu) (1 - R(mu)) mu dmu``.  0.398 sr^-1 for ``n = 1``
     (Lambertian: 1/pi = 0.318; Chandrasekhar's exact H-function value: 0.401).
+
+    Parameters
+    ----------
+    n : float
+        Relative refractive index of the medium.
+
+    Returns
+    -------
+    float
+        Radiance per unit exitance, 1/sr.
+
+    See Also
+    --------
+    planeray.mc_line_profile : its ``radiance``.
+
+    Examples
+    --------
+    >>> round(float(diffusion_normal_radiance_ratio(1.0)), 3)  # per steradian
+    0.398
     """
     A = boundary_mismatch_A(n)
     mu, wt = np.polynomial.legendre.leggauss(64)

@@ -274,6 +274,22 @@ def default_cutoff_mm(medium: Medium, offsets_rows, *, mm_per_row) -> float:
         The binned window (bins of ``mm_per_row``).
     mm_per_row : float
         Bin width in mm.
+
+    Returns
+    -------
+    float
+        The cutoff distance in mm.
+
+    See Also
+    --------
+    planeray.mc_line_profile : uses it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from planeray.medium import Medium
+    >>> default_cutoff_mm(Medium(sigma_s=1.0, sigma_a=0.01, g=0.9), np.arange(-50, 51), mm_per_row=1.0) > 50
+    True
     """
     medium = as_medium(medium)
     sigma_a = medium.sigma_a
@@ -339,6 +355,11 @@ def mc_line_profile(
         Binned exiting power (``values``) and normal-view radiance (``radiance``)
         of a line source along ``y`` lit at ``x = 0``, with batch standard errors
         and the energy balance.
+
+    See Also
+    --------
+    planeray.line_kernel : the tabulated kernel for a scene.
+    planeray.Medium : the optical constants.
 
     Notes
     -----
@@ -409,6 +430,18 @@ def mc_point_profile(
         its area for ``R_d(r)`` per mm^2, compare with
         :func:`planeray.kernels.dipole_reflectance`), ``radiance`` the
         normal-view radiance averaged over it (mm^-2 sr^-1 per unit power).
+
+    See Also
+    --------
+    planeray.mc_line_profile : a lit line.
+    planeray.kernels.dipole_reflectance : the diffusion dipole's ``R_d(r)``.
+
+    Examples
+    --------
+    >>> from planeray.medium import Medium
+    >>> p = mc_point_profile(Medium(sigma_s=1.0, sigma_a=0.1, g=0.9), n_photons=5_000)
+    >>> abs(p.energy_balance - 1.0) < 1e-9
+    True
     """
     medium = as_medium(medium)
     if radius_bins is None:

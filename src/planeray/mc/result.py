@@ -69,6 +69,18 @@ class MCProfile:
         0 without a wall).
     wall_loss_stderr : float
         Its batch standard error.
+
+    See Also
+    --------
+    planeray.mc_line_profile, planeray.mc.mc_point_profile : return it.
+
+    Examples
+    --------
+    >>> from planeray.mc import mc_line_profile
+    >>> from planeray.medium import Medium
+    >>> p = mc_line_profile(Medium(sigma_s=1.0, sigma_a=0.1, g=0.9), n_photons=5_000)
+    >>> type(p).__name__, p.values.shape == p.stderr.shape
+    ('MCProfile', True)
     """
 
     offsets_rows: np.ndarray

@@ -46,17 +46,76 @@ def _level(level) -> int:
 
 
 def white(shape, *, level: int = 255) -> np.ndarray:
-    """Every pixel lit at ``level`` (0-255): the sweep's illumination."""
+    """Every pixel lit at ``level`` (0-255): the sweep's illumination.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    level : int
+        Brightness, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    black : the laser off.
+
+    Examples
+    --------
+    >>> white((2, 3)).shape, int(white((2, 3), level=128).max())
+    ((2, 3), 128)
+    """
     return np.full(_shape(shape), _level(level), np.uint8)
 
 
 def black(shape) -> np.ndarray:
-    """Every pixel dark: the laser off (a dark frame)."""
+    """Every pixel dark: the laser off (a dark frame).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    white : the laser on.
+
+    Examples
+    --------
+    >>> int(black((2, 3)).max())
+    0
+    """
     return np.zeros(_shape(shape), np.uint8)
 
 
 def comb(shape, step_rows: int, phase: int, *, level: int = 255) -> np.ndarray:
     """Rows ``phase, phase + k, phase + 2k, ...`` lit (``k = step_rows``), the others dark (Sec. 6).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    step_rows : int
+        ``k``: rows between lit rows.
+    phase : int
+        The first lit row.
+    level : int
+        Brightness of the lit rows, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    planeray.rig.capture_comb : captures every phase.
 
     Examples
     --------
@@ -72,7 +131,32 @@ def comb(shape, step_rows: int, phase: int, *, level: int = 255) -> np.ndarray:
 
 
 def rows(shape, first: int, last: int | None = None, *, level: int = 255) -> np.ndarray:
-    """Row ``first`` lit, or the band of rows ``first`` to ``last`` (both included)."""
+    """Row ``first`` lit, or the band of rows ``first`` to ``last`` (both included).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    first : int
+        The first lit row.
+    last : int, optional
+        The last lit row (default: ``first``).
+    level : int
+        Brightness, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    comb : rows ``k`` apart.
+
+    Examples
+    --------
+    >>> rows((6, 2), 2, 3)[:, 0].tolist()  # rows 2 to 3 lit
+    [0, 0, 255, 255, 0, 0]
+    """
     h, w = _shape(shape)
     last = first if last is None else last
     a = check_integer(first, "first row", minimum=0, maximum=h - 1)
@@ -89,6 +173,28 @@ def rectification_card(shape, *, step_rows: int = 40) -> np.ndarray:
     short ticks at both edges mark every tenth row between.  Point the camera at a
     flat target, show the card, and turn the camera until each line lies on one
     camera row (the numbers tell which projector row it is).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    step_rows : int
+        Rows between the numbered lines.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    parse_pattern : ``card`` by name.
+
+    Examples
+    --------
+    >>> card = rectification_card((100, 200), step_rows=40)
+    >>> import numpy as np
+    >>> card.shape, np.flatnonzero(card.min(axis=1) == 255).tolist()  # the rows of the full-width lines
+    ((100, 200), [0, 40, 80])
     """
     from PIL import Image, ImageDraw, ImageFont
 
@@ -117,11 +223,34 @@ def rectification_card(shape, *, step_rows: int = 40) -> np.ndarray:
 def load_pattern(path) -> np.ndarray:
     """An image file (PNG, TIFF, BMP..., 8-bit grey or RGB) or a ``.npy`` array, as a pattern.
 
+    Parameters
+    ----------
+    path : str or path
+        The image or ``.npy`` file.
+
+    Returns
+    -------
+    ndarray uint8
+
     Raises
     ------
     InputError
         Missing, unreadable, or not 8-bit (a 16-bit image would need a scaling the
         pattern must not get).
+
+    See Also
+    --------
+    parse_pattern : a name or a file.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = pathlib.Path(tmp) / "p.npy"
+    ...     np.save(path, rows((4, 4), 1))
+    ...     load_pattern(path).shape
+    (4, 4, 3)
     """
     path = Path(path)
     if not path.is_file():
@@ -153,6 +282,24 @@ def as_rgb8(pattern) -> np.ndarray:
     ``uint8`` and ``bool`` arrays are taken as they are (True = 255); floats must lie
     in ``[0, 1]`` and become ``round(255 x)``; grey is repeated on the three channels.
     Nothing else is changed: no scaling, filtering or gamma.
+
+    Parameters
+    ----------
+    pattern : array_like
+        Grey ``(rows, columns)`` or RGB ``(rows, columns, 3)``, 0-255.
+
+    Returns
+    -------
+    ndarray (rows, columns, 3) uint8
+
+    See Also
+    --------
+    parse_pattern : patterns by name.
+
+    Examples
+    --------
+    >>> as_rgb8(white((2, 3))).shape
+    (2, 3, 3)
     """
     a = np.asarray(pattern)
     if a.ndim == 3 and a.shape[2] == 1:
@@ -178,10 +325,33 @@ def as_rgb8(pattern) -> np.ndarray:
 def place(pattern, shape, at) -> np.ndarray:
     """The pattern put on a black screen of ``shape`` with its top-left pixel at ``at = (row, column)``.
 
+    Parameters
+    ----------
+    pattern : array_like
+        The pattern.
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+    at : (int, int)
+        Where its top-left pixel goes, ``(row, column)``.
+
+    Returns
+    -------
+    ndarray uint8
+
     Raises
     ------
     InputError
         It does not fit there (nothing is cropped).
+
+    See Also
+    --------
+    black : the screen around it.
+
+    Examples
+    --------
+    >>> placed = place(white((1, 2)), (3, 4), (1, 2))
+    >>> placed[..., 0].tolist()
+    [[0, 0, 0, 0], [0, 0, 255, 255], [0, 0, 0, 0]]
     """
     p = as_rgb8(pattern)
     h, w = _shape(shape)
@@ -201,6 +371,26 @@ def parse_pattern(spec: str, shape) -> np.ndarray:
     ``white``, ``black``, ``comb:K:J`` (every ``K``-th row from ``J``), ``row:R``,
     ``rows:A:B`` (rows ``A`` to ``B``, both included), ``card`` or ``card:STEP``;
     anything else is read as an image file.
+
+    Parameters
+    ----------
+    spec : str
+        A pattern's name (``white``, ``black``, ``card``, ``rows:A-B``, ``comb:K:P``...) or an image file.
+    shape : (int, int)
+        The screen's ``(rows, columns)``.
+
+    Returns
+    -------
+    ndarray (rows, columns) uint8
+
+    See Also
+    --------
+    load_pattern : an image file.
+
+    Examples
+    --------
+    >>> parse_pattern("white", (2, 2)).tolist()
+    [[255, 255], [255, 255]]
     """
     name, _, rest = spec.partition(":")
     args = rest.split(":") if rest else []

@@ -26,7 +26,21 @@ LIST_TIMEOUT_S = 20.0
 
 
 def window_library_available() -> bool:
-    """Whether pyglet, the windowing library of the projector window, is installed."""
+    """Whether pyglet, the windowing library of the projector window, is installed.
+
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    list_screens : needs it.
+
+    Examples
+    --------
+    >>> isinstance(window_library_available(), bool)
+    True
+    """
     from importlib.util import find_spec
 
     return find_spec("pyglet") is not None
@@ -59,6 +73,16 @@ class Screen:
         The RandR output's name (``HDMI-1``), when the server names it.
     refresh_hz : float or None
         Its refresh rate, when the server knows it.
+
+    See Also
+    --------
+    list_screens : the screens of a display.
+
+    Examples
+    --------
+    >>> s = Screen(index=1, display=":0", x_screen=0, head=1, x=1920, y=0, width=1280, height=720)
+    >>> s.width, s.height
+    (1280, 720)
     """
 
     index: int
@@ -98,10 +122,28 @@ class Screen:
 def display_name(display: str | None = None) -> str:
     """The X display to use, without its screen number: ``display``, else ``$DISPLAY``.
 
+    Parameters
+    ----------
+    display : str, optional
+        ``:N`` or ``:N.S`` (default ``$DISPLAY``).
+
+    Returns
+    -------
+    str
+
     Raises
     ------
     InputError
         Neither is set.
+
+    See Also
+    --------
+    list_screens : its screens.
+
+    Examples
+    --------
+    >>> display_name(":1")
+    ':1'
     """
     name = display if display is not None else os.environ.get("DISPLAY")
     if not name:
@@ -149,10 +191,25 @@ def list_screens(display: str | None = None, *, refresh: bool = False) -> list[S
     refresh : bool
         Ask the X server again (the list is kept per display for the process).
 
+    Returns
+    -------
+    list of Screen
+
     Raises
     ------
     InputError
         No display, no pyglet, or the display cannot be reached.
+
+    See Also
+    --------
+    get_screen : one by number.
+
+    Examples
+    --------
+    The screens of the X display (needs a display: the projector is one of them)
+
+    >>> [(s.index, s.width, s.height) for s in list_screens()]  # doctest: +SKIP
+    [(0, 1920, 1080), (1, 1280, 720)]
     """
     name = display_name(display)
     if name in _CACHE and not refresh:
@@ -167,7 +224,28 @@ def list_screens(display: str | None = None, *, refresh: bool = False) -> list[S
 
 
 def get_screen(index: int, display: str | None = None) -> Screen:
-    """Screen ``index`` of the display, or a one-line refusal naming the screens there are."""
+    """Screen ``index`` of the display, or a one-line refusal naming the screens there are.
+
+    Parameters
+    ----------
+    index : int
+        The screen's number (as ``--screen`` takes it).
+    display : str, optional
+        The X display.
+
+    Returns
+    -------
+    Screen
+
+    See Also
+    --------
+    list_screens : every screen.
+
+    Examples
+    --------
+    >>> get_screen(1).height  # doctest: +SKIP
+    720
+    """
     screens = list_screens(display)
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not 0 <= index < len(screens):
         have = ", ".join(f"{s.index} ({s.width}x{s.height})" for s in screens)
@@ -182,10 +260,28 @@ def grab_screen(screen: Screen) -> np.ndarray:
     screen, cut to the head), not of any window's buffer: what the projector's
     input receives.
 
+    Parameters
+    ----------
+    screen : Screen
+        The screen.
+
+    Returns
+    -------
+    ndarray (height, width, 3) uint8
+
     Raises
     ------
     DeviceError
         The X server cannot be read.
+
+    See Also
+    --------
+    get_screen : a screen by number.
+
+    Examples
+    --------
+    >>> grab_screen(get_screen(1)).shape  # doctest: +SKIP
+    (720, 1280, 3)
     """
     from PIL import ImageGrab
 

@@ -47,6 +47,11 @@ class ProjectorWindow:
     timeout_s : float
         Longest wait for the window to open or for a pattern to be shown.
 
+    See Also
+    --------
+    parse_pattern : patterns to show.
+    list_screens : the screens.
+
     Examples
     --------
     >>> from planeray.projector import ProjectorWindow, comb  # doctest: +SKIP

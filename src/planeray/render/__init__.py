@@ -33,12 +33,45 @@ _SCENES = Path(__file__).resolve().parent / "scenes"
 
 
 def example_scenes() -> dict[str, Path]:
-    """The shipped example scene files by name (``mirror_ball``, ``disco_ball``, ``wax_candle``, ``room_corner``)."""
+    """The shipped example scene files by name (``mirror_ball``, ``disco_ball``, ``wax_candle``, ``room_corner``).
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+
+    See Also
+    --------
+    render_transport : renders one.
+
+    Examples
+    --------
+    >>> sorted(example_scenes())
+    ['disco_ball', 'mirror_ball', 'room_corner', 'wax_candle']
+    """
     return {p.stem: p for p in sorted(_SCENES.glob("*.xml"))}
 
 
 def example_scene(name: str) -> Path:
-    """Path of a shipped example scene file (a name of :func:`example_scenes`, or a path as it is)."""
+    """Path of a shipped example scene file (a name of :func:`example_scenes`, or a path as it is).
+
+    Parameters
+    ----------
+    name : str
+        A name of :func:`example_scenes`, or a path.
+
+    Returns
+    -------
+    pathlib.Path
+
+    See Also
+    --------
+    example_scenes : the names.
+
+    Examples
+    --------
+    >>> example_scene("room_corner").name
+    'room_corner.xml'
+    """
     scenes = example_scenes()
     if name in scenes:
         return scenes[name]

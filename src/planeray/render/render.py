@@ -56,7 +56,17 @@ LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 
 
 class RenderWarning(UserWarning):
-    """Light the render leaves out: long-range entries dropped (the message says how much), or a caustic pass skipped."""
+    """Light the render leaves out: long-range entries dropped (the message says how much), or a caustic pass skipped.
+
+    See Also
+    --------
+    render_transport : warns with it.
+
+    Examples
+    --------
+    >>> issubclass(RenderWarning, UserWarning)
+    True
+    """
 
 
 @dataclass
@@ -83,6 +93,17 @@ class RenderResult:
         Everything that rebuilds the render (scene file and digest, rig, parameters, variant, timings).
     dropped_fraction : float
         Fraction of the light beyond the band that was neither dense nor sparse.
+
+    See Also
+    --------
+    render_transport : returns it.
+
+    Examples
+    --------
+    >>> from planeray.render import example_scene
+    >>> result = render_transport(example_scene("room_corner"), shape=(8, 8), projector_rows=16, spp=4, band_rows=8)
+    >>> type(result).__name__, result.direct.shape, result.labels.shape
+    ('RenderResult', (8, 8), (8, 8))
     """
 
     transport: Transport
@@ -103,6 +124,24 @@ def labels_from_classes(classes, *, label_fraction=0.1, floor_fraction=1e-3) -> 
     ``label_fraction`` of its direct light (the rule of the built-in ``corner``
     and ``mirror_ball`` scenes), else direct diffuse (1); pixels whose total is
     below ``floor_fraction`` of the image's 99th percentile are 0 (none).
+
+    Parameters
+    ----------
+    classes : array_like (4, H, W)
+        Light per path class: direct, subsurface, diffuse and specular interreflection.
+    label_fraction : float
+        Share of the direct light an indirect class needs to label a pixel.
+    floor_fraction : float
+        Pixels below this share of the image's 99th percentile are labelled 0.
+
+    Returns
+    -------
+    ndarray (H, W) of int
+        Keys of :data:`planeray.scenes.EFFECTS`.
+
+    See Also
+    --------
+    RenderResult : its ``labels``.
 
     Examples
     --------
@@ -528,6 +567,29 @@ def render_transport(
     Returns
     -------
     RenderResult
+
+    See Also
+    --------
+    planeray.render.RenderResult : what it returns.
+    planeray.make_scene : the built-in analytic scenes.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Eq. 4.
+    .. [2] W. Jakob et al., "Mitsuba 3 renderer", https://mitsuba-renderer.org, 2022.
+
+    Examples
+    --------
+    A corner of a room, 8 x 8 pixels, 4 samples per pixel:
+
+    >>> from importlib.resources import files
+    >>> import planeray as pr
+    >>> scene = files("planeray") / "render" / "scenes" / "room_corner.xml"
+    >>> result = pr.render_transport(scene, shape=(8, 8), projector_rows=16, spp=4, band_rows=8)
+    >>> result.transport.dense.shape
+    (8, 8, 17)
     """
     import time
 
@@ -549,6 +611,28 @@ def render_work(scene_file, **kwargs) -> int:
     """Number of ``progress`` units of a render with these parameters (without rendering).
 
     Silent about what the render itself will warn of (a caustic pass skipped): it renders nothing.
+
+    Parameters
+    ----------
+    scene_file : str or path
+        A Mitsuba 3 scene file.
+    **kwargs
+        The options of :func:`render_transport`.
+
+    Returns
+    -------
+    int
+        The total the ``progress`` callback will count to.
+
+    See Also
+    --------
+    render_transport : the render.
+
+    Examples
+    --------
+    >>> from planeray.render import example_scene
+    >>> render_work(example_scene("room_corner"), shape=(8, 8), projector_rows=16, spp=4) > 0
+    True
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RenderWarning)
@@ -595,10 +679,50 @@ def render_to_store(
     ``ambient_albedo``, ``labels`` and ``light_<class>`` and, for RGB, ``T_rgb``
     (H, W, U, 3); its attributes record every parameter.
 
+    Parameters
+    ----------
+    scene_file : str or path
+        A Mitsuba 3 scene file.
+    out : str or path
+        The transport store to write.
+    overwrite : bool
+        Replace a finished store planeray wrote.
+    restart : bool
+        Discard an unfinished render instead of resuming it.
+    lines_per_second : float, optional
+        Recorded in the store (default: the paper's).
+    progress : callable, optional
+        ``progress(n)`` with the work units just done.
+    on_resume : callable, optional
+        ``on_resume(done, total)`` (batches) when an unfinished render is continued.
+    **kwargs
+        The options of :func:`render_transport`.
+
     Returns
     -------
     path : Path
     result : RenderResult
+
+    See Also
+    --------
+    render_transport : in memory.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import planeray as pr
+    >>> from planeray.render import example_scene
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path, result = render_to_store(
+    ...         example_scene("room_corner"),
+    ...         pathlib.Path(tmp) / "T.zarr",
+    ...         shape=(8, 8),
+    ...         projector_rows=16,
+    ...         spp=4,
+    ...         band_rows=8,
+    ...     )
+    ...     pr.read_transport(path)[0].dense.shape
+    (8, 8, 17)
     """
     import time
 

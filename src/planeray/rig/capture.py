@@ -90,6 +90,20 @@ def capture_comb(
     ------
     InputError
         The device has no global shutter, or the comb does not fit the screen.
+
+    See Also
+    --------
+    planeray.calibrate_lines_per_second : reads what it captures.
+
+    Examples
+    --------
+    On a rig, the line-velocity calibration's comb captured through the projector window (the
+    simulated rig with ``-O screen=N`` and Xvfb in tests/test_rig.py):
+
+    >>> from planeray.calibration import calibrate_lines_per_second
+    >>> sweep = capture_comb(camera, window, exposure_us=500.0, line_step_rows=8)  # doctest: +SKIP
+    >>> calibrate_lines_per_second(sweep).lines_per_second  # doctest: +SKIP
+    54012.3
     """
     require(device, "global_shutter", "the line-velocity capture (calibrate lines --device)")
     rows, cols = window.shape

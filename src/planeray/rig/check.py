@@ -58,6 +58,16 @@ class Check:
         ``"global_shutter"``, ``"row_time"``, ``"other_screen"``, ``"exposure_range"``...).
     details : dict
         The measured numbers.
+
+    See Also
+    --------
+    check_rig : returns them.
+
+    Examples
+    --------
+    >>> check = Check("trigger", "pass", "one frame per VSYNC")
+    >>> check.status, check.fault
+    ('pass', None)
     """
 
     name: str
@@ -143,6 +153,25 @@ def check_rig(
         Called with each check as it completes.
     window : ProjectorWindow, optional
         An open window on ``screen`` to use (and leave open); default: one opened and closed here.
+
+    Returns
+    -------
+    list of Check
+
+    See Also
+    --------
+    capture_comb : the comb capture it includes.
+
+    Examples
+    --------
+    On a rig (a projector screen and a camera; tests/test_rig.py runs it on a simulated rig and a
+    two-screen Xvfb):
+
+    >>> from planeray.devices import open_device
+    >>> from planeray.projector import get_screen
+    >>> checks = check_rig(lambda: open_device("ueye"), get_screen(1))  # doctest: +SKIP
+    >>> [(c.name, c.status) for c in checks]  # doctest: +SKIP
+    [('trigger', 'pass'), ('row time', 'pass'), ...]
     """
     sweep = sweep or paper_sweep()
     checks: list[Check] = []

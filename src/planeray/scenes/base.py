@@ -73,6 +73,16 @@ class Scene:
     maps : dict of str to ndarray (H, W)
         Further per-pixel ground truth a scene provides (the ``materials`` scene: class
         ids, distance to the nearest container wall, pixels whose kernel the wall changes).
+
+    See Also
+    --------
+    make_scene : builds one by name.
+
+    Examples
+    --------
+    >>> scene = make_scene("wax", (8, 8), seed=0)
+    >>> scene.name, scene.transport.dense.shape[:2], scene.labels.shape
+    ('wax', (8, 8), (8, 8))
     """
 
     name: str
@@ -122,6 +132,43 @@ def register_scene(name: str, description: str, *, argument: str | None = None):
     ``mitsuba`` scene: ``mitsuba:path/to/scene.xml``); ``argument`` names it for
     help texts, and ``build`` receives it as the keyword ``argument``.
     Parametric scenes are listed by ``list_scenes(parametric=True)`` only.
+
+    Parameters
+    ----------
+    name : str
+        The scene's name (no ``:``).
+    description : str
+        One line for ``planeray scenes``.
+    argument : str, optional
+        For a parametric scene, the name of its argument (``FILE.xml``).
+
+    Returns
+    -------
+    callable
+        The decorator; it returns ``build`` unchanged.
+
+    See Also
+    --------
+    make_scene : builds a registered scene.
+
+    Examples
+    --------
+    A scene of your own, then built by name like the built-in ones:
+
+    >>> import numpy as np
+    >>> from planeray.transport import Transport
+    >>> @register_scene("doc_flat", "a flat grey plane (an example)")
+    ... def _flat(shape, projector_rows, seed, **params):
+    ...     H, W = shape
+    ...     dense = np.zeros((H, W, 3), np.float32)
+    ...     dense[..., 1] = 0.5
+    ...     T = Transport(dense, np.array([-1, 0, 1]))
+    ...     return Scene(
+    ...         "doc_flat", T, direct=dense[..., 1], ambient_albedo=np.full(shape, 0.5), labels=np.ones(shape, int)
+    ...     )
+    >>> make_scene("doc_flat", (8, 8)).transport.dense.shape
+    (8, 8, 3)
+    >>> del _REGISTRY["doc_flat"]  # this example leaves the registry as it found it
     """
 
     def deco(build):
@@ -149,8 +196,25 @@ def _discover() -> None:
 def list_scenes(*, parametric: bool = False) -> dict[str, str]:
     """Names and one-line descriptions of the registered scenes.
 
-    With ``parametric``, the scenes that take an argument are listed too, as
-    ``NAME:ARGUMENT`` (e.g. ``mitsuba:FILE.xml``).
+    Parameters
+    ----------
+    parametric : bool
+        Also the scenes that take an argument, as ``NAME:ARGUMENT`` (e.g. ``mitsuba:FILE.xml``).
+
+    Returns
+    -------
+    dict of str to str
+        Name -> one-line description.
+
+    See Also
+    --------
+    make_scene : build one by name.
+
+    Examples
+    --------
+    >>> scenes = list_scenes()
+    >>> "wax" in scenes, "skin" in scenes
+    (True, True)
     """
     _discover()
     out = {k: v.description for k, v in sorted(_REGISTRY.items()) if v.argument is None}
@@ -160,13 +224,46 @@ def list_scenes(*, parametric: bool = False) -> dict[str, str]:
 
 
 def split_scene_name(text: str) -> tuple[str, str | None]:
-    """``"mitsuba:room.xml"`` -> ``("mitsuba", "room.xml")``; ``"wax"`` -> ``("wax", None)``."""
+    """``"mitsuba:room.xml"`` -> ``("mitsuba", "room.xml")``; ``"wax"`` -> ``("wax", None)``.
+
+    Parameters
+    ----------
+    text : str
+        A scene name as typed.
+
+    Returns
+    -------
+    name : str
+    argument : str or None
+
+    See Also
+    --------
+    is_scene_name : whether it is registered.
+
+    Examples
+    --------
+    >>> split_scene_name("mitsuba:room.xml"), split_scene_name("wax")
+    (('mitsuba', 'room.xml'), ('wax', None))
+    """
     name, sep, argument = str(text).partition(":")
     return name, (argument if sep else None)
 
 
 def is_scene_name(text: str) -> bool:
     """True if ``text`` names a registered scene (``NAME`` or, for a parametric one, ``NAME:ARGUMENT``).
+
+    Parameters
+    ----------
+    text : str
+        A name as typed (``wax``, ``mitsuba:room.xml``).
+
+    Returns
+    -------
+    bool
+
+    See Also
+    --------
+    split_scene_name : its parts.
 
     Examples
     --------
@@ -195,6 +292,17 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
         Seed of every random element (textures); same seed, same bytes.
     **params
         Scene-specific physical parameters (see each scene's docstring).
+
+    Returns
+    -------
+    Scene
+        Its exact ground-truth ``transport`` (normalized image value per projector row),
+        the ``direct`` light, the ``ambient_albedo`` and the effect ``labels`` of each pixel.
+
+    See Also
+    --------
+    list_scenes : the names.
+    planeray.simulate_stack : capture a sweep of it.
 
     Examples
     --------
@@ -231,7 +339,27 @@ def make_scene(name: str, shape=(128, 128), *, projector_rows: int | None = None
 
 
 def scene_offsets(band_rows: int = DEFAULT_BAND_ROWS) -> np.ndarray:
-    """Offsets ``-band_rows`` to ``band_rows`` of a scene's dense band."""
+    """Offsets ``-band_rows`` to ``band_rows`` of a scene's dense band.
+
+    Parameters
+    ----------
+    band_rows : int
+        Half-width of the dense band, projector rows.
+
+    Returns
+    -------
+    ndarray of int
+
+    See Also
+    --------
+    planeray.Transport : its ``offsets_rows``.
+
+    Examples
+    --------
+    >>> offsets = scene_offsets(4)
+    >>> offsets.tolist()
+    [-4, -3, -2, -1, 0, 1, 2, 3, 4]
+    """
     return np.arange(-int(band_rows), int(band_rows) + 1)
 
 
@@ -245,6 +373,35 @@ def representative_pixels(
     Other effects: the pixels whose noise-free delay profile (the paper's delays at
     ``exposure_us``, rendered from the ground truth) has the most prominent second
     peak beside the one on the epipolar plane -- the clearest two-peak profiles.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with ground-truth labels.
+    support_rows : int
+        Half-width of the sweep's offset support, projector rows.
+    per_label : int
+        Pixels per effect.
+    exposure_us : float
+        Exposure of the delay profiles compared, microseconds.
+
+    Returns
+    -------
+    pixels : ndarray (P, 2) of int
+        ``(row, col)`` of each pixel.
+    labels : list of str
+        The effect of each (a name of :data:`EFFECTS`).
+
+    See Also
+    --------
+    planeray.measured_delay_profiles : their profiles.
+
+    Examples
+    --------
+    >>> scene = make_scene("mirror_ball", (32, 32), seed=0)
+    >>> pixels, labels = representative_pixels(scene, 114)
+    >>> len(pixels) == len(labels) > 0
+    True
     """
     from scipy.ndimage import distance_transform_edt
 

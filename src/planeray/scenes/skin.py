@@ -91,7 +91,7 @@ References
    resolution diffuse optical tomography using short range indirect subsurface
    imaging", ICCP 2020.
 .. [3] S. Y. Park et al., forearm vein depth 4.8 +- 2.2 mm and diameters 3-4.5 mm by
-   ultrasound (issue 13), 2023.
+   ultrasound, 2023.
 """
 
 from __future__ import annotations
@@ -437,6 +437,28 @@ class SkinVein:
 
 def skin_veins(scene: Scene) -> list[SkinVein]:
     """Each vein of a ``skin`` scene with its exact ground truth: depth, diameter, its own pixel mask.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene built by ``make_scene("skin", ...)``.
+
+    Returns
+    -------
+    list of SkinVein
+        Per vein: ``id``, ``parent`` (the vein it branches from, 0 for none), ``depth_mm``
+        (of its top below the surface), ``diameter_mm``, ``points_mm`` (its centre line) and
+        ``mask`` (H, W) of the pixels over it; ``axis_depth_mm`` is ``depth_mm + diameter_mm / 2``.
+
+    See Also
+    --------
+    planeray.skin.depth : vein depths measured from a stack.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Sec. 10.
 
     Examples
     --------

@@ -95,6 +95,28 @@ def relative_spectrum(kind: str, wavelength_nm) -> np.ndarray:
 def band_irradiance_w_m2(lux: float, kind: str, wavelength_nm: float, *, filter_fwhm_nm: float = 10.0) -> float:
     """Irradiance (W/m^2) in a box band of ``filter_fwhm_nm`` around ``wavelength_nm`` for ``lux``.
 
+    Parameters
+    ----------
+    lux : float
+        Illuminance, lux.
+    kind : {"sun", "led", ...}
+        The light's spectrum.
+    wavelength_nm : float
+        Centre of the band, nm.
+    filter_fwhm_nm : float
+        Width of the band, nm.
+
+    Returns
+    -------
+    float
+        W/m^2 in the band.
+
+    See Also
+    --------
+    ambient_e_per_us : in the camera's electrons.
+
+    Examples
+    --------
     >>> round(band_irradiance_w_m2(100_000, "sun", 638.0), 1)
     12.5
     >>> band_irradiance_w_m2(500, "led", 850.0) < 1e-4
@@ -120,6 +142,34 @@ def ambient_e_per_us(
 ) -> float:
     """The camera model's ``ambient_e_per_us`` for an ambient light (see the module notes).
 
+    Parameters
+    ----------
+    lux : float
+        Illuminance of the ambient light, lux.
+    kind : {"sun", "led", ...}
+        Its spectrum.
+    wavelength_nm : float
+        The camera filter's centre, nm.
+    laser_electrons : float
+        The camera model's electrons per frame from the laser.
+    filter_fwhm_nm : float
+        Width of the camera's filter, nm.
+    projector_power_w : float
+        The laser projector's optical power, W.
+    field_m2 : float
+        Area the projector lights, m^2.
+
+    Returns
+    -------
+    float
+        Electrons per microsecond of exposure for albedo 1.
+
+    See Also
+    --------
+    ambient_table : the standard levels.
+
+    Examples
+    --------
     >>> round(ambient_e_per_us(100_000, "sun", 638.0), 1)
     10.8
     """
@@ -129,7 +179,32 @@ def ambient_e_per_us(
 
 
 def ambient_table(wavelength_nm: float, *, laser_electrons: float = 6000.0, filter_fwhm_nm: float = 10.0) -> list:
-    """One row per :data:`AMBIENT_LEVELS` entry: lux, spectrum, W/m^2 in band, ``ambient_e_per_us``."""
+    """One row per :data:`AMBIENT_LEVELS` entry: lux, spectrum, W/m^2 in band, ``ambient_e_per_us``.
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        The camera filter's centre, nm.
+    laser_electrons : float
+        The camera model's electrons per frame from the laser.
+    filter_fwhm_nm : float
+        Width of the camera's filter, nm.
+
+    Returns
+    -------
+    list of dict
+        One row per level.
+
+    See Also
+    --------
+    ambient_e_per_us : one level.
+
+    Examples
+    --------
+    >>> rows = ambient_table(850)
+    >>> len(rows) == len(AMBIENT_LEVELS), sorted(rows[0])[:2]
+    (True, ['ambient_e_per_us', 'band_w_m2'])
+    """
     rows = []
     for name, (lux, kind) in AMBIENT_LEVELS.items():
         rows.append(

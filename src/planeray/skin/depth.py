@@ -102,11 +102,11 @@ __all__ = [
 
 
 #: A larger standard error of the depth reports the vein unresolved, mm: a resolved vein's depth is then within
-#: the issue's 0.5 mm at 2.5 standard errors (on the seeded forearm, fits with standard errors of 0.26-0.48 mm
+#: the target's 0.5 mm at 2.5 standard errors (on the seeded forearm, fits with standard errors of 0.26-0.48 mm
 #: were off by up to 0.52 mm; at a 0.25 mm threshold two fits at 0.20 and 0.23 mm were off by 0.57 and 0.56 mm).
 MAX_DEPTH_SE_MM = 0.2
-#: The forward model's error (issue 41), measured against forward models it was not built from -- brute-force Monte
-#: Carlo with the blood in the medium (docs/user_guide/skin.md, "What the checks say": the fast model's short-range
+#: The forward model's error, measured against forward models it was not built from -- brute-force Monte
+#: Carlo with the blood in the medium (docs/user_guide/skin_scene.md, "What the checks say": the fast model's short-range
 #: contrast within 0-9 % for veins 1-2 mm deep, 18-25 % low for 3 mm, 12-16 % low on dark skin):
 #: the vein's contrast is off by a common factor ``1 + s``, ``s`` a nuisance parameter of the fit with a Gaussian prior
 #: of this standard deviation (its uncertainty enters every standard error) ...

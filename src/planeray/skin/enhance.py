@@ -79,6 +79,22 @@ _PAPER_ROWS = 720
 def paper_patch_px(shape) -> int:
     """The paper's 200-pixel patch scaled to an image of ``shape``: ``round(200 H / 720)``, at least 8.
 
+    Parameters
+    ----------
+    shape : (int, int)
+        The image size ``(H, W)``.
+
+    Returns
+    -------
+    int
+        Patch size, pixels.
+
+    See Also
+    --------
+    enhance_contrast : its ``patch_px``.
+
+    Examples
+    --------
     >>> paper_patch_px((128, 128)), paper_patch_px((720, 1280))
     (36, 200)
     """
@@ -160,6 +176,25 @@ def compose(images, delays_us, delay_map_us) -> np.ndarray:
     interpolates linearly between the two delay images around ``t_d*`` (``delays_us`` sorted
     ascending).  On the delays themselves it is exactly ``I_{t_d*}``.
 
+    Parameters
+    ----------
+    images : ndarray (D, H, W)
+        The delay images.
+    delays_us : array_like (D,)
+        Their delays, microseconds, ascending.
+    delay_map_us : ndarray (H, W)
+        The chosen delay ``t_d*`` of each pixel, microseconds.
+
+    Returns
+    -------
+    ndarray (H, W)
+
+    See Also
+    --------
+    enhance_contrast : chooses the map.
+
+    Examples
+    --------
     >>> imgs = np.stack([np.zeros((1, 2)), np.ones((1, 2))])
     >>> compose(imgs, [0, 100], np.array([[0.0, 25.0]])).tolist()
     [[0.0, 0.25]]
@@ -197,6 +232,24 @@ class EnhanceResult:
     delays_us : ndarray (N,)
     params : dict
         The patch and filter sizes used.
+
+    See Also
+    --------
+    enhance_contrast : returns it.
+
+    References
+    ----------
+    .. [1] H. Kubo, S. Jayasuriya, T. Iwaguchi, T. Funatomi, Y. Mukaigawa, S. G. Narasimhan,
+       "Programmable Non-Epipolar Indirect Light Transport: Capture and Analysis",
+       IEEE TVCG 27(4), 2019, doi:10.1109/TVCG.2019.2946812, Eq. 7, Sec. 10.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> images = np.stack([np.full((16, 16), v, np.float32) for v in (0.2, 0.4)])
+    >>> result = enhance_contrast(images, [375.0, 750.0], patch_px=8)
+    >>> type(result).__name__, result.image.shape
+    ('EnhanceResult', (16, 16))
     """
 
     image: np.ndarray
@@ -255,6 +308,10 @@ def enhance_contrast(
     Returns
     -------
     EnhanceResult
+
+    See Also
+    --------
+    compose : the composite of Eq. 7.
 
     Examples
     --------

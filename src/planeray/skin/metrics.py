@@ -31,8 +31,8 @@ projector at 0.3 mm per row, so the band is 2.96-8.89 pixels there, 1.48-4.44 at
 hair are left out of the vein region as well.  The pooled (all-veins) CNR uses the union of
 the vein regions against the union of the bands.
 
-A vein counts as **detected** when its CNR is at least ``min_cnr`` (1 by default, the issue's
-rule) *and* it is darker than its band (veins absorb: a brighter "vein" is not a vein seen).
+A vein counts as **detected** when its CNR is at least ``min_cnr`` (1 by default, the
+rule of the study) *and* it is darker than its band (veins absorb: a brighter "vein" is not a vein seen).
 A vein with fewer than ``min_pixels`` usable pixels (or band pixels) is reported with
 ``cnr = None`` and ``detected = False`` -- never a made-up number.
 
@@ -91,6 +91,10 @@ def band_definition(mm_per_px, *, gap_mm: float = BAND_GAP_MM, width_mm: float =
         ``definition`` (text), ``gap_mm``, ``width_mm``, ``mm_per_px`` and the band in pixels
         (``gap_px``, ``width_px``; along the rows).
 
+    See Also
+    --------
+    background_bands : the bands.
+
     Examples
     --------
     >>> b = band_definition(1.6875)
@@ -116,6 +120,27 @@ def vein_ids_from_mask(mask) -> np.ndarray:
     """Integer vein ids (1, 2, ...; 0 off veins) from a boolean mask: 8-connected components.
 
     For a user mask without ids (a PNG/TIFF drawn over a captured image).
+
+    Parameters
+    ----------
+    mask : array_like of bool (H, W)
+        Vein pixels.
+
+    Returns
+    -------
+    ndarray (H, W) of int
+
+    See Also
+    --------
+    vein_metrics : metrics per id.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> mask = np.zeros((4, 6), bool)
+    >>> mask[:, 1] = mask[:, 4] = True
+    >>> vein_ids_from_mask(mask)[0].tolist()
+    [0, 1, 0, 0, 2, 0]
     """
     labels, _ = ndimage.label(np.asarray(mask, bool), structure=np.ones((3, 3), bool))
     return labels.astype(np.int32)
@@ -141,6 +166,10 @@ def background_bands(
     Returns
     -------
     dict of int to ndarray (H, W) bool
+
+    See Also
+    --------
+    vein_metrics : uses them.
 
     Examples
     --------
@@ -173,6 +202,24 @@ def background_bands(
 def cnr(image, vein, background) -> float:
     """Contrast-to-noise ratio ``|mu_bg - mu_vein| / sigma_bg`` (``sigma_bg`` with ddof = 1).
 
+    Parameters
+    ----------
+    image : array_like (H, W)
+        The image.
+    vein, background : array_like of bool (H, W)
+        The vein's pixels and its background band.
+
+    Returns
+    -------
+    float
+
+    See Also
+    --------
+    weber_contrast : the contrast without the noise.
+    vein_metrics : per vein of an id map.
+
+    Examples
+    --------
     >>> img = np.array([1.0, 1.2, 0.8, 1.0, 0.5])
     >>> round(cnr(img, img == 0.5, img != 0.5), 3)
     3.062
@@ -191,6 +238,24 @@ def cnr(image, vein, background) -> float:
 def weber_contrast(image, vein, background) -> float:
     """Weber contrast ``(mu_vein - mu_bg) / mu_bg``.
 
+    Parameters
+    ----------
+    image : array_like (H, W)
+        The image.
+    vein, background : array_like of bool (H, W)
+        The vein's pixels and its background band.
+
+    Returns
+    -------
+    float
+        Negative for a vein darker than its background.
+
+    See Also
+    --------
+    cnr : over the background's noise.
+
+    Examples
+    --------
     >>> img = np.array([2.0, 2.0, 1.0])
     >>> weber_contrast(img, img == 1.0, img == 2.0)
     -0.5
@@ -250,6 +315,10 @@ def vein_metrics(
         with ``id``, ``pixels``, ``band_pixels``, ``mu_vein``, ``mu_bg``, ``sigma_bg``, ``cnr``,
         ``weber``, ``detected`` and, where given, ``depth_mm`` and ``diameter_mm``; ``band``:
         the band's definition and values (:func:`band_definition`).
+
+    See Also
+    --------
+    cnr, weber_contrast : the two measures.
 
     Examples
     --------

@@ -1,4 +1,4 @@
-"""The skin model a depth fit uses, as its user states it (issue 41): layers, index, anisotropy, blood.
+"""The skin model a depth fit uses, as its user states it: layers, index, anisotropy, blood.
 
 The vein depth fit (:mod:`planeray.skin.depth`) needs the skin's forward model: the layers' thicknesses,
 their optics and index, and the blood of the veins.  :func:`stated_skin_model` builds it from what the user

@@ -69,6 +69,25 @@ def display_codes(image, *, white: float, gamma: float = 1.0) -> np.ndarray:
 def to_rgb(image, *, white: float, gamma: float = 1.0, colormap: str = "gray") -> np.ndarray:
     """``(H, W, 3)`` uint8 RGB of an image as the page paints it.
 
+    Parameters
+    ----------
+    image : array_like (H, W)
+        The image.
+    white : float
+        The value shown as white.
+    gamma : float
+        Display gamma.
+    colormap : str
+        ``"gray"`` or a matplotlib colormap.
+
+    Returns
+    -------
+    ndarray (H, W, 3) uint8
+
+    See Also
+    --------
+    auto_white : a white level.
+
     Examples
     --------
     >>> to_rgb(np.array([[0.0, 0.5, 1.0, 2.0]]), white=1.0)[0, :, 0].tolist()
@@ -82,6 +101,27 @@ def auto_white(image, percentile: float = 99.5) -> float:
     """A white level that shows an image brightly: its ``percentile`` (the figures' display scale).
 
     Subsampled to about 16k pixels (cheap enough for every frame); 1 for a black image.
+
+    Parameters
+    ----------
+    image : array_like
+        The image.
+    percentile : float
+        Percentile shown as white.
+
+    Returns
+    -------
+    float
+
+    See Also
+    --------
+    to_rgb : paints with it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> round(float(auto_white(np.linspace(0.0, 1.0, 1001), percentile=99.5)), 3)
+    0.995
     """
     flat = np.asarray(image, dtype=np.float32).ravel()
     step = max(1, flat.size // 16384)

@@ -97,6 +97,16 @@ class ViewSettings:
     noise, ambient : bool
         Scenes only: camera noise (shot, read, quantization, row jitter) and ambient
         light in the band image.
+
+    See Also
+    --------
+    ViewSource.render : renders them.
+
+    Examples
+    --------
+    >>> settings = ViewSettings(mode="band", delay_us=375.0, exposure_us=600.0)
+    >>> settings.mode, settings.width_rows
+    ('band', 1.0)
     """
 
     mode: str = "band"
@@ -190,6 +200,17 @@ class ViewSource:
         What the command line named (a scene name or the path).
     shape : (int, int)
         Image ``(H, W)``.
+
+    See Also
+    --------
+    open_source : the source of a path or scene name.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> source = TransportSource(pr.make_scene("corner", (8, 8), seed=0).transport, name="corner")
+    >>> isinstance(source, ViewSource), source.shape
+    (True, (8, 8))
     """
 
     kind = "source"
@@ -326,6 +347,18 @@ class TransportSource(ViewSource):
         Extra relighting patterns by name (rows of the projector).
     attrs : dict, optional
         The store's attributes (``epipolar_resolution_rows`` is shown).
+
+    See Also
+    --------
+    StackSource : a stack.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> source = TransportSource(pr.make_scene("corner", (8, 8), seed=0).transport, name="corner")
+    >>> image, info = source.render(ViewSettings(mode="band", delay_us=375.0, exposure_us=600.0))
+    >>> image.shape
+    (8, 8)
     """
 
     modes = tuple(MODES)
@@ -577,6 +610,18 @@ class StackSource(ViewSource):
     truth : Transport, optional
         Ground truth: its continuous delay profiles (noise-free bands of every delay
         at each captured exposure) are overlaid on the measured ones.
+
+    See Also
+    --------
+    TransportSource : a transport.
+
+    Examples
+    --------
+    >>> import planeray as pr
+    >>> stack = pr.simulate_stack(pr.make_scene("corner", (8, 8), seed=0), pr.quick_sweep(), seed=0)
+    >>> image, info = StackSource(stack, name="corner").render(ViewSettings(delay_us=375.0, exposure_us=600.0))
+    >>> image.shape
+    (8, 8)
     """
 
     kind = "stack"
@@ -764,6 +809,14 @@ def open_source(
         Relighting pattern files (:func:`planeray.synthesis.load_pattern`), named by their stem.
     camera : CameraModel, optional
         Scenes: the virtual camera (default :class:`~planeray.camera.CameraModel`).
+
+    Returns
+    -------
+    ViewSource
+
+    See Also
+    --------
+    TransportSource, StackSource
 
     Examples
     --------
