@@ -45,6 +45,19 @@ def _demux() -> None:
         raise RuntimeError("the warm-up stack has no saturated pixel: the Woodbury passes were not compiled")
     demultiplex(stack)
     demultiplex(stack, ambient="estimate")
+    _weights_criterion()
+
+
+def _weights_criterion() -> None:
+    """The automatic weights' degrees of freedom (the batched path solves and ridge traces)."""
+    import numpy as np
+
+    from .demux.risk import degrees_of_freedom_batch
+
+    rng = np.random.default_rng(0)
+    A = rng.random((3, 6))  # 3 observations, 5 offsets and the ambient's column
+    X = np.array([[0.5, 0.2, 0.0, 0.3, 0.1, 0.4]])  # 4 offsets free (of 5) and the ambient: 5 > 3
+    degrees_of_freedom_batch(A, 0.1, X, 5)
 
 
 def _engine() -> None:
