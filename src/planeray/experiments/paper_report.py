@@ -343,7 +343,7 @@ def _vein_depth_row(quote: str, depth: dict | None) -> dict:
         + (f" (worst {worst:.2f} mm)" if worst is not None else "")
         + f"; deeper: {s['deep_resolved']} of {s['deep_veins']} resolved; the others are reported unresolved",
         "qualitative",
-        "the paper fuses the delays for contrast; planeray measures the depth they reveal (the issue's target: "
+        "the paper fuses the delays for contrast; planeray measures the depth they reveal (planeray's target: "
         "every resolved vein 1-3 mm deep within 0.5 mm)",
     )
 
