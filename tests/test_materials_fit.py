@@ -735,8 +735,9 @@ def test_the_row_size_comes_from_acquisition_json_and_is_never_assumed(stacks, t
 
 def test_a_cached_forward_table_is_reused_silently_and_a_missing_one_announced(monkeypatch, table, tmp_path):
     """--n of a table that is shipped or cached: no note; of one that is not: the note with the estimate from a
-    pilot run, then a progress bar over its runs (here the tracing is a stand-in returning the shipped table)."""
-    from planeray.cli.materials import _forward_table
+    pilot run, then a stage counted over its runs (here the tracing is a stand-in returning the shipped table)."""
+    from planeray.experiments.materials_folders import forward_table
+    from planeray.experiments.workflow import Stages
 
     calls = []
     monkeypatch.setattr(fit, "forward_table_stored", lambda **kw: kw["n"] == fit.DEFAULT_N)
@@ -749,15 +750,19 @@ def test_a_cached_forward_table_is_reused_silently_and_a_missing_one_announced(m
         return table
 
     monkeypatch.setattr(fit, "forward_table", trace)
-    from planeray import _console
+    events = []
+    stages = Stages(lambda name, done, total: events.append(("progress", name, done, total)),
+                    lambda text: events.append(("note", text)))  # fmt: skip
 
-    with _console.console.capture() as cap:
-        _forward_table(fit.DEFAULT_N)
-    assert "note" not in cap.get() and calls[-1] == {"n": fit.DEFAULT_N}
-    with _console.console.capture() as cap:
-        _forward_table(1.45)
-    text = cap.get()
+    forward_table(fit.DEFAULT_N, stages)
+    assert events == [] and calls[-1] == {"n": fit.DEFAULT_N}
+    forward_table(1.45, stages)
+    notes = [i for i, e in enumerate(events) if e[0] == "note"]
+    assert len(notes) == 1
+    text = events[notes[0]][1]
     assert "no forward table for n = 1.45" in text and "about 2 minutes" in text and "pilot" in text
+    tracing = [e for e in events[notes[0] :] if e[0] == "progress" and "tracing" in e[1]]
+    assert tracing[-1][2:] == (fit.TABLE_RUNS, fit.TABLE_RUNS)  # announced first, then counted to the end
     assert calls[-1]["n"] == 1.45 and callable(calls[-1]["progress"])
 
 

@@ -319,16 +319,6 @@ def _settings(mm_per_row, *, n=None, depth_mm=None, white_reference=None, white_
     )
 
 
-def _forward_table(n: float):
-    """The forward table of index ``n`` (:func:`planeray.experiments.materials_folders.forward_table`): loaded
-    silently when shipped or cached, else traced -- noted with a time estimate, counted on a progress bar."""
-    from ..experiments.materials_folders import forward_table
-    from ..experiments.workflow import Stages
-
-    with stage_bars() as progress:
-        return forward_table(n, Stages(progress, note))
-
-
 @materials_app.command("fit")
 @_friendly_errors(options={"block_px": "--block"})
 def fit_cmd(
