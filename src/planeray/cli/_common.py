@@ -20,7 +20,6 @@ from typer.core import TyperGroup
 from .._console import console
 from ..errors import InputError, PlanerayError, parameter_names
 from ..io.atomic import check_not_an_input
-from ..io.atomic import same_place as _same_place  # noqa: F401 - the commands' import
 
 #: The positional argument of every command that reads a stack.
 StackArg = Annotated[Path, typer.Argument(help="Stack (Zarr) or import folder.")]

@@ -18,7 +18,6 @@ from pathlib import Path
 
 from .._validate import check_integer, check_number
 from ..errors import InputError
-from ..io.atomic import written_together  # noqa: F401 - the commands' lim.written_together
 
 #: Largest camera side (pixels): the dense transport of a 2048 x 2048 scene alone is 4.3 GB.
 MAX_SIDE = 2048

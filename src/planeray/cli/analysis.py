@@ -11,6 +11,7 @@ import typer
 
 from .._console import console, out, print_json, progress_bar
 from ..errors import InputError
+from ..io.atomic import written_together
 from ..timing import PAPER_LINES_PER_SECOND
 from . import _limits as lim
 from ._common import StackArg, _check_outputs, _friendly_errors, _load_stack, _parse_pixel, _save_image
@@ -110,7 +111,7 @@ def profiles(
         inputs=[("STACK", stack_path), ("--transport", transport), ("--direct-reference", direct_reference)],
     )
     st, pixels, T, attrs, white = _profiles_inputs(stack_path, pixel, exposure_us, transport, direct_reference)
-    with lim.written_together(out_png if pixel else None, csv, classify):  # all of them, or none
+    with written_together(out_png if pixel else None, csv, classify):  # all of them, or none
         if pixel:
             prof = measured_delay_profiles(st, pixels)
             continuous = None

@@ -10,6 +10,7 @@ import typer
 
 from .._console import print_verbatim, progress_bar
 from ..errors import InputError
+from ..io.atomic import written_together
 from . import _limits as lim
 from ._common import _check_outputs, _friendly_errors
 
@@ -111,7 +112,7 @@ def mc_profile(
                 diffusion_depth_mfp=diffusion_depth_mfp or None, progress=advance,
             )  # fmt: skip
     dt = time.perf_counter() - t0
-    with lim.written_together(out_path, out_path.with_suffix(".json"), plot):  # the three, or none of them
+    with written_together(out_path, out_path.with_suffix(".json"), plot):  # the three, or none of them
         csv_path, json_path = write_profile(prof, out_path)
         if plot is not None:
             from ..figures.mc import mc_profile_figure
