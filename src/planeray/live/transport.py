@@ -147,21 +147,7 @@ class WindowSolver:
     --------
     >>> import numpy as np
     >>> import planeray as pr
-    >>> from planeray.live import Frame
     >>> stack = pr.simulate_stack(pr.make_scene("wax", (8, 8), seed=0), pr.quick_sweep(), seed=0)
-    >>> frames = [
-    ...     Frame(
-    ...         i,
-    ...         stack.images[i],
-    ...         stack.saturated[i],
-    ...         float(stack.delay_us[i]),
-    ...         float(stack.exposure_us[i]),
-    ...         time_s=i / 30,
-    ...         captured_at=i / 30,
-    ...         generation=0,
-    ...     )
-    ...     for i in range(len(stack))
-    ... ]
     >>> sweep = pr.quick_sweep()
     >>> solver = WindowSolver(sweep, (8, 8), lines_per_second=54000.0, projector_rows=8)
     >>> used = ~sweep.excluded
