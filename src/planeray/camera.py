@@ -137,7 +137,10 @@ class CameraModel:
         ``var = (e + r^2) / (n FW^2) + 1 / (12 n span^2)``.  (The row jitter, which moves a whole camera
         row's band, is not in it: it depends on the scene, :meth:`row_jitter_rows`.)
         """
-        e = np.maximum(np.asarray(image, float), 0.0) * self.full_well_e
+        return self._variance_of_electrons(np.maximum(np.asarray(image, float), 0.0) * self.full_well_e)
+
+    def _variance_of_electrons(self, e):
+        """The normalized image's variance at ``e`` expected electrons per frame (shot, read, rounding; averaged)."""
         n = self.frames_averaged
         span = self.max_code - self.black_level
         return (e + self.read_noise_e**2) / (n * self.full_well_e**2) + 1.0 / (12.0 * n * span**2)
@@ -230,10 +233,7 @@ class CameraModel:
         e = self.laser_electrons * np.asarray(signal, dtype=np.float64)
         if ambient_albedo is not None and self.ambient_e_per_us > 0:
             e = e + self.ambient_e_per_us * np.asarray(exposure_us, np.float64) * np.asarray(ambient_albedo, np.float64)
-        e = np.maximum(e, 0.0)
-        n = self.frames_averaged
-        span = self.max_code - self.black_level
-        return (e + self.read_noise_e**2) / (n * self.full_well_e**2) + 1.0 / (12.0 * n * span**2)
+        return self._variance_of_electrons(np.maximum(e, 0.0))
 
     def expose(self, signal, exposure_us, rng: np.random.Generator, *, ambient_albedo=None, noise=True):
         """Capture one stack image: ``frames_averaged`` noisy frames, averaged and normalized.
