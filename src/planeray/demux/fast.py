@@ -257,6 +257,11 @@ class AdmmRowSolver:
         self._AQ = None
 
     @property
+    def start_level(self) -> int:
+        """The penalty's place on the ladder where a cold (or primal-started) pixel begins."""
+        return _ambient_start(self.beta) if self.ambient else _RHO_START
+
+    @property
     def ambient_column(self) -> np.ndarray | None:
         """The ambient column the solver uses (``A 1`` where collinear; unscaled), or None."""
         return self.A[:, -1] * self.ambient_scale if self.ambient else None
@@ -347,7 +352,7 @@ class AdmmRowSolver:
             X0 = np.maximum(np.asarray(start, np.float64), 0.0)
             if X0.shape != (P, U):
                 raise ValueError(f"start must be {(P, U)}, got {X0.shape}")
-            lv = _ambient_start(self.beta) if self.ambient else _RHO_START
+            lv = self.start_level
             keep = np.zeros((0, 0), bool) if mask is None else mask
             start = WarmStart(self._warm(X0, B, keep, _RHO_LADDER[lv]), np.full(P, lv, np.int64))
         self._admm(B, tol, max_iter, np.flatnonzero(run), wb, mask, X, iters, gap, fval, kkt, rss, start, state)
@@ -398,7 +403,7 @@ class AdmmRowSolver:
         Bb = Ball[idx]
         keep = np.zeros((0, 0), bool) if mask is None else np.ascontiguousarray(mask[idx])
         masked = np.full(P, -1) if wb is None else wb.index[idx]
-        start = _ambient_start(self.beta) if self.ambient else _RHO_START
+        start = self.start_level
         level = np.full(P, start) if warm is None else np.asarray(warm.level, np.int64)[idx].copy()
         if wb is not None or warm is not None:  # rows by level, masked pixels first within each level
             first = np.lexsort((masked < 0, level))
