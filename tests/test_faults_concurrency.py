@@ -391,6 +391,27 @@ def test_a_second_run_while_the_first_writes_is_refused_and_the_first_finishes_w
         )
 
 
+@pytest.mark.parametrize(
+    "command",
+    [
+        ("render", "{d}/scene.xml", "--out", "{o}"),
+        ("paper", "--quick", "--out", "{o}"),
+        ("demux", "{d}/S.zarr", "--out", "{o}"),
+        ("acquire", "--device", "replay", "--replay", "{d}/S.zarr", "--sweep", "quick", "--out", "{o}"),
+    ],
+    ids=["render", "paper", "demux", "acquire"],
+)
+def test_every_resumable_command_is_refused_while_another_process_holds_its_output(stores, tmp_path, holder, command):
+    """The lock held by an independent process (the protocol written in this test): each resumable command is
+    refused in one line naming the holder's pid before any work -- nothing written, the lock left as it was."""
+    out = tmp_path / "out.zarr"
+    h = holder(out)
+    one_line_error(invoke(*[a.format(d=stores, o=out) for a in command]), f"another planeray run (pid {h.pid})", out)
+    assert not out.exists() and not any(p.name.startswith("out.zarr.partial") for p in tmp_path.iterdir())
+    assert lock_holder(out)["pid"] == h.pid
+    h.release()
+
+
 def test_a_killed_runs_lock_is_taken_over_with_a_note_and_the_run_resumes(stores, tmp_path):
     """A run killed (-9) while it writes leaves its lock; the next run says it takes it over and finishes."""
     from planeray.io import read_transport
