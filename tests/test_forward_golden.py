@@ -372,8 +372,8 @@ EXPECTED = {
     "tables": "1e6d586ee09fec80",
     "fit_kernels": "2e0493cc35dc91d3",
     "scenes": "a9f0dabe59be4057",
-    "fit_transport": "8010ca38fa06d425",
-    "fit_stack": "176e52c7510f38d8",
+    "fit_transport": "ccecdb482505c656",  # the media's g a fitted nuisance (issue 41)
+    "fit_stack": "3ebd8585497c46a2",  # the same
     "vein_fit": "d70b62dc2a932f68",
 }
 
@@ -424,6 +424,8 @@ for name, params in builds:
     make_scene(name, (16, 16), projector_rows=90, seed=0, **params)
 for n in (1.33, 1.38, 1.45):
     fit.forward_table(n=n)
+from planeray.kernels.anisotropy import anisotropy_table
+anisotropy_table()  # the fits' model error over the unknown g
 print(sorted({p.name for p in TABLES_DIR.glob("*.npz")} - read))
 """
 

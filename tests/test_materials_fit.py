@@ -270,6 +270,7 @@ def test_the_command_writes_maps_with_units_a_figure_and_a_summary(capture):
         (["--n", "2.5"], "--n"),
         (["--mm-per-row", "-1"], "--mm-per-row"),
         (["--white-albedo", "1.5"], "--white-albedo"),
+        (["--g", "0.99"], "--g"),
         (["--labels", "{d}/nothing.png"], "--labels"),
         (["--white-reference", "{d}/nothing.zarr"], "--white-reference"),
     ],
@@ -309,6 +310,34 @@ def test_the_white_reference_calibrates_the_magnitude(capture):
         r = meta["regions"][region]
         assert abs(r["mu_s_prime_per_mm"] / s_true - 1) < 0.05, r
         assert abs(r["mu_a_per_mm"] / a_true - 1) < 0.10, r
+
+
+@pytest.mark.usefixtures("figures_not_drawn")
+def test_a_stated_g_is_used_and_an_unstated_one_is_fitted(capture):
+    """`--g` states the medium's anisotropy (used, said so, one parameter fewer); without it g is fitted with
+    mu_s' and mu_a and reported with its standard error (planeray.kernels.anisotropy)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from planeray.cli import app
+
+    root, cap = capture
+    base = ["materials", "fit", str(cap), "--labels", str(root / "labels.png"), "--no-walls", "--white-reference",
+            str(root / "white.zarr")]  # fmt: skip
+    metas = {}
+    for name, extra in (("stated", ["--g", "0.8"]), ("unknown", [])):
+        res = CliRunner().invoke(app, [*base, "--out", str(root / f"fit_g_{name}"), *extra])
+        assert res.exit_code == 0, res.output
+        metas[name] = json.loads((root / f"fit_g_{name}" / "planeray.json").read_text())
+    stated, unknown = metas["stated"], metas["unknown"]
+    assert stated["anisotropy_g"] == 0.8 and stated["anisotropy_g_source"] == "--g"
+    assert unknown["anisotropy_g"] is None and unknown["anisotropy_g_source"].startswith("unknown")
+    for region in ("1", "2"):
+        s, u = stated["regions"][region], unknown["regions"][region]
+        assert s["g"] == 0.8 and s["g_se"] is None
+        assert 0.0 <= u["g"] <= 0.95 and u["g_se"] > 0
+        assert s["fit_quality"]["dof"] == u["fit_quality"]["dof"] + 1
 
 
 def test_regions_only_gives_the_same_regions_without_the_maps(capture, table):

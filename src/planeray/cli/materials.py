@@ -310,12 +310,12 @@ def _print_score(sc: dict) -> None:
         out.print(f"  accuracy {name}: {_acc(acc)}{extra}{share}")
 
 
-def _settings(mm_per_row, *, n=None, depth_mm=None, white_reference=None, white_albedo: float = 0.99):
+def _settings(mm_per_row, *, n=None, depth_mm=None, white_reference=None, white_albedo: float = 0.99, g=None):
     """The capture settings of a command, built once (:class:`~planeray.materials.settings.CaptureSettings`)."""
     from ..materials.settings import CaptureSettings
 
     return CaptureSettings(
-        mm_per_row=mm_per_row, n=n, depth_mm=depth_mm, white_reference=white_reference, white_albedo=white_albedo
+        mm_per_row=mm_per_row, n=n, depth_mm=depth_mm, white_reference=white_reference, white_albedo=white_albedo, g=g
     )
 
 
@@ -343,6 +343,14 @@ def fit_cmd(
             help="Refractive index of the medium against air (1 for an index-matched surface). Default 1.33 "
             "(water-based media), said so: a wrong index biases mu_s' by tens of percent and does not show in the "
             "fit's chi-square.",
+        ),
+    ] = None,
+    g: Annotated[
+        float | None,
+        typer.Option(
+            "--g",
+            help="The medium's scattering anisotropy (Henyey-Greenstein g), 0-0.95. Default: unknown -- fitted "
+            "with mu_s' and mu_a, its uncertainty carried into theirs.",
         ),
     ] = None,
     mm_per_row: MmPerRowOpt = None,
@@ -392,7 +400,9 @@ def fit_cmd(
     from ..experiments.materials_folders import check_fit_options, fit_materials
     from ..io import jsonable
 
-    settings = _settings(mm_per_row, n=n, depth_mm=depth_mm, white_reference=white_reference, white_albedo=white_albedo)
+    settings = _settings(
+        mm_per_row, n=n, depth_mm=depth_mm, white_reference=white_reference, white_albedo=white_albedo, g=g
+    )
     check_fit_options(block, method, wall_kind)
     _check_outputs(
         (out_dir, "materials fit"),
@@ -428,6 +438,8 @@ def _print_region(region, r: dict) -> None:
             "of freedom)",
             highlight=False,
         )
+    if r.get("g_se") is not None:
+        out.print(f"    g (unknown, fitted with them) {r['g']:.2f} +- {r['g_se']:.2f}", highlight=False)
     for text in r.get("flags", []):
         out.print(f"    FLAGGED: {text}", highlight=False, markup=False)
     if r.get("blocks_flagged"):

@@ -330,13 +330,13 @@ def _run_fit(got: dict, settings: CaptureSettings, table, walls: bool, wall_kind
         return fit_stack(
             got["stack"], mm_per_row=got["mm"], labels=lab, containers=lab if walls else None, white=got["white"],
             white_albedo=settings.white_albedo, block_px=block, table=table, camera=got["camera"],
-            depth_mm=settings.depth_mm, wall_kind=wall_kind, progress=advance,
+            depth_mm=settings.depth_mm, wall_kind=wall_kind, g=settings.g, progress=advance,
         )  # fmt: skip
     advance = stages.stage("fitting pixel blocks", n_blocks)
     return mfit.fit_transport(
         got["transport"], mm_per_row=got["mm"], labels=lab, white_scale=got["scale"], block_px=block,
         containers=lab if walls else None, table=table, depth_mm=settings.depth_mm, wall_kind=wall_kind,
-        progress=advance,
+        g=settings.g, progress=advance,
     )  # fmt: skip
 
 
@@ -362,7 +362,13 @@ def _fit_summary(capture, got: dict, settings: CaptureSettings, result, walls: b
         "refractive_index_source": (
             parameter_name("n") if settings.n_stated else f"assumed (water-based media; state {parameter_name('n')})"
         ),
-        "anisotropy_g": mfit.DEFAULT_G,
+        "anisotropy_g": settings.g,
+        "anisotropy_g_source": (
+            parameter_name("g")
+            if settings.g is not None
+            else "unknown: fitted within 0-0.95 with mu_s' and mu_a (each region's g, g_se); its uncertainty is in "
+            "theirs"
+        ),
         "depth_mm": depth_mm,
         "bottom": "none: semi-infinite" if depth_mm is None else f"at {depth_mm:g} mm: returns no light",
         "noise_model": (

@@ -9,7 +9,9 @@
 * :mod:`planeray.kernels.forward`: the forward table of the transport fit and its kernel at a
   capture's geometry (:func:`~planeray.kernels.forward.forward_kernel`);
 * :mod:`planeray.kernels.walls`: the relative effect of container walls and a layer's bottom in
-  diffusion theory (the image sources the fit applies to the forward table).
+  diffusion theory (the image sources the fit applies to the forward table);
+* :mod:`planeray.kernels.anisotropy`: how a medium's unknown anisotropy ``g`` changes the forward
+  table's kernel (the fits' model error over it).
 
 The diffusion theory itself (the dipole, its one line law) is :mod:`planeray.mc.diffusion`.
 """

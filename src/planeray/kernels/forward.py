@@ -16,13 +16,12 @@ interpolated smoothly (cubic) in ``log K`` over ``(log mu_s', sqrt(mu_a))``.
   **per-row** coefficients ``mu h``; built over ``mu_s'`` 0.126-8 /mm and ``mu_a``
   0.0005-0.2 /mm at the materials scene's 0.3 mm per row (:data:`TABLE_MM_PER_ROW`), it
   serves any ``mm_per_row`` whose per-row coefficients fall inside it.
-* **Anisotropy ``g``: fixed** (:data:`DEFAULT_G` = 0.8, the table's ``g``), not fitted
-  or marginalized.  By the similarity relation the diffuse part of the kernel depends on
-  ``mu_s' = mu_s (1 - g)`` alone; ``g`` changes only the first transport mean free
-  path around the line (offsets below ``1 / mu_s'``), which at the capture's sampling
-  carries little of the profile and cannot be separated from ``mu_s'`` with a single
-  line kernel.  The bias this costs for a medium of another ``g`` is measured
-  (docs/user_guide/materials.md, "Measuring the medium").
+* **Anisotropy ``g``: the table's is 0.8** (:data:`DEFAULT_G`).  By the similarity relation the diffuse
+  part of the kernel depends on ``mu_s' = mu_s (1 - g)`` alone, but near the line it does not (a medium
+  of ``g = 0`` puts up to several times the table's light into the line's own bin and up to a third less
+  into the next few transport mean free paths), so the fits take a medium's ``g`` as a **nuisance
+  parameter**, fitted within 0-0.95 (or stated), by changing this kernel
+  (:mod:`planeray.kernels.anisotropy`); a single line kernel barely separates it from ``mu_s'``.
 * **Refractive index** ``n``: the table's (:data:`DEFAULT_N` = 1.33, water-based media);
   the user states another by building a table with it (:func:`build_forward_table`).
 * **Camera rows.**  A camera row spans ``rows_per_camera_row`` projector rows; its kernel

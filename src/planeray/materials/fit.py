@@ -65,6 +65,7 @@ from ..goodness import (
     describe_flags,
     fit_quality,
 )
+from ..kernels.anisotropy import G_PRIOR, anisotropy_table, check_g, g_kernel_change
 from ..kernels.footprint import camera_row_footprint
 from ..kernels.forward import (
     DEFAULT_G,
@@ -84,6 +85,7 @@ from ..kernels.forward import (
     forward_table_stored,
     kernel_per_row,
     model_kernel,
+    table_kernel,
 )
 from ..kernels.walls import BOTTOM_ANGLE_DEG, WALL_ANGLES_DEG, WALL_KINDS, check_wall_kind
 
@@ -268,6 +270,8 @@ class FitResult:
         Bits of :data:`planeray.goodness.FLAGS`: the model does not fit (chi-square past the
         threshold at ``dof``; the standard errors are then inflated by ``sqrt(chi2 / dof)``), a
         parameter at the forward model's edge, not fitted.
+    g, g_se : ndarray (P,) or None
+        The media's anisotropy: fitted (unknown ``g``) with its standard error, or the stated one (``g_se`` NaN).
     """
 
     mu_s_prime_per_mm: np.ndarray
@@ -283,6 +287,8 @@ class FitResult:
     log_se: np.ndarray | None = None
     dof: np.ndarray | None = None
     flags: np.ndarray | None = None
+    g: np.ndarray | None = None
+    g_se: np.ndarray | None = None
 
     def quality(self, i: int = 0):
         """:class:`planeray.goodness.FitQuality` of profile ``i`` (None where no fit ran)."""
@@ -298,17 +304,19 @@ def _cell_rel(table_rel, gs, ga, log_s, log_a):
     return table_rel[i : i + 2, j : j + 2].max(axis=(0, 1))
 
 
-def _forward_jac(resid, step=1e-4):
+def _forward_jac(resid, step=1e-4, upper=None):
     """Forward-difference Jacobian with an absolute step in the log-parameters (scipy's relative step
-    is 0 at a parameter that is exactly 0, e.g. ``log c`` of a perfectly calibrated profile)."""
+    is 0 at a parameter that is exactly 0, e.g. ``log c`` of a perfectly calibrated profile); a backward step
+    where the forward one would pass ``upper`` (a bounded parameter at its end)."""
 
     def jac(x, *args):
         r0 = resid(x)
         cols = []
         for i in range(len(x)):
             xi = np.array(x, float)
-            xi[i] += step
-            cols.append((resid(xi) - r0) / step)
+            h = -step if upper is not None and xi[i] + step > upper[i] else step
+            xi[i] += h
+            cols.append((resid(xi) - r0) / h)
         return np.stack(cols, axis=1)
 
     return jac
@@ -395,6 +403,7 @@ def fit_profiles(
     walls=None,
     wall_kind: str = "clear",
     p_misfit=DEFAULT_P_MISFIT,
+    g=None,
 ) -> FitResult:
     """Fit ``mu_s'`` and ``mu_a`` to line-kernel profiles (weighted least squares in log-parameters).
 
@@ -439,6 +448,10 @@ def fit_profiles(
     p_misfit : float
         A fit whose chi-square is less probable than this is flagged "model does not fit"
         (:func:`planeray.goodness.fit_quality`).
+    g : float, optional
+        The media's Henyey-Greenstein anisotropy (the table's is :data:`DEFAULT_G`; another changes the kernel by
+        :func:`planeray.kernels.anisotropy.g_kernel_change`).  None: unknown -- a third parameter, fitted within
+        :data:`planeray.kernels.anisotropy.G_PRIOR`, its uncertainty carried into the others' standard errors.
 
     Returns
     -------
@@ -448,6 +461,10 @@ def fit_profiles(
     """
     table = table or forward_table()
     check_wall_kind(wall_kind)
+    g = check_g(g)
+    fit_g = g is None
+    with_g = fit_g or g != DEFAULT_G
+    g_table = anisotropy_table() if with_g else None
     Y = np.atleast_2d(np.asarray(profiles, np.float64))
     if walls is not None and len(walls) != Y.shape[0]:
         raise InputError(f"walls has {len(walls)} entries, one per profile expected ({Y.shape[0]})")
@@ -473,6 +490,18 @@ def fit_profiles(
     model = np.full(Y.shape, np.nan)
     raw, raw_se = np.full((P, 2), np.nan), np.full((P, 2), np.nan)
     dofs = np.zeros(P, np.int64)
+    g_est = np.full(P, np.nan if fit_g else float(g))
+    g_se = np.full(P, np.nan)
+
+    def with_anisotropy(k, x):
+        """The kernel ``k`` at the log-parameters ``x`` changed to the media's anisotropy (``x[-1]`` when fitted)."""
+        if not with_g:
+            return k
+        gx = x[-1] if fit_g else g
+        dk = g_kernel_change(table_kernel(table, x[0], x[1]), math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets,
+                             foot, table=g_table)  # fmt: skip
+        return np.maximum(k + dk, 0.0)
+
     # A coarse start: the grid point of least misfit (shape only, scale solved in closed form).
     gs, ga = np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row)
     starts, Kg = grid_starts(table, offsets, foot)
@@ -508,6 +537,10 @@ def fit_profiles(
             x0.append(math.log(c_g[g0]))
             lo_p.append(-np.inf)
             hi_p.append(np.inf)
+        if fit_g:  # the anisotropy, last, from the table's
+            x0.append(DEFAULT_G)
+            lo_p.append(G_PRIOR[0])
+            hi_p.append(G_PRIOR[1])
         x0 = np.clip(x0, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
         # Two passes when sigma is given: the model's own error (the table's Monte Carlo error per
         # offset, largest of the grid cell around the estimate, plus the interpolation share) joins
@@ -530,22 +563,26 @@ def fit_profiles(
                     rho = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
 
                 def resid(x, y=y, sd=sd, ok=ok, rho=rho):
-                    k = kernel_per_row(table, x[0], x[1], offsets, foot) * rho
-                    c = math.exp(x[2]) if len(x) > 2 else 1.0
+                    k = with_anisotropy(kernel_per_row(table, x[0], x[1], offsets, foot) * rho, x)
+                    c = 1.0 if calibrated else math.exp(x[2])
                     return np.where(ok, (c * k - y) / sd, 0.0)
 
-                res = least_squares(resid, x0, jac=_forward_jac(resid), bounds=(lo_p, hi_p), method="trf", x_scale=1.0)
+                res = least_squares(
+                    resid, x0, jac=_forward_jac(resid, upper=hi_p), bounds=(lo_p, hi_p), method="trf", x_scale=1.0
+                )
                 x0 = np.clip(res.x, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
                 if wp is not None and i_pass >= 1 and np.max(np.abs(x0[:2] - x_prev[:2])) < 1e-3:
                     break
             if wp is not None:  # polish with the walls' effect evaluated at every trial (the exact Jacobian)
 
                 def resid(x, y=y, sd=sd, ok=ok, wp=wp):
-                    k = model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind)
-                    c = math.exp(x[2]) if len(x) > 2 else 1.0
+                    k = with_anisotropy(model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind), x)
+                    c = 1.0 if calibrated else math.exp(x[2])
                     return np.where(ok, (c * k - y) / sd, 0.0)
 
-                res = least_squares(resid, x0, jac=_forward_jac(resid), bounds=(lo_p, hi_p), method="trf", x_scale=1.0)
+                res = least_squares(
+                    resid, x0, jac=_forward_jac(resid, upper=hi_p), bounds=(lo_p, hi_p), method="trf", x_scale=1.0
+                )
         except (ValueError, np.linalg.LinAlgError):
             mask[p] |= 64
             continue
@@ -569,8 +606,10 @@ def fit_profiles(
         out["se_s"][p], out["se_a"][p] = s_est * se_log[0], a_est * se_log[1]
         out["chi2"][p] = chi2
         raw[p], raw_se[p] = x[:2] - math.log(h), se_log[:2]
-        scale[p] = math.exp(x[2]) if len(x) > 2 else 1.0
-        model[p] = scale[p] * model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind)
+        scale[p] = 1.0 if calibrated else math.exp(x[2])
+        model[p] = scale[p] * with_anisotropy(model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind), x)
+        if fit_g:
+            g_est[p], g_se[p] = x[-1], se_log[-1]
         if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:
             mask[p] |= 2
         if min(x[1] - lo[1], hi[1] - x[1]) < edge_tol:
@@ -611,6 +650,8 @@ def fit_profiles(
         log_se=raw_se,
         dof=dofs,
         flags=flags,
+        g=g_est,
+        g_se=g_se,
     )
 
 
@@ -683,6 +724,7 @@ def fit_transport(
     regions_only: bool = False,
     wall_kind: str = "clear",
     p_misfit=DEFAULT_P_MISFIT,
+    g=None,
     progress=None,
 ) -> TransportFit:
     """Fit ``mu_s'`` and ``mu_a`` over a transport: maps (per pixel block) and per-region results.
@@ -720,6 +762,8 @@ def fit_transport(
         The containers' walls (:data:`WALL_KINDS`).
     p_misfit : float
         Chi-square probability below which a fit is flagged "model does not fit" (:mod:`planeray.goodness`).
+    g : float, optional
+        The media's anisotropy; None: unknown, fitted as a nuisance parameter (:func:`fit_profiles`).
     progress : callable, optional
         Called with the number of fits just done.
 
@@ -761,7 +805,7 @@ def fit_transport(
     maps["mask"] = np.full((H, W), 255, np.uint8)
     maps["flags"] = np.full((H, W), 255, np.uint8)
     check_wall_kind(wall_kind)
-    fit_kw = dict(wall_kind=wall_kind, p_misfit=p_misfit)
+    fit_kw = dict(wall_kind=wall_kind, p_misfit=p_misfit, g=check_g(g))
     regions, profiles = {}, {}
     for region in sorted(int(v) for v in np.unique(lab) if v != 0):
         inside = lab == region
@@ -845,6 +889,9 @@ def fit_transport(
             "model_fits": None if q is None else q.fits,
             "flags": describe_flags(flag0),
             "flag_bits": flag0,
+            "g": num_or_none(rr.g[0]),
+            "g_se": num_or_none(rr.g_se[0]),
+            "g_source": "fitted (unknown)" if fit_kw["g"] is None else "stated",
             "blocks_flagged": None if res is None else float(((res.flags & (FLAG_MISFIT | FLAG_EDGE)) > 0).mean()),
             "blocks_median_mu_s_prime_per_mm": None if res is None else _nanmedian(res.mu_s_prime_per_mm),
             "blocks_median_mu_a_per_mm": None if res is None else _nanmedian(res.mu_a_per_mm),

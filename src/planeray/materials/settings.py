@@ -14,6 +14,7 @@ from pathlib import Path
 from .._validate import check_number
 from ..camera import CameraModel
 from ..errors import InputError
+from ..kernels.anisotropy import check_g
 from .fit import DEFAULT_N
 
 __all__ = ["CaptureSettings"]
@@ -35,6 +36,9 @@ class CaptureSettings:
     depth_mm : float, optional
         Depth of the medium's layer, mm, in (0, 10000], on a support that returns no light;
         default: semi-infinite.
+    g : float, optional
+        The medium's Henyey-Greenstein anisotropy, 0-0.95 (:data:`planeray.kernels.anisotropy.G_PRIOR`);
+        default: unknown -- fitted with ``mu_s'`` and ``mu_a``, its uncertainty carried into theirs.
     white_reference : str or os.PathLike, optional
         Capture (stack, or transport for the transport fit) of a white Lambertian target with the same
         sweep and camera: calibrates the magnitude (absolute reflectance); without it only the
@@ -58,6 +62,7 @@ class CaptureSettings:
     mm_per_row: float | None = None
     n: float | None = None
     depth_mm: float | None = None
+    g: float | None = None
     white_reference: str | Path | None = None
     white_albedo: float = 0.99
     camera: CameraModel | None = None
@@ -71,6 +76,7 @@ class CaptureSettings:
             check_number(self.mm_per_row, "mm_per_row", minimum=0.0, maximum=100.0, min_inclusive=False)
         if self.depth_mm is not None and not (math.isfinite(self.depth_mm) and 0.0 < self.depth_mm <= 10_000.0):
             raise InputError(f"depth_mm must be a depth in (0, 10000] mm, got {self.depth_mm:g}")
+        check_g(self.g)
 
     @property
     def refractive_index(self) -> float:

@@ -73,8 +73,9 @@ from ..goodness import (
     describe_flags,
     fit_quality,
 )
+from ..kernels.anisotropy import G_PRIOR, anisotropy_table, check_g, g_kernel_change
 from ..kernels.footprint import camera_row_footprint
-from ..kernels.forward import ForwardTable, forward_table, kernel_per_row, model_kernel
+from ..kernels.forward import DEFAULT_G, ForwardTable, forward_table, kernel_per_row, model_kernel, table_kernel
 from ..kernels.walls import BOTTOM_ANGLE_DEG, check_wall_kind
 from ..stack import Stack
 from .fit import (
@@ -361,6 +362,8 @@ def _fit_region(
     p_misfit=DEFAULT_P_MISFIT,
     wall_effect_sd=0.0,
     bottom_effect_sd=0.0,
+    g=DEFAULT_G,
+    g_table=None,
 ):
     """One region's fit: ``dict`` of per-row estimates (log), standard errors, mask bits, scale, ambient, model.
 
@@ -373,7 +376,10 @@ def _fit_region(
     and the walls' and the bottom's effects off by ``wall_effect_sd`` and ``bottom_effect_sd`` of themselves.
     Residuals are whitened by it (held at the current estimate during a least-squares pass; three passes).
     The chi-square of the whitened residuals at ``images - 4`` (shape only; 3 calibrated) degrees of
-    freedom is the fit's :class:`planeray.goodness.FitQuality`.
+    freedom is the fit's :class:`planeray.goodness.FitQuality`.  ``g`` is the medium's anisotropy: the
+    table's (no change), a stated value (the kernel changed by :func:`planeray.kernels.anisotropy.g_kernel_change`,
+    ``g_table``), or None -- fitted within :data:`~planeray.kernels.anisotropy.G_PRIOR`, a third parameter (one
+    degree of freedom less; its uncertainty in the others' standard errors).
     """
     out = dict(
         mask=0, x=None, se_log=np.full(2, np.nan), c=np.nan, b=np.nan, chi2=np.nan, dof=0, model=None, kernel=None,
@@ -389,8 +395,17 @@ def _fit_region(
         A_g, w_g, var_rows = jitter
         A_g = A_g[:, ok]
 
+    fit_g = g is None
+    with_g = fit_g or float(g) != DEFAULT_G
+
     def kernel(x):
-        return model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind)
+        k = model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind)
+        if not with_g:
+            return k
+        gx = x[2] if fit_g else g
+        dk = g_kernel_change(table_kernel(table, x[0], x[1]), math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets,
+                             foot, table=g_table)  # fmt: skip
+        return np.maximum(k + dk, 0.0)
 
     # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
     # :data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`), a correlated error of the model along their shapes
@@ -458,7 +473,11 @@ def _fit_region(
     Mg = Kg @ A.T  # (G, N)
     costs = [float(np.sum(linear(Mg[i], L)[2] ** 2)) for i in range(len(Mg))]
     g0 = int(np.argmin(costs))
-    x0 = np.clip(starts[g0], lo + 1e-9, hi - 1e-9)
+    if fit_g:  # the anisotropy a third parameter, from the table's
+        lo, hi = np.append(lo, G_PRIOR[0]), np.append(hi, G_PRIOR[1])
+        x0 = np.clip(np.append(starts[g0], DEFAULT_G), lo + 1e-9, hi - 1e-9)
+    else:
+        x0 = np.clip(starts[g0], lo + 1e-9, hi - 1e-9)
     c0 = linear(Mg[g0], L)[0]
     L = whitener(Mg[g0], c0, Kg[g0])
 
@@ -486,10 +505,11 @@ def _fit_region(
     # standard errors: Jacobian of all unknowns (log s, log a, c[, b]) of the whitened residual
     step = 1e-4
     cols = []
-    for i in range(2):
+    for i in range(x.size):
         xi = np.array(x, float)
-        xi[i] += step
-        cols.append(L @ (c * (A @ kernel(xi) - m)) / step)
+        h_i = step if xi[i] + step <= hi[i] else -step  # inside the bounds (g at its upper end)
+        xi[i] += h_i
+        cols.append(L @ (c * (A @ kernel(xi) - m)) / h_i)
     if not calibrated:
         cols.append(L @ m)
     cols.append(L @ I)
@@ -502,8 +522,8 @@ def _fit_region(
     corr = float(cov[0, 1] / (se_log[0] * se_log[1])) if se_log[0] > 0 and se_log[1] > 0 else 0.0
     out.update(
         log_correlation=corr,
-        x=x, se_log=se_log, c=c, b=b, chi2=chi2, dof=n_dof, quality=quality, model=c * (Abar @ k) + b * Iw,
-        kernel=c * k,
+        x=x[:2], se_log=se_log, c=c, b=b, chi2=chi2, dof=n_dof, quality=quality, model=c * (Abar @ k) + b * Iw,
+        kernel=c * k, g=float(x[2]) if fit_g else float(g), g_se=float(np.sqrt(max(cov[2, 2], 0.0))) if fit_g else None,
     )  # fmt: skip
     edge_tol = 0.02
     if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:
@@ -541,6 +561,7 @@ def fit_stack(
     p_misfit=DEFAULT_P_MISFIT,
     wall_effect_sd=WALL_EFFECT_SD,
     bottom_effect_sd=BOTTOM_EFFECT_SD,
+    g=None,
     progress=None,
 ) -> TransportFit:
     """Fit ``mu_s'`` and ``mu_a`` (1/mm) of each region from a stack's images directly (see the module).
@@ -586,6 +607,11 @@ def fit_stack(
     wall_effect_sd, bottom_effect_sd : float
         The model's error in the walls' and the bottom's effects, shares of them (:data:`WALL_EFFECT_SD`,
         :data:`BOTTOM_EFFECT_SD`; 0: taken as exact): in the data's covariance along their shapes.
+    g : float, optional
+        The media's Henyey-Greenstein anisotropy (the forward table's is 0.8; :mod:`planeray.kernels.anisotropy`
+        changes its kernel to another).  None: unknown -- fitted with ``mu_s'`` and ``mu_a`` within
+        :data:`planeray.kernels.anisotropy.G_PRIOR`, its uncertainty carried into theirs (each region's ``g`` and
+        ``g_se``).
     progress : callable, optional
         Called with the number of fits just done.
 
@@ -604,6 +630,7 @@ def fit_stack(
         raise InputError(f"mm_per_row must be positive, got {mm_per_row!r}")
     table = table or forward_table()
     check_wall_kind(wall_kind)
+    g = check_g(g)
     design = stack_design(stack)
     H, W = stack.shape
     imgs, ok = _images(stack, design)
@@ -637,7 +664,8 @@ def fit_stack(
         table=table, calibrated=calibrated, h=h, max_relative_se=max_relative_se,
         model_relative_sd=model_relative_sd, model_correlated_sd=model_correlated_sd, lo=lo, hi=hi,
         starts=starts, Kg=Kg, basis=_model_error_basis(offsets), wall_kind=wall_kind, p_misfit=p_misfit,
-        wall_effect_sd=wall_effect_sd, bottom_effect_sd=bottom_effect_sd,
+        wall_effect_sd=wall_effect_sd, bottom_effect_sd=bottom_effect_sd, g=g,
+        g_table=anisotropy_table() if g is None or g != DEFAULT_G else None,
     )  # fmt: skip
     var_rows = None if camera is None else camera.row_jitter_rows(stack.lines_per_second) ** 2
 
@@ -743,6 +771,9 @@ def fit_stack(
             "log_estimate_per_mm": None if x is None else [float(v - math.log(h)) for v in x],
             "log_se": None if x is None else [float(v) for v in r["se_log"]],
             "log_correlation": r.get("log_correlation"),
+            "g": None if r.get("g") is None else num_or_none(r["g"]),
+            "g_se": None if r.get("g_se") is None else num_or_none(r["g_se"]),
+            "g_source": "stated" if g is not None else "fitted (unknown)",
             "mu_s_prime_edge": _edge_side(x, lo, hi) if x is not None and r["mask"] & 2 else None,
             "blocks": len(blocks_s),
             "blocks_flagged": float(np.mean(blocks_flagged)) if blocks_flagged else None,
