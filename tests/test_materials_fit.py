@@ -483,29 +483,38 @@ def test_a_layer_fitted_with_its_depth_is_recovered_and_biased_without(table):
 
 
 def test_a_mismatched_model_is_flagged_and_a_consistent_one_is_not(table):
-    """Goodness of fit (issue 41): a 3 mm layer of a weakly scattering medium (its kernel cut by the bottom)
+    """Goodness of fit (issue 41): a 2 mm layer of a weakly scattering medium (its kernel cut by the bottom)
     fitted as semi-infinite does not fit within the noise and is flagged (in the region's summary and the flag
-    layer); fitted with its depth it fits and nothing is flagged.  (A deep layer's loss reads as absorption
-    within the noise -- the 10 mm layer above: not every wrong model shows in the chi-square.)"""
+    layer); fitted with its depth it fits and nothing is flagged.  A 3 mm layer is flagged only when the medium's
+    g is stated: with g unknown, part of the bottom's cut reads as a forward-scattering g (reduced chi-square 1.64
+    against 1.67).  (A deep layer's loss reads as absorption within the noise -- the 10 mm layer above: not every
+    wrong model shows in the chi-square.)"""
     from planeray.goodness import FLAG_MISFIT, FLAG_RANGE
     from planeray.transport import Transport
 
     off = np.arange(-60, 61)
-    k = fit.forward_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table,
-                        walls=[[3.0 / MM, fit.BOTTOM_ANGLE_DEG, 0.0, 1.0]])  # fmt: skip
-    rng = np.random.default_rng(5)
-    transport = Transport((k * 50.0 * (1.0 + 0.002 * rng.standard_normal((4, 4, off.size)))).astype(np.float32), off)
-    right = fit.fit_transport(transport, mm_per_row=MM, block_px=4, table=table, depth_mm=3.0, regions_only=True)
-    wrong = fit.fit_transport(transport, mm_per_row=MM, block_px=4, table=table, regions_only=True)
+
+    def layer(depth_mm):
+        k = fit.forward_kernel(0.2, 0.004, offsets_rows=off, mm_per_row=MM, table=table,
+                            walls=[[depth_mm / MM, fit.BOTTOM_ANGLE_DEG, 0.0, 1.0]])  # fmt: skip
+        rng = np.random.default_rng(5)
+        return Transport((k * 50.0 * (1.0 + 0.002 * rng.standard_normal((4, 4, off.size)))).astype(np.float32), off)
+
+    kw = dict(mm_per_row=MM, block_px=4, table=table, regions_only=True)
+    right = fit.fit_transport(layer(2.0), depth_mm=2.0, **kw)
+    wrong = fit.fit_transport(layer(2.0), **kw)
     r, w = right.regions[1], wrong.regions[1]
     assert r["model_fits"] and r["fit_quality"]["reduced_chi2"] < r["fit_quality"]["threshold"]
-    # the right model fits; its 3 mm bottom lies within 5 transport mean free paths (1 / 0.2 mm): flagged out of
+    # the right model fits; its 2 mm bottom lies within 5 transport mean free paths (1 / 0.2 mm): flagged out of
     # diffusion theory's range, never as a misfit
     assert r["flag_bits"] == FLAG_RANGE and np.all(right.maps["flags"] == FLAG_RANGE)
     assert not w["model_fits"] and w["flag_bits"] & FLAG_MISFIT and "model does not fit" in w["flags"][0]
     assert np.all(wrong.maps["flags"] & FLAG_MISFIT)
     # the misfit widens the standard errors by sqrt(chi2 / dof)
     assert w["fit_quality"]["se_inflation"] == pytest.approx(np.sqrt(w["fit_quality"]["reduced_chi2"]))
+    # 3 mm: flagged with the medium's g stated (with g unknown it is not: the docstring)
+    stated = fit.fit_transport(layer(3.0), g=fit.DEFAULT_G, **kw).regions[1]
+    assert stated["flag_bits"] & FLAG_MISFIT
 
 
 # ---------------------------------------------------------------- Fig. 10 extended (`materials report`, `paper`)
