@@ -80,3 +80,17 @@ def test_a_g_outside_the_covered_range_is_refused():
 
     with pytest.raises(InputError, match="g must lie within"):
         fit.fit_profiles(np.ones(OFFSETS.size), offsets_rows=OFFSETS, mm_per_row=MM, g=0.99)
+
+
+def test_the_interpolation_in_g_is_scipys_pchip():
+    """The fits' own monotone cubic in g (written out for speed) against scipy's PchipInterpolator, on random rows
+    (monotone, oscillating, flat stretches) and at every point of the range, nodes included."""
+    from scipy.interpolate import PchipInterpolator
+
+    rng = np.random.default_rng(7)
+    x = np.array(an.G_NODES)
+    for trial in range(40):
+        y = rng.normal(size=(x.size, 30)) * rng.choice([0.0, 1.0], size=(x.size, 30), p=[0.2, 0.8])
+        y = np.cumsum(y, axis=0) if trial % 2 else y
+        for q in np.linspace(*an.G_PRIOR, 39):
+            np.testing.assert_allclose(an._pchip(x, y, q), PchipInterpolator(x, y, axis=0)(q), rtol=1e-12, atol=1e-12)

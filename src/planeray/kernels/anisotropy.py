@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from ..mc.cache import save_table, stored, where
 from ..mc.engine import mc_line_profile
@@ -201,6 +200,35 @@ def anisotropy_table_stored() -> bool:
     return where(_name(*_args())) is not None
 
 
+def _pchip(x, y, xq: float) -> np.ndarray:
+    """Monotone piecewise-cubic Hermite interpolation (Fritsch & Carlson 1980, SIAM J. Numer. Anal. 17, 238; the
+    slopes of :class:`scipy.interpolate.PchipInterpolator`) of the rows ``y`` ``(G, U)`` over the increasing ``x``
+    at one ``xq``: ``(U,)``.  Written out because the fits call it at every trial (scipy's builds an object:
+    6x the time)."""
+    x = np.asarray(x, np.float64)
+    h = np.diff(x)
+    m = np.diff(y, axis=0) / h[:, None]  # (G - 1, U) secants
+    d = np.zeros_like(y)
+    w1 = (2.0 * h[1:] + h[:-1])[:, None]
+    w2 = (h[1:] + 2.0 * h[:-1])[:, None]
+    same = (np.sign(m[1:]) == np.sign(m[:-1])) & (m[1:] != 0) & (m[:-1] != 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        whmean = (w1 / m[:-1] + w2 / m[1:]) / (w1 + w2)
+        d[1:-1] = np.where(same, 1.0 / whmean, 0.0)
+
+    def edge(h0, h1, m0, m1):
+        e = ((2.0 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+        e = np.where(np.sign(e) != np.sign(m0), 0.0, e)
+        return np.where((np.sign(m0) != np.sign(m1)) & (np.abs(e) > np.abs(3.0 * m0)), 3.0 * m0, e)
+
+    d[0] = edge(h[0], h[1], m[0], m[1])
+    d[-1] = edge(h[-1], h[-2], m[-1], m[-2])
+    i = int(np.clip(np.searchsorted(x, xq) - 1, 0, x.size - 2))
+    t = (xq - x[i]) / h[i]
+    h00, h10, h01, h11 = 2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, -2 * t**3 + 3 * t**2, t**3 - t**2
+    return h00 * y[i] + h10 * h[i] * d[i] + h01 * y[i + 1] + h11 * h[i] * d[i + 1]
+
+
 def check_g(g) -> float | None:
     """A stated anisotropy, checked: None (unknown: fitted within :data:`G_PRIOR`) or a value in that range."""
     from ..errors import InputError, parameter_name
@@ -264,7 +292,7 @@ def g_kernel_change(kernel_row, s_per_row, a_per_row, n, g, offsets_rows, foot, 
     g = float(np.clip(g, nodes[0], nodes[-1]))
     # monotone cubic in g between the traced values (PCHIP): smooth, so the fit's cost is smooth in g (a linear
     # interpolation's kinks at the nodes stall a trust-region step there), and it does not overshoot them
-    dev = PchipInterpolator(nodes, t.at(s_per_row, a_per_row, n), axis=0)(g)
+    dev = _pchip(nodes, t.at(s_per_row, a_per_row, n), g)
     k = np.asarray(kernel_row, np.float64)
     reach = min(k.size, dev.size) - 1
     k = k[: reach + 1]

@@ -372,23 +372,25 @@ def table_kernel(table: ForwardTable, log_s, log_a):
     return np.exp(table.log_kernel_per_row(log_s, log_a))
 
 
-def kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot):
-    """``K`` (not log) at per-row log-coefficients for the given signed offsets, footprint-averaged."""
+def kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot, *, k=None):
+    """``K`` (not log) at per-row log-coefficients for the given signed offsets, footprint-averaged (``k``: the
+    :func:`table_kernel` at them, when the caller has it)."""
     f, w = foot
     u = np.abs(np.asarray(offsets_rows, np.int64)[:, None] + f[None, :])  # (U, F)
     reach = table.offsets_rows[-1]
-    k = table_kernel(table, log_s, log_a)  # (..., U_table)
+    k = table_kernel(table, log_s, log_a) if k is None else k  # (..., U_table)
     inside = u <= reach
     vals = np.where(inside, k[..., np.minimum(u, reach)], 0.0)
     return (vals * w).sum(axis=-1)
 
 
-def model_kernel(table: ForwardTable, log_s, log_a, offsets_rows, foot, walls=None, wall_kind="clear"):
-    """The pixel's (or block's) kernel at per-row log-coefficients: the table's, changed by the walls."""
-    base = kernel_per_row(table, log_s, log_a, offsets_rows, foot)
+def model_kernel(table: ForwardTable, log_s, log_a, offsets_rows, foot, walls=None, wall_kind="clear", *, k=None):
+    """The pixel's (or block's) kernel at per-row log-coefficients: the table's, changed by the walls (``k``: the
+    :func:`table_kernel` at them, when the caller has it)."""
+    k = table_kernel(table, log_s, log_a) if k is None else k
+    base = kernel_per_row(table, log_s, log_a, offsets_rows, foot, k=k)
     if walls is None or not len(walls):
         return base
-    k = table_kernel(table, log_s, log_a)
     term = wall_term(k, log_s, log_a, table.n, offsets_rows, foot, np.asarray(walls, float), wall_kind)
     return np.maximum(base + term, 0.0)
 

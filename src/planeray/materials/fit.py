@@ -493,13 +493,13 @@ def fit_profiles(
     g_est = np.full(P, np.nan if fit_g else float(g))
     g_se = np.full(P, np.nan)
 
-    def with_anisotropy(k, x):
-        """The kernel ``k`` at the log-parameters ``x`` changed to the media's anisotropy (``x[-1]`` when fitted)."""
+    def with_anisotropy(k, x, k_row):
+        """The kernel ``k`` at the log-parameters ``x`` (:func:`table_kernel` ``k_row``) changed to the media's
+        anisotropy (``x[-1]`` when fitted)."""
         if not with_g:
             return k
         gx = x[-1] if fit_g else g
-        dk = g_kernel_change(table_kernel(table, x[0], x[1]), math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets,
-                             foot, table=g_table)  # fmt: skip
+        dk = g_kernel_change(k_row, math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets, foot, table=g_table)
         return np.maximum(k + dk, 0.0)
 
     # A coarse start: the grid point of least misfit (shape only, scale solved in closed form).
@@ -563,7 +563,8 @@ def fit_profiles(
                     rho = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
 
                 def resid(x, y=y, sd=sd, ok=ok, rho=rho):
-                    k = with_anisotropy(kernel_per_row(table, x[0], x[1], offsets, foot) * rho, x)
+                    k_row = table_kernel(table, x[0], x[1])
+                    k = with_anisotropy(kernel_per_row(table, x[0], x[1], offsets, foot, k=k_row) * rho, x, k_row)
                     c = 1.0 if calibrated else math.exp(x[2])
                     return np.where(ok, (c * k - y) / sd, 0.0)
 
@@ -576,7 +577,10 @@ def fit_profiles(
             if wp is not None:  # polish with the walls' effect evaluated at every trial (the exact Jacobian)
 
                 def resid(x, y=y, sd=sd, ok=ok, wp=wp):
-                    k = with_anisotropy(model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind), x)
+                    k_row = table_kernel(table, x[0], x[1])
+                    k = with_anisotropy(
+                        model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind, k=k_row), x, k_row
+                    )
                     c = 1.0 if calibrated else math.exp(x[2])
                     return np.where(ok, (c * k - y) / sd, 0.0)
 
@@ -607,7 +611,10 @@ def fit_profiles(
         out["chi2"][p] = chi2
         raw[p], raw_se[p] = x[:2] - math.log(h), se_log[:2]
         scale[p] = 1.0 if calibrated else math.exp(x[2])
-        model[p] = scale[p] * with_anisotropy(model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind), x)
+        k_row = table_kernel(table, x[0], x[1])
+        model[p] = scale[p] * with_anisotropy(
+            model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind, k=k_row), x, k_row
+        )
         if fit_g:
             g_est[p], g_se[p] = x[-1], se_log[-1]
         if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:

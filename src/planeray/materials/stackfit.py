@@ -399,12 +399,12 @@ def _fit_region(
     with_g = fit_g or float(g) != DEFAULT_G
 
     def kernel(x):
-        k = model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind)
+        k_row = table_kernel(table, x[0], x[1])
+        k = model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind, k=k_row)
         if not with_g:
             return k
         gx = x[2] if fit_g else g
-        dk = g_kernel_change(table_kernel(table, x[0], x[1]), math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets,
-                             foot, table=g_table)  # fmt: skip
+        dk = g_kernel_change(k_row, math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets, foot, table=g_table)
         return np.maximum(k + dk, 0.0)
 
     # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
