@@ -10,8 +10,8 @@
   capture's geometry (:func:`~planeray.kernels.forward.forward_kernel`);
 * :mod:`planeray.kernels.walls`: the relative effect of container walls and a layer's bottom in
   diffusion theory (the image sources the fit applies to the forward table);
-* :mod:`planeray.kernels.anisotropy`: how a medium's unknown anisotropy ``g`` changes the forward
-  table's kernel (the fits' model error over it).
+* :mod:`planeray.kernels.anisotropy`: how a medium's anisotropy ``g`` changes the forward table's
+  kernel (traced at 0.8; the fits take ``g`` as a nuisance parameter, or as stated).
 
 The diffusion theory itself (the dipole, its one line law) is :mod:`planeray.mc.diffusion`.
 """

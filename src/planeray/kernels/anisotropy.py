@@ -4,12 +4,11 @@ The forward table (:mod:`planeray.kernels.forward`) is traced at one Henyey-Gree
 ``g = 0.8`` (:data:`~planeray.kernels.forward.DEFAULT_G`).  By the similarity relation the diffuse
 kernel depends on ``mu_s' = mu_s (1 - g)`` alone, but near the line it does not: measured here with the
 project's Monte Carlo (:func:`planeray.mc.mc_line_profile`, the same medium at ``g`` from 0 to 0.95),
-a medium of ``g = 0`` sends 1.3-3 times the light of the table's into the line's own bin and 10-18 %
-less into the next few transport mean free paths (``1 / mu_s'``); ``g = 0.95`` moves light the other
-way.  A user rarely knows ``g`` (milk 0.8-0.93, Intralipid 0.6-0.8, tissues 0.8-0.95, scattering paints
+a medium of ``g = 0`` sends up to 5.8 times the light of the table's into the line's own bin (1.3 times
+at ``mu_s' h`` = 1 per row) and up to 34 % less into the next few rows.  A user rarely knows ``g`` (milk 0.8-0.93, Intralipid 0.6-0.8, tissues 0.8-0.95, scattering paints
 and powders lower), so the fits take it as a **nuisance parameter**: fitted with ``mu_s'`` and ``mu_a``
 within :data:`G_PRIOR`, the kernel ``K_g = K_0.8 (1 + d_g)`` with ``d_g`` the traced deviation, a monotone
-cubic (PCHIP) in ``g`` between the nodes :data:`G_NODES` (:func:`g_kernel_change`).  Its uncertainty enters the standard
+cubic (PCHIP) in ``g`` between the nodes :data:`G_NODES` (:func:`g_kernel_change`, :func:`kernel_at_g`).  Its uncertainty enters the standard
 errors of ``mu_s'`` and ``mu_a`` through their correlation with it (the fit's covariance), and the
 chi-square counts it as one more parameter -- one physical direction of the kernel's shape, not a free
 band of shapes, so a model whose geometry is wrong (a thin layer fitted as semi-infinite) still fails it.
@@ -33,6 +32,7 @@ import numpy as np
 from ..mc.cache import save_table, stored, where
 from ..mc.engine import mc_line_profile
 from ..medium import Medium
+from .footprint import footprint_average
 
 __all__ = [
     "G_NODES",
@@ -46,6 +46,7 @@ __all__ = [
     "anisotropy_table_stored",
     "check_g",
     "g_kernel_change",
+    "kernel_at_g",
 ]
 
 #: Anisotropies traced (the table's own ``g = 0.8`` among them: its deviation is zero).
@@ -173,7 +174,7 @@ def _args():
 
 
 def anisotropy_table(*, progress=None, cache=True) -> AnisotropyTable:
-    """The shipped (else cached, else traced: about half an hour on two cores) :class:`AnisotropyTable`.
+    """The shipped (else cached, else traced: about 40 minutes on two cores) :class:`AnisotropyTable`.
 
     Parameters
     ----------
@@ -299,7 +300,40 @@ def g_kernel_change(kernel_row, s_per_row, a_per_row, n, g, offsets_rows, foot, 
     # where the kernel is below _KERNEL_FLOOR of its peak the traced ratios are Monte Carlo noise (a handful of
     # photons, or none): no change is taken there
     change_row = dev[: reach + 1] * np.where(k > _KERNEL_FLOOR * k.max(), k, 0.0)
-    f, wf = foot
-    u = np.abs(np.asarray(offsets_rows, np.int64)[:, None] + np.asarray(f)[None, :])  # (U, F)
-    vals = np.where(u <= reach, change_row[np.minimum(u, reach)], 0.0)
-    return (vals * np.asarray(wf)[None, :]).sum(axis=1)
+    return footprint_average(change_row, offsets_rows, foot)
+
+
+def kernel_at_g(kernel, kernel_row, log_s, log_a, n, g, offsets_rows, foot, *, table=None) -> np.ndarray:
+    """The footprint-averaged kernel ``kernel`` of the forward table (``g = 0.8``) for a medium of anisotropy ``g``:
+    ``max(kernel + change, 0)`` (:func:`g_kernel_change`); ``kernel`` itself at the table's ``g``.
+
+    Parameters
+    ----------
+    kernel : ndarray (U,)
+        The table's kernel at the fit's offsets (walls included where the fit has them).
+    kernel_row : ndarray (R + 1,)
+        :func:`planeray.kernels.forward.table_kernel` at the same medium (offsets ``0 .. R``).
+    log_s, log_a : float
+        ``log(mu_s' h)``, ``log(mu_a h)``: the fits' per-row log-coefficients.
+    n, g, offsets_rows, foot, table
+        As :func:`g_kernel_change`.
+
+    Returns
+    -------
+    ndarray (U,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> k_row = np.exp(-0.3 * np.arange(129.0))
+    >>> foot = (np.array([0]), np.array([1.0]))
+    >>> k = k_row[np.abs(np.arange(-3, 4))]
+    >>> kernel_at_g(k, k_row, np.log(0.3), np.log(0.003), 1.33, 0.8, np.arange(-3, 4), foot) is k
+    True
+    """
+    if g == _TABLE_G:
+        return kernel
+    change = g_kernel_change(
+        kernel_row, math.exp(log_s), math.exp(log_a), n, g, offsets_rows, foot, table=table
+    )  # fmt: skip
+    return np.maximum(kernel + change, 0.0)

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..timing import band_bin_weights
 
-__all__ = ["footprint_kernel", "camera_row_footprint"]
+__all__ = ["footprint_kernel", "camera_row_footprint", "footprint_average"]
 
 
 def footprint_kernel(offsets_rows, rows_per_camera_row: float) -> np.ndarray:
@@ -61,3 +61,33 @@ def camera_row_footprint(rows_per_camera_row):
     f = np.arange(-half, half + 1)
     w = band_bin_weights(f, 0.0, rpc)
     return f, w / w.sum()
+
+
+def footprint_average(values_row, offsets_rows, foot) -> np.ndarray:
+    """A symmetric kernel given per offset ``0 .. R`` (last axis), averaged over a camera row's footprint at signed
+    offsets; zero beyond ``R``.
+
+    Parameters
+    ----------
+    values_row : ndarray (..., R + 1)
+        The kernel (or its change) at projector-row offsets ``0 .. R``.
+    offsets_rows : array_like of int (U,)
+        Signed offsets, projector rows.
+    foot : tuple of ndarray
+        ``(offsets, weights)`` of :func:`camera_row_footprint`.
+
+    Returns
+    -------
+    ndarray (..., U)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> footprint_average(np.array([1.0, 0.5, 0.25]), np.arange(-3, 4), camera_row_footprint(1.0)).tolist()
+    [0.0, 0.25, 0.5, 1.0, 0.5, 0.25, 0.0]
+    """
+    f, w = foot
+    u = np.abs(np.asarray(offsets_rows, np.int64)[:, None] + f[None, :])  # (U, F)
+    reach = np.shape(values_row)[-1] - 1
+    vals = np.where(u <= reach, values_row[..., np.minimum(u, reach)], 0.0)
+    return (vals * w).sum(axis=-1)

@@ -64,7 +64,7 @@ from ..errors import InputError
 from ..mc.cache import save_table, stored, where
 from ..mc.engine import mc_line_profile
 from ..medium import Medium
-from .footprint import camera_row_footprint
+from .footprint import camera_row_footprint, footprint_average
 from .walls import BOTTOM_ANGLE_DEG, WALL_ANGLES_DEG, check_wall_kind, dipole_line, dipole_per_row, wall_term
 
 __all__ = [
@@ -375,13 +375,8 @@ def table_kernel(table: ForwardTable, log_s, log_a):
 def kernel_per_row(table: ForwardTable, log_s, log_a, offsets_rows, foot, *, k=None):
     """``K`` (not log) at per-row log-coefficients for the given signed offsets, footprint-averaged (``k``: the
     :func:`table_kernel` at them, when the caller has it)."""
-    f, w = foot
-    u = np.abs(np.asarray(offsets_rows, np.int64)[:, None] + f[None, :])  # (U, F)
-    reach = table.offsets_rows[-1]
     k = table_kernel(table, log_s, log_a) if k is None else k  # (..., U_table)
-    inside = u <= reach
-    vals = np.where(inside, k[..., np.minimum(u, reach)], 0.0)
-    return (vals * w).sum(axis=-1)
+    return footprint_average(k, offsets_rows, foot)
 
 
 def model_kernel(table: ForwardTable, log_s, log_a, offsets_rows, foot, walls=None, wall_kind="clear", *, k=None):

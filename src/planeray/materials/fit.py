@@ -65,7 +65,7 @@ from ..goodness import (
     describe_flags,
     fit_quality,
 )
-from ..kernels.anisotropy import G_PRIOR, anisotropy_table, check_g, g_kernel_change
+from ..kernels.anisotropy import G_PRIOR, anisotropy_table, check_g, kernel_at_g
 from ..kernels.footprint import camera_row_footprint
 from ..kernels.forward import (
     DEFAULT_G,
@@ -463,8 +463,7 @@ def fit_profiles(
     check_wall_kind(wall_kind)
     g = check_g(g)
     fit_g = g is None
-    with_g = fit_g or g != DEFAULT_G
-    g_table = anisotropy_table() if with_g else None
+    g_table = anisotropy_table() if fit_g or g != DEFAULT_G else None
     Y = np.atleast_2d(np.asarray(profiles, np.float64))
     if walls is not None and len(walls) != Y.shape[0]:
         raise InputError(f"walls has {len(walls)} entries, one per profile expected ({Y.shape[0]})")
@@ -496,11 +495,12 @@ def fit_profiles(
     def with_anisotropy(k, x, k_row):
         """The kernel ``k`` at the log-parameters ``x`` (:func:`table_kernel` ``k_row``) changed to the media's
         anisotropy (``x[-1]`` when fitted)."""
-        if not with_g:
-            return k
-        gx = x[-1] if fit_g else g
-        dk = g_kernel_change(k_row, math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets, foot, table=g_table)
-        return np.maximum(k + dk, 0.0)
+        return kernel_at_g(k, k_row, x[0], x[1], table.n, x[-1] if fit_g else g, offsets, foot, table=g_table)
+
+    def walls_kernel(x, wp):
+        """The kernel with the walls ``wp`` (None: none) and the media's anisotropy, at the log-parameters ``x``."""
+        k_row = table_kernel(table, x[0], x[1])
+        return with_anisotropy(model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind, k=k_row), x, k_row)
 
     # A coarse start: the grid point of least misfit (shape only, scale solved in closed form).
     gs, ga = np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row)
@@ -577,10 +577,7 @@ def fit_profiles(
             if wp is not None:  # polish with the walls' effect evaluated at every trial (the exact Jacobian)
 
                 def resid(x, y=y, sd=sd, ok=ok, wp=wp):
-                    k_row = table_kernel(table, x[0], x[1])
-                    k = with_anisotropy(
-                        model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind, k=k_row), x, k_row
-                    )
+                    k = walls_kernel(x, wp)
                     c = 1.0 if calibrated else math.exp(x[2])
                     return np.where(ok, (c * k - y) / sd, 0.0)
 
@@ -611,10 +608,7 @@ def fit_profiles(
         out["chi2"][p] = chi2
         raw[p], raw_se[p] = x[:2] - math.log(h), se_log[:2]
         scale[p] = 1.0 if calibrated else math.exp(x[2])
-        k_row = table_kernel(table, x[0], x[1])
-        model[p] = scale[p] * with_anisotropy(
-            model_kernel(table, x[0], x[1], offsets, foot, wp, wall_kind, k=k_row), x, k_row
-        )
+        model[p] = scale[p] * walls_kernel(x, wp)
         if fit_g:
             g_est[p], g_se[p] = x[-1], se_log[-1]
         if min(x[0] - lo[0], hi[0] - x[0]) < edge_tol:

@@ -73,7 +73,7 @@ from ..goodness import (
     describe_flags,
     fit_quality,
 )
-from ..kernels.anisotropy import G_PRIOR, anisotropy_table, check_g, g_kernel_change
+from ..kernels.anisotropy import G_PRIOR, anisotropy_table, check_g, kernel_at_g
 from ..kernels.footprint import camera_row_footprint
 from ..kernels.forward import DEFAULT_G, ForwardTable, forward_table, kernel_per_row, model_kernel, table_kernel
 from ..kernels.walls import BOTTOM_ANGLE_DEG, check_wall_kind
@@ -396,16 +396,11 @@ def _fit_region(
         A_g = A_g[:, ok]
 
     fit_g = g is None
-    with_g = fit_g or float(g) != DEFAULT_G
 
     def kernel(x):
         k_row = table_kernel(table, x[0], x[1])
         k = model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind, k=k_row)
-        if not with_g:
-            return k
-        gx = x[2] if fit_g else g
-        dk = g_kernel_change(k_row, math.exp(x[0]), math.exp(x[1]), table.n, gx, offsets, foot, table=g_table)
-        return np.maximum(k + dk, 0.0)
+        return kernel_at_g(k, k_row, x[0], x[1], table.n, x[2] if fit_g else g, offsets, foot, table=g_table)
 
     # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
     # :data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`), a correlated error of the model along their shapes
