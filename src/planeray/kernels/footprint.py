@@ -64,8 +64,8 @@ def camera_row_footprint(rows_per_camera_row):
 
 
 def footprint_average(values_row, offsets_rows, foot) -> np.ndarray:
-    """A symmetric kernel given per offset ``0 .. R`` (last axis), averaged over a camera row's footprint at signed
-    offsets; zero beyond ``R``.
+    """A symmetric kernel given at the offsets 0 to ``R`` (last axis), averaged over a camera row's footprint at
+    signed offsets; zero beyond ``R``.
 
     Parameters
     ----------
