@@ -151,6 +151,27 @@ DIFFUSION_RANGE_MFP = 5.0
 MODEL_RELATIVE_SD = 0.02
 
 
+#: The walls' effect on the kernel (diffusion theory's method of images) is off by this share of itself: against
+#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect
+#: (docs/user_guide/materials_fit.md, "Container walls").  Their distances are also uncertain by a transport mean
+#: free path and the pixel's half (:func:`wall_error_columns`).
+WALL_EFFECT_SD = 0.2
+
+
+#: The walls' effect is also off in its **shape** over the offsets: by this share of itself in each smooth bump of
+#: :func:`model_error_basis`, independently.  Measured against Mitsuba 3 renders of trays (a forward model planeray
+#: did not write; media none of the validation cases holds), the maximum-likelihood share beside the other wall
+#: terms: ``tools/measure_wall_error.py`` (docs/user_guide/materials_fit.md, "Container walls").
+WALL_SHAPE_SD = 0.0
+
+
+#: A layer's bottom's effect (the slab's image series) is off by this share of itself: against planeray's Monte
+#: Carlo of the soap's 30 mm layer (6 transport mean free paths) it removes 3.8 % of the kernel where the Monte
+#: Carlo removes 2.1 %: 80 % too much, and diffusion theory errs more in thinner layers.  (Walls and a bottom
+#: closer than :data:`DIFFUSION_RANGE_MFP` flag the fit.)
+BOTTOM_EFFECT_SD = 1.0
+
+
 #: Reasons for a NaN, as bits of the identifiability mask.
 REASONS = {
     1: "no signal: too few positive samples",
@@ -238,6 +259,65 @@ def group_walls(distances, per_e_fold=_WALL_BINS_PER_E_FOLD):
             mean = np.bincount(inv, weights=v, minlength=key.size) / cnt
             rows.append(np.stack([mean, np.full(key.size, ang), np.full(key.size, side), cnt / n], axis=1))
     return np.concatenate(rows) if rows else np.zeros((0, 4))
+
+
+def model_error_basis(offsets):
+    """Smooth bumps over ``log(1 + |u|)`` (``(U, J)``): the shapes of the forward model's correlated error."""
+    x = np.log1p(np.abs(np.asarray(offsets, np.float64)))
+    centres = np.log1p(np.array([0.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0]))
+    width = 0.5 * float(np.mean(np.diff(centres)))
+    return np.exp(-0.5 * ((x[:, None] - centres[None, :]) / width) ** 2)
+
+
+def wall_error_columns(table, x, offsets, foot, walls, wall_kind, *, effect_sd, bottom_sd, shape_sd, basis):
+    """The walls' and the bottom's model error: kernel-space columns ``(U, K)`` whose outer product is its covariance.
+
+    Diffusion theory's walls and bottom (:mod:`planeray.kernels.walls`) are uncertain: each part's effect
+    (``K_walls - K``) off by ``effect_sd`` (walls) or ``bottom_sd`` (bottom) of itself; its distances off by a
+    transport mean free path (diffusion theory's boundaries are uncertain by about one, Haskell et al. 1994) --
+    for walls also by the pixel's half (their positions come from the labels); and the walls' effect off in
+    shape, ``shape_sd`` of it in each bump of ``basis`` (:func:`model_error_basis`).  ``x`` holds the per-row
+    log-coefficients ``(log mu_s' h, log mu_a h, ...)``.  None when there is nothing uncertain.
+    """
+    if walls is None or not len(walls):
+        return None
+    w = np.asarray(walls, np.float64)
+    is_bottom = w[:, 1] == BOTTOM_ANGLE_DEG
+    parts = []
+    if (~is_bottom).any() and (effect_sd > 0 or shape_sd > 0):
+        parts.append((w[~is_bottom], effect_sd, shape_sd))
+    if is_bottom.any() and bottom_sd > 0:
+        parts.append((w[is_bottom], bottom_sd, 0.0))
+    if not parts:
+        return None
+    foot_rows = float(np.ptp(foot[0]) + 1) if foot[0].size > 1 else 1.0  # a camera row's extent, projector rows
+    free = model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
+    mfp_rows = 1.0 / math.exp(x[0])  # 1 / mu_s' in rows
+    cols = []
+    for ww, sd, shape in parts:
+        effect = model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free
+        cols.append(sd * effect)
+        if shape > 0:
+            cols.extend((shape * effect[:, None] * basis).T)
+        bottom = bool(np.all(ww[:, 1] == BOTTOM_ANGLE_DEG))
+        shift = mfp_rows if bottom else math.hypot(mfp_rows, 0.5 * foot_rows)
+        hi, lo = ww.copy(), ww.copy()
+        hi[:, 0] += shift
+        lo[:, 0] = np.maximum(lo[:, 0] - shift, 0.0)
+        k_hi = model_kernel(table, x[0], x[1], offsets, foot, hi, wall_kind)
+        k_lo = model_kernel(table, x[0], x[1], offsets, foot, lo, wall_kind)
+        cols.append(0.5 * (k_hi - k_lo))
+    return np.stack(cols, axis=1)
+
+
+def _whitener(sd, ok, E=None, c=1.0):
+    """Whitened residuals of the samples ``ok``: ``v / sd``, or ``L v`` with ``L L^T`` the inverse of
+    ``diag(sd^2) + (c E)(c E)^T`` (the walls' model error, :func:`wall_error_columns`; None: none)."""
+    if E is None:
+        return lambda v: np.where(ok, v / sd, 0.0)
+    Eok = c * E[ok]
+    L = np.linalg.inv(np.linalg.cholesky(np.diag(sd[ok] ** 2) + Eok @ Eok.T))
+    return lambda v: L @ v[ok]
 
 
 @dataclass(frozen=True)
@@ -404,6 +484,9 @@ def fit_profiles(
     wall_kind: str = "clear",
     p_misfit=DEFAULT_P_MISFIT,
     g=None,
+    wall_effect_sd=WALL_EFFECT_SD,
+    bottom_effect_sd=BOTTOM_EFFECT_SD,
+    wall_shape_sd=WALL_SHAPE_SD,
 ) -> FitResult:
     """Fit ``mu_s'`` and ``mu_a`` to line-kernel profiles (weighted least squares in log-parameters).
 
@@ -452,12 +535,17 @@ def fit_profiles(
         The media's Henyey-Greenstein anisotropy (the table's is :data:`DEFAULT_G`; another changes the kernel by
         :func:`planeray.kernels.anisotropy.g_kernel_change`).  None: unknown -- a third parameter, fitted within
         :data:`planeray.kernels.anisotropy.G_PRIOR`, its uncertainty carried into the others' standard errors.
+    wall_effect_sd, bottom_effect_sd, wall_shape_sd : float
+        The walls' and the bottom's model error (:func:`wall_error_columns`: :data:`WALL_EFFECT_SD`,
+        :data:`BOTTOM_EFFECT_SD`, :data:`WALL_SHAPE_SD`; 0: taken as exact).  With ``sigma`` and walls, it joins the
+        data's covariance (correlated over the offsets; residuals whitened by it, held at each pass's estimate).
 
     Returns
     -------
     FitResult
         Standard errors from the Jacobian, scaled by ``sqrt(chi2 / dof)`` where that exceeds 1 (the
-        misfit inflates them; the model's own error is in ``sigma`` through ``model_relative_sd``).
+        misfit inflates them; the model's own error is in ``sigma`` through ``model_relative_sd``, the walls'
+        through ``wall_effect_sd``, ``bottom_effect_sd`` and ``wall_shape_sd``).
     """
     table = table or forward_table()
     check_wall_kind(wall_kind)
@@ -505,6 +593,7 @@ def fit_profiles(
     # A coarse start: the grid point of least misfit (shape only, scale solved in closed form).
     gs, ga = np.log(table.mu_s_prime_per_row), np.log(table.mu_a_per_row)
     starts, Kg = grid_starts(table, offsets, foot)
+    basis = model_error_basis(offsets)
     edge_tol = 0.02
     for p in range(P):
         y, sd = Y[p], S[p]
@@ -561,12 +650,18 @@ def fit_profiles(
                     k_free = kernel_per_row(table, x0[0], x0[1], offsets, foot)
                     k_wall = model_kernel(table, x0[0], x0[1], offsets, foot, wp, wall_kind)
                     rho = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
+                white = _whitener(
+                    sd, ok, None if not model_error else wall_error_columns(
+                        table, x0, offsets, foot, wp, wall_kind, effect_sd=wall_effect_sd, bottom_sd=bottom_effect_sd,
+                        shape_sd=wall_shape_sd, basis=basis,
+                    ), 1.0 if calibrated else math.exp(x0[2]),
+                )  # fmt: skip
 
-                def resid(x, y=y, sd=sd, ok=ok, rho=rho):
+                def resid(x, y=y, white=white, rho=rho):
                     k_row = table_kernel(table, x[0], x[1])
                     k = with_anisotropy(kernel_per_row(table, x[0], x[1], offsets, foot, k=k_row) * rho, x, k_row)
                     c = 1.0 if calibrated else math.exp(x[2])
-                    return np.where(ok, (c * k - y) / sd, 0.0)
+                    return white(c * k - y)
 
                 res = least_squares(
                     resid, x0, jac=_forward_jac(resid, upper=hi_p), bounds=(lo_p, hi_p), method="trf", x_scale=1.0
@@ -576,10 +671,10 @@ def fit_profiles(
                     break
             if wp is not None:  # polish with the walls' effect evaluated at every trial (the exact Jacobian)
 
-                def resid(x, y=y, sd=sd, ok=ok, wp=wp):
+                def resid(x, y=y, white=white, wp=wp):
                     k = walls_kernel(x, wp)
                     c = 1.0 if calibrated else math.exp(x[2])
-                    return np.where(ok, (c * k - y) / sd, 0.0)
+                    return white(c * k - y)
 
                 res = least_squares(
                     resid, x0, jac=_forward_jac(resid, upper=hi_p), bounds=(lo_p, hi_p), method="trf", x_scale=1.0

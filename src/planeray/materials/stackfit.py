@@ -76,23 +76,28 @@ from ..goodness import (
 from ..kernels.anisotropy import G_PRIOR, anisotropy_table, check_g, kernel_at_g
 from ..kernels.footprint import camera_row_footprint
 from ..kernels.forward import DEFAULT_G, ForwardTable, forward_table, kernel_per_row, model_kernel, table_kernel
-from ..kernels.walls import BOTTOM_ANGLE_DEG, check_wall_kind
+from ..kernels.walls import check_wall_kind
 from ..stack import Stack
 from .fit import (
+    BOTTOM_EFFECT_SD,
     MAP_NAMES,
     MAX_RELATIVE_SE,
     MODEL_RELATIVE_SD,
     MU_A_BAD,
     MU_S_BAD,
+    WALL_EFFECT_SD,
+    WALL_SHAPE_SD,
     TransportFit,
     bottom_row,
     describe_reasons,
     grid_starts,
     group_walls,
     log_bounds,
+    model_error_basis,
     num_or_none,
     out_of_range,
     regions_and_walls,
+    wall_error_columns,
 )
 
 __all__ = ["StackDesign", "stack_design", "stack_model_images", "white_stack_scale", "fit_stack"]
@@ -104,18 +109,6 @@ STACK_MODEL_RELATIVE_SD = MODEL_RELATIVE_SD
 #: The forward model's correlated relative error: the kernel off by this much in each of a few smooth bumps
 #: over the offsets (table interpolation: 2-6 % against direct Monte Carlo, tests and tools/validate_stack_fit.py).
 STACK_MODEL_CORRELATED_SD = 0.03
-#: The walls' effect on the kernel (diffusion theory's method of images) is off by this share of itself: against
-#: the materials scene's brute-force Monte Carlo wall tables it carries 78-99 % of their effect
-#: (docs/user_guide/materials_fit.md, "Container walls").
-WALL_EFFECT_SD = 0.2
-#: (and, both, their distances by a transport mean free path: ``_fit_region``'s ``effect_columns``)
-#: Diffusion theory's walls and bottom are trusted DIFFUSION_RANGE_MFP transport mean free paths (1 / mu_s') away
-#: and beyond (planeray.materials.fit): a region whose bottom, or whose median pixel's nearest wall, lies closer
-#: is flagged (FLAG_RANGE).  The soap's 30 mm layer (6 mean free paths) already showed the bottom's model 80 % off.
-#: A layer's bottom's effect (the slab's image series) is off by this share of itself: against planeray's Monte
-#: Carlo of the soap's 30 mm layer (6 transport mean free paths) it removes 3.8 % of the kernel where the Monte
-#: Carlo removes 2.1 %: 80 % too much, and diffusion theory errs more in thinner layers.
-BOTTOM_EFFECT_SD = 1.0
 
 
 @dataclass(frozen=True)
@@ -329,14 +322,6 @@ def _region_data(imgs, ok, rows, cols, variance=None):
     return y, np.sqrt(var), m
 
 
-def _model_error_basis(offsets):
-    """Smooth bumps over ``log(1 + |u|)`` (``(U, J)``): the shapes of the forward model's correlated error."""
-    x = np.log1p(np.abs(np.asarray(offsets, np.float64)))
-    centres = np.log1p(np.array([0.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0]))
-    width = 0.5 * float(np.mean(np.diff(centres)))
-    return np.exp(-0.5 * ((x[:, None] - centres[None, :]) / width) ** 2)
-
-
 def _fit_region(
     y,
     se,
@@ -362,6 +347,7 @@ def _fit_region(
     p_misfit=DEFAULT_P_MISFIT,
     wall_effect_sd=0.0,
     bottom_effect_sd=0.0,
+    wall_shape_sd=0.0,
     g=DEFAULT_G,
     g_table=None,
 ):
@@ -373,7 +359,8 @@ def _fit_region(
     weights squared) plus the forward model's error: ``model_relative_sd`` of the modelled laser light per
     image (independent), a correlated part -- the kernel off by ``model_correlated_sd`` (relative) in
     each smooth bump of ``basis`` over the offsets, independently, seen through the illumination matrix --
-    and the walls' and the bottom's effects off by ``wall_effect_sd`` and ``bottom_effect_sd`` of themselves.
+    and the walls' and the bottom's effects off by ``wall_effect_sd`` and ``bottom_effect_sd`` of themselves (the
+    walls' also in shape: ``wall_shape_sd`` of their effect in each bump of ``basis``).
     Residuals are whitened by it (held at the current estimate during a least-squares pass; three passes).
     The chi-square of the whitened residuals at ``images - 4`` (shape only; 3 calibrated) degrees of
     freedom is the fit's :class:`planeray.goodness.FitQuality`.  ``g`` is the medium's anisotropy: the
@@ -402,36 +389,16 @@ def _fit_region(
         k = model_kernel(table, x[0], x[1], offsets, foot, walls, wall_kind, k=k_row)
         return kernel_at_g(k, k_row, x[0], x[1], table.n, x[2] if fit_g else g, offsets, foot, table=g_table)
 
-    # the walls' and the bottom's effects come from diffusion theory: their size is uncertain (a share of each,
-    # :data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`), a correlated error of the model along their shapes
-    parts = []
-    foot_rows = float(np.ptp(foot[0]) + 1) if foot[0].size > 1 else 1.0  # a camera row's extent, projector rows
-    if walls is not None and len(walls):
-        w = np.asarray(walls, np.float64)
-        is_bottom = w[:, 1] == BOTTOM_ANGLE_DEG
-        parts = [(w[~is_bottom], wall_effect_sd), (w[is_bottom], bottom_effect_sd)]
-        parts = [(ww, sd) for ww, sd in parts if len(ww) and sd > 0]
-
     def effect_columns(x, c):
-        """``(N, 2 P)``: the images' change when each part's effect (walls, bottom) is off by its sd, and when its
-        distances are off by a transport mean free path (diffusion theory's boundaries are uncertain by about
-        one, Haskell et al. 1994) -- for walls also by the pixel's half (their positions come from the labels)."""
-        if not parts or x is None:
+        """``(N, K)``: the images' change along each column of the walls' and the bottom's model error
+        (:func:`planeray.materials.fit.wall_error_columns`), seen through the illumination matrix."""
+        if walls is None or x is None:
             return None
-        free = model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
-        mfp_rows = 1.0 / math.exp(x[0])  # 1 / mu_s' in rows (x[0] = log of the per-row mu_s')
-        cols = []
-        for ww, sd in parts:
-            cols.append(sd * c * (A @ (model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free)))
-            bottom = bool(np.all(ww[:, 1] == BOTTOM_ANGLE_DEG))
-            shift = mfp_rows if bottom else math.hypot(mfp_rows, 0.5 * foot_rows)
-            hi, lo = ww.copy(), ww.copy()
-            hi[:, 0] += shift
-            lo[:, 0] = np.maximum(lo[:, 0] - shift, 0.0)
-            k_hi = model_kernel(table, x[0], x[1], offsets, foot, hi, wall_kind)
-            k_lo = model_kernel(table, x[0], x[1], offsets, foot, lo, wall_kind)
-            cols.append(0.5 * c * (A @ (k_hi - k_lo)))
-        return np.stack(cols, axis=1)
+        E = wall_error_columns(
+            table, x, offsets, foot, walls, wall_kind, effect_sd=wall_effect_sd, bottom_sd=bottom_effect_sd,
+            shape_sd=wall_shape_sd, basis=basis,
+        )  # fmt: skip
+        return None if E is None else c * (A @ E)
 
     def jitter_var(c, k):
         """Variance of each image of the mean from the row jitter: ``sum_g w_g (c A_g K')^2 var_rows``."""
@@ -556,6 +523,7 @@ def fit_stack(
     p_misfit=DEFAULT_P_MISFIT,
     wall_effect_sd=WALL_EFFECT_SD,
     bottom_effect_sd=BOTTOM_EFFECT_SD,
+    wall_shape_sd=WALL_SHAPE_SD,
     g=None,
     progress=None,
 ) -> TransportFit:
@@ -602,6 +570,9 @@ def fit_stack(
     wall_effect_sd, bottom_effect_sd : float
         The model's error in the walls' and the bottom's effects, shares of them (:data:`WALL_EFFECT_SD`,
         :data:`BOTTOM_EFFECT_SD`; 0: taken as exact): in the data's covariance along their shapes.
+    wall_shape_sd : float
+        The walls' effect off in its shape over the offsets: this share of it in each smooth bump of the
+        model-error basis, independently (:data:`WALL_SHAPE_SD`, measured against Mitsuba 3; 0: none).
     g : float, optional
         The media's Henyey-Greenstein anisotropy (the forward table's is 0.8; :mod:`planeray.kernels.anisotropy`
         changes its kernel to another).  None: unknown -- fitted with ``mu_s'`` and ``mu_a`` within
@@ -658,8 +629,8 @@ def fit_stack(
     kw = dict(
         table=table, calibrated=calibrated, h=h, max_relative_se=max_relative_se,
         model_relative_sd=model_relative_sd, model_correlated_sd=model_correlated_sd, lo=lo, hi=hi,
-        starts=starts, Kg=Kg, basis=_model_error_basis(offsets), wall_kind=wall_kind, p_misfit=p_misfit,
-        wall_effect_sd=wall_effect_sd, bottom_effect_sd=bottom_effect_sd, g=g,
+        starts=starts, Kg=Kg, basis=model_error_basis(offsets), wall_kind=wall_kind, p_misfit=p_misfit,
+        wall_effect_sd=wall_effect_sd, bottom_effect_sd=bottom_effect_sd, wall_shape_sd=wall_shape_sd, g=g,
         g_table=anisotropy_table() if g is None or g != DEFAULT_G else None,
     )  # fmt: skip
     var_rows = None if camera is None else camera.row_jitter_rows(stack.lines_per_second) ** 2

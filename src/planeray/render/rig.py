@@ -55,8 +55,9 @@ __all__ = ["Rig", "xml_defaults"]
 
 #: The paper's projector (Celluon PicoPro): 1280 x 720.
 DEFAULT_PROJECTOR_ASPECT = 16 / 9
-#: The narrowest and widest projectors a rig takes (width / height): a tenth to ten times as wide as tall.
-MIN_PROJECTOR_ASPECT, MAX_PROJECTOR_ASPECT = 0.1, 10.0
+#: The narrowest and widest projectors a rig takes (width / height): a tenth to 32 times as wide as tall (a thin
+#: render of a wide medium needs lines much longer than the view: tools/honest_cases.py renders at 16).
+MIN_PROJECTOR_ASPECT, MAX_PROJECTOR_ASPECT = 0.1, 32.0
 
 
 def xml_defaults(path) -> dict[str, str]:
