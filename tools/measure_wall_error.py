@@ -14,7 +14,8 @@ behind them: a "black" wall, the kind of an index-matched container) and a wide 
 walls' true relative effect on the tray's mean kernel is ``E = K_tray / K_slab - 1`` (Mitsuba against Mitsuba:
 the renderer's differences from planeray's table cancel), the model's is the fit's own ``model_kernel`` with the
 tray's walls against without.  The shape error's standard deviation is the maximum-likelihood one given the
-Mitsuba noise (the two mirror halves of each render) and the other wall-error terms the fit already carries.
+Mitsuba noise (two interleaved halves of each render's pixels; its scale a nuisance, profiled out) and the other
+wall-error terms the fit already carries.
 
     nice -n 19 python tools/measure_wall_error.py render     # ~30-60 min on 2 cores, cached
     python tools/measure_wall_error.py measure [--json out.json]
@@ -124,8 +125,7 @@ def medium_terms(c):
     """
     from planeray.kernels.footprint import camera_row_footprint
     from planeray.kernels.forward import forward_table, model_kernel
-    from planeray.materials.fit import group_walls
-    from planeray.materials.fit import WALL_EFFECT_SD, model_error_basis
+    from planeray.materials.fit import WALL_EFFECT_SD, group_walls, model_error_basis
 
     folder = ROOT / c["id"]
     Tt, offsets = _read(folder / "tray.zarr")
@@ -167,11 +167,23 @@ def medium_terms(c):
                 slab=S.mean(axis=0), tray=tray.mean(axis=0))  # fmt: skip
 
 
-def _loglik(t, sd):
-    cov = np.diag(t["var"]) + t["fixed"] @ t["fixed"].T + sd**2 * (t["shape"] @ t["shape"].T)
+#: The renders' noise variance (from one split per offset, smoothed) is known to a factor: a nuisance scale on it,
+#: profiled out of the likelihood (so that noise the split misses is not read as the walls' shape error).
+NOISE_SCALES = np.round(np.arange(0.8, 3.01, 0.1), 2)
+
+
+def _loglik(t, sd, noise_scale=1.0):
+    """Gaussian log-likelihood of ``d`` and its reduced chi-square at shape error ``sd`` and noise scale."""
+    cov = noise_scale**2 * np.diag(t["var"]) + t["fixed"] @ t["fixed"].T + sd**2 * (t["shape"] @ t["shape"].T)
     sign, logdet = np.linalg.slogdet(cov)
     alpha = np.linalg.solve(cov, t["d"])
     return -0.5 * (logdet + float(t["d"] @ alpha)), float(t["d"] @ alpha) / t["d"].size
+
+
+def _profile(t, sd):
+    """The log-likelihood at ``sd``, the noise scale profiled out: ``(loglik, reduced chi2, noise scale)``."""
+    best = max(((*_loglik(t, sd, k), k) for k in NOISE_SCALES), key=lambda v: v[0])
+    return best
 
 
 def measure(json_out=None):
@@ -184,24 +196,46 @@ def measure(json_out=None):
             print(f"{c['id']}: not rendered", flush=True)
             continue
         t = medium_terms(c)
-        ll = np.array([_loglik(t, sd)[0] for sd in grid])
+        prof = [_profile(t, sd) for sd in grid]
+        ll = np.array([p[0] for p in prof])
         total += ll
         chi0 = _loglik(t, 0.0)[1]
-        best = float(grid[int(np.argmax(ll))])
+        i_best = int(np.argmax(ll))
+        best = float(grid[i_best])
         wall_share = float(np.abs(t["W"]).sum() / np.abs(t["slab"]).sum())
         rows.append(dict(id=c["id"], mu_s_prime=c["mu_s_prime"], mu_a=c["mu_a"], wall_share=wall_share,
-                         reduced_chi2_without_shape=chi0, ml_shape_sd=best,
+                         reduced_chi2_without_shape=chi0, ml_shape_sd=best, noise_scale=prof[i_best][2],
+                         reduced_chi2_at_ml=prof[i_best][1],
                          total_effect_ratio=float(t["tray"].sum() - t["slab"].sum()) / float(t["W"].sum())))  # fmt: skip
         print(f"{c['id']}: mu_s' {c['mu_s_prime']} mu_a {c['mu_a']}: walls take {wall_share:.1%} of the kernel; "
               f"true/model total wall effect {rows[-1]['total_effect_ratio']:.2f}; reduced chi2 without a shape "
-              f"error {chi0:.2f}; ML shape sd {best:.2f}", flush=True)  # fmt: skip
+              f"error {chi0:.2f}; ML shape sd {best:.2f} (noise scale {prof[i_best][2]:.1f}, reduced chi2 "
+              f"{prof[i_best][1]:.2f})", flush=True)  # fmt: skip
     i = int(np.argmax(total))
     inside = grid[total >= total[i] - 1.92]  # the likelihood-ratio 95 % interval
     summary = dict(ml_shape_sd=float(grid[i]), interval_95=[float(inside.min()), float(inside.max())], media=rows)
     print(f"all media: ML shape sd {grid[i]:.2f} (95 % interval {inside.min():.2f}-{inside.max():.2f})")
     if json_out:
         Path(json_out).write_text(json.dumps(summary, indent=1) + "\n")
+    print(markdown(summary))
     return summary
+
+
+def markdown(summary) -> str:
+    """The measurement as the docs' table (indented for a list item)."""
+    lines = [
+        "| medium | `mu_s'` /mm | `mu_a` /mm | walls' share of the kernel | true / model wall effect (sum) "
+        "| reduced chi-square, no shape error | shape share (ML) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in summary["media"]:
+        lines.append(
+            f"| {r['id']} | {r['mu_s_prime']:g} | {r['mu_a']:g} | {r['wall_share']:.0%} | "
+            f"{r['total_effect_ratio']:.2f} | {r['reduced_chi2_without_shape']:.1f} | {r['ml_shape_sd']:.2f} |"
+        )
+    lo, hi = summary["interval_95"]
+    lines.append(f"| all six | | | | | | **{summary['ml_shape_sd']:.2f}** (95 %: {lo:.2f}-{hi:.2f}) |")
+    return "\n".join("  " + line for line in lines)
 
 
 def main(argv=None):
