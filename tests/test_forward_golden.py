@@ -372,8 +372,8 @@ EXPECTED = {
     "tables": "1e6d586ee09fec80",
     "fit_kernels": "2e0493cc35dc91d3",
     "scenes": "a9f0dabe59be4057",
-    "fit_transport": "70cdc78c533010c6",  # the media's g a fitted nuisance (issue 41)
-    "fit_stack": "7e4c97c0cd9e56e0",  # the same
+    "fit_transport": "e0fab94f86dfd54c",  # the walls' model error in its covariance (issue 41: fit.wall_error_columns)
+    "fit_stack": "7e4c97c0cd9e56e0",  # the media's g a fitted nuisance (issue 41); no walls here
     "vein_fit": "d70b62dc2a932f68",
 }
 

@@ -817,9 +817,10 @@ def test_the_old_name_of_the_forward_kernel_warns_and_is_the_forward_kernel(tabl
 
 def test_the_walls_model_error_is_in_the_transport_fits_covariance(table):
     """Profiles of a weakly absorbing medium beside walls, drawn as the fit's own model plus the walls' model error
-    at its stated size (:func:`fit.wall_error_columns`: their effect's size, shape and distances) and a little
-    noise.  The transport fit that carries that error finds chi-squares of its degrees of freedom and standard
-    errors that cover the truth; the same fit with the walls taken as exact flags the draws or misses the truth."""
+    at its stated size -- their effect's size and distances (:func:`fit.wall_error_columns`, in the weights) and
+    shape (:func:`fit.wall_shape_columns`, in the standard errors) -- and a little noise.  Without the shape error
+    the chi-squares are of their degrees of freedom (the weights' covariance is the draws'); with it the standard
+    errors still cover the truth; the same fit with the walls taken as exact flags the draws or misses."""
     rng = np.random.default_rng(3)
     u = np.arange(-80, 81)
     s, a = 0.9, 0.003  # 1/mm: a diffusion length (11 mm) longer than the walls' distances
@@ -827,22 +828,24 @@ def test_the_walls_model_error_is_in_the_transport_fits_covariance(table):
     x = np.log([s * MM, a * MM])
     foot = camera_row_footprint(1.0)
     k = fit.model_kernel(table, x[0], x[1], u, foot, walls, "clear")
-    E = fit.wall_error_columns(table, x, u, foot, walls, "clear", effect_sd=fit.WALL_EFFECT_SD,
-                               bottom_sd=0.0, shape_sd=0.2, basis=fit.model_error_basis(u))  # fmt: skip
+    E = fit.wall_error_columns(table, x, u, foot, walls, "clear", effect_sd=fit.WALL_EFFECT_SD, bottom_sd=0.0)
+    S = fit.wall_shape_columns(table, x, u, foot, walls, "clear", shape_sd=0.2, basis=fit.model_error_basis(u))
     sd = 0.002 * k.max()
     kw = dict(offsets_rows=u, mm_per_row=MM, sigma=sd, table=table, g=fit.DEFAULT_G, model_relative_sd=1e-6)
-    z, chi2, z_exact, flagged_exact = [], [], [], 0
+    chi2, z, z_exact, flagged_exact = [], [], [], 0
     for _ in range(8):
         y = k + E @ rng.normal(size=E.shape[1]) + sd * rng.normal(size=u.size)
+        chi2.append(fit.fit_profiles(y, walls=[walls], wall_shape_sd=0.2, **kw).chi2_per_dof[0])
+        y = y + S @ rng.normal(size=S.shape[1])
         r = fit.fit_profiles(y, walls=[walls], wall_shape_sd=0.2, **kw)
         z.append((np.log(r.mu_a_per_mm[0]) - np.log(a)) / r.log_se[0, 1])
-        chi2.append(r.chi2_per_dof[0])
         exact = fit.fit_profiles(y, walls=[walls], wall_effect_sd=0.0, bottom_effect_sd=0.0, wall_shape_sd=0.0, **kw)
         flagged_exact += int(exact.flags[0] & fit.FLAG_MISFIT > 0)
         if not exact.flags[0] & fit.FLAG_MISFIT:
             z_exact.append((np.log(exact.mu_a_per_mm[0]) - np.log(a)) / exact.log_se[0, 1])
     assert 0.5 < np.median(chi2) < 1.6, chi2
-    assert np.max(np.abs(z)) < 3.5, z
-    # taken as exact, the walls' error is either flagged or read as a confident mu_a (measured: 2 flagged, 2 of the
-    # other 6 beyond 2 standard errors, one at 14.7)
+    assert np.all(np.abs(z) < 3.5), z  # NaN (not identifiable) fails too
+    print(flagged_exact, z_exact, z, chi2)
+    assert 0
+    # taken as exact, the walls' error is either flagged or read as a confident mu_a
     assert flagged_exact + int(np.sum(np.abs(z_exact) > 2.0)) >= 3, (flagged_exact, z_exact)

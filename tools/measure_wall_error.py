@@ -17,7 +17,7 @@ tray's walls against without.  The shape error's standard deviation is the maxim
 Mitsuba noise (two interleaved halves of each render's pixels; its scale a nuisance, profiled out) and the other
 wall-error terms the fit already carries.
 
-    nice -n 19 python tools/measure_wall_error.py render     # ~30-60 min on 2 cores, cached
+    nice -n 19 python tools/measure_wall_error.py render     # ~1 h on 2 cores (the slabs: 3-18 min each), cached
     python tools/measure_wall_error.py measure [--json out.json]
 """
 

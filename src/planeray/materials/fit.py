@@ -160,9 +160,10 @@ WALL_EFFECT_SD = 0.2
 
 #: The walls' effect is also off in its **shape** over the offsets: by this share of itself in each smooth bump of
 #: :func:`model_error_basis`, independently.  Measured against Mitsuba 3 renders of trays (a forward model planeray
-#: did not write; media none of the validation cases holds), the maximum-likelihood share beside the other wall
-#: terms: ``tools/measure_wall_error.py`` (docs/user_guide/materials_fit.md, "Container walls").
-WALL_SHAPE_SD = 0.0
+#: did not write; six media none of the validation cases holds, mu_s' 0.4-4 /mm), the maximum-likelihood share
+#: beside the other wall terms: 0.18 (95 %: 0.13-0.24; per medium 0.11-0.35, the largest where the walls take half
+#: the kernel): ``tools/measure_wall_error.py`` (docs/user_guide/materials_fit.md, "Container walls").
+WALL_SHAPE_SD = 0.18
 
 
 #: A layer's bottom's effect (the slab's image series) is off by this share of itself: against planeray's Monte
@@ -269,37 +270,35 @@ def model_error_basis(offsets):
     return np.exp(-0.5 * ((x[:, None] - centres[None, :]) / width) ** 2)
 
 
-def wall_error_columns(table, x, offsets, foot, walls, wall_kind, *, effect_sd, bottom_sd, shape_sd, basis):
-    """The walls' and the bottom's model error: kernel-space columns ``(U, K)`` whose outer product is its covariance.
-
-    Diffusion theory's walls and bottom (:mod:`planeray.kernels.walls`) are uncertain: each part's effect
-    (``K_walls - K``) off by ``effect_sd`` (walls) or ``bottom_sd`` (bottom) of itself; its distances off by a
-    transport mean free path (diffusion theory's boundaries are uncertain by about one, Haskell et al. 1994) --
-    for walls also by the pixel's half (their positions come from the labels); and the walls' effect off in
-    shape, ``shape_sd`` of it in each bump of ``basis`` (:func:`model_error_basis`).  ``x`` holds the per-row
-    log-coefficients ``(log mu_s' h, log mu_a h, ...)``.  None when there is nothing uncertain.
-    """
-    if walls is None or not len(walls):
-        return None
+def _wall_effects(table, x, offsets, foot, walls, wall_kind):
+    """The walls' and the bottom's parts of ``walls`` (``(rows, is_bottom)``) and the wall-free kernel at ``x``."""
     w = np.asarray(walls, np.float64)
     is_bottom = w[:, 1] == BOTTOM_ANGLE_DEG
-    parts = []
-    if (~is_bottom).any() and (effect_sd > 0 or shape_sd > 0):
-        parts.append((w[~is_bottom], effect_sd, shape_sd))
-    if is_bottom.any() and bottom_sd > 0:
-        parts.append((w[is_bottom], bottom_sd, 0.0))
-    if not parts:
+    parts = [(w[m], b) for m, b in ((~is_bottom, False), (is_bottom, True)) if m.any()]
+    return parts, model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
+
+
+def wall_error_columns(table, x, offsets, foot, walls, wall_kind, *, effect_sd, bottom_sd):
+    """The walls' and the bottom's model error in the fit's weights: columns ``(U, K)``, their outer product its covariance.
+
+    Diffusion theory's walls and bottom (:mod:`planeray.kernels.walls`) are uncertain: each part's effect
+    (``K_walls - K``) off by ``effect_sd`` (walls) or ``bottom_sd`` (bottom) of itself, and its distances off by a
+    transport mean free path (diffusion theory's boundaries are uncertain by about one, Haskell et al. 1994) --
+    for walls also by the pixel's half (their positions come from the labels).  ``x`` holds the per-row
+    log-coefficients ``(log mu_s' h, log mu_a h, ...)``.  None when there is nothing uncertain.  The walls'
+    *shape* error is apart (:func:`wall_shape_columns`): it widens the standard errors, not the weights.
+    """
+    if walls is None or not len(walls) or (effect_sd <= 0 and bottom_sd <= 0):
         return None
+    parts, free = _wall_effects(table, x, offsets, foot, walls, wall_kind)
     foot_rows = float(np.ptp(foot[0]) + 1) if foot[0].size > 1 else 1.0  # a camera row's extent, projector rows
-    free = model_kernel(table, x[0], x[1], offsets, foot, None, wall_kind)
     mfp_rows = 1.0 / math.exp(x[0])  # 1 / mu_s' in rows
     cols = []
-    for ww, sd, shape in parts:
-        effect = model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free
-        cols.append(sd * effect)
-        if shape > 0:
-            cols.extend((shape * effect[:, None] * basis).T)
-        bottom = bool(np.all(ww[:, 1] == BOTTOM_ANGLE_DEG))
+    for ww, bottom in parts:
+        sd = bottom_sd if bottom else effect_sd
+        if sd <= 0:
+            continue
+        cols.append(sd * (model_kernel(table, x[0], x[1], offsets, foot, ww, wall_kind) - free))
         shift = mfp_rows if bottom else math.hypot(mfp_rows, 0.5 * foot_rows)
         hi, lo = ww.copy(), ww.copy()
         hi[:, 0] += shift
@@ -308,6 +307,61 @@ def wall_error_columns(table, x, offsets, foot, walls, wall_kind, *, effect_sd, 
         k_lo = model_kernel(table, x[0], x[1], offsets, foot, lo, wall_kind)
         cols.append(0.5 * (k_hi - k_lo))
     return np.stack(cols, axis=1)
+
+
+def wall_shape_columns(table, x, offsets, foot, walls, wall_kind, *, shape_sd, basis):
+    """The walls' effect off in its shape over the offsets: ``shape_sd`` of it in each bump of ``basis``
+    (:func:`model_error_basis`), columns ``(U, J)``; None without walls.
+
+    Measured against Mitsuba 3 as a spread over media (:data:`WALL_SHAPE_SD`), not as one fit's error
+    covariance: the fits put it in their standard errors (:func:`sandwich_covariance`), not in their weights --
+    weighted by it, a medium whose wall effect dominates its kernel moved to another optimum (fat-free milk's
+    ``mu_s'`` -26 % at 3.4 standard errors in the 64-pixel tray capture), and a misfit it describes is no
+    excuse: the chi-square keeps to the weights' covariance.
+    """
+    if walls is None or not len(walls) or shape_sd <= 0:
+        return None
+    parts, free = _wall_effects(table, x, offsets, foot, walls, wall_kind)
+    walls_only = [ww for ww, bottom in parts if not bottom]
+    if not walls_only:
+        return None
+    effect = model_kernel(table, x[0], x[1], offsets, foot, walls_only[0], wall_kind) - free
+    return shape_sd * effect[:, None] * basis
+
+
+def sandwich_covariance(J, S_white):
+    """The estimates' covariance ``(J^T J)^-1 + B B^T``, ``B = (J^T J)^-1 J^T S``: a least-squares fit whose weights
+    leave out errors with the (whitened) columns ``S_white`` (None: ``(J^T J)^-1``; ``J`` the whitened Jacobian)."""
+    inv = np.linalg.pinv(J.T @ J)
+    if S_white is None:
+        return inv
+    B = inv @ (J.T @ S_white)
+    return inv + B @ B.T
+
+
+#: A second optimum is looked for from the best grid start at least this far (in ``(log mu_s', log mu_a)``) from
+#: the fit's estimate: a factor e in one coefficient.
+SECOND_START_LOG_DISTANCE = 1.0
+
+
+def second_start(starts, costs, x, min_distance=SECOND_START_LOG_DISTANCE):
+    """Index of the least-cost grid start (``starts`` ``(G, 2)`` log-coefficients, ``costs`` ``(G,)``) farther than
+    ``min_distance`` from the estimate ``x`` in ``(log mu_s', log mu_a)``; None when there is none."""
+    d = np.hypot(starts[:, 0] - x[0], starts[:, 1] - x[1])
+    far = np.flatnonzero(d > min_distance)
+    return None if far.size == 0 else int(far[np.argmin(np.asarray(costs)[far])])
+
+
+def widen_for_second_optimum(se_log, x, chi2, x_alt, chi2_alt, inflation):
+    """Standard errors that also cover a second optimum nearly as good: where the chi-squares differ by less than
+    ``4 inflation^2`` (two standard errors), each of ``(log mu_s', log mu_a)``'s is at least half its distance to
+    the other optimum (a bimodal likelihood reported as one wide interval; beyond
+    :data:`MAX_RELATIVE_SE` the parameter is not identifiable).  The local curvature alone says nothing of it: a
+    medium whose walls take most of its light had its ``mu_a`` 5x off at 0.1 standard errors in log."""
+    se = np.array(se_log, np.float64)
+    if x_alt is None or not abs(chi2_alt - chi2) < 4.0 * inflation**2:
+        return se
+    return np.maximum(se, 0.5 * np.abs(np.asarray(x_alt[:2]) - np.asarray(x[:2])))
 
 
 def _whitener(sd, ok, E=None, c=1.0):
@@ -536,9 +590,11 @@ def fit_profiles(
         :func:`planeray.kernels.anisotropy.g_kernel_change`).  None: unknown -- a third parameter, fitted within
         :data:`planeray.kernels.anisotropy.G_PRIOR`, its uncertainty carried into the others' standard errors.
     wall_effect_sd, bottom_effect_sd, wall_shape_sd : float
-        The walls' and the bottom's model error (:func:`wall_error_columns`: :data:`WALL_EFFECT_SD`,
-        :data:`BOTTOM_EFFECT_SD`, :data:`WALL_SHAPE_SD`; 0: taken as exact).  With ``sigma`` and walls, it joins the
-        data's covariance (correlated over the offsets; residuals whitened by it, held at each pass's estimate).
+        The walls' and the bottom's model error (:data:`WALL_EFFECT_SD`, :data:`BOTTOM_EFFECT_SD`,
+        :data:`WALL_SHAPE_SD`; 0: taken as exact).  With ``sigma`` and walls, the first two join the data's
+        covariance (:func:`wall_error_columns`: correlated over the offsets; residuals whitened by it, held at each
+        pass's estimate); the walls' shape error widens the standard errors (:func:`wall_shape_columns`,
+        :func:`sandwich_covariance`).
 
     Returns
     -------
@@ -650,12 +706,12 @@ def fit_profiles(
                     k_free = kernel_per_row(table, x0[0], x0[1], offsets, foot)
                     k_wall = model_kernel(table, x0[0], x0[1], offsets, foot, wp, wall_kind)
                     rho = np.where(k_free > 0, k_wall / np.where(k_free > 0, k_free, 1.0), 0.0)
-                white = _whitener(
-                    sd, ok, None if not model_error else wall_error_columns(
-                        table, x0, offsets, foot, wp, wall_kind, effect_sd=wall_effect_sd, bottom_sd=bottom_effect_sd,
-                        shape_sd=wall_shape_sd, basis=basis,
-                    ), 1.0 if calibrated else math.exp(x0[2]),
-                )  # fmt: skip
+                c0 = 1.0 if calibrated else math.exp(x0[2])
+                E = None
+                if model_error and wp is not None:
+                    E = wall_error_columns(table, x0, offsets, foot, wp, wall_kind, effect_sd=wall_effect_sd,
+                                           bottom_sd=bottom_effect_sd)  # fmt: skip
+                white = _whitener(sd, ok, E, c0)
 
                 def resid(x, y=y, white=white, rho=rho):
                     k_row = table_kernel(table, x[0], x[1])
@@ -682,20 +738,44 @@ def fit_profiles(
         except (ValueError, np.linalg.LinAlgError):
             mask[p] |= 64
             continue
+        # a second optimum, from the best grid start far from the estimate, with the same weights: the better
+        # one is the estimate, and one nearly as good widens the standard errors (widen_for_second_optimum)
+        res_alt = None
+        i_alt = second_start(starts, cost_g, res.x)
+        if i_alt is not None:
+            xa = [*starts[i_alt], *([] if calibrated else [math.log(c_g[i_alt])]), *([DEFAULT_G] if fit_g else [])]
+            xa = np.clip(xa, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
+            try:
+                res_alt = least_squares(
+                    resid, xa, jac=_forward_jac(resid, upper=hi_p), bounds=(lo_p, hi_p), method="trf", x_scale=1.0
+                )
+            except (ValueError, np.linalg.LinAlgError):
+                res_alt = None
+            if res_alt is not None and res_alt.success and res_alt.cost < res.cost:
+                res, res_alt = res_alt, res
         if not res.success:
             mask[p] |= 64
         n_dof = max(int(ok.sum()) - len(x0), 1)
         dofs[p] = n_dof
         chi2 = float(2.0 * res.cost / n_dof)
         J = res.jac
+        shape = None
+        if model_error and wp is not None:  # the walls' shape error: in the standard errors, not the weights
+            shape = wall_shape_columns(table, res.x, offsets, foot, wp, wall_kind, shape_sd=wall_shape_sd, basis=basis)
+        c_fit = 1.0 if calibrated else math.exp(res.x[2])
         try:
-            cov = np.linalg.pinv(J.T @ J)
+            cov = sandwich_covariance(J, None if shape is None else np.stack([white(c_fit * v) for v in shape.T], 1))
         except np.linalg.LinAlgError:
             cov = np.full((len(x0), len(x0)), np.inf)
         # without sigma the residual variance is the noise; with it, a misfit beyond the noise (and the model's
         # error in it) widens the errors by sqrt(chi2 / dof) (planeray.goodness, the Birge ratio)
-        cov = cov * (chi2 if sigma is None else max(chi2, 1.0))
+        infl2 = chi2 if sigma is None else max(chi2, 1.0)
+        cov = cov * infl2
         se_log = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        if res_alt is not None and res_alt.success:
+            se_log[:2] = widen_for_second_optimum(
+                se_log[:2], res.x, 2.0 * res.cost, res_alt.x, 2.0 * res_alt.cost, math.sqrt(infl2)
+            )
         x = res.x
         s_est, a_est = math.exp(x[0]) / h, math.exp(x[1]) / h
         out["s"][p], out["a"][p] = s_est, a_est

@@ -97,7 +97,11 @@ from .fit import (
     num_or_none,
     out_of_range,
     regions_and_walls,
+    sandwich_covariance,
+    second_start,
     wall_error_columns,
+    wall_shape_columns,
+    widen_for_second_optimum,
 )
 
 __all__ = ["StackDesign", "stack_design", "stack_model_images", "white_stack_scale", "fit_stack"]
@@ -359,8 +363,9 @@ def _fit_region(
     weights squared) plus the forward model's error: ``model_relative_sd`` of the modelled laser light per
     image (independent), a correlated part -- the kernel off by ``model_correlated_sd`` (relative) in
     each smooth bump of ``basis`` over the offsets, independently, seen through the illumination matrix --
-    and the walls' and the bottom's effects off by ``wall_effect_sd`` and ``bottom_effect_sd`` of themselves (the
-    walls' also in shape: ``wall_shape_sd`` of their effect in each bump of ``basis``).
+    and the walls' and the bottom's effects off by ``wall_effect_sd`` and ``bottom_effect_sd`` of themselves; the
+    walls' effect off in shape (``wall_shape_sd`` of it in each bump of ``basis``) widens the standard errors
+    (:func:`planeray.materials.fit.sandwich_covariance`), not the weights.
     Residuals are whitened by it (held at the current estimate during a least-squares pass; three passes).
     The chi-square of the whitened residuals at ``images - 4`` (shape only; 3 calibrated) degrees of
     freedom is the fit's :class:`planeray.goodness.FitQuality`.  ``g`` is the medium's anisotropy: the
@@ -395,9 +400,8 @@ def _fit_region(
         if walls is None or x is None:
             return None
         E = wall_error_columns(
-            table, x, offsets, foot, walls, wall_kind, effect_sd=wall_effect_sd, bottom_sd=bottom_effect_sd,
-            shape_sd=wall_shape_sd, basis=basis,
-        )  # fmt: skip
+            table, x, offsets, foot, walls, wall_kind, effect_sd=wall_effect_sd, bottom_sd=bottom_effect_sd
+        )
         return None if E is None else c * (A @ E)
 
     def jitter_var(c, k):
@@ -458,6 +462,18 @@ def _fit_region(
     except (ValueError, np.linalg.LinAlgError):
         out["mask"] |= 64
         return out
+    # a second optimum, from the best grid start far from the estimate, with the same weights: the better one is
+    # the estimate, one nearly as good widens the standard errors (fit.widen_for_second_optimum)
+    res_alt = None
+    i_alt = second_start(starts, costs, res.x)
+    if i_alt is not None:
+        xa = np.clip(np.append(starts[i_alt], DEFAULT_G) if fit_g else starts[i_alt], lo + 1e-9, hi - 1e-9)
+        try:
+            res_alt = least_squares(resid, xa, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
+        except (ValueError, np.linalg.LinAlgError):
+            res_alt = None
+        if res_alt is not None and res_alt.success and res_alt.cost < res.cost:
+            res, res_alt = res_alt, res
     if not res.success:
         out["mask"] |= 64
     x = res.x
@@ -479,8 +495,14 @@ def _fit_region(
     n_dof = max(int(ok.sum()) - J.shape[1], 1)
     quality = fit_quality(float(r @ r), n_dof, p_misfit=p_misfit)
     chi2 = quality.reduced_chi2
-    cov = np.linalg.pinv(J.T @ J) * quality.inflation**2
+    # the walls' shape error widens the standard errors (not the weights, not the chi-square)
+    shape = None if walls is None else wall_shape_columns(
+        table, x, offsets, foot, walls, wall_kind, shape_sd=wall_shape_sd, basis=basis
+    )  # fmt: skip
+    cov = sandwich_covariance(J, None if shape is None else L @ (c * (A @ shape))) * quality.inflation**2
     se_log = np.sqrt(np.maximum(np.diag(cov)[:2], 0.0))
+    if res_alt is not None and res_alt.success:
+        se_log = widen_for_second_optimum(se_log, x, 2.0 * res.cost, res_alt.x, 2.0 * res_alt.cost, quality.inflation)
     corr = float(cov[0, 1] / (se_log[0] * se_log[1])) if se_log[0] > 0 and se_log[1] > 0 else 0.0
     out.update(
         log_correlation=corr,
@@ -572,7 +594,8 @@ def fit_stack(
         :data:`BOTTOM_EFFECT_SD`; 0: taken as exact): in the data's covariance along their shapes.
     wall_shape_sd : float
         The walls' effect off in its shape over the offsets: this share of it in each smooth bump of the
-        model-error basis, independently (:data:`WALL_SHAPE_SD`, measured against Mitsuba 3; 0: none).
+        model-error basis, independently (:data:`WALL_SHAPE_SD`, measured against Mitsuba 3; 0: none), in the
+        standard errors (:func:`planeray.materials.fit.wall_shape_columns`).
     g : float, optional
         The media's Henyey-Greenstein anisotropy (the forward table's is 0.8; :mod:`planeray.kernels.anisotropy`
         changes its kernel to another).  None: unknown -- fitted with ``mu_s'`` and ``mu_a`` within
