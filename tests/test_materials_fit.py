@@ -849,5 +849,5 @@ def test_the_walls_model_error_is_in_the_transport_fits_covariance(table):
     # limit of a local standard error, in docs/user_guide/trust.md)
     assert np.sum(np.abs(z) < 3.0) >= 7, z
     # taken as exact, the walls' error is either flagged or read as a confident mu_a (measured: 2 flagged, 2 of the
-    # other 6 beyond 2 standard errors, one at 14)
+    # other 6 beyond 2 standard errors, one at 22)
     assert flagged_exact + int(np.sum(np.abs(z_exact) > 2.0)) >= 3, (flagged_exact, z_exact)
