@@ -352,6 +352,23 @@ def second_start(starts, costs, x, min_distance=SECOND_START_LOG_DISTANCE):
     return None if far.size == 0 else int(far[np.argmin(np.asarray(costs)[far])])
 
 
+def second_optimum(res, starts, costs, start_of, solve):
+    """The fit ``res`` against a second one from the best grid start far from it (:func:`second_start`):
+    ``(estimate, other)``, the better (lower cost) first; ``other`` None when no start lies far enough or its
+    fit fails.  ``start_of(i)`` is the full parameter vector of grid start ``i``, ``solve(x0)`` the fit's
+    least-squares run with the same weights."""
+    i = second_start(starts, costs, res.x)
+    if i is None:
+        return res, None
+    try:
+        alt = solve(start_of(i))
+    except (ValueError, np.linalg.LinAlgError):
+        return res, None
+    if alt.success and alt.cost < res.cost:
+        return alt, res
+    return res, alt
+
+
 def widen_for_second_optimum(se_log, x, chi2, x_alt, chi2_alt, inflation):
     """Standard errors that also cover a second optimum nearly as good: where the chi-squares differ by less than
     ``4 inflation^2`` (two standard errors), each of ``(log mu_s', log mu_a)``'s is at least half its distance to
@@ -738,21 +755,19 @@ def fit_profiles(
         except (ValueError, np.linalg.LinAlgError):
             mask[p] |= 64
             continue
+
         # a second optimum, from the best grid start far from the estimate, with the same weights: the better
         # one is the estimate, and one nearly as good widens the standard errors (widen_for_second_optimum)
-        res_alt = None
-        i_alt = second_start(starts, cost_g, res.x)
-        if i_alt is not None:
-            xa = [*starts[i_alt], *([] if calibrated else [math.log(c_g[i_alt])]), *([DEFAULT_G] if fit_g else [])]
-            xa = np.clip(xa, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
-            try:
-                res_alt = least_squares(
-                    resid, xa, jac=_forward_jac(resid, upper=hi_p), bounds=(lo_p, hi_p), method="trf", x_scale=1.0
-                )
-            except (ValueError, np.linalg.LinAlgError):
-                res_alt = None
-            if res_alt is not None and res_alt.success and res_alt.cost < res.cost:
-                res, res_alt = res_alt, res
+        def start_of(i, c_g=c_g, lo_p=lo_p, hi_p=hi_p):
+            x = [*starts[i], *([] if calibrated else [math.log(c_g[i])]), *([DEFAULT_G] if fit_g else [])]
+            return np.clip(x, np.array(lo_p) + 1e-9, np.array(hi_p) - 1e-9)
+
+        def solve(xa, resid=resid, lo_p=lo_p, hi_p=hi_p):
+            return least_squares(
+                resid, xa, jac=_forward_jac(resid, upper=hi_p), bounds=(lo_p, hi_p), method="trf", x_scale=1.0
+            )
+
+        res, res_alt = second_optimum(res, starts, cost_g, start_of, solve)
         if not res.success:
             mask[p] |= 64
         n_dof = max(int(ok.sum()) - len(x0), 1)

@@ -98,7 +98,7 @@ from .fit import (
     out_of_range,
     regions_and_walls,
     sandwich_covariance,
-    second_start,
+    second_optimum,
     wall_error_columns,
     wall_shape_columns,
     widen_for_second_optimum,
@@ -464,16 +464,11 @@ def _fit_region(
         return out
     # a second optimum, from the best grid start far from the estimate, with the same weights: the better one is
     # the estimate, one nearly as good widens the standard errors (fit.widen_for_second_optimum)
-    res_alt = None
-    i_alt = second_start(starts, costs, res.x)
-    if i_alt is not None:
-        xa = np.clip(np.append(starts[i_alt], DEFAULT_G) if fit_g else starts[i_alt], lo + 1e-9, hi - 1e-9)
-        try:
-            res_alt = least_squares(resid, xa, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0)
-        except (ValueError, np.linalg.LinAlgError):
-            res_alt = None
-        if res_alt is not None and res_alt.success and res_alt.cost < res.cost:
-            res, res_alt = res_alt, res
+    res, res_alt = second_optimum(
+        res, starts, costs,
+        lambda i: np.clip(np.append(starts[i], DEFAULT_G) if fit_g else starts[i], lo + 1e-9, hi - 1e-9),
+        lambda xa: least_squares(resid, xa, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0),
+    )  # fmt: skip
     if not res.success:
         out["mask"] |= 64
     x = res.x
